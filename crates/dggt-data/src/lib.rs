@@ -1,6 +1,8 @@
 //! Driving-scene data for dggt: everything between files on disk and the tensors a training step consumes.
 //!
 //! - [`layout`]: file names of the scene-export layout (drivestudio / OmniRe).
+//! - [`scene`]: the in-memory log: cameras, frames, ground-truth poses, per-view files.
+//! - [`preprocess`]: the release's resize/crop of images and masks, with intrinsics to match.
 //! - [`text`], [`npy`], [`images`], [`io`]: untrusted-input readers and atomic writers.
 //!
 //! Every reader returns a [`DataError`] naming the file and what was expected; nothing here panics on bad input.
@@ -10,7 +12,11 @@ pub mod images;
 pub mod io;
 pub mod layout;
 pub mod npy;
+pub mod preprocess;
+pub mod scene;
 pub mod text;
 
 pub use error::{DataError, Result};
 pub use layout::{DynamicMaskKind, ExportLayout};
+pub use preprocess::{BinaryMask, PlanarImage, Preprocess, PreprocessPlan};
+pub use scene::{Scene, SceneCamera, SceneFrame, SceneSource, View, ViewFiles};
