@@ -1,22 +1,31 @@
 //! Driving-scene data for dggt: everything between files on disk and the tensors a training step consumes.
 //!
 //! - [`layout`]: file names of the scene-export layout (drivestudio / OmniRe).
+//! - [`export`], [`kitti`], [`lidar`]: readers of the driving-log formats into a [`Scene`].
 //! - [`scene`]: the in-memory log: cameras, frames, ground-truth poses, per-view files.
-//! - [`preprocess`]: the release's resize/crop of images and masks, with intrinsics to match.
+//! - [`preprocess`]: the release's resize/crop of images and masks, with intrinsics to match;
+//!   [`views`] applies it to one view of a scene.
 //! - [`text`], [`npy`], [`images`], [`io`]: untrusted-input readers and atomic writers.
 //!
 //! Every reader returns a [`DataError`] naming the file and what was expected; nothing here panics on bad input.
 
 mod error;
+pub mod export;
 pub mod images;
 pub mod io;
+pub mod kitti;
 pub mod layout;
+pub mod lidar;
 pub mod npy;
 pub mod preprocess;
 pub mod scene;
 pub mod text;
+pub mod views;
 
 pub use error::{DataError, Result};
 pub use layout::{DynamicMaskKind, ExportLayout};
 pub use preprocess::{BinaryMask, PlanarImage, Preprocess, PreprocessPlan};
+pub use export::{ExportOptions, read_export};
+pub use kitti::read_kitti_odometry;
+pub use views::{PreparedView, prepare_view};
 pub use scene::{Scene, SceneCamera, SceneFrame, SceneSource, View, ViewFiles};

@@ -29,6 +29,8 @@ pub struct SceneCamera {
     pub size: ImageSize,
     /// Intrinsics at the original size.
     pub intrinsics: PinholeIntrinsics,
+    /// OpenCV distortion `k1 k2 p1 p2 k3` as stored by the source; images are used as pinhole images.
+    pub distortion: [f64; 5],
     /// Mounting on the vehicle (OpenCV camera axes), when the source provides it.
     pub ego_from_camera: Option<EgoFromCamera>,
 }
