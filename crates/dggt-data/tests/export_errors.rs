@@ -1,0 +1,143 @@
+//! Malformed scene exports: every defect is an error that names the file at fault and what was expected.
+
+use std::path::Path;
+
+use dggt_data::{DataError, ExportLayout, ExportOptions, Preprocess, images, prepare_view, read_export, text};
+use image::{GrayImage, RgbImage};
+
+const IDENTITY_FLU_MOUNT: [[f64; 4]; 4] =
+    [[1.0, 0.0, 0.0, 1.5], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 1.6], [0.0, 0.0, 0.0, 1.0]];
+
+/// A valid two-frame, one-camera export of 64x48 images.
+fn write_minimal_export(root: &Path) -> ExportLayout {
+    let layout = ExportLayout::new(root);
+    text::write_rows(&layout.intrinsics(0), &[[50.0], [50.0], [32.0], [24.0], [0.0], [0.0], [0.0], [0.0], [0.0]])
+        .unwrap();
+    text::write_rows(&layout.extrinsics(0), &IDENTITY_FLU_MOUNT).unwrap();
+    for t in 0..2 {
+        let mut pose = IDENTITY_FLU_MOUNT;
+        pose[0][3] = t as f64;
+        pose[2][3] = 0.0;
+        text::write_rows(&layout.ego_pose(t), &pose).unwrap();
+        let image = RgbImage::from_fn(64, 48, |x, y| image::Rgb([x as u8 * 4, y as u8 * 5, 128]));
+        images::write_jpeg(&layout.image(t, 0), &image, 90).unwrap();
+        let sky = GrayImage::from_fn(64, 48, |_, y| image::Luma([if y < 20 { 255 } else { 0 }]));
+        images::write_png_gray(&layout.sky_mask(t, 0), &sky).unwrap();
+    }
+    layout
+}
+
+fn expect_error_naming(root: &Path, file: &Path, needle: &str) -> DataError {
+    let error = read_export(root, &ExportOptions::default()).expect_err("the export is malformed");
+    let message = error.to_string();
+    assert!(message.contains(&file.display().to_string()), "{message:?} should name {}", file.display());
+    assert!(message.contains(needle), "{message:?} should say {needle:?}");
+    error
+}
+
+#[test]
+fn a_valid_export_reads_and_prepares() {
+    let dir = tempfile::tempdir().unwrap();
+    write_minimal_export(dir.path());
+    let scene = read_export(dir.path(), &ExportOptions::default()).unwrap();
+    assert_eq!((scene.frames.len(), scene.cameras.len()), (2, 1));
+    // The mount is identity in Waymo axes: the optical axis is the ego's forward axis.
+    let axis = scene.view(1, 0).world_from_camera.transform_vector(dggt_geom::glam::DVec3::Z);
+    assert!(axis.abs_diff_eq(dggt_geom::glam::DVec3::X, 1e-12));
+    assert!((scene.trajectory_length(0) - 1.0).abs() < 1e-12);
+    let view = prepare_view(&scene, 1, 0, &Preprocess { target_width: 56, patch_size: 14, crop_to_square: true }).unwrap();
+    assert_eq!((view.image.size.width, view.image.size.height), (56, 42));
+    let sky = view.sky_mask.unwrap();
+    assert!((sky.coverage() - 17.0 / 42.0).abs() < 0.03, "{}", sky.coverage());
+}
+
+#[test]
+fn non_finite_pose() {
+    let dir = tempfile::tempdir().unwrap();
+    let layout = write_minimal_export(dir.path());
+    std::fs::write(layout.ego_pose(1), "1 0 0 NaN\n0 1 0 0\n0 0 1 0\n0 0 0 1\n").unwrap();
+    expect_error_naming(dir.path(), &layout.ego_pose(1), "finite");
+}
+
+#[test]
+fn non_rigid_extrinsics() {
+    let dir = tempfile::tempdir().unwrap();
+    let layout = write_minimal_export(dir.path());
+    std::fs::write(layout.extrinsics(0), "2 0 0 0\n0 2 0 0\n0 0 2 0\n0 0 0 1\n").unwrap();
+    expect_error_naming(dir.path(), &layout.extrinsics(0), "not a rigid transform");
+}
+
+#[test]
+fn wrong_number_of_intrinsics() {
+    let dir = tempfile::tempdir().unwrap();
+    let layout = write_minimal_export(dir.path());
+    std::fs::write(layout.intrinsics(0), "50\n50\n32\n24\n").unwrap();
+    expect_error_naming(dir.path(), &layout.intrinsics(0), "9 numbers");
+}
+
+#[test]
+fn unparsable_matrix() {
+    let dir = tempfile::tempdir().unwrap();
+    let layout = write_minimal_export(dir.path());
+    std::fs::write(layout.ego_pose(0), "1 0 0 0\n0 1 0 zero\n0 0 1 0\n0 0 0 1\n").unwrap();
+    expect_error_naming(dir.path(), &layout.ego_pose(0), "\"zero\"");
+}
+
+#[test]
+fn corrupt_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let layout = write_minimal_export(dir.path());
+    std::fs::write(layout.image(1, 0), b"definitely not a jpeg").unwrap();
+    expect_error_naming(dir.path(), &layout.image(1, 0), "image");
+}
+
+#[test]
+fn image_size_disagrees_with_the_calibration() {
+    let dir = tempfile::tempdir().unwrap();
+    let layout = write_minimal_export(dir.path());
+    images::write_jpeg(&layout.image(1, 0), &RgbImage::new(32, 48), 90).unwrap();
+    expect_error_naming(dir.path(), &layout.image(1, 0), "64x48");
+    // The first image defines the size; a principal point outside it is caught against the intrinsics.
+    images::write_jpeg(&layout.image(0, 0), &RgbImage::new(20, 20), 90).unwrap();
+    expect_error_naming(dir.path(), &layout.intrinsics(0), "principal point");
+}
+
+#[test]
+fn missing_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let layout = write_minimal_export(dir.path());
+    std::fs::remove_file(layout.sky_mask(1, 0)).unwrap();
+    expect_error_naming(dir.path(), &layout.sky_mask(1, 0), "missing");
+    std::fs::remove_file(layout.intrinsics(0)).unwrap();
+    expect_error_naming(dir.path(), &dir.path().join("intrinsics"), "none");
+    let error = read_export(&dir.path().join("nope"), &ExportOptions::default()).unwrap_err();
+    assert!(error.to_string().contains("nope"));
+}
+
+#[test]
+fn frame_and_camera_selection() {
+    let dir = tempfile::tempdir().unwrap();
+    let layout = write_minimal_export(dir.path());
+    let options = ExportOptions { cameras: Some(vec![0]), frames: Some(1..2), frame_rate_hz: None };
+    let scene = read_export(dir.path(), &options).unwrap();
+    assert_eq!(scene.frames[0].index, 1);
+    let centre = scene.view(0, 0).world_from_camera.translation();
+    assert!((centre.x - 1.5).abs() < 1e-12, "world anchored at the ego of the first chosen frame: {centre}");
+    let missing = ExportOptions { frames: Some(0..3), ..ExportOptions::default() };
+    expect_error_naming_with(dir.path(), &missing, &layout.ego_pose(2));
+}
+
+fn expect_error_naming_with(root: &Path, options: &ExportOptions, file: &Path) {
+    let message = read_export(root, options).unwrap_err().to_string();
+    assert!(message.contains(&file.display().to_string()), "{message}");
+}
+
+#[test]
+fn corrupt_mask_is_reported_when_prepared() {
+    let dir = tempfile::tempdir().unwrap();
+    let layout = write_minimal_export(dir.path());
+    std::fs::write(layout.sky_mask(0, 0), [0x89, b'P', b'N', b'G', 0, 0]).unwrap();
+    let scene = read_export(dir.path(), &ExportOptions::default()).unwrap();
+    let message = prepare_view(&scene, 0, 0, &Preprocess::default()).unwrap_err().to_string();
+    assert!(message.contains("000_0.png"), "{message}");
+}
