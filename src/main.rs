@@ -1,1 +1,95 @@
-fn main() {}
+//! `dggt`: feedforward 4D reconstruction of dynamic driving scenes — the command-line entry point.
+
+mod backend;
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use clap::{Parser, Subcommand};
+use tracing_subscriber::EnvFilter;
+
+use crate::backend::DeviceChoice;
+
+#[derive(Debug, Parser)]
+#[command(name = "dggt", version, about = "Feedforward 4D reconstruction of dynamic driving scenes")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Summarise a driving log: a scene export or a KITTI odometry sequence.
+    Inspect {
+        /// The scene folder (export layout) or KITTI sequence folder.
+        dir: PathBuf,
+        /// Only these frame indices, as `START..END` (end exclusive).
+        #[arg(long, value_parser = parse_range)]
+        frames: Option<std::ops::Range<usize>>,
+        /// Only these camera ids (comma separated).
+        #[arg(long, value_delimiter = ',')]
+        cameras: Option<Vec<usize>>,
+        /// Print the summary as JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// List the compute backends of this build and check that each one computes.
+    Devices {
+        /// Check only this backend.
+        #[arg(long, value_enum)]
+        device: Option<DeviceChoice>,
+    },
+}
+
+fn parse_range(text: &str) -> Result<std::ops::Range<usize>, String> {
+    let (start, end) = text.split_once("..").ok_or_else(|| format!("expected START..END, got {text:?}"))?;
+    let start: usize = start.parse().map_err(|_| format!("bad range start in {text:?}"))?;
+    let end: usize = end.parse().map_err(|_| format!("bad range end in {text:?}"))?;
+    if end <= start {
+        return Err(format!("empty range {text:?}"));
+    }
+    Ok(start..end)
+}
+
+fn main() -> Result<()> {
+    tracing_subscriber::fmt()
+        .with_env_filter(EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info")))
+        .with_writer(std::io::stderr)
+        .init();
+    match Cli::parse().command {
+        Command::Inspect { dir, frames, cameras, json } => {
+            let scene = dggt_data::open_scene(&dir, frames, cameras)
+                .with_context(|| format!("reading the log at {}", dir.display()))?;
+            let summary = dggt_data::SceneSummary::of(&scene);
+            if json {
+                println!("{}", serde_json::to_string_pretty(&summary)?);
+            } else {
+                println!("{summary}");
+            }
+        }
+        Command::Devices { device } => {
+            let choices = device.map_or(DeviceChoice::ALL.to_vec(), |d| vec![d]);
+            let mut failed = false;
+            for choice in choices {
+                if !choice.compiled() {
+                    println!("{choice:?}: not in this build (cargo feature `{}`)", choice.feature());
+                    failed |= device.is_some();
+                    continue;
+                }
+                match choice.device().and_then(|d| backend::self_check(&d).map(|err| (d, err))) {
+                    Ok((d, err)) if err < 1e-4 => println!("{choice:?}: ok ({d:?}, matmul error {err:.1e})"),
+                    Ok((d, err)) => {
+                        println!("{choice:?}: WRONG RESULTS ({d:?}, matmul error {err:.1e})");
+                        failed = true;
+                    }
+                    Err(e) => {
+                        println!("{choice:?}: failed: {e:#}");
+                        failed = true;
+                    }
+                }
+            }
+            anyhow::ensure!(!failed, "a requested backend is unavailable or computes wrong results");
+        }
+    }
+    Ok(())
+}

@@ -5,6 +5,7 @@
 //! - [`scene`]: the in-memory log: cameras, frames, ground-truth poses, per-view files.
 //! - [`preprocess`]: the release's resize/crop of images and masks, with intrinsics to match;
 //!   [`views`] applies it to one view of a scene.
+//! - [`summary`]: what `dggt inspect` reports about a scene.
 //! - [`text`], [`npy`], [`images`], [`io`]: untrusted-input readers and atomic writers.
 //!
 //! Every reader returns a [`DataError`] naming the file and what was expected; nothing here panics on bad input.
@@ -17,8 +18,10 @@ pub mod kitti;
 pub mod layout;
 pub mod lidar;
 pub mod npy;
+mod open;
 pub mod preprocess;
 pub mod scene;
+pub mod summary;
 pub mod text;
 pub mod views;
 
@@ -27,5 +30,7 @@ pub use layout::{DynamicMaskKind, ExportLayout};
 pub use preprocess::{BinaryMask, PlanarImage, Preprocess, PreprocessPlan};
 pub use export::{ExportOptions, read_export};
 pub use kitti::read_kitti_odometry;
+pub use open::open_scene;
 pub use views::{PreparedView, prepare_view};
+pub use summary::SceneSummary;
 pub use scene::{Scene, SceneCamera, SceneFrame, SceneSource, View, ViewFiles};

@@ -95,7 +95,7 @@ impl Scene {
                 let b = self.view(f, camera).world_from_camera.translation();
                 a.distance(b)
             })
-            .sum()
+            .fold(0.0, |total, step| total + step)
     }
 
     /// Whether every view has a file of the given kind.

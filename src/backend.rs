@@ -1,0 +1,84 @@
+//! Compute devices: which burn backends this build has, and the `--device` choice that selects one.
+//!
+//! Backends are cargo features of the `dggt` package (`flex` by default, `ndarray`, `wgpu`, `cuda`), so a
+//! CPU-only build never compiles GPU crates. Asking for a backend the build lacks is an error that says which
+//! feature to enable.
+
+use anyhow::{Result, bail};
+use burn::tensor::{Device, Tensor};
+
+/// A backend the user can ask for with `--device`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum DeviceChoice {
+    /// Pure-Rust CPU backend (`flex`, the default).
+    Cpu,
+    /// The ndarray CPU backend.
+    Ndarray,
+    /// GPU through wgpu (Vulkan, Metal, DX12), CubeCL kernels.
+    Wgpu,
+    /// NVIDIA GPU through CUDA, the same CubeCL kernels.
+    Cuda,
+}
+
+impl DeviceChoice {
+    pub const ALL: [DeviceChoice; 4] = [Self::Cpu, Self::Ndarray, Self::Wgpu, Self::Cuda];
+
+    /// The cargo feature that compiles this backend in.
+    pub fn feature(self) -> &'static str {
+        match self {
+            Self::Cpu => "flex",
+            Self::Ndarray => "ndarray",
+            Self::Wgpu => "wgpu",
+            Self::Cuda => "cuda",
+        }
+    }
+
+    /// Whether this build includes the backend.
+    pub fn compiled(self) -> bool {
+        match self {
+            Self::Cpu => cfg!(feature = "flex"),
+            Self::Ndarray => cfg!(feature = "ndarray"),
+            Self::Wgpu => cfg!(feature = "wgpu"),
+            Self::Cuda => cfg!(feature = "cuda"),
+        }
+    }
+
+    /// The burn device, or an error naming the missing feature.
+    pub fn device(self) -> Result<Device> {
+        match self {
+            #[cfg(feature = "flex")]
+            Self::Cpu => Ok(Device::flex()),
+            #[cfg(feature = "ndarray")]
+            #[allow(deprecated)]
+            Self::Ndarray => Ok(Device::ndarray()),
+            #[cfg(feature = "wgpu")]
+            Self::Wgpu => Ok(Device::wgpu(burn::tensor::DeviceKind::default())),
+            #[cfg(feature = "cuda")]
+            Self::Cuda => Ok(Device::cuda(0)),
+            #[allow(unreachable_patterns)]
+            other => bail!(
+                "this build of dggt has no {other:?} backend; rebuild with `cargo build --release --features {}`",
+                other.feature()
+            ),
+        }
+    }
+}
+
+/// Runs a small matrix product on `device` and returns the largest difference from the same product on the
+/// host, proving that the backend computes.
+pub fn self_check(device: &Device) -> Result<f32> {
+    let (m, k, n) = (17, 33, 9);
+    let a: Vec<f32> = (0..m * k).map(|i| ((i * 7 % 13) as f32 - 6.0) / 7.0).collect();
+    let b: Vec<f32> = (0..k * n).map(|i| ((i * 5 % 11) as f32 - 5.0) / 5.0).collect();
+    let expected: Vec<f32> = (0..m * n)
+        .map(|idx| (0..k).map(|p| a[idx / n * k + p] * b[p * n + idx % n]).sum())
+        .collect();
+    let ta = Tensor::<2>::from_data(burn::tensor::TensorData::new(a, [m, k]), device);
+    let tb = Tensor::<2>::from_data(burn::tensor::TensorData::new(b, [k, n]), device);
+    let product: Vec<f32> = ta
+        .matmul(tb)
+        .into_data()
+        .try_to_vec::<f32>()
+        .map_err(|e| anyhow::anyhow!("reading back the product: {e:?}"))?;
+    Ok(product.iter().zip(&expected).fold(0.0f32, |m, (x, y)| m.max((x - y).abs())))
+}
