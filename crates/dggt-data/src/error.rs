@@ -17,6 +17,8 @@ pub enum DataError {
     Image { path: PathBuf, source: image::ImageError },
     #[error("invalid configuration: {0}")]
     Config(String),
+    #[error("loading failed: {0}")]
+    Worker(String),
 }
 
 impl DataError {
@@ -38,7 +40,7 @@ impl DataError {
             Self::Io { path, .. } | Self::Malformed { path, .. } | Self::Geometry { path, .. } | Self::Image { path, .. } => {
                 Some(path)
             }
-            Self::Config(_) => None,
+            Self::Config(_) | Self::Worker(_) => None,
         }
     }
 }

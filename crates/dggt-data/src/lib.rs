@@ -1,15 +1,18 @@
 //! Driving-scene data for dggt: everything between files on disk and the tensors a training step consumes.
 //!
 //! - [`layout`]: file names of the scene-export layout (drivestudio / OmniRe).
-//! - [`export`], [`kitti`], [`lidar`]: readers of the driving-log formats into a [`Scene`].
+//! - [`export`], [`kitti`], [`lidar`], [`depth_flow`]: readers of the driving-log formats into a [`Scene`].
 //! - [`scene`]: the in-memory log: cameras, frames, ground-truth poses, per-view files.
 //! - [`preprocess`]: the release's resize/crop of images and masks, with intrinsics to match;
 //!   [`views`] applies it to one view of a scene.
+//! - [`sampler`]: which input and target frames each training step sees, reproducibly per step.
+//! - [`prefetch`]: worker threads that load upcoming items ahead of the consumer, in order, with bounded memory.
 //! - [`summary`]: what `dggt inspect` reports about a scene.
 //! - [`text`], [`npy`], [`images`], [`io`]: untrusted-input readers and atomic writers.
 //!
 //! Every reader returns a [`DataError`] naming the file and what was expected; nothing here panics on bad input.
 
+pub mod depth_flow;
 mod error;
 pub mod export;
 pub mod images;
@@ -19,7 +22,9 @@ pub mod layout;
 pub mod lidar;
 pub mod npy;
 mod open;
+pub mod prefetch;
 pub mod preprocess;
+pub mod sampler;
 pub mod scene;
 pub mod summary;
 pub mod text;
@@ -27,7 +32,10 @@ pub mod views;
 
 pub use error::{DataError, Result};
 pub use layout::{DynamicMaskKind, ExportLayout};
+pub use prefetch::Prefetcher;
 pub use preprocess::{BinaryMask, PlanarImage, Preprocess, PreprocessPlan};
+pub use sampler::{Sampler, SamplerConfig, TrainingSample};
+pub use depth_flow::DepthFlowMap;
 pub use export::{ExportOptions, read_export};
 pub use kitti::read_kitti_odometry;
 pub use open::open_scene;

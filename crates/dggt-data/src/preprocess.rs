@@ -64,7 +64,7 @@ impl BinaryMask {
 impl Preprocess {
     /// Checks the settings.
     pub fn validate(&self) -> Result<()> {
-        if self.patch_size == 0 || self.target_width == 0 || self.target_width % self.patch_size != 0 {
+        if self.patch_size == 0 || self.target_width == 0 || !self.target_width.is_multiple_of(self.patch_size) {
             return Err(DataError::Config(format!(
                 "target_width {} must be a positive multiple of patch_size {}",
                 self.target_width, self.patch_size

@@ -1,5 +1,5 @@
 //! The in-memory description of one driving log: cameras, frames, ground-truth poses and where each view's
-//! files are. Pixels are not held here; they are decoded on demand (see [`crate::loader`]).
+//! files are. Pixels are not held here; they are decoded on demand (see [`crate::views`]).
 //!
 //! Conventions: `world_from_camera` is the ground-truth camera-to-world pose in OpenCV camera axes; for scene
 //! exports the world is anchored at the ego pose of the first chosen frame, for KITTI at camera 0 of frame 0.

@@ -14,7 +14,7 @@ pub fn parse_numbers(path: &Path, text: &str) -> Result<Vec<f64>> {
                 .parse()
                 .map_err(|_| DataError::malformed(path, "whitespace-separated numbers", format!("token {token:?}")))?;
             if !value.is_finite() {
-                return Err(DataError::malformed(path, "finite numbers", format!("{token}")));
+                return Err(DataError::malformed(path, "finite numbers", token.to_string()));
             }
             Ok(value)
         })

@@ -61,15 +61,18 @@ impl QuatWxyz {
     }
 }
 
-fn normalized(q: DQuat, what: &'static str) -> Result<DQuat, GeomError> {
+/// The unit quaternion of `q`. The components are scaled by their largest magnitude before the norm is taken,
+/// so huge inputs do not overflow to infinity; zero (or denormal-small) and non-finite inputs are errors.
+pub(crate) fn normalized(q: DQuat, what: &'static str) -> Result<DQuat, GeomError> {
     if !q.is_finite() {
         return Err(GeomError::NonFinite { what });
     }
-    let norm = q.length();
-    if norm < 1e-12 {
+    let largest = q.to_array().iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    if largest < 1e-150 {
         return Err(GeomError::ZeroQuaternion { what });
     }
-    Ok(q / norm)
+    let scaled = q / largest;
+    Ok(scaled / scaled.length())
 }
 
 /// Below this angle between the two rotations (radians, on the 4-sphere) SLERP falls back to normalised
@@ -81,8 +84,11 @@ const SLERP_LINEAR_THRESHOLD: f64 = 1e-6;
 /// Inputs need not be normalised. `b` is negated when `a · b < 0`, so antipodal inputs (the same rotation)
 /// interpolate to that rotation and rotations 180° apart take one consistent path. Nearly identical inputs use
 /// normalised linear interpolation. The result is always a finite unit quaternion for finite non-zero inputs;
-/// `t` outside `[0, 1]` extrapolates along the same great circle.
+/// `t` outside `[0, 1]` extrapolates along the same great circle; a non-finite `t` is an error.
 pub fn slerp(a: DQuat, b: DQuat, t: f64) -> Result<DQuat, GeomError> {
+    if !t.is_finite() {
+        return Err(GeomError::NonFinite { what: "slerp parameter" });
+    }
     let a = normalized(a, "slerp start")?;
     let mut b = normalized(b, "slerp end")?;
     let mut cos = a.dot(b);
@@ -113,6 +119,12 @@ mod tests {
         assert_eq!(QuatWxyz::from(x), q);
         let r = x.to_rotation().unwrap();
         assert!((r.w - 0.5 / x.0.iter().map(|v| v * v).sum::<f64>().sqrt()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn huge_quaternions_normalise_without_overflow() {
+        let q = QuatWxyz([1e300, 0.0, 0.0, 1e300]).to_rotation().unwrap();
+        assert!((q.length() - 1.0).abs() < 1e-12 && (q.w - q.z).abs() < 1e-12);
     }
 
     #[test]

@@ -76,11 +76,8 @@ impl<To, From> Rigid<To, From> {
         if !rotation.is_finite() || !translation.is_finite() {
             return Err(GeomError::NonFinite { what: "rigid transform" });
         }
-        let norm = rotation.length();
-        if norm < 1e-12 {
-            return Err(GeomError::ZeroQuaternion { what: "rigid transform rotation" });
-        }
-        Ok(Self { rotation: rotation / norm, translation, frames: PhantomData })
+        let rotation = crate::quaternion::normalized(rotation, "rigid transform rotation")?;
+        Ok(Self { rotation, translation, frames: PhantomData })
     }
 
     /// Builds a transform from a 3x3 rotation matrix, checked to be orthonormal with determinant +1.

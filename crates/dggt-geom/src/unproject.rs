@@ -8,7 +8,7 @@ use crate::{CameraFromWorld, GeomError, ImageSize, PinholeIntrinsics, PixelConve
 /// `X_world = Rᵀ (X_cam - t)` for the camera-from-world extrinsic `[R | t]`.
 ///
 /// `convention` says where pixel `(column, row)` lies: the release uses [`PixelConvention::Integer`].
-/// Returns one point per pixel in the same order as `depth`.
+/// Returns one point per pixel in the same order as `depth`; a non-finite depth is an error.
 pub fn unproject_depth_map(
     depth: &[f32],
     size: ImageSize,
@@ -25,6 +25,9 @@ pub fn unproject_depth_map(
         });
     }
     intrinsics.validate()?;
+    if depth.iter().any(|d| !d.is_finite()) {
+        return Err(GeomError::NonFinite { what: "depth map" });
+    }
     let world_from_camera = camera_from_world.inverse();
     let width = size.width as usize;
     Ok(depth

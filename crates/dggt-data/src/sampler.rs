@@ -1,0 +1,386 @@
+//! Which frames and cameras one training step sees.
+//!
+//! DGGT trains on `N` unposed input frames and `2N` target frames rendered from the predicted scene. The
+//! inputs come from a short window of the log so that the scene barely changes between them; the targets lie
+//! between and just around the inputs, so the model is supervised on novel timestamps it has to interpolate.
+//!
+//! One step is drawn as follows (all choices uniform):
+//!
+//! 1. a window of `window` consecutive frames lying inside the log;
+//! 2. `N` in `min_inputs..=max_inputs`;
+//! 3. `N` distinct frames of the window, sorted. There is no minimum spread: every `N`-subset of the window is
+//!    equally likely, so the model sees tightly clustered inputs as well as inputs spanning the whole window.
+//!    Frames within `window - 1` of either end of the log are covered by fewer windows and so drawn less often;
+//! 4. `targets_per_input · N` targets from the *target range* `[first input - target_margin, last input +
+//!    target_margin]`, clipped to the log. Targets are distinct whenever the range has enough frames: frames
+//!    that are not inputs are taken first, then input frames fill the remaining places. When the range is
+//!    smaller than the number of targets, the whole range is taken and then drawn again, without replacement
+//!    within each round, so every frame of the range occurs as often as any other, give or take one.
+//!    Targets are sorted.
+//!
+//! Every view of a step uses the same cameras: the configured ones in the configured order, or all of them.
+//!
+//! Reproducibility: [`Sampler::sample_at`] derives a generator from `(seed, step)` alone, so step `k` of a run
+//! can be reproduced, or training resumed at step `k`, without replaying steps `0..k`. The generator is
+//! xoshiro256++ (a fixed algorithm, unlike `StdRng`), so samples are stable for a given `rand` version, which
+//! `Cargo.lock` pins.
+
+use rand::rngs::Xoshiro256PlusPlus;
+use rand::seq::index;
+use rand::{Rng, RngExt, SeedableRng};
+use serde::{Deserialize, Serialize};
+
+use crate::error::{DataError, Result};
+
+/// How training steps draw their frames and cameras. Missing fields take their defaults.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SamplerConfig {
+    /// Fewest input frames per step.
+    pub min_inputs: usize,
+    /// Most input frames per step.
+    pub max_inputs: usize,
+    /// Consecutive frames the inputs of one step are drawn from (the paper's 20-frame window).
+    pub window: usize,
+    /// Target frames per input frame.
+    pub targets_per_input: usize,
+    /// Frames before the first input and after the last one that targets may also come from.
+    pub target_margin: usize,
+    /// Camera positions in the scene used for every view, in this order; empty means all cameras.
+    pub cameras: Vec<usize>,
+}
+
+impl Default for SamplerConfig {
+    fn default() -> Self {
+        Self { min_inputs: 4, max_inputs: 8, window: 20, targets_per_input: 2, target_margin: 1, cameras: Vec::new() }
+    }
+}
+
+impl SamplerConfig {
+    /// Checks the settings against a log of `frame_count` frames seen by `camera_count` cameras.
+    pub fn validate(&self, frame_count: usize, camera_count: usize) -> Result<()> {
+        let fail = |message: String| Err(DataError::Config(format!("sampler: {message}")));
+        if self.min_inputs == 0 {
+            return fail("min_inputs must be at least 1".into());
+        }
+        if self.min_inputs > self.max_inputs {
+            return fail(format!("min_inputs ({}) exceeds max_inputs ({})", self.min_inputs, self.max_inputs));
+        }
+        if self.window < self.max_inputs {
+            return fail(format!(
+                "a window of {} frames cannot hold max_inputs = {} distinct input frames",
+                self.window, self.max_inputs
+            ));
+        }
+        if self.window > frame_count {
+            return fail(format!("the window of {} frames is longer than the log ({frame_count} frames)", self.window));
+        }
+        if self.targets_per_input == 0 {
+            return fail("targets_per_input must be at least 1".into());
+        }
+        if camera_count == 0 {
+            return fail("the scene has no cameras".into());
+        }
+        for (i, &camera) in self.cameras.iter().enumerate() {
+            if camera >= camera_count {
+                return fail(format!("camera position {camera} does not exist; the scene has {camera_count} cameras"));
+            }
+            if self.cameras[..i].contains(&camera) {
+                return fail(format!("camera position {camera} is listed twice"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The views of one training step, as positions into [`Scene::frames`](crate::Scene::frames) and
+/// [`Scene::cameras`](crate::Scene::cameras). Every listed frame is seen by every listed camera.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TrainingSample {
+    /// Sorted, distinct, all inside one window.
+    pub input_frames: Vec<usize>,
+    /// Sorted; `targets_per_input` per input; distinct when the target range allows it.
+    pub target_frames: Vec<usize>,
+    pub cameras: Vec<usize>,
+}
+
+/// Draws [`TrainingSample`]s for one log, following the module's rules.
+#[derive(Debug, Clone)]
+pub struct Sampler {
+    config: SamplerConfig,
+    frame_count: usize,
+    cameras: Vec<usize>,
+}
+
+impl Sampler {
+    /// A sampler for a log of `frame_count` frames and `camera_count` cameras; errors when `config` does not fit.
+    pub fn new(config: SamplerConfig, frame_count: usize, camera_count: usize) -> Result<Self> {
+        config.validate(frame_count, camera_count)?;
+        let cameras = if config.cameras.is_empty() { (0..camera_count).collect() } else { config.cameras.clone() };
+        Ok(Self { config, frame_count, cameras })
+    }
+
+    pub fn config(&self) -> &SamplerConfig {
+        &self.config
+    }
+
+    /// The cameras every sample uses.
+    pub fn cameras(&self) -> &[usize] {
+        &self.cameras
+    }
+
+    /// Draws one sample from `rng`.
+    pub fn sample<R: Rng + ?Sized>(&self, rng: &mut R) -> TrainingSample {
+        let config = &self.config;
+        let window_start = rng.random_range(0..=self.frame_count - config.window);
+        let input_count = rng.random_range(config.min_inputs..=config.max_inputs);
+        let mut input_frames: Vec<usize> =
+            index::sample(rng, config.window, input_count).into_iter().map(|i| window_start + i).collect();
+        input_frames.sort_unstable();
+        let target_frames = self.draw_targets(&input_frames, rng);
+        TrainingSample { input_frames, target_frames, cameras: self.cameras.clone() }
+    }
+
+    /// The sample of training step `step` of the run seeded with `seed`; it depends on `(seed, step)` only.
+    pub fn sample_at(&self, seed: u64, step: u64) -> TrainingSample {
+        self.sample(&mut step_rng(seed, step))
+    }
+
+    /// The samples of steps `0, 1, 2, ...` of the run seeded with `seed`.
+    pub fn samples(&self, seed: u64) -> impl Iterator<Item = TrainingSample> + '_ {
+        self.samples_from(seed, 0)
+    }
+
+    /// The samples of steps `first_step, first_step + 1, ...`: resuming a run without replaying earlier steps.
+    pub fn samples_from(&self, seed: u64, first_step: u64) -> impl Iterator<Item = TrainingSample> + '_ {
+        (first_step..).map(move |step| self.sample_at(seed, step))
+    }
+
+    /// `targets_per_input` targets per input from the target range: non-inputs first, then inputs, then
+    /// further rounds over the whole range when it is too small.
+    fn draw_targets<R: Rng + ?Sized>(&self, inputs: &[usize], rng: &mut R) -> Vec<usize> {
+        let (Some(&first), Some(&last)) = (inputs.first(), inputs.last()) else {
+            return Vec::new();
+        };
+        let margin = self.config.target_margin;
+        let range = first.saturating_sub(margin)..=last.saturating_add(margin).min(self.frame_count - 1);
+        let wanted = self.config.targets_per_input * inputs.len();
+        let others: Vec<usize> = range.clone().filter(|f| inputs.binary_search(f).is_err()).collect();
+        let mut targets = Vec::with_capacity(wanted);
+        fill_with_distinct(&mut targets, wanted, &others, rng);
+        fill_with_distinct(&mut targets, wanted, inputs, rng);
+        let whole_range: Vec<usize> = range.collect();
+        while targets.len() < wanted {
+            fill_with_distinct(&mut targets, wanted, &whole_range, rng);
+        }
+        targets.sort_unstable();
+        targets
+    }
+}
+
+/// Appends distinct elements of `from`, chosen uniformly, until `into` holds `wanted` or `from` is used up.
+fn fill_with_distinct<R: Rng + ?Sized>(into: &mut Vec<usize>, wanted: usize, from: &[usize], rng: &mut R) {
+    let count = wanted.saturating_sub(into.len()).min(from.len());
+    into.extend(index::sample(rng, from.len(), count).into_iter().map(|i| from[i]));
+}
+
+/// SplitMix64's increment, `2^64 / φ`.
+const GOLDEN_GAMMA: u64 = 0x9e37_79b9_7f4a_7c15;
+
+/// The generator of one training step. Its initial state is an injective function of `(seed, step)` (the first
+/// two words are bijections of `seed` and of `step`), so no two `(seed, step)` pairs start from the same state.
+fn step_rng(seed: u64, step: u64) -> Xoshiro256PlusPlus {
+    let words = [seed, step, seed ^ GOLDEN_GAMMA, step ^ GOLDEN_GAMMA].map(splitmix64);
+    let mut state = [0u8; 32];
+    for (chunk, word) in state.chunks_exact_mut(8).zip(words) {
+        chunk.copy_from_slice(&word.to_le_bytes());
+    }
+    Xoshiro256PlusPlus::from_seed(state)
+}
+
+/// SplitMix64's output function: a bijection of `u64` that scatters nearby inputs across the whole range.
+fn splitmix64(x: u64) -> u64 {
+    let mut z = x.wrapping_add(GOLDEN_GAMMA);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::{BTreeMap, BTreeSet};
+
+    use proptest::prelude::*;
+
+    use super::*;
+
+    /// Asserts every documented invariant of one sample.
+    fn check_invariants(sampler: &Sampler, sample: &TrainingSample) {
+        let config = sampler.config();
+        let inputs = &sample.input_frames;
+        let n = inputs.len();
+        assert!((config.min_inputs..=config.max_inputs).contains(&n), "{n} inputs: {sample:?}");
+        assert!(inputs.windows(2).all(|w| w[0] < w[1]), "inputs not sorted and distinct: {sample:?}");
+        assert!(inputs[n - 1] < sampler.frame_count, "{sample:?}");
+        assert!(inputs[n - 1] - inputs[0] < config.window, "inputs span more than one window: {sample:?}");
+
+        let targets = &sample.target_frames;
+        assert_eq!(targets.len(), config.targets_per_input * n, "{sample:?}");
+        assert!(targets.windows(2).all(|w| w[0] <= w[1]), "targets not sorted: {sample:?}");
+        let low = inputs[0].saturating_sub(config.target_margin);
+        let high = (inputs[n - 1] + config.target_margin).min(sampler.frame_count - 1);
+        assert!(targets.iter().all(|t| (low..=high).contains(t)), "target outside [{low}, {high}]: {sample:?}");
+
+        let range_len = high - low + 1;
+        let mut counts = BTreeMap::new();
+        for &t in targets {
+            *counts.entry(t).or_insert(0usize) += 1;
+        }
+        if range_len >= targets.len() {
+            assert!(counts.values().all(|&c| c == 1), "repeated targets although {range_len} frames: {sample:?}");
+            if range_len - n >= targets.len() {
+                assert!(targets.iter().all(|t| inputs.binary_search(t).is_err()), "input used as target: {sample:?}");
+            } else {
+                let non_inputs = targets.iter().filter(|t| inputs.binary_search(t).is_err()).count();
+                assert_eq!(non_inputs, range_len - n, "every non-input frame must be a target first: {sample:?}");
+            }
+        } else {
+            assert_eq!(counts.len(), range_len, "every frame of the range is a target: {sample:?}");
+            let (min, max) = (counts.values().min().unwrap(), counts.values().max().unwrap());
+            assert!(max - min <= 1, "targets repeated unevenly: {sample:?}");
+        }
+        assert_eq!(sample.cameras, sampler.cameras());
+    }
+
+    fn config() -> impl Strategy<Value = (SamplerConfig, usize, usize)> {
+        (1usize..6, 0usize..5, 0usize..20, 0usize..40, 1usize..4, 0usize..4, 1usize..5).prop_map(
+            |(min_inputs, extra_inputs, extra_window, extra_frames, targets_per_input, target_margin, cameras)| {
+                let max_inputs = min_inputs + extra_inputs;
+                let window = max_inputs + extra_window;
+                let config =
+                    SamplerConfig { min_inputs, max_inputs, window, targets_per_input, target_margin, cameras: vec![] };
+                (config, window + extra_frames, cameras)
+            },
+        )
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(256))]
+
+        #[test]
+        fn samples_satisfy_the_invariants((config, frames, cameras) in config(), seed in any::<u64>()) {
+            let sampler = Sampler::new(config, frames, cameras).unwrap();
+            for sample in sampler.samples(seed).take(50) {
+                check_invariants(&sampler, &sample);
+            }
+        }
+    }
+
+    #[test]
+    fn default_matches_the_paper() {
+        let config = SamplerConfig::default();
+        assert_eq!((config.min_inputs, config.max_inputs, config.window), (4, 8, 20));
+        assert_eq!((config.targets_per_input, config.target_margin), (2, 1));
+        let sampler = Sampler::new(config, 200, 3).unwrap();
+        assert_eq!(sampler.cameras(), [0, 1, 2]);
+        for sample in sampler.samples(1).take(2000) {
+            check_invariants(&sampler, &sample);
+        }
+    }
+
+    #[test]
+    fn every_count_window_and_frame_occurs() {
+        let config = SamplerConfig { max_inputs: 6, window: 6, ..SamplerConfig::default() };
+        let sampler = Sampler::new(config, 10, 1).unwrap();
+        let mut counts = BTreeSet::new();
+        let mut inputs = BTreeSet::new();
+        let mut targets = BTreeSet::new();
+        let mut starts = BTreeSet::new();
+        for sample in sampler.samples(5).take(3000) {
+            counts.insert(sample.input_frames.len());
+            starts.insert(sample.input_frames[0]);
+            inputs.extend(sample.input_frames);
+            targets.extend(sample.target_frames);
+        }
+        assert_eq!(counts, (4..=6).collect());
+        assert_eq!(inputs, (0..10).collect());
+        assert_eq!(targets, (0..10).collect());
+        assert_eq!(starts, (0..=6).collect(), "the first input can be anywhere a window of 6 leaves room for 4 inputs");
+    }
+
+    #[test]
+    fn a_step_depends_on_seed_and_step_only() {
+        let sampler = Sampler::new(SamplerConfig::default(), 100, 2).unwrap();
+        let run: Vec<_> = sampler.samples(42).take(100).collect();
+        assert_eq!(run[37], sampler.sample_at(42, 37));
+        assert_eq!(sampler.samples_from(42, 37).next().unwrap(), run[37]);
+        assert_eq!(sampler.samples_from(42, 90).take(10).collect::<Vec<_>>(), run[90..]);
+        let distinct: BTreeSet<_> = run.iter().map(|s| (s.input_frames.clone(), s.target_frames.clone())).collect();
+        assert!(distinct.len() > 95, "steps should differ: {} distinct of 100", distinct.len());
+        let other_seed: Vec<_> = sampler.samples(43).take(100).collect();
+        assert_ne!(run, other_seed);
+    }
+
+    #[test]
+    fn step_samples_are_stable_across_builds() {
+        // Resuming a run must reproduce its steps; this pins the generator and the drawing procedure.
+        let sampler = Sampler::new(SamplerConfig::default(), 50, 1).unwrap();
+        let sample = sampler.sample_at(7, 3);
+        assert_eq!(sample.input_frames, vec![13, 14, 15, 16, 22]);
+        assert_eq!(sample.target_frames, vec![12, 13, 14, 17, 18, 19, 20, 21, 22, 23]);
+    }
+
+    #[test]
+    fn small_target_ranges_repeat_frames_evenly() {
+        // Five consecutive inputs in a window of five: the target range has 7 frames for 10 targets.
+        let config = SamplerConfig { min_inputs: 5, max_inputs: 5, window: 5, ..SamplerConfig::default() };
+        let sampler = Sampler::new(config, 30, 1).unwrap();
+        for sample in sampler.samples(3).take(200) {
+            check_invariants(&sampler, &sample);
+            let inputs = &sample.input_frames;
+            assert_eq!(inputs[4] - inputs[0], 4);
+        }
+    }
+
+    #[test]
+    fn cameras_follow_the_configuration() {
+        let config = SamplerConfig { cameras: vec![2, 0], ..SamplerConfig::default() };
+        let sampler = Sampler::new(config, 40, 3).unwrap();
+        assert_eq!(sampler.sample_at(0, 0).cameras, vec![2, 0]);
+        let single = Sampler::new(SamplerConfig { cameras: vec![1], ..SamplerConfig::default() }, 40, 3).unwrap();
+        assert_eq!(single.sample_at(0, 0).cameras, vec![1]);
+        let all = Sampler::new(SamplerConfig::default(), 40, 1).unwrap();
+        assert_eq!(all.sample_at(0, 0).cameras, vec![0]);
+    }
+
+    #[test]
+    fn invalid_configurations_are_rejected() {
+        let base = SamplerConfig::default();
+        let cases = [
+            (SamplerConfig { min_inputs: 0, ..base.clone() }, 100, 1, "min_inputs must be at least 1"),
+            (SamplerConfig { min_inputs: 9, ..base.clone() }, 100, 1, "exceeds max_inputs"),
+            (SamplerConfig { window: 7, ..base.clone() }, 100, 1, "cannot hold"),
+            (base.clone(), 19, 1, "longer than the log"),
+            (SamplerConfig { targets_per_input: 0, ..base.clone() }, 100, 1, "targets_per_input"),
+            (base.clone(), 100, 0, "no cameras"),
+            (SamplerConfig { cameras: vec![0, 3], ..base.clone() }, 100, 3, "does not exist"),
+            (SamplerConfig { cameras: vec![1, 1], ..base.clone() }, 100, 3, "listed twice"),
+        ];
+        for (config, frames, cameras, expected) in cases {
+            match Sampler::new(config.clone(), frames, cameras) {
+                Err(DataError::Config(message)) => assert!(message.contains(expected), "{message}"),
+                other => panic!("{config:?} with {frames} frames, {cameras} cameras: {other:?}"),
+            }
+        }
+        assert!(Sampler::new(SamplerConfig { window: 20, ..base }, 20, 1).is_ok(), "a window may cover the log");
+    }
+
+    #[test]
+    fn configuration_reads_partial_json_and_rejects_unknown_fields() {
+        let config: SamplerConfig = serde_json::from_str(r#"{"max_inputs": 6, "cameras": [0, 1]}"#).unwrap();
+        assert_eq!(config, SamplerConfig { max_inputs: 6, cameras: vec![0, 1], ..SamplerConfig::default() });
+        let round_trip: SamplerConfig = serde_json::from_str(&serde_json::to_string(&config).unwrap()).unwrap();
+        assert_eq!(round_trip, config);
+        assert!(serde_json::from_str::<SamplerConfig>(r#"{"windows": 10}"#).is_err());
+    }
+}
