@@ -6,7 +6,8 @@
 //! - [`preprocess`]: the release's resize/crop of images and masks, with intrinsics to match;
 //!   [`views`] applies it to one view of a scene.
 //! - [`sampler`]: which input and target frames each training step sees, reproducibly per step.
-//! - [`prefetch`]: worker threads that load upcoming items ahead of the consumer, in order, with bounded memory.
+//! - [`prefetch`]: worker threads that load upcoming items ahead of the consumer, in order, with bounded memory;
+//!   [`loader`] streams decoded training samples through it.
 //! - [`summary`]: what `dggt inspect` reports about a scene.
 //! - [`text`], [`npy`], [`images`], [`io`]: untrusted-input readers and atomic writers.
 //!
@@ -19,6 +20,7 @@ pub mod images;
 pub mod io;
 pub mod kitti;
 pub mod layout;
+pub mod loader;
 pub mod lidar;
 pub mod npy;
 mod open;
@@ -32,6 +34,7 @@ pub mod views;
 
 pub use error::{DataError, Result};
 pub use layout::{DynamicMaskKind, ExportLayout};
+pub use loader::{LoadedSample, LoaderOptions, load_sample, training_stream};
 pub use prefetch::Prefetcher;
 pub use preprocess::{BinaryMask, PlanarImage, Preprocess, PreprocessPlan};
 pub use sampler::{Sampler, SamplerConfig, TrainingSample};

@@ -98,3 +98,25 @@ fn kitti_sequence_moves_forward_about_1_2_metres_per_frame() {
     assert!(r == g && g == b, "grayscale is replicated to RGB");
     assert!(read_kitti_odometry(&root, Some(40..60)).is_err());
 }
+
+#[test]
+fn training_stream_decodes_kitti_samples_in_step_order() {
+    use dggt_data::{LoaderOptions, Sampler, SamplerConfig, training_stream};
+    let scene = std::sync::Arc::new(read_kitti_odometry(&real_data().join("kitti-odometry/sequence_1"), None).unwrap());
+    let sampler = Sampler::new(SamplerConfig::default(), scene.frames.len(), 1).unwrap();
+    let preprocess = Preprocess { target_width: 140, patch_size: 14, crop_to_square: true };
+    let stream = training_stream(scene.clone(), sampler.clone(), preprocess, 11, 5, LoaderOptions::default()).unwrap();
+    for (loaded, step) in stream.take(3).zip(5..) {
+        let loaded = loaded.unwrap();
+        assert_eq!(loaded.step, step);
+        assert_eq!(loaded.sample, sampler.sample_at(11, step));
+        let n = loaded.sample.input_frames.len();
+        assert!((4..=8).contains(&n));
+        assert_eq!((loaded.inputs.len(), loaded.targets.len()), (n, 2 * n));
+        for (view, &frame) in loaded.inputs.iter().zip(&loaded.sample.input_frames) {
+            assert_eq!(view.frame, frame);
+            assert_eq!((view.image.size.width, view.image.size.height), (140, 42));
+            assert_eq!(view.world_from_camera, scene.view(frame, 0).world_from_camera);
+        }
+    }
+}
