@@ -79,7 +79,8 @@ impl Preprocess {
         let width = self.target_width;
         let patch = self.patch_size as f64;
         let scaled_height = original.height as f64 * width as f64 / original.width as f64;
-        let height = ((scaled_height / patch).round() * patch) as u32;
+        // Python's round(), which the release uses, rounds halves to even.
+        let height = ((scaled_height / patch).round_ties_even() * patch) as u32;
         if height == 0 {
             return Err(DataError::Config(format!(
                 "an image of {original} resized to width {width} is less than one patch ({}) tall",
@@ -175,6 +176,9 @@ mod tests {
         assert_eq!(portrait.resized, size(518, 686));
         assert_eq!((portrait.crop_top, portrait.output), (84, size(518, 518)));
         assert!(Preprocess { target_width: 500, ..p }.plan(size(10, 10)).is_err());
+        // Halves round to even, as Python's round(): 70 * 70 / 140 / 14 = 2.5 patches -> 2.
+        let tiny = Preprocess { target_width: 70, patch_size: 14, crop_to_square: true };
+        assert_eq!(tiny.plan(size(140, 70)).unwrap().output, size(70, 28));
     }
 
     #[test]

@@ -1,0 +1,19 @@
+//! Errors of scene synthesis: a configuration the generator does not support, or a failure while writing the
+//! export. Invalid arguments are reported here instead of panicking, because they come from the command line.
+
+/// Why a synthetic scene could not be generated or written.
+#[derive(Debug, thiserror::Error)]
+pub enum SynthError {
+    #[error("invalid synthetic-scene configuration: {0}")]
+    InvalidConfig(String),
+    #[error("no view for frame {frame}, camera {camera}: the scene has {frames} frames and {cameras} cameras")]
+    NoSuchView { frame: usize, camera: usize, frames: usize, cameras: usize },
+    #[error(transparent)]
+    Data(#[from] dggt_data::DataError),
+    #[error("synthetic-scene geometry: {0}")]
+    Geometry(#[from] dggt_geom::GeomError),
+    #[error("cannot serialise {what}: {source}")]
+    Json { what: &'static str, source: serde_json::Error },
+}
+
+pub type Result<T, E = SynthError> = std::result::Result<T, E>;
