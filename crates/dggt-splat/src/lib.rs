@@ -1,0 +1,43 @@
+//! Differentiable 3D Gaussian rasterisation for dggt: the host reference implementation.
+//!
+//! DGGT renders its predicted Gaussians with gsplat's "classic" 3DGS rasteriser (pinhole, eps2d 0.3, near 0.01,
+//! 16x16 tiles, alpha threshold 1/255, expected depth). This crate reproduces those semantics in plain Rust over
+//! flat `f32` buffers, forward and hand-written backward, parallel with rayon and bit-deterministic. It is the
+//! reference that CPU tensor backends call and that GPU kernels are tested against, so its buffers are the
+//! structure-of-arrays layouts a kernel would use (shapes are documented on each type).
+//!
+//! The pipeline, one module per stage:
+//!
+//! 1. `covariance`: `Σ = R S Sᵀ Rᵀ` from `wxyz` quaternions and linear scales.
+//! 2. `projection`: EWA projection into each view, culling with a [`CullReason`].
+//! 3. `tiles`: kept Gaussians binned into screen tiles, sorted by depth.
+//! 4. `composite`: front-to-back alpha compositing per pixel, and its backward pass.
+//! 5. [`rasterize`] / [`rasterize_backward`] run the stages over a batch of views.
+//!
+//! Sanitising (never NaN, never a panic): a Gaussian with any non-finite parameter, or one whose projected
+//! covariance is not positive definite or overflows, is culled in that view and counted in [`CullStats`];
+//! a quaternion shorter than [`QUAT_MIN_NORM`] is the identity rotation with zero gradient. Wrong buffer
+//! lengths, invalid cameras or settings, and non-finite image gradients are a [`SplatError`].
+
+mod backward;
+mod composite;
+mod covariance;
+mod cull;
+mod error;
+mod forward;
+mod gaussians;
+mod projection;
+mod settings;
+mod tiles;
+mod view;
+
+pub use backward::{GaussianGrads, ImageGrads, rasterize_backward};
+pub use covariance::QUAT_MIN_NORM;
+pub use cull::{CullReason, CullStats};
+pub use error::SplatError;
+pub use forward::{Images, Rasterized, rasterize};
+pub use gaussians::{Gaussians, Opacities};
+pub use projection::Projection;
+pub use settings::RasterSettings;
+pub use tiles::TileBins;
+pub use view::{PinholeView, ViewBatch};

@@ -1,0 +1,63 @@
+//! Rasteriser settings: clipping planes, the 2D blur, the tile size and the background colour.
+
+use crate::error::SplatError;
+
+/// How a batch is rasterised. The defaults are gsplat's (and DGGT's): near 0.01, far 1e10, eps2d 0.3,
+/// 16x16 tiles, black background.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RasterSettings {
+    /// Gaussians with camera-space `z <= near_plane` are culled.
+    pub near_plane: f32,
+    /// Gaussians with camera-space `z >= far_plane` are culled.
+    pub far_plane: f32,
+    /// Added to the diagonal of every projected 2D covariance (a one-pixel-scale low-pass filter; "classic"
+    /// mode: the opacity is not compensated for it).
+    pub eps2d: f32,
+    /// Side of the square screen tiles Gaussians are binned into.
+    pub tile_size: u32,
+    /// `[K]` colour behind the Gaussians, composited with the final transmittance; `None` is black.
+    pub background: Option<Vec<f32>>,
+}
+
+impl Default for RasterSettings {
+    fn default() -> Self {
+        Self { near_plane: 0.01, far_plane: 1e10, eps2d: 0.3, tile_size: 16, background: None }
+    }
+}
+
+impl RasterSettings {
+    /// Checks the settings for `channels` colour channels.
+    pub(crate) fn validate(&self, channels: usize) -> Result<(), SplatError> {
+        let invalid = |detail: String| Err(SplatError::InvalidSettings { detail });
+        if !(self.near_plane.is_finite() && self.near_plane >= 0.0) {
+            return invalid(format!("near_plane must be finite and >= 0, got {}", self.near_plane));
+        }
+        if self.far_plane.is_nan() || self.far_plane <= self.near_plane {
+            return invalid(format!("far_plane ({}) must exceed near_plane ({})", self.far_plane, self.near_plane));
+        }
+        if !(self.eps2d.is_finite() && self.eps2d >= 0.0) {
+            return invalid(format!("eps2d must be finite and >= 0, got {}", self.eps2d));
+        }
+        if self.tile_size == 0 {
+            return invalid("tile_size must be positive".into());
+        }
+        if let Some(background) = &self.background {
+            if background.len() != channels {
+                return Err(SplatError::Shape {
+                    tensor: "background",
+                    expected: format!("{channels} ([K])"),
+                    actual: background.len(),
+                });
+            }
+            if background.iter().any(|v| !v.is_finite()) {
+                return Err(SplatError::NonFinite { what: "background" });
+            }
+        }
+        Ok(())
+    }
+
+    /// The background as `[K]` values (zeros when unset).
+    pub(crate) fn background_or_black(&self, channels: usize) -> Vec<f32> {
+        self.background.clone().unwrap_or_else(|| vec![0.0; channels])
+    }
+}
