@@ -56,6 +56,51 @@ impl CullStats {
         stats
     }
 
+    /// Number of counters in [`to_counts`](Self::to_counts).
+    pub const COUNTS: usize = 9;
+
+    /// The counters in declaration order (`gaussians`, `kept`, the six reasons, `tile_intersections`): the row
+    /// layout of the statistics tensor a tensor backend returns.
+    pub fn to_counts(&self) -> [usize; Self::COUNTS] {
+        [
+            self.gaussians,
+            self.kept,
+            self.non_finite,
+            self.transparent,
+            self.near_plane,
+            self.far_plane,
+            self.degenerate,
+            self.outside_image,
+            self.tile_intersections,
+        ]
+    }
+
+    /// The inverse of [`to_counts`](Self::to_counts).
+    pub fn from_counts(counts: [usize; Self::COUNTS]) -> Self {
+        let [
+            gaussians,
+            kept,
+            non_finite,
+            transparent,
+            near_plane,
+            far_plane,
+            degenerate,
+            outside_image,
+            tile_intersections,
+        ] = counts;
+        Self {
+            gaussians,
+            kept,
+            non_finite,
+            transparent,
+            near_plane,
+            far_plane,
+            degenerate,
+            outside_image,
+            tile_intersections,
+        }
+    }
+
     /// Gaussians removed for any reason.
     pub fn culled(&self) -> usize {
         self.gaussians - self.kept

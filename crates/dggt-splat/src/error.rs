@@ -1,4 +1,5 @@
-//! Errors for input the rasteriser cannot interpret: buffers of the wrong length, invalid cameras or settings.
+//! Errors for input the rasteriser cannot interpret: buffers or tensors of the wrong length, shape or element
+//! type, invalid cameras or settings.
 //!
 //! Per-Gaussian problems (NaN parameters, degenerate shapes) are not errors: such Gaussians are culled and
 //! counted in [`CullStats`](crate::CullStats), so one bad splat cannot stop a training step.
@@ -8,6 +9,10 @@
 pub enum SplatError {
     #[error("`{tensor}` has {actual} values, expected {expected}")]
     Shape { tensor: &'static str, expected: String, actual: usize },
+    #[error("`{tensor}` has shape {actual:?}, expected {expected}")]
+    TensorShape { tensor: &'static str, expected: String, actual: Vec<usize> },
+    #[error("`{tensor}` has element type {actual}, expected f32")]
+    ElementType { tensor: &'static str, actual: String },
     #[error("`{what}` contains a non-finite value (NaN or infinity)")]
     NonFinite { what: &'static str },
     #[error("invalid camera {view}: {detail}")]

@@ -25,6 +25,14 @@ impl<T: AsRef<[f32]>> Opacities<T> {
         }
     }
 
+    /// Borrows the values, keeping the shape.
+    pub fn as_slices(&self) -> Opacities<&[f32]> {
+        match self {
+            Opacities::Shared(v) => Opacities::Shared(v.as_ref()),
+            Opacities::PerView(v) => Opacities::PerView(v.as_ref()),
+        }
+    }
+
     /// The opacity of Gaussian `index` in view `view`.
     pub(crate) fn get(&self, view: usize, index: usize, count: usize) -> f32 {
         match self {

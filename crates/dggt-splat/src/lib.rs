@@ -14,6 +14,9 @@
 //! 4. `composite`: front-to-back alpha compositing per pixel, and its backward pass.
 //! 5. [`rasterize`] / [`rasterize_backward`] run the stages over a batch of views.
 //!
+//! On burn tensors: [`render`] checks typed tensor inputs and calls [`SplatOps`], a backend extension whose CPU
+//! implementation runs the host pipeline above and whose autodiff implementation calls its backward pass.
+//!
 //! Sanitising (never NaN, never a panic): a Gaussian with any non-finite parameter, or one whose projected
 //! covariance is not positive definite or overflows, is culled in that view and counted in [`CullStats`];
 //! a quaternion shorter than [`QUAT_MIN_NORM`] is the identity rotation with zero gradient. Wrong buffer
@@ -26,7 +29,11 @@ mod cull;
 mod error;
 mod forward;
 mod gaussians;
+// burn's NdArray backend is deprecated; the `ndarray` feature names it on purpose.
+#[cfg_attr(feature = "ndarray", allow(deprecated))]
+mod op;
 mod projection;
+mod render;
 mod settings;
 mod tiles;
 mod view;
@@ -37,7 +44,11 @@ pub use cull::{CullReason, CullStats};
 pub use error::SplatError;
 pub use forward::{Images, Rasterized, rasterize};
 pub use gaussians::{Gaussians, Opacities};
+pub use op::{HostForward, PACKED_EXTRA_CHANNELS, SplatGrads, SplatInputs, SplatKernels, SplatOps, SplatOutputs};
 pub use projection::Projection;
+pub use render::{
+    CameraTensors, GaussianTensors, OpacityTensor, RenderSettings, RenderTensors, render, render_with_stats,
+};
 pub use settings::RasterSettings;
 pub use tiles::TileBins;
 pub use view::{PinholeView, ViewBatch};

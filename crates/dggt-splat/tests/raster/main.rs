@@ -1,5 +1,5 @@
 //! Integration tests of the rasteriser: parity with gsplat, finite differences, per-view opacities,
-//! robustness and determinism, empty scenes.
+//! robustness and determinism, empty scenes, and the burn tensor op against the host functions.
 
 mod empty;
 mod finite_difference;
@@ -7,3 +7,4 @@ mod parity;
 mod per_view;
 mod scenes;
 mod stress;
+mod tensor_op;

@@ -12,7 +12,7 @@ use dggt_splat::{
     CullReason, Gaussians, ImageGrads, Opacities, RasterSettings, ViewBatch, rasterize, rasterize_backward,
 };
 
-fn parity_dir() -> PathBuf {
+pub fn parity_dir() -> PathBuf {
     let root = std::env::var_os("DGGT_PARITY_DIR")
         .map(PathBuf::from)
         .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/parity"));
@@ -25,10 +25,10 @@ fn parity_dir() -> PathBuf {
     dir
 }
 
-struct Tensors(HashMap<String, (Vec<usize>, Vec<f32>)>);
+pub struct Tensors(HashMap<String, (Vec<usize>, Vec<f32>)>);
 
 impl Tensors {
-    fn load(path: PathBuf) -> Self {
+    pub fn load(path: PathBuf) -> Self {
         let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
         let file = safetensors::SafeTensors::deserialize(&bytes)
             .unwrap_or_else(|e| panic!("{} is not a safetensors file: {e}", path.display()));
@@ -45,17 +45,17 @@ impl Tensors {
         Self(tensors)
     }
 
-    fn get(&self, name: &str) -> &[f32] {
+    pub fn get(&self, name: &str) -> &[f32] {
         &self.0.get(name).unwrap_or_else(|| panic!("tensor {name} missing")).1
     }
 
-    fn shape(&self, name: &str) -> &[usize] {
+    pub fn shape(&self, name: &str) -> &[usize] {
         &self.0.get(name).unwrap_or_else(|| panic!("tensor {name} missing")).0
     }
 }
 
 /// Largest absolute difference and the reference's largest magnitude, over the entries `keep` selects.
-fn compare(actual: &[f32], expected: &[f32], keep: impl Fn(usize) -> bool) -> (f64, f64) {
+pub fn compare(actual: &[f32], expected: &[f32], keep: impl Fn(usize) -> bool) -> (f64, f64) {
     assert_eq!(actual.len(), expected.len());
     let mut max_error = 0.0f64;
     let mut max_reference = 0.0f64;
@@ -71,7 +71,7 @@ fn compare(actual: &[f32], expected: &[f32], keep: impl Fn(usize) -> bool) -> (f
 
 /// Tolerance of one tensor: `|a - b| <= atol + rtol · max|reference|`.
 #[derive(Clone, Copy)]
-struct Tolerance {
+pub struct Tolerance {
     atol: f64,
     rtol: f64,
 }
@@ -81,9 +81,9 @@ const IMAGE: Tolerance = Tolerance { atol: 3e-5, rtol: 0.0 };
 /// Expected depth divides by alpha.
 const DEPTH: Tolerance = Tolerance { atol: 1e-4, rtol: 0.0 };
 /// Gradients: half the 1e-3 the reference suggests; measured at most 1e-4.
-const GRADIENT: Tolerance = Tolerance { atol: 1e-5, rtol: 5e-4 };
+pub const GRADIENT: Tolerance = Tolerance { atol: 1e-5, rtol: 5e-4 };
 
-fn check(case: &str, name: &str, (error, reference): (f64, f64), tol: Tolerance) {
+pub fn check(case: &str, name: &str, (error, reference): (f64, f64), tol: Tolerance) {
     let bound = tol.atol + tol.rtol * reference;
     eprintln!(
         "{case:<28} {name:<20} max abs err {error:.2e}  rel {:.2e}  (bound {bound:.1e})",
@@ -93,7 +93,7 @@ fn check(case: &str, name: &str, (error, reference): (f64, f64), tol: Tolerance)
 }
 
 /// Checks `actual` against the float32 reference `name` and its float64 recomputation `f64_name`.
-fn check_both(case: &str, name: &str, actual: &[f32], outputs: &Tensors, tol: Tolerance) {
+pub fn check_both(case: &str, name: &str, actual: &[f32], outputs: &Tensors, tol: Tolerance) {
     check(case, name, compare(actual, outputs.get(name), |_| true), tol);
     let f64_name = format!("f64_{name}");
     check(case, &f64_name, compare(actual, outputs.get(&f64_name), |_| true), tol);

@@ -46,11 +46,8 @@ pub struct Scene {
 
 impl Scene {
     pub fn gaussians(&self) -> Gaussians<'_> {
-        let opacities = match &self.opacities {
-            Opacities::Shared(v) => Opacities::Shared(v.as_slice()),
-            Opacities::PerView(v) => Opacities::PerView(v.as_slice()),
-        };
-        Gaussians::new(&self.means, &self.quats, &self.scales, opacities, &self.colors, self.channels).unwrap()
+        Gaussians::new(&self.means, &self.quats, &self.scales, self.opacities.as_slices(), &self.colors, self.channels)
+            .unwrap()
     }
 
     pub fn len(&self) -> usize {
