@@ -1,0 +1,455 @@
+//! Network hyper-parameters: every size the DGGT network is built from, as serde structs.
+//!
+//! Field names follow the parity vectors' `config.json`, so [`ModelConfig::from_parity_json`] reads that file
+//! directly (unknown fields are ignored). Presets give the tiny parity model and the full VGGT-1B / DGGT sizes.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::ModelError;
+
+/// ImageNet normalisation the aggregator applies to `[0, 1]` RGB input.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ImageNormalization {
+    pub mean: [f64; 3],
+    pub std: [f64; 3],
+}
+
+impl Default for ImageNormalization {
+    fn default() -> Self {
+        Self { mean: [0.485, 0.456, 0.406], std: [0.229, 0.224, 0.225] }
+    }
+}
+
+/// The DINOv2 ViT (with registers) used as the aggregator's patch embedding.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DinoConfig {
+    /// Image size the positional embedding was trained for (square); the grid is `img_size / patch_size`.
+    pub img_size: usize,
+    pub patch_size: usize,
+    pub embed_dim: usize,
+    pub depth: usize,
+    pub num_heads: usize,
+    pub mlp_ratio: f64,
+    pub num_register_tokens: usize,
+    /// Whether the positional-embedding resize uses PyTorch's antialiased bicubic kernel.
+    pub interpolate_antialias: bool,
+    /// DINOv2's historical offset: when non-zero the resize is driven by a scale factor
+    /// `(grid + offset) / M` instead of the output size.
+    pub interpolate_offset: f64,
+    /// LayerNorm epsilon of every DINO norm (blocks and final norm).
+    pub norm_eps: f64,
+}
+
+impl DinoConfig {
+    pub fn mlp_hidden(&self) -> usize {
+        (self.embed_dim as f64 * self.mlp_ratio) as usize
+    }
+
+    /// Side of the square positional-embedding grid.
+    pub fn pos_embed_grid(&self) -> usize {
+        self.img_size / self.patch_size
+    }
+}
+
+/// The alternating frame/global attention aggregator.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AggregatorConfig {
+    pub img_size: usize,
+    pub patch_size: usize,
+    pub embed_dim: usize,
+    /// Number of frame blocks (and, equally, of global blocks).
+    pub depth: usize,
+    pub num_heads: usize,
+    pub mlp_ratio: f64,
+    pub num_register_tokens: usize,
+    pub qk_norm: bool,
+    pub qk_norm_eps: f64,
+    pub block_norm_eps: f64,
+    /// Base of the 2D RoPE frequencies; 0 disables RoPE.
+    pub rope_freq: f64,
+    #[serde(default)]
+    pub image_normalization: ImageNormalization,
+    pub dino: DinoConfig,
+}
+
+impl AggregatorConfig {
+    pub fn head_dim(&self) -> usize {
+        self.embed_dim / self.num_heads
+    }
+
+    pub fn mlp_hidden(&self) -> usize {
+        (self.embed_dim as f64 * self.mlp_ratio) as usize
+    }
+
+    /// Index of the first patch token in a frame: camera token, then the registers.
+    pub fn patch_start_idx(&self) -> usize {
+        1 + self.num_register_tokens
+    }
+}
+
+/// Activation applied to one part of the `absT_quaR_FoV` pose encoding.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PoseActivation {
+    Linear,
+    Relu,
+    Exp,
+}
+
+/// The iterative camera head.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CameraHeadConfig {
+    /// Width of the aggregated tokens it reads (twice the aggregator width).
+    pub dim_in: usize,
+    pub trunk_depth: usize,
+    pub num_heads: usize,
+    pub mlp_ratio: f64,
+    /// Epsilon of `token_norm`, `trunk_norm` and the trunk blocks' norms.
+    pub block_norm_eps: f64,
+    /// Epsilon of the affine-free modulation norm.
+    pub adaln_eps: f64,
+    /// Length of the pose encoding (9 for `absT_quaR_FoV`).
+    pub target_dim: usize,
+    /// `[input, hidden, output]` widths of the pose branch MLP.
+    pub pose_branch: [usize; 3],
+    pub trans_act: PoseActivation,
+    pub quat_act: PoseActivation,
+    pub fl_act: PoseActivation,
+    pub num_iterations: usize,
+}
+
+impl CameraHeadConfig {
+    pub fn mlp_hidden(&self) -> usize {
+        (self.dim_in as f64 * self.mlp_ratio) as usize
+    }
+}
+
+/// Settings shared by every DPT head.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DptConfig {
+    pub patch_size: usize,
+    pub features: usize,
+    pub out_channels: [usize; 4],
+    pub intermediate_layer_idx: [usize; 4],
+    pub pos_embed: bool,
+    pub head_features_2: usize,
+    pub layernorm_eps: f64,
+}
+
+/// Activation of a DPT head's prediction or confidence channels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HeadActivation {
+    Linear,
+    Exp,
+    /// `1 + exp(x)`.
+    Expp1,
+    Sigmoid,
+    /// `sign(x) * (exp(|x|) - 1)`.
+    InvLog,
+}
+
+/// One DPT head's own settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DptHeadConfig {
+    pub dim_in: usize,
+    /// Raw output channels: prediction channels, then one confidence channel.
+    pub output_dim: usize,
+    pub activation: HeadActivation,
+    pub conf_activation: HeadActivation,
+}
+
+/// The Gaussian head: a DPT head over `[DINO block 0 | frame | global]` tokens whose channels are
+/// activated as Gaussian parameters (colour, opacity, scale, rotation, lifespan).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GaussianHeadConfig {
+    pub dim_in: usize,
+    pub output_dim: usize,
+}
+
+/// The sky model: `resolution^2` Gaussians on a hemisphere of `radius` (the points themselves are checkpoint
+/// buffers; `radius` documents where they lie).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SkyConfig {
+    pub resolution: usize,
+    pub radius: f64,
+}
+
+/// The whole network. The point head is VGGT's; the Gaussian, instance (dynamic) and semantic heads exist
+/// in DGGT only.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModelConfig {
+    pub aggregator: AggregatorConfig,
+    pub camera_head: CameraHeadConfig,
+    #[serde(rename = "dpt_common")]
+    pub dpt: DptConfig,
+    pub depth_head: DptHeadConfig,
+    pub point_head: DptHeadConfig,
+    #[serde(default)]
+    pub gs_head: Option<GaussianHeadConfig>,
+    #[serde(default)]
+    pub instance_head: Option<DptHeadConfig>,
+    #[serde(default)]
+    pub semantic_head: Option<DptHeadConfig>,
+    #[serde(default)]
+    pub sky_model: Option<SkyConfig>,
+}
+
+impl ModelConfig {
+    /// Reads the parity folder's `config.json` (only the fields above are used) and validates it.
+    pub fn from_parity_json(path: impl AsRef<Path>) -> Result<Self, ModelError> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| ModelError::Io { path: path.display().to_string(), source })?;
+        Self::from_json_str(&text)
+    }
+
+    /// Parses a configuration in the `config.json` layout and validates it.
+    pub fn from_json_str(text: &str) -> Result<Self, ModelError> {
+        let config: Self = serde_json::from_str(text).map_err(|e| ModelError::Config(e.to_string()))?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// The tiny model of the parity vectors `dggt_tiny_s3_56x70`.
+    pub fn tiny() -> Self {
+        let dino = DinoConfig {
+            img_size: 56,
+            patch_size: 14,
+            embed_dim: 64,
+            depth: 4,
+            num_heads: 4,
+            mlp_ratio: 4.0,
+            num_register_tokens: 4,
+            interpolate_antialias: true,
+            interpolate_offset: 0.0,
+            norm_eps: 1e-6,
+        };
+        Self::with_sizes(dino, 4, 4, 1, 32, [16, 32, 64, 64], [0, 1, 2, 3]).with_dggt_heads(20)
+    }
+
+    /// VGGT-1B: ViT-L/14 DINO, 24+24 aggregator blocks, DPT features 256.
+    pub fn vggt_1b() -> Self {
+        let dino = DinoConfig {
+            img_size: 518,
+            patch_size: 14,
+            embed_dim: 1024,
+            depth: 24,
+            num_heads: 16,
+            mlp_ratio: 4.0,
+            num_register_tokens: 4,
+            interpolate_antialias: true,
+            interpolate_offset: 0.0,
+            norm_eps: 1e-6,
+        };
+        let mut config = Self::with_sizes(dino, 24, 16, 4, 256, [256, 512, 1024, 1024], [4, 11, 17, 23]);
+        config.depth_head.conf_activation = HeadActivation::Expp1;
+        config
+    }
+
+    /// The DGGT release: the VGGT-1B sizes; its depth confidence is a sigmoid (VGGT: `1 + exp`).
+    pub fn dggt() -> Self {
+        let mut config = Self::vggt_1b().with_dggt_heads(300);
+        config.depth_head.conf_activation = HeadActivation::Sigmoid;
+        config
+    }
+
+    /// Adds DGGT's Gaussian (12 channels), instance (2) and semantic (11) heads and its sky model.
+    fn with_dggt_heads(mut self, sky_resolution: usize) -> Self {
+        let c = self.aggregator.embed_dim;
+        let dino_head = |output_dim| DptHeadConfig {
+            dim_in: c,
+            output_dim,
+            activation: HeadActivation::Linear,
+            conf_activation: HeadActivation::Expp1,
+        };
+        self.gs_head = Some(GaussianHeadConfig { dim_in: 3 * c, output_dim: 12 });
+        self.instance_head = Some(dino_head(2));
+        self.semantic_head = Some(dino_head(11));
+        self.sky_model = Some(SkyConfig { resolution: sky_resolution, radius: 50.0 });
+        self
+    }
+
+    fn with_sizes(
+        dino: DinoConfig,
+        depth: usize,
+        num_heads: usize,
+        camera_trunk_depth: usize,
+        features: usize,
+        out_channels: [usize; 4],
+        intermediate_layer_idx: [usize; 4],
+    ) -> Self {
+        let embed_dim = dino.embed_dim;
+        let aggregator = AggregatorConfig {
+            img_size: dino.img_size,
+            patch_size: dino.patch_size,
+            embed_dim,
+            depth,
+            num_heads,
+            mlp_ratio: 4.0,
+            num_register_tokens: 4,
+            qk_norm: true,
+            qk_norm_eps: 1e-5,
+            block_norm_eps: 1e-5,
+            rope_freq: 100.0,
+            image_normalization: ImageNormalization::default(),
+            dino,
+        };
+        let dim_in = 2 * embed_dim;
+        let camera_head = CameraHeadConfig {
+            dim_in,
+            trunk_depth: camera_trunk_depth,
+            num_heads,
+            mlp_ratio: 4.0,
+            block_norm_eps: 1e-5,
+            adaln_eps: 1e-6,
+            target_dim: 9,
+            pose_branch: [dim_in, dim_in / 2, 9],
+            trans_act: PoseActivation::Linear,
+            quat_act: PoseActivation::Linear,
+            fl_act: PoseActivation::Relu,
+            num_iterations: 4,
+        };
+        let dpt = DptConfig {
+            patch_size: aggregator.patch_size,
+            features,
+            out_channels,
+            intermediate_layer_idx,
+            pos_embed: true,
+            head_features_2: 32,
+            layernorm_eps: 1e-5,
+        };
+        let depth_head = DptHeadConfig {
+            dim_in,
+            output_dim: 2,
+            activation: HeadActivation::Exp,
+            conf_activation: HeadActivation::Sigmoid,
+        };
+        let point_head = DptHeadConfig {
+            dim_in,
+            output_dim: 4,
+            activation: HeadActivation::InvLog,
+            conf_activation: HeadActivation::Expp1,
+        };
+        Self {
+            aggregator,
+            camera_head,
+            dpt,
+            depth_head,
+            point_head,
+            gs_head: None,
+            instance_head: None,
+            semantic_head: None,
+            sky_model: None,
+        }
+    }
+
+    /// Checks that the sizes fit together.
+    pub fn validate(&self) -> Result<(), ModelError> {
+        let fail = |msg: String| Err(ModelError::Config(msg));
+        let a = &self.aggregator;
+        let d = &a.dino;
+        if d.embed_dim != a.embed_dim || d.patch_size != a.patch_size {
+            return fail(format!(
+                "DINO width/patch ({}, {}) differ from the aggregator's ({}, {})",
+                d.embed_dim, d.patch_size, a.embed_dim, a.patch_size
+            ));
+        }
+        if !d.embed_dim.is_multiple_of(d.num_heads) || !a.embed_dim.is_multiple_of(a.num_heads) {
+            return fail("embed_dim must be divisible by num_heads".into());
+        }
+        if a.rope_freq > 0.0 && !a.head_dim().is_multiple_of(4) {
+            return fail(format!("2D RoPE needs head_dim divisible by 4, got {}", a.head_dim()));
+        }
+        if d.depth < a.depth {
+            return fail(format!("DINO depth {} is smaller than the aggregator depth {}", d.depth, a.depth));
+        }
+        let c = &self.camera_head;
+        if c.dim_in != 2 * a.embed_dim || c.pose_branch[0] != c.dim_in || c.pose_branch[2] != c.target_dim {
+            return fail(format!(
+                "camera head dim_in {} / pose_branch {:?} / target_dim {} do not fit aggregator width {}",
+                c.dim_in, c.pose_branch, c.target_dim, a.embed_dim
+            ));
+        }
+        if c.target_dim != 9 {
+            return fail(format!("only the 9-value absT_quaR_FoV pose encoding is supported, got {}", c.target_dim));
+        }
+        if !c.dim_in.is_multiple_of(c.num_heads) {
+            return fail("camera head dim_in must be divisible by num_heads".into());
+        }
+        let width = a.embed_dim;
+        let heads = [
+            ("depth_head", Some((self.depth_head.dim_in, self.depth_head.output_dim)), 2 * width, 2),
+            ("point_head", Some((self.point_head.dim_in, self.point_head.output_dim)), 2 * width, 2),
+            ("gs_head", self.gs_head.as_ref().map(|h| (h.dim_in, h.output_dim)), 3 * width, 12),
+            ("instance_head", self.instance_head.as_ref().map(|h| (h.dim_in, h.output_dim)), width, 2),
+            ("semantic_head", self.semantic_head.as_ref().map(|h| (h.dim_in, h.output_dim)), width, 2),
+        ];
+        for (name, sizes, dim_in, min_output) in heads {
+            if let Some((head_dim_in, output_dim)) = sizes
+                && (head_dim_in != dim_in || output_dim < min_output)
+            {
+                return fail(format!(
+                    "{name} dim_in {head_dim_in} / output_dim {output_dim}: expected dim_in {dim_in} and at \
+                     least {min_output} outputs for aggregator width {width}"
+                ));
+            }
+        }
+        if !self.dpt.features.is_multiple_of(2) || (self.dpt.pos_embed && !(self.dpt.features / 2).is_multiple_of(4)) {
+            return fail(format!("DPT features {} must be a multiple of 8", self.dpt.features));
+        }
+        if self.dpt.intermediate_layer_idx.iter().any(|&i| i >= a.depth.min(d.depth)) {
+            return fail(format!(
+                "DPT tapped layers {:?} exceed the aggregator depth {}",
+                self.dpt.intermediate_layer_idx, a.depth
+            ));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn presets_validate() {
+        ModelConfig::tiny().validate().unwrap();
+        ModelConfig::vggt_1b().validate().unwrap();
+        ModelConfig::dggt().validate().unwrap();
+    }
+
+    #[test]
+    fn full_size_matches_release_numbers() {
+        let c = ModelConfig::dggt();
+        assert_eq!(c.aggregator.dino.embed_dim, 1024);
+        assert_eq!(c.aggregator.dino.pos_embed_grid(), 37);
+        assert_eq!(c.aggregator.depth, 24);
+        assert_eq!(c.camera_head.dim_in, 2048);
+        assert_eq!(c.camera_head.pose_branch, [2048, 1024, 9]);
+        assert_eq!(c.dpt.out_channels, [256, 512, 1024, 1024]);
+        assert_eq!(c.dpt.intermediate_layer_idx, [4, 11, 17, 23]);
+        assert_eq!(c.depth_head.conf_activation, HeadActivation::Sigmoid);
+        assert_eq!(c.gs_head.as_ref().unwrap().dim_in, 3072);
+        assert_eq!(c.instance_head.as_ref().unwrap().dim_in, 1024);
+        let vggt = ModelConfig::vggt_1b();
+        assert_eq!(vggt.depth_head.conf_activation, HeadActivation::Expp1);
+        assert!(vggt.gs_head.is_none() && vggt.instance_head.is_none() && vggt.semantic_head.is_none());
+    }
+
+    #[test]
+    fn json_round_trip() {
+        let c = ModelConfig::vggt_1b();
+        let text = serde_json::to_string(&c).unwrap();
+        assert_eq!(ModelConfig::from_json_str(&text).unwrap(), c);
+    }
+
+    #[test]
+    fn inconsistent_sizes_are_rejected() {
+        let mut c = ModelConfig::tiny();
+        c.camera_head.dim_in = 100;
+        assert!(c.validate().is_err());
+    }
+}

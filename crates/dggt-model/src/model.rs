@@ -1,0 +1,127 @@
+//! The DGGT network: aggregator, camera head and the DPT heads (depth, point and, for DGGT, Gaussian,
+//! instance and semantic) plus DGGT's sky model, with weights loaded from a release checkpoint. Field names are the checkpoint's
+//! top-level prefixes.
+//!
+//! Head inputs, as the release wires them: depth and point heads read `output_list` (2C); the Gaussian head
+//! reads `[DINO block 0 | frame_i | global_i]` (3C); the instance and semantic heads read `dino_token_list`
+//! (C), at the same tapped layer indices.
+
+use std::path::Path;
+
+use burn::module::Module;
+use burn::tensor::{Device, Tensor};
+
+use crate::aggregator::{Aggregator, AggregatorOutput};
+use crate::camera_head::{CameraHead, CameraHeadOutput};
+use crate::config::{DptHeadConfig, HeadActivation, ModelConfig};
+use crate::dpt::{DptHead, DptOutput, DptPrediction};
+use crate::error::ModelError;
+use crate::gaussian_maps::GaussianMaps;
+use crate::sky::SkyModel;
+use crate::weights::{LoadReport, load_checkpoint};
+
+#[derive(Module, Debug)]
+pub struct Dggt {
+    pub aggregator: Aggregator,
+    pub camera_head: CameraHead,
+    pub depth_head: DptHead,
+    pub point_head: DptHead,
+    /// Activated by [`GaussianMaps`], not by the head's own activations.
+    pub gs_head: Option<DptHead>,
+    pub instance_head: Option<DptHead>,
+    pub semantic_head: Option<DptHead>,
+    /// Coloured from the input views with predicted cameras, outside [`Dggt::forward`].
+    pub sky_model: Option<SkyModel>,
+}
+
+/// The Gaussian head's raw output and its activated parameters.
+#[derive(Debug, Clone)]
+pub struct GaussianOutput {
+    pub dpt: DptOutput,
+    pub maps: GaussianMaps,
+}
+
+/// One forward pass.
+#[derive(Debug, Clone)]
+pub struct DggtOutput {
+    pub aggregator: AggregatorOutput,
+    pub camera: CameraHeadOutput,
+    /// Depth `[B, S, H, W, 1]` and its confidence.
+    pub depth: DptPrediction,
+    /// World points `[B, S, H, W, 3]` and their confidence (VGGT's point head; DGGT does not use it).
+    pub points: DptPrediction,
+    pub gaussians: Option<GaussianOutput>,
+    /// Channel 0 of the prediction is the dynamic logit.
+    pub instance: Option<DptPrediction>,
+    /// Semantic logits (channels `0..C-1`); DGGT computes but does not use them.
+    pub semantic: Option<DptPrediction>,
+}
+
+impl Dggt {
+    /// A network with placeholder parameters (initialised lazily; load weights before use).
+    pub fn new(config: &ModelConfig, device: &Device) -> Result<Self, ModelError> {
+        config.validate()?;
+        Ok(Self {
+            aggregator: Aggregator::new(&config.aggregator, device),
+            camera_head: CameraHead::new(&config.camera_head, device),
+            depth_head: DptHead::new(&config.dpt, &config.depth_head, device),
+            point_head: DptHead::new(&config.dpt, &config.point_head, device),
+            gs_head: config.gs_head.as_ref().map(|gs| {
+                let head = DptHeadConfig {
+                    dim_in: gs.dim_in,
+                    output_dim: gs.output_dim,
+                    activation: HeadActivation::Linear,
+                    conf_activation: HeadActivation::Linear,
+                };
+                DptHead::new(&config.dpt, &head, device)
+            }),
+            instance_head: config.instance_head.as_ref().map(|head| DptHead::new(&config.dpt, head, device)),
+            semantic_head: config.semantic_head.as_ref().map(|head| DptHead::new(&config.dpt, head, device)),
+            sky_model: config.sky_model.as_ref().map(|sky| SkyModel::new(sky, device)),
+        })
+    }
+
+    /// The checkpoint prefixes this network consumes.
+    pub fn built_prefixes(&self) -> Vec<&'static str> {
+        let optional = [
+            ("gs_head.", self.gs_head.is_some()),
+            ("instance_head.", self.instance_head.is_some()),
+            ("semantic_head.", self.semantic_head.is_some()),
+            ("sky_model.", self.sky_model.is_some()),
+        ];
+        ["aggregator.", "camera_head.", "depth_head.", "point_head."]
+            .into_iter()
+            .chain(optional.into_iter().filter(|(_, built)| *built).map(|(prefix, _)| prefix))
+            .collect()
+    }
+
+    /// Builds the network and loads a checkpoint with release key names (`.safetensors`, `.pt`, `.pth`).
+    pub fn from_checkpoint(
+        config: &ModelConfig,
+        path: impl AsRef<Path>,
+        device: &Device,
+    ) -> Result<(Self, LoadReport), ModelError> {
+        let mut model = Self::new(config, device)?;
+        let report = load_checkpoint(&mut model, path)?;
+        Ok((model, report))
+    }
+
+    /// `images`: `[B, S, 3, H, W]` RGB in `[0, 1]`.
+    pub fn forward(&self, images: Tensor<5>) -> Result<DggtOutput, ModelError> {
+        let aggregator = self.aggregator.forward(images)?;
+        let last = aggregator.output_list.last().expect("aggregator depth is at least one").clone();
+        let camera = self.camera_head.forward(last);
+        let frame_global = |i: usize| aggregator.output_list[i].clone();
+        let dino_tokens = |i: usize| aggregator.dino_token_list[i].clone();
+        let (start, grid) = (aggregator.patch_start_idx, aggregator.grid);
+        let depth = self.depth_head.predict(frame_global, start, grid);
+        let points = self.point_head.predict(frame_global, start, grid);
+        let gaussians = self.gs_head.as_ref().map(|head| {
+            let dpt = head.forward(|i| aggregator.output_with_dino_tokens(i), start, grid);
+            GaussianOutput { maps: GaussianMaps::from_raw(dpt.raw.clone()), dpt }
+        });
+        let instance = self.instance_head.as_ref().map(|head| head.predict(dino_tokens, start, grid));
+        let semantic = self.semantic_head.as_ref().map(|head| head.predict(dino_tokens, start, grid));
+        Ok(DggtOutput { aggregator, camera, depth, points, gaussians, instance, semantic })
+    }
+}

@@ -1,0 +1,123 @@
+//! PyTorch's antialiased bicubic resize (`interpolate(mode="bicubic", antialias=True, align_corners=False)`)
+//! as explicit resampling matrices.
+//!
+//! The DINO positional embedding is resized with this kernel, and burn's bicubic `interpolate` follows the
+//! classic (non-antialiased, a = -0.75) definition instead. The weights are computed on the host in `f64`, so
+//! the result is exact and identical on every backend; applying them is a matrix product.
+//!
+//! Per output sample `i` along one axis, with `scale = in / out` (or `1 / scale_factor` when the resize was
+//! asked for by a scale factor): centre `c = scale * (i + 0.5)`; support `2 * max(scale, 1)`; the taps are
+//! the input samples `j` in `[trunc(c - support + 0.5), trunc(c + support + 0.5))` clipped to the input, with
+//! weight `keys((j - c + 0.5) / max(scale, 1))` (Keys cubic, a = -0.5), normalised to sum to one. Upscaling is
+//! therefore plain a = -0.5 bicubic whose border taps are dropped and renormalised rather than clamped.
+
+/// Keys' cubic convolution kernel with `a = -0.5`, the kernel of PyTorch's antialiased bicubic mode.
+fn keys_cubic(x: f64) -> f64 {
+    const A: f64 = -0.5;
+    let x = x.abs();
+    if x < 1.0 {
+        ((A + 2.0) * x - (A + 3.0)) * x * x + 1.0
+    } else if x < 2.0 {
+        (((x - 5.0) * x + 8.0) * x - 4.0) * A
+    } else {
+        0.0
+    }
+}
+
+/// The input-per-output sampling step along one axis: `1 / scale_factor` when the resize is driven by a
+/// scale factor, else `input / output`.
+pub fn sampling_step(input: usize, output: usize, scale_factor: Option<f64>) -> f64 {
+    match scale_factor {
+        Some(factor) => 1.0 / factor,
+        None => input as f64 / output as f64,
+    }
+}
+
+/// Row-major `[output, input]` weights of a one-axis antialiased bicubic resize; every row sums to one.
+pub fn antialiased_bicubic_weights(input: usize, output: usize, step: f64) -> Vec<f64> {
+    let support = if step >= 1.0 { 2.0 * step } else { 2.0 };
+    let inv_step = if step >= 1.0 { 1.0 / step } else { 1.0 };
+    let mut weights = vec![0.0; output * input];
+    for i in 0..output {
+        let centre = step * (i as f64 + 0.5);
+        // Truncation toward zero, then clipping, as PyTorch computes the window.
+        let first = ((centre - support + 0.5) as i64).max(0) as usize;
+        let end = ((centre + support + 0.5) as i64).clamp(0, input as i64) as usize;
+        let row = &mut weights[i * input..(i + 1) * input];
+        let mut total = 0.0;
+        for (j, w) in row.iter_mut().enumerate().take(end).skip(first) {
+            *w = keys_cubic((j as f64 - centre + 0.5) * inv_step);
+            total += *w;
+        }
+        if total != 0.0 {
+            row.iter_mut().for_each(|w| *w /= total);
+        }
+    }
+    weights
+}
+
+/// Row-major `[out_h * out_w, in_h * in_w]` matrix of the separable 2D resize of a row-major grid: the
+/// Kronecker product of the row and column matrices. `output = matrix · input` for `[in_h * in_w, C]` input.
+pub fn antialiased_bicubic_matrix_2d(input: [usize; 2], output: [usize; 2], step: [f64; 2]) -> Vec<f32> {
+    let rows = antialiased_bicubic_weights(input[0], output[0], step[0]);
+    let cols = antialiased_bicubic_weights(input[1], output[1], step[1]);
+    let (in_cells, out_cells) = (input[0] * input[1], output[0] * output[1]);
+    let mut matrix = vec![0.0f32; out_cells * in_cells];
+    for oy in 0..output[0] {
+        for ox in 0..output[1] {
+            let out_row = &mut matrix[(oy * output[1] + ox) * in_cells..][..in_cells];
+            for iy in 0..input[0] {
+                let wy = rows[oy * input[0] + iy];
+                if wy == 0.0 {
+                    continue;
+                }
+                for ix in 0..input[1] {
+                    out_row[iy * input[1] + ix] = (wy * cols[ox * input[1] + ix]) as f32;
+                }
+            }
+        }
+    }
+    matrix
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn same_size_is_identity() {
+        let w = antialiased_bicubic_weights(4, 4, 1.0);
+        for i in 0..4 {
+            for j in 0..4 {
+                assert_eq!(w[i * 4 + j], if i == j { 1.0 } else { 0.0 });
+            }
+        }
+    }
+
+    #[test]
+    fn rows_sum_to_one() {
+        for (input, output) in [(4, 5), (37, 25), (37, 37), (16, 3), (3, 16)] {
+            let w = antialiased_bicubic_weights(input, output, sampling_step(input, output, None));
+            for row in w.chunks(input) {
+                assert!((row.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn downscaling_widens_support() {
+        // Halving: each output sample averages 8 taps (support 4 on each side in input units), clipped at borders.
+        let w = antialiased_bicubic_weights(16, 8, 2.0);
+        let taps = |i: usize| w[i * 16..(i + 1) * 16].iter().filter(|&&x| x != 0.0).count();
+        assert_eq!(taps(4), 8);
+        assert!(taps(0) < 8);
+    }
+
+    #[test]
+    fn constant_is_preserved_in_2d() {
+        let m = antialiased_bicubic_matrix_2d([4, 4], [3, 7], [4.0 / 3.0, 4.0 / 7.0]);
+        for row in m.chunks(16) {
+            assert!((row.iter().sum::<f32>() - 1.0).abs() < 1e-6);
+        }
+    }
+}

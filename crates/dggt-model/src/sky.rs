@@ -1,0 +1,220 @@
+//! The sky model: a fixed hemisphere of Gaussians far from the cameras whose colours are read from the input
+//! images, rendered as the background.
+//!
+//! Its state is the release's buffers (Fibonacci-hemisphere points `bg_pcd` at the configured radius, log
+//! scales `bg_scales`, opacities `bg_opacity`, wxyz rotations `bg_quat`) and the colour field `bg_field`
+//! (`Linear 3 -> 64`, ReLU, `Linear 64 -> 6`, tanh). Colouring, as the release computes it: project every
+//! point into every view (`K [R | t] X`, pixel = `xy / max(z, 1e-8)` clamped to +-1e6); a view sees a point
+//! when `z > 0` and the pixel lies in `[0, W-1] x [0, H-1]`; sample the `[0, 1]` image bilinearly with zero
+//! padding at the point (quirk: coordinates are normalised by `W - 1` / `H - 1` but sampled with
+//! `align_corners = False`, i.e. at `pixel * W / (W - 1) - 0.5`); average over the views that see it; keep the
+//! points seen at least once; the field's first three outputs are the colours (tanh, so possibly negative).
+//! Scales are `exp(bg_scales)` (the release zeroes its residual). The projection runs on the host in `f64`.
+
+use burn::module::{Module, Param};
+use burn::nn::{Initializer, Linear, LinearConfig};
+use burn::tensor::activation::relu;
+use burn::tensor::{Device, Tensor, TensorData};
+use dggt_geom::{CameraFromWorld, ImageSize, PinholeIntrinsics};
+
+use crate::config::SkyConfig;
+
+/// Pixel coordinates are clamped to this magnitude.
+const PIXEL_LIMIT: f64 = 1e6;
+/// Depths are clamped from below before the perspective division.
+const MIN_DEPTH: f64 = 1e-8;
+
+/// The colour field `bg_field`.
+#[derive(Module, Debug)]
+pub struct BackgroundField {
+    pub layers: Vec<Linear>,
+}
+
+impl BackgroundField {
+    /// `[N, 3]` mean RGB -> `[N, 6]` in (-1, 1).
+    pub fn forward(&self, rgb: Tensor<2>) -> Tensor<2> {
+        self.layers[1].forward(relu(self.layers[0].forward(rgb))).tanh()
+    }
+}
+
+#[derive(Module, Debug)]
+pub struct SkyModel {
+    /// `[N, 3]` log scales.
+    pub bg_scales: Param<Tensor<2>>,
+    /// `[N, 3]` points.
+    pub bg_pcd: Param<Tensor<2>>,
+    /// `[N, 1]`.
+    pub bg_opacity: Param<Tensor<2>>,
+    /// `[N, 4]` wxyz.
+    pub bg_quat: Param<Tensor<2>>,
+    pub bg_field: BackgroundField,
+}
+
+/// Where every sky point lands in every view; arrays are view-major, `[views * points]`.
+#[derive(Debug, Clone)]
+pub struct SkyProjection {
+    pub points: usize,
+    /// Clamped pixel coordinates `(x, y)`.
+    pub pixels: Vec<[f64; 2]>,
+    /// Camera-space depth.
+    pub depth: Vec<f64>,
+    /// In front of the camera and inside the image.
+    pub seen: Vec<bool>,
+}
+
+/// The sky Gaussians kept for rendering (the points seen by at least one view).
+#[derive(Debug, Clone)]
+pub struct SkyGaussians {
+    /// Indices of the kept points in the hemisphere.
+    pub visible_index: Vec<usize>,
+    /// `[V, 3]` mean colour sampled from the views that see each point.
+    pub rgb_mean: Tensor<2>,
+    /// `[V, 6]` colour field output.
+    pub field_out: Tensor<2>,
+    /// `[V, 3]` colours (tanh, may be negative).
+    pub colors: Tensor<2>,
+    /// `[V, 3]`.
+    pub means: Tensor<2>,
+    /// `[V, 3]` linear scales.
+    pub scales: Tensor<2>,
+    /// `[V, 4]` wxyz.
+    pub quats: Tensor<2>,
+    /// `[V]`.
+    pub opacities: Tensor<1>,
+}
+
+fn host(t: Tensor<2>) -> Vec<f32> {
+    t.into_data().try_to_vec::<f32>().expect("f32 tensor")
+}
+
+impl SkyModel {
+    /// Placeholder buffers for `resolution^2` points; load them from a checkpoint.
+    pub fn new(config: &SkyConfig, device: &Device) -> Self {
+        let n = config.resolution * config.resolution;
+        let buffer = |width: usize| Initializer::Zeros.init([n, width], device).set_require_grad(false);
+        Self {
+            bg_scales: buffer(3),
+            bg_pcd: buffer(3),
+            bg_opacity: buffer(1),
+            bg_quat: buffer(4),
+            bg_field: BackgroundField {
+                layers: vec![LinearConfig::new(3, 64).init(device), LinearConfig::new(64, 6).init(device)],
+            },
+        }
+    }
+
+    /// Projects every point into every view.
+    pub fn project(&self, views: &[(CameraFromWorld, PinholeIntrinsics)], size: ImageSize) -> SkyProjection {
+        let points: Vec<f32> = host(self.bg_pcd.val());
+        let n = points.len() / 3;
+        let (max_x, max_y) = (size.width as f64 - 1.0, size.height as f64 - 1.0);
+        let mut projection = SkyProjection { points: n, pixels: vec![], depth: vec![], seen: vec![] };
+        for (camera_from_world, k) in views {
+            let m = k.matrix();
+            for p in points.chunks(3) {
+                let x = camera_from_world.transform_point([p[0], p[1], p[2]].map(f64::from).into());
+                let h = m * x;
+                let z = h.z.max(MIN_DEPTH);
+                let pixel = [(h.x / z).clamp(-PIXEL_LIMIT, PIXEL_LIMIT), (h.y / z).clamp(-PIXEL_LIMIT, PIXEL_LIMIT)];
+                let inside = (0.0..=max_x).contains(&pixel[0]) && (0.0..=max_y).contains(&pixel[1]);
+                projection.seen.push(h.z > 0.0 && inside);
+                projection.pixels.push(pixel);
+                projection.depth.push(h.z);
+            }
+        }
+        projection
+    }
+
+    /// Colours the points from `images` (`[views, 3, H, W]` RGB in `[0, 1]`) seen from `views`.
+    pub fn gaussians(&self, images: Tensor<4>, views: &[(CameraFromWorld, PinholeIntrinsics)]) -> SkyGaussians {
+        let [num_views, channels, height, width] = images.dims();
+        assert_eq!(num_views, views.len(), "one camera per image");
+        assert_eq!(channels, 3, "RGB images");
+        let device = images.device();
+        let size = ImageSize::new(width as u32, height as u32).expect("non-empty images");
+        let projection = self.project(views, size);
+        let pixels: Vec<f32> = images.into_data().try_to_vec::<f32>().expect("f32 images");
+        let n = projection.points;
+
+        let mut visible_index = vec![];
+        let mut rgb_mean = vec![];
+        for point in 0..n {
+            let mut sum = [0.0f64; 3];
+            let mut count = 0usize;
+            for view in 0..num_views {
+                let i = view * n + point;
+                if !projection.seen[i] {
+                    continue;
+                }
+                count += 1;
+                let [px, py] = projection.pixels[i];
+                let image = &pixels[view * 3 * height * width..][..3 * height * width];
+                let sample = sample_bilinear_zeros(image, [height, width], [px, py]);
+                sum.iter_mut().zip(sample).for_each(|(s, v)| *s += v);
+            }
+            if count > 0 {
+                visible_index.push(point);
+                rgb_mean.extend(sum.map(|s| (s / count as f64) as f32));
+            }
+        }
+        let v = visible_index.len();
+        let gather = |buffer: &Param<Tensor<2>>| {
+            let width = buffer.dims()[1];
+            let values = host(buffer.val());
+            let kept: Vec<f32> =
+                visible_index.iter().flat_map(|&i| values[i * width..(i + 1) * width].to_vec()).collect();
+            Tensor::<2>::from_data(TensorData::new(kept, [v, width]), &device)
+        };
+        let rgb_mean = Tensor::<2>::from_data(TensorData::new(rgb_mean, [v, 3]), &device);
+        let field_out = self.bg_field.forward(rgb_mean.clone());
+        SkyGaussians {
+            colors: field_out.clone().narrow(1, 0, 3),
+            field_out,
+            rgb_mean,
+            means: gather(&self.bg_pcd),
+            scales: gather(&self.bg_scales).exp(),
+            quats: gather(&self.bg_quat),
+            opacities: gather(&self.bg_opacity).reshape([v]),
+            visible_index,
+        }
+    }
+}
+
+/// Bilinear sample of a `[3, H, W]` image at pixel `(x, y)` normalised by `(W - 1, H - 1)` and read back with
+/// `align_corners = False` (the release's sampling), taps outside the image counting as zero.
+fn sample_bilinear_zeros(image: &[f32], [height, width]: [usize; 2], [x, y]: [f64; 2]) -> [f64; 3] {
+    let ix = x / (width as f64 - 1.0) * width as f64 - 0.5;
+    let iy = y / (height as f64 - 1.0) * height as f64 - 0.5;
+    let (x0, y0) = (ix.floor(), iy.floor());
+    let (fx, fy) = (ix - x0, iy - y0);
+    let mut out = [0.0; 3];
+    for (dy, wy) in [(0.0, 1.0 - fy), (1.0, fy)] {
+        for (dx, wx) in [(0.0, 1.0 - fx), (1.0, fx)] {
+            let (tx, ty) = (x0 + dx, y0 + dy);
+            if tx < 0.0 || ty < 0.0 || tx >= width as f64 || ty >= height as f64 {
+                continue;
+            }
+            let cell = ty as usize * width + tx as usize;
+            for (c, o) in out.iter_mut().enumerate() {
+                *o += wx * wy * image[c * height * width + cell] as f64;
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sampling_reads_pixels_at_the_release_offset() {
+        // 2x3 image, channel value = column index; x = 0 maps to 0 * 3 / 2 - 0.5 = -0.5: half the first pixel.
+        let image: Vec<f32> = (0..3).flat_map(|_| (0..2).flat_map(|_| [0.0, 1.0, 2.0])).collect();
+        let s = sample_bilinear_zeros(&image, [2, 3], [0.0, 0.0]);
+        assert!((s[0] - 0.0).abs() < 1e-12);
+        // (x, y) = (2, 1), the last pixel, maps to (2.5, 1.5): a quarter of pixel (2, 1), the other taps outside.
+        let s = sample_bilinear_zeros(&image, [2, 3], [2.0, 1.0]);
+        assert!((s[1] - 0.5).abs() < 1e-12, "{s:?}");
+    }
+}
