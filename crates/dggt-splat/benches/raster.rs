@@ -1,0 +1,105 @@
+//! Host rasteriser throughput at DGGT's scale: pixel-aligned Gaussians (one per input pixel, 1-3 pixels wide,
+//! depths 2-60 m) rendered at 518x350 into 1 or 12 views, forward and forward + backward.
+//!
+//! `cargo bench -p dggt-splat --bench raster` runs N in {10k, 100k, 1M}; set `DGGT_BENCH_GAUSSIANS` (comma
+//! separated, e.g. `10000,100000,1000000,2200000`) and `DGGT_BENCH_VIEWS` (e.g. `1,12`) to choose.
+
+use std::time::Instant;
+
+use dggt_splat::{Gaussians, ImageGrads, Opacities, PinholeView, RasterSettings, ViewBatch, rasterize, rasterize_backward};
+use dggt_geom::{ImageSize, PinholeIntrinsics};
+
+/// A small deterministic generator (SplitMix64), so the scene is the same on every machine.
+struct Sequence(u64);
+
+impl Sequence {
+    fn next(&mut self) -> f32 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
+
+struct Scene {
+    means: Vec<f32>,
+    quats: Vec<f32>,
+    scales: Vec<f32>,
+    opacities: Vec<f32>,
+    colors: Vec<f32>,
+}
+
+fn scene(count: usize, size: ImageSize, k: &PinholeIntrinsics) -> Scene {
+    let mut random = Sequence(count as u64);
+    let mut s = Scene { means: vec![], quats: vec![], scales: vec![], opacities: vec![], colors: vec![] };
+    for _ in 0..count {
+        let (u, v) = (random.next() * size.width as f32, random.next() * size.height as f32);
+        let depth = 2.0 + 58.0 * random.next() * random.next();
+        s.means.extend([(u - k.cx as f32) * depth / k.fx as f32, (v - k.cy as f32) * depth / k.fy as f32, depth]);
+        s.quats.extend([1.0, 0.2 * random.next(), 0.2 * random.next(), 0.2 * random.next()]);
+        let pixels = 0.5 + 1.5 * random.next();
+        let scale = pixels * depth / k.fx as f32;
+        s.scales.extend([scale, scale * (0.5 + random.next()), scale * 0.3]);
+        s.opacities.push(0.3 + 0.65 * random.next());
+        s.colors.extend([random.next(), random.next(), random.next()]);
+    }
+    s
+}
+
+fn views(count: usize, size: ImageSize, k: &PinholeIntrinsics) -> ViewBatch {
+    // Cameras along a 1.5 m stretch of road, as the frames of a DGGT sample.
+    let views = (0..count)
+        .map(|i| {
+            let z = -(i as f32) * 1.5 / count.max(1) as f32;
+            PinholeView {
+                world_to_camera: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, z]],
+                fx: k.fx as f32,
+                fy: k.fy as f32,
+                cx: k.cx as f32,
+                cy: k.cy as f32,
+            }
+        })
+        .collect();
+    ViewBatch::new(views, size).expect("valid views")
+}
+
+fn peak_rss_mib() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| s.lines().find(|l| l.starts_with("VmHWM:")).map(|l| l.to_owned()))
+        .and_then(|l| l.split_whitespace().nth(1).and_then(|kb| kb.parse::<f64>().ok()))
+        .map_or(f64::NAN, |kb| kb / 1024.0)
+}
+
+fn list(var: &str, default: &[usize]) -> Vec<usize> {
+    std::env::var(var)
+        .ok()
+        .map(|s| s.split(',').filter_map(|v| v.trim().parse().ok()).collect())
+        .unwrap_or_else(|| default.to_vec())
+}
+
+fn main() {
+    let size = ImageSize::new(518, 350).expect("size");
+    let k = PinholeIntrinsics::new(300.0, 300.0, 259.0, 175.0).expect("intrinsics");
+    let settings = RasterSettings::default();
+    println!("threads: {}", rayon::current_num_threads());
+    println!("{:>9} {:>5} {:>12} {:>12} {:>10} {:>14}", "gaussians", "views", "forward ms", "fwd+bwd ms", "kept/view", "peak RSS MiB");
+    for count in list("DGGT_BENCH_GAUSSIANS", &[10_000, 100_000, 1_000_000]) {
+        let s = scene(count, size, &k);
+        let gaussians =
+            Gaussians::new(&s.means, &s.quats, &s.scales, Opacities::Shared(&s.opacities), &s.colors, 3).expect("scene");
+        for view_count in list("DGGT_BENCH_VIEWS", &[1, 12]) {
+            let batch = views(view_count, size, &k);
+            let started = Instant::now();
+            let forward = rasterize(&gaussians, &batch, &settings).expect("forward");
+            let forward_ms = started.elapsed().as_secs_f64() * 1e3;
+            let ones = vec![1.0f32; forward.images.colors.len()];
+            let grads = ImageGrads { colors: Some(&ones), alpha: None, depth: None };
+            rasterize_backward(&gaussians, &batch, &settings, &forward, &grads).expect("backward");
+            let total_ms = started.elapsed().as_secs_f64() * 1e3;
+            let kept = forward.stats.iter().map(|s| s.kept).sum::<usize>() / view_count;
+            println!("{count:>9} {view_count:>5} {forward_ms:>12.1} {total_ms:>12.1} {kept:>10} {:>14.0}", peak_rss_mib());
+        }
+    }
+}
