@@ -6,8 +6,10 @@
 
 use std::time::Instant;
 
-use dggt_splat::{Gaussians, ImageGrads, Opacities, PinholeView, RasterSettings, ViewBatch, rasterize, rasterize_backward};
 use dggt_geom::{ImageSize, PinholeIntrinsics};
+use dggt_splat::{
+    Gaussians, ImageGrads, Opacities, PinholeView, RasterSettings, ViewBatch, rasterize, rasterize_backward,
+};
 
 /// A small deterministic generator (SplitMix64), so the scene is the same on every machine.
 struct Sequence(u64);
@@ -84,11 +86,14 @@ fn main() {
     let k = PinholeIntrinsics::new(300.0, 300.0, 259.0, 175.0).expect("intrinsics");
     let settings = RasterSettings::default();
     println!("threads: {}", rayon::current_num_threads());
-    println!("{:>9} {:>5} {:>12} {:>12} {:>10} {:>14}", "gaussians", "views", "forward ms", "fwd+bwd ms", "kept/view", "peak RSS MiB");
+    println!(
+        "{:>9} {:>5} {:>12} {:>12} {:>10} {:>14}",
+        "gaussians", "views", "forward ms", "fwd+bwd ms", "kept/view", "peak RSS MiB"
+    );
     for count in list("DGGT_BENCH_GAUSSIANS", &[10_000, 100_000, 1_000_000]) {
         let s = scene(count, size, &k);
-        let gaussians =
-            Gaussians::new(&s.means, &s.quats, &s.scales, Opacities::Shared(&s.opacities), &s.colors, 3).expect("scene");
+        let gaussians = Gaussians::new(&s.means, &s.quats, &s.scales, Opacities::Shared(&s.opacities), &s.colors, 3)
+            .expect("scene");
         for view_count in list("DGGT_BENCH_VIEWS", &[1, 12]) {
             let batch = views(view_count, size, &k);
             let started = Instant::now();
@@ -99,7 +104,10 @@ fn main() {
             rasterize_backward(&gaussians, &batch, &settings, &forward, &grads).expect("backward");
             let total_ms = started.elapsed().as_secs_f64() * 1e3;
             let kept = forward.stats.iter().map(|s| s.kept).sum::<usize>() / view_count;
-            println!("{count:>9} {view_count:>5} {forward_ms:>12.1} {total_ms:>12.1} {kept:>10} {:>14.0}", peak_rss_mib());
+            println!(
+                "{count:>9} {view_count:>5} {forward_ms:>12.1} {total_ms:>12.1} {kept:>10} {:>14.0}",
+                peak_rss_mib()
+            );
         }
     }
 }

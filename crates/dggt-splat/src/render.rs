@@ -10,6 +10,7 @@ use crate::cull::CullStats;
 use crate::error::SplatError;
 use crate::op::SplatOps;
 use crate::settings::RasterSettings;
+use crate::view::ViewBatch;
 
 /// Opacities in `[0, 1]`, shared by all views or one row per view (DGGT's lifespan fades Gaussians with the
 /// time of the rendered view).
@@ -67,8 +68,8 @@ pub struct RenderTensors {
 /// Renders every Gaussian into every camera in one call.
 ///
 /// Gradients (on an autodiff device) reach the means, quaternions, scales, opacities, colours and background;
-/// the cameras are constants. Shapes, element types and settings are checked here; camera values are checked
-/// by the backend, which panics on a non-finite or non-positive focal length or a malformed view matrix.
+/// the cameras are constants. Shapes, element types, settings and camera values are checked here and reported
+/// as a [`SplatError`].
 pub fn render(
     gaussians: &GaussianTensors,
     cameras: &CameraTensors,
@@ -181,5 +182,22 @@ fn check(gaussians: &GaussianTensors, cameras: &CameraTensors, settings: &Render
         });
     }
     settings.raster.validate(channels)?;
+    check_camera_values(cameras)?;
     Ok(channels)
+}
+
+/// Camera values are checked on the host, so that a non-finite or non-positive focal length or a malformed view
+/// matrix is an error rather than a failure inside the backend. Cameras are `25 V` numbers: reading them back is
+/// one small transfer per call, not one per view.
+fn check_camera_values(cameras: &CameraTensors) -> Result<(), SplatError> {
+    let read = |tensor: &Tensor<3>, name: &'static str| {
+        tensor
+            .clone()
+            .into_data()
+            .try_to_vec::<f32>()
+            .map_err(|e| SplatError::ElementType { tensor: name, actual: format!("{e:?}") })
+    };
+    let viewmats = read(&cameras.world_to_camera, "world_to_camera")?;
+    let intrinsics = read(&cameras.intrinsics, "intrinsics")?;
+    ViewBatch::from_matrices(&viewmats, &intrinsics, cameras.size).map(|_| ())
 }

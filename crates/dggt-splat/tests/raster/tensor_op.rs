@@ -249,8 +249,21 @@ fn wrong_shapes_element_types_and_settings_are_errors() {
         ..settings.clone()
     };
     assert!(matches!(render(&gaussians, &cameras, &twice), Err(SplatError::InvalidSettings { .. })));
-    let tiles = RenderSettings { raster: RasterSettings { tile_size: 0, ..RasterSettings::default() }, ..settings };
+    let tiles =
+        RenderSettings { raster: RasterSettings { tile_size: 0, ..RasterSettings::default() }, ..settings.clone() };
     assert!(matches!(render(&gaussians, &cameras, &tiles), Err(SplatError::InvalidSettings { .. })));
+
+    // Camera values: a NaN focal length and a non-homogeneous view matrix are errors, not failures in the op.
+    let mut k = values(cameras.intrinsics.clone());
+    k[0] = f32::NAN;
+    let nan_focal = CameraTensors { intrinsics: tensor(&k, [2, 3, 3], &device), ..cameras.clone() };
+    let error = render(&gaussians, &nan_focal, &settings).unwrap_err();
+    assert!(matches!(error, SplatError::InvalidView { .. }), "{error}");
+    let mut m = values(cameras.world_to_camera.clone());
+    m[16 + 12] = 0.5;
+    let bad_view = CameraTensors { world_to_camera: tensor(&m, [2, 4, 4], &device), ..cameras };
+    let error = render(&gaussians, &bad_view, &settings).unwrap_err();
+    assert!(matches!(error, SplatError::InvalidView { .. }), "{error}");
 }
 
 #[cfg(feature = "ndarray")]
