@@ -6,6 +6,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
+use dggt_model::parity::{ParityVectors, run_parity};
 use tracing_subscriber::EnvFilter;
 
 use crate::backend::DeviceChoice;
@@ -50,6 +51,18 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Run a folder of reference vectors (config.json, weights, inputs and outputs .safetensors) and compare
+    /// every output with the release's; fails when any is out of tolerance.
+    Parity {
+        /// The vector folder.
+        #[arg(long)]
+        vectors: PathBuf,
+        #[arg(long, value_enum, default_value = "cpu")]
+        device: DeviceChoice,
+        /// Checkpoint to load [default: DIR/weights.safetensors, else DIR/weights.pt].
+        #[arg(long)]
+        weights: Option<PathBuf>,
+    },
     /// List the compute backends of this build and check that each one computes.
     Devices {
         /// Check only this backend.
@@ -66,6 +79,25 @@ fn parse_range(text: &str) -> Result<std::ops::Range<usize>, String> {
         return Err(format!("empty range {text:?}"));
     }
     Ok(start..end)
+}
+
+/// `dggt parity`: prints the comparison table and a summary line; an error when any output fails.
+fn parity(dir: &std::path::Path, device: DeviceChoice, weights: Option<PathBuf>) -> Result<()> {
+    let started = std::time::Instant::now();
+    let vectors = ParityVectors::open(dir)?;
+    let weights = match weights {
+        Some(path) => path,
+        None => vectors.default_weights()?,
+    };
+    let device = device.device()?;
+    tracing::info!("running {} with {} on {device:?}", dir.display(), weights.display());
+    let report = run_parity(&vectors, &weights, &device)
+        .with_context(|| format!("running the network of {} with {}", dir.display(), weights.display()))?;
+    print!("{report}");
+    println!("{} ({:.1} s)", report.summary(), started.elapsed().as_secs_f64());
+    let failed: Vec<&str> = report.failed().map(|row| row.name.as_str()).collect();
+    anyhow::ensure!(failed.is_empty(), "{} output(s) failed parity: {}", failed.len(), failed.join(", "));
+    Ok(())
 }
 
 fn main() -> Result<()> {
@@ -102,6 +134,7 @@ fn main() -> Result<()> {
                 println!("{summary}");
             }
         }
+        Command::Parity { vectors, device, weights } => parity(&vectors, device, weights)?,
         Command::Devices { device } => {
             let choices = device.map_or(DeviceChoice::ALL.to_vec(), |d| vec![d]);
             let mut failed = false;

@@ -1,4 +1,4 @@
-//! Errors of model construction and weight loading.
+//! Errors of model construction, weight loading and reading parity vectors.
 
 use thiserror::Error;
 
@@ -22,6 +22,8 @@ pub enum ModelError {
     WeightApply { name: String, message: String },
     #[error("the checkpoint lacks {} tensor(s) the network needs: {}", .0.len(), .0.join(", "))]
     MissingWeights(Vec<String>),
+    #[error("parity vectors at {path}: {message}")]
+    Vectors { path: String, message: String },
     #[error("input image size {height}x{width} is not a multiple of the patch size {patch}")]
     ImageSize { height: usize, width: usize, patch: usize },
 }

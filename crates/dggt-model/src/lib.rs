@@ -12,7 +12,8 @@
 //!   full-size presets are checked name by name and shape by shape against the released checkpoints' key
 //!   lists (`tests/checkpoint_keys.rs`).
 //!
-//! - [`sky`]: the sky model's Gaussians and their colours sampled from the input views.
+//! - [`sky`]: the sky model's Gaussians and their colours sampled from the input views;
+//! - [`parity`]: running a folder of reference vectors and comparing every output (`dggt parity`).
 //!
 //! Not built: the tracker head (never run by DGGT).
 //!
@@ -29,6 +30,7 @@ mod error;
 pub mod gaussian_maps;
 pub mod mlp;
 pub mod model;
+pub mod parity;
 pub mod resample;
 pub mod rope;
 pub mod sky;

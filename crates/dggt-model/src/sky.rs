@@ -147,9 +147,9 @@ impl SkyModel {
                     continue;
                 }
                 count += 1;
-                let [px, py] = projection.pixels[i];
                 let image = &pixels[view * 3 * height * width..][..3 * height * width];
-                let sample = sample_bilinear_zeros(image, [height, width], [px, py]);
+                let grid = grid_coordinates(projection.pixels[i], size);
+                let sample = sample_bilinear_zeros(image, [height, width], grid);
                 sum.iter_mut().zip(sample).for_each(|(s, v)| *s += v);
             }
             if count > 0 {
@@ -180,11 +180,17 @@ impl SkyModel {
     }
 }
 
-/// Bilinear sample of a `[3, H, W]` image at pixel `(x, y)` normalised by `(W - 1, H - 1)` and read back with
-/// `align_corners = False` (the release's sampling), taps outside the image counting as zero.
-fn sample_bilinear_zeros(image: &[f32], [height, width]: [usize; 2], [x, y]: [f64; 2]) -> [f64; 3] {
-    let ix = x / (width as f64 - 1.0) * width as f64 - 0.5;
-    let iy = y / (height as f64 - 1.0) * height as f64 - 0.5;
+/// The release's sampling-grid coordinates of pixel `(x, y)`: `2 p / (W - 1, H - 1) - 1`, i.e. normalised as
+/// for `align_corners = True` (the sampler reads them with `align_corners = False`).
+pub fn grid_coordinates([x, y]: [f64; 2], size: ImageSize) -> [f64; 2] {
+    [2.0 * x / (size.width as f64 - 1.0) - 1.0, 2.0 * y / (size.height as f64 - 1.0) - 1.0]
+}
+
+/// Bilinear sample of a `[3, H, W]` image at grid coordinates `(gx, gy)` in `[-1, 1]`, read with
+/// `align_corners = False` (pixel `((g + 1) W - 1) / 2`), taps outside the image counting as zero.
+fn sample_bilinear_zeros(image: &[f32], [height, width]: [usize; 2], [gx, gy]: [f64; 2]) -> [f64; 3] {
+    let ix = ((gx + 1.0) * width as f64 - 1.0) / 2.0;
+    let iy = ((gy + 1.0) * height as f64 - 1.0) / 2.0;
     let (x0, y0) = (ix.floor(), iy.floor());
     let (fx, fy) = (ix - x0, iy - y0);
     let mut out = [0.0; 3];
@@ -211,10 +217,11 @@ mod tests {
     fn sampling_reads_pixels_at_the_release_offset() {
         // 2x3 image, channel value = column index; x = 0 maps to 0 * 3 / 2 - 0.5 = -0.5: half the first pixel.
         let image: Vec<f32> = (0..3).flat_map(|_| (0..2).flat_map(|_| [0.0, 1.0, 2.0])).collect();
-        let s = sample_bilinear_zeros(&image, [2, 3], [0.0, 0.0]);
+        let size = ImageSize::new(3, 2).unwrap();
+        let s = sample_bilinear_zeros(&image, [2, 3], grid_coordinates([0.0, 0.0], size));
         assert!((s[0] - 0.0).abs() < 1e-12);
         // (x, y) = (2, 1), the last pixel, maps to (2.5, 1.5): a quarter of pixel (2, 1), the other taps outside.
-        let s = sample_bilinear_zeros(&image, [2, 3], [2.0, 1.0]);
+        let s = sample_bilinear_zeros(&image, [2, 3], grid_coordinates([2.0, 1.0], size));
         assert!((s[1] - 0.5).abs() < 1e-12, "{s:?}");
     }
 }
