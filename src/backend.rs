@@ -70,9 +70,8 @@ pub fn self_check(device: &Device) -> Result<f32> {
     let (m, k, n) = (17, 33, 9);
     let a: Vec<f32> = (0..m * k).map(|i| ((i * 7 % 13) as f32 - 6.0) / 7.0).collect();
     let b: Vec<f32> = (0..k * n).map(|i| ((i * 5 % 11) as f32 - 5.0) / 5.0).collect();
-    let expected: Vec<f32> = (0..m * n)
-        .map(|idx| (0..k).map(|p| a[idx / n * k + p] * b[p * n + idx % n]).sum())
-        .collect();
+    let expected: Vec<f32> =
+        (0..m * n).map(|idx| (0..k).map(|p| a[idx / n * k + p] * b[p * n + idx % n]).sum()).collect();
     let ta = Tensor::<2>::from_data(burn::tensor::TensorData::new(a, [m, k]), device);
     let tb = Tensor::<2>::from_data(burn::tensor::TensorData::new(b, [k, n]), device);
     let product: Vec<f32> = ta

@@ -42,7 +42,11 @@ fn inspect_reports_bad_input_clearly() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("empty range"));
     let out = dggt(&["inspect", &fixture(), "--cameras", "4"]);
     assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("intrinsics/4.txt"), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("intrinsics/4.txt"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 }
 
 #[test]

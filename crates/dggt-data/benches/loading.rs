@@ -31,13 +31,10 @@ fn time_stream(label: &str, scene: Arc<Scene>, preprocess: Preprocess, options: 
     let sampler = Sampler::new(SamplerConfig::default(), scene.frames.len(), scene.cameras.len()).expect("sampler");
     let stream = training_stream(scene, sampler, preprocess, 0, 0, options).expect("stream");
     let started = Instant::now();
-    let views: usize = stream.take(steps).map(|s| s.expect("sample loads")).map(|s| s.inputs.len() + s.targets.len()).sum();
+    let views: usize =
+        stream.take(steps).map(|s| s.expect("sample loads")).map(|s| s.inputs.len() + s.targets.len()).sum();
     let elapsed = started.elapsed().as_secs_f64();
-    println!(
-        "{label:<48} {:>8.1} ms/step {:>8.1} views/s",
-        elapsed / steps as f64 * 1e3,
-        views as f64 / elapsed
-    );
+    println!("{label:<48} {:>8.1} ms/step {:>8.1} views/s", elapsed / steps as f64 * 1e3, views as f64 / elapsed);
 }
 
 fn main() {
@@ -55,6 +52,12 @@ fn main() {
     for workers in [1, 2] {
         let options = LoaderOptions { workers, capacity: 2 * workers };
         time_stream(&format!("KITTI stream -> 518x154, {workers} worker(s)"), kitti.clone(), release, options, 10);
-        time_stream(&format!("fixture stream 3 cams -> 518x364, {workers} worker(s)"), synth.clone(), release, options, 10);
+        time_stream(
+            &format!("fixture stream 3 cams -> 518x364, {workers} worker(s)"),
+            synth.clone(),
+            release,
+            options,
+            10,
+        );
     }
 }

@@ -29,11 +29,8 @@ impl DepthFlowMap {
     /// Reads a map and checks it against the full-resolution image size it belongs to.
     pub fn read(path: &Path, image_size: ImageSize) -> Result<Self> {
         let array = read_npy_f32(path)?;
-        let expected = [
-            (image_size.height / DEPTH_FLOW_STRIDE) as usize,
-            (image_size.width / DEPTH_FLOW_STRIDE) as usize,
-            4,
-        ];
+        let expected =
+            [(image_size.height / DEPTH_FLOW_STRIDE) as usize, (image_size.width / DEPTH_FLOW_STRIDE) as usize, 4];
         if array.shape != expected {
             return Err(DataError::malformed(
                 path,

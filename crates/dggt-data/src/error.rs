@@ -37,9 +37,10 @@ impl DataError {
     /// The file this error concerns, when there is one.
     pub fn path(&self) -> Option<&Path> {
         match self {
-            Self::Io { path, .. } | Self::Malformed { path, .. } | Self::Geometry { path, .. } | Self::Image { path, .. } => {
-                Some(path)
-            }
+            Self::Io { path, .. }
+            | Self::Malformed { path, .. }
+            | Self::Geometry { path, .. }
+            | Self::Image { path, .. } => Some(path),
             Self::Config(_) | Self::Worker(_) => None,
         }
     }

@@ -56,10 +56,8 @@ pub fn read_export(root: &Path, options: &ExportOptions) -> Result<Scene> {
         return Err(DataError::Config(format!("frame rate must be positive, got {frame_rate}")));
     }
 
-    let cameras = camera_ids
-        .iter()
-        .map(|&id| read_camera(&layout, id, frame_indices[0]))
-        .collect::<Result<Vec<_>>>()?;
+    let cameras =
+        camera_ids.iter().map(|&id| read_camera(&layout, id, frame_indices[0])).collect::<Result<Vec<_>>>()?;
 
     let ego_poses = frame_indices
         .iter()
@@ -89,10 +87,7 @@ pub fn read_export(root: &Path, options: &ExportOptions) -> Result<Scene> {
             views.push(View { frame: f, camera: c, world_from_camera: world_from_ego * ego_from_camera, files });
         }
     }
-    let lidar = frames
-        .iter()
-        .map(|frame| Some(layout.lidar(frame.index)).filter(|p| p.is_file()))
-        .collect();
+    let lidar = frames.iter().map(|frame| Some(layout.lidar(frame.index)).filter(|p| p.is_file())).collect();
     let name = root.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     Ok(Scene { name, root: root.to_owned(), source: SceneSource::Export, cameras, frames, views, lidar })
 }

@@ -54,13 +54,17 @@ pub fn write_jpeg(path: &Path, image: &RgbImage, quality: u8) -> Result<()> {
 /// Encodes an 8-bit grayscale PNG and writes it atomically.
 pub fn write_png_gray(path: &Path, image: &GrayImage) -> Result<()> {
     let mut bytes = Cursor::new(Vec::new());
-    image.write_to(&mut bytes, ImageFormat::Png).map_err(|source| DataError::Image { path: path.to_owned(), source })?;
+    image
+        .write_to(&mut bytes, ImageFormat::Png)
+        .map_err(|source| DataError::Image { path: path.to_owned(), source })?;
     crate::io::write_atomically(path, &bytes.into_inner())
 }
 
 /// Encodes an RGB PNG and writes it atomically.
 pub fn write_png_rgb(path: &Path, image: &RgbImage) -> Result<()> {
     let mut bytes = Cursor::new(Vec::new());
-    image.write_to(&mut bytes, ImageFormat::Png).map_err(|source| DataError::Image { path: path.to_owned(), source })?;
+    image
+        .write_to(&mut bytes, ImageFormat::Png)
+        .map_err(|source| DataError::Image { path: path.to_owned(), source })?;
     crate::io::write_atomically(path, &bytes.into_inner())
 }

@@ -11,7 +11,8 @@ use crate::error::{DataError, Result};
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
     let parent = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     fs::create_dir_all(parent).map_err(|e| DataError::io(parent, e))?;
-    let file_name = path.file_name().ok_or_else(|| DataError::Config(format!("{} has no file name", path.display())))?;
+    let file_name =
+        path.file_name().ok_or_else(|| DataError::Config(format!("{} has no file name", path.display())))?;
     let temporary = parent.join(format!(".{}.partial", file_name.to_string_lossy()));
     let mut file = fs::File::create(&temporary).map_err(|e| DataError::io(&temporary, e))?;
     file.write_all(bytes).map_err(|e| DataError::io(&temporary, e))?;

@@ -21,11 +21,10 @@ const FRAME_RATE_HZ: f64 = 10.0;
 
 /// Reads a KITTI odometry sequence, restricted to `frames` when given.
 pub fn read_kitti_odometry(root: &Path, frames: Option<Range<usize>>) -> Result<Scene> {
-    let image_folder = IMAGE_FOLDERS
-        .iter()
-        .map(|name| root.join(name))
-        .find(|p| p.is_dir())
-        .ok_or_else(|| DataError::malformed(root, format!("a KITTI sequence with one of {IMAGE_FOLDERS:?}"), "none"))?;
+    let image_folder =
+        IMAGE_FOLDERS.iter().map(|name| root.join(name)).find(|p| p.is_dir()).ok_or_else(|| {
+            DataError::malformed(root, format!("a KITTI sequence with one of {IMAGE_FOLDERS:?}"), "none")
+        })?;
     let mut image_paths: Vec<PathBuf> = std::fs::read_dir(&image_folder)
         .map_err(|e| DataError::io(&image_folder, e))?
         .filter_map(|entry| entry.ok().map(|e| e.path()))
@@ -69,14 +68,8 @@ pub fn read_kitti_odometry(root: &Path, frames: Option<Range<usize>>) -> Result<
         let world_from_camera: WorldFromCamera = (anchor * poses[index]).relabel();
         views.push(View { frame: f, camera: 0, world_from_camera, files: ViewFiles { image, ..Default::default() } });
     }
-    let camera = SceneCamera {
-        id: 0,
-        name: "cam0".into(),
-        size,
-        intrinsics,
-        distortion: [0.0; 5],
-        ego_from_camera: None,
-    };
+    let camera =
+        SceneCamera { id: 0, name: "cam0".into(), size, intrinsics, distortion: [0.0; 5], ego_from_camera: None };
     let name = root.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     Ok(Scene {
         name,
@@ -96,7 +89,8 @@ fn read_poses(path: &Path) -> Result<Vec<WorldFromCamera>> {
         .enumerate()
         .filter(|(_, line)| !line.trim().is_empty())
         .map(|(i, line)| {
-            let line_ref = path.with_file_name(format!("{}:{}", path.file_name().unwrap_or_default().to_string_lossy(), i + 1));
+            let line_ref =
+                path.with_file_name(format!("{}:{}", path.file_name().unwrap_or_default().to_string_lossy(), i + 1));
             let values = text::parse_numbers(&line_ref, line)?;
             if values.len() != 12 {
                 return Err(DataError::malformed(&line_ref, "12 numbers (a 3x4 matrix)", format!("{}", values.len())));

@@ -40,9 +40,14 @@ pub fn read_lidar(path: &Path) -> Result<Vec<LidarPoint>> {
         .chunks_exact(point_bytes)
         .enumerate()
         .map(|(i, chunk)| {
-            let v: Vec<f64> = chunk.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64).collect();
+            let v: Vec<f64> =
+                chunk.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64).collect();
             if v[..9].iter().any(|x| !x.is_finite()) {
-                return Err(DataError::malformed(path, "finite coordinates", format!("a non-finite value in point {i}")));
+                return Err(DataError::malformed(
+                    path,
+                    "finite coordinates",
+                    format!("a non-finite value in point {i}"),
+                ));
             }
             Ok(LidarPoint {
                 origin: DVec3::new(v[0], v[1], v[2]),

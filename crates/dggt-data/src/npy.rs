@@ -14,8 +14,7 @@ pub struct NpyArray {
 /// Reads a float32 C-order `.npy` file, checking that its data matches its shape.
 pub fn read_npy_f32(path: &Path) -> Result<NpyArray> {
     let bytes = std::fs::read(path).map_err(|e| DataError::io(path, e))?;
-    let file = npyz::NpyFile::new(&bytes[..])
-        .map_err(|e| DataError::malformed(path, "a .npy file", e.to_string()))?;
+    let file = npyz::NpyFile::new(&bytes[..]).map_err(|e| DataError::malformed(path, "a .npy file", e.to_string()))?;
     if file.order() != npyz::Order::C {
         return Err(DataError::malformed(path, "C (row-major) order", "Fortran order"));
     }
@@ -24,9 +23,14 @@ pub fn read_npy_f32(path: &Path) -> Result<NpyArray> {
         return Err(DataError::malformed(path, "dtype '<f4' (little-endian float32)", dtype.descr()));
     }
     let shape: Vec<usize> = file.shape().iter().map(|&d| d as usize).collect();
-    let data: Vec<f32> = file.into_vec().map_err(|e| DataError::malformed(path, "complete float32 data", e.to_string()))?;
+    let data: Vec<f32> =
+        file.into_vec().map_err(|e| DataError::malformed(path, "complete float32 data", e.to_string()))?;
     if data.len() != shape.iter().product::<usize>() {
-        return Err(DataError::malformed(path, format!("{} values for shape {shape:?}", shape.iter().product::<usize>()), format!("{}", data.len())));
+        return Err(DataError::malformed(
+            path,
+            format!("{} values for shape {shape:?}", shape.iter().product::<usize>()),
+            format!("{}", data.len()),
+        ));
     }
     Ok(NpyArray { shape, data })
 }

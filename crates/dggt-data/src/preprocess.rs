@@ -210,7 +210,10 @@ mod tests {
             }
         }
         let centroid = (sx / sw, sy / sw);
-        assert!((centroid.0 - expected.x).abs() < 0.3 && (centroid.1 - expected.y).abs() < 0.3, "{centroid:?} vs {expected:?}");
+        assert!(
+            (centroid.0 - expected.x).abs() < 0.3 && (centroid.1 - expected.y).abs() < 0.3,
+            "{centroid:?} vs {expected:?}"
+        );
     }
 
     #[test]

@@ -33,11 +33,19 @@ pub fn prepare_view(scene: &Scene, frame: usize, camera: usize, preprocess: &Pre
     let scene_camera = &scene.cameras[camera];
     let plan = preprocess.plan(scene_camera.size)?;
     let rgb = images::read_rgb(&view.files.image)?;
-    images::expect_size(&view.files.image, dggt_geom::ImageSize { width: rgb.width(), height: rgb.height() }, scene_camera.size)?;
+    images::expect_size(
+        &view.files.image,
+        dggt_geom::ImageSize { width: rgb.width(), height: rgb.height() },
+        scene_camera.size,
+    )?;
     let mask = |path: &Option<std::path::PathBuf>| -> Result<Option<BinaryMask>> {
         let Some(path) = path else { return Ok(None) };
         let gray = images::read_gray(path)?;
-        images::expect_size(path, dggt_geom::ImageSize { width: gray.width(), height: gray.height() }, scene_camera.size)?;
+        images::expect_size(
+            path,
+            dggt_geom::ImageSize { width: gray.width(), height: gray.height() },
+            scene_camera.size,
+        )?;
         Ok(Some(plan.mask(&gray)?))
     };
     let dynamic_source = view.files.fine_dynamic_mask.as_ref().or(view.files.dynamic_mask.as_ref()).cloned();

@@ -45,7 +45,8 @@ fn a_valid_export_reads_and_prepares() {
     let axis = scene.view(1, 0).world_from_camera.transform_vector(dggt_geom::glam::DVec3::Z);
     assert!(axis.abs_diff_eq(dggt_geom::glam::DVec3::X, 1e-12));
     assert!((scene.trajectory_length(0) - 1.0).abs() < 1e-12);
-    let view = prepare_view(&scene, 1, 0, &Preprocess { target_width: 56, patch_size: 14, crop_to_square: true }).unwrap();
+    let view =
+        prepare_view(&scene, 1, 0, &Preprocess { target_width: 56, patch_size: 14, crop_to_square: true }).unwrap();
     assert_eq!((view.image.size.width, view.image.size.height), (56, 42));
     let sky = view.sky_mask.unwrap();
     assert!((sky.coverage() - 17.0 / 42.0).abs() < 0.03, "{}", sky.coverage());

@@ -33,13 +33,8 @@ fn waymo_export_frame_has_five_cameras_in_opencv_axes() {
         assert_eq!((camera.size.width, camera.size.height), (1920, 886), "{}", camera.name);
     }
     // The world is the ego frame of frame 0 (forward-left-up). Expected optical axes in that frame:
-    let expected_axis = [
-        DVec3::X,
-        DVec3::new(1.0, 1.0, 0.0).normalize(),
-        DVec3::new(1.0, -1.0, 0.0).normalize(),
-        DVec3::Y,
-        -DVec3::Y,
-    ];
+    let expected_axis =
+        [DVec3::X, DVec3::new(1.0, 1.0, 0.0).normalize(), DVec3::new(1.0, -1.0, 0.0).normalize(), DVec3::Y, -DVec3::Y];
     for (c, camera) in scene.cameras.iter().enumerate() {
         let pose = scene.view(0, c).world_from_camera;
         let rotation = pose.rotation_matrix();
@@ -51,7 +46,11 @@ fn waymo_export_frame_has_five_cameras_in_opencv_axes() {
         let down = pose.transform_vector(DVec3::Y);
         assert!(down.dot(-DVec3::Z) > 0.98, "{}: image down is {down}, expected world down", camera.name);
         let centre = pose.translation();
-        assert!((1.9..2.3).contains(&centre.z) && (1.3..1.7).contains(&centre.x), "{} mounted at {centre}", camera.name);
+        assert!(
+            (1.9..2.3).contains(&centre.z) && (1.3..1.7).contains(&centre.x),
+            "{} mounted at {centre}",
+            camera.name
+        );
         let k = camera.intrinsics;
         assert!((1900.0..2200.0).contains(&k.fx) && (k.fx - k.fy).abs() < 1.0, "{}: {k:?}", camera.name);
         assert!((k.cx - camera.size.width as f64 / 2.0).abs() < 50.0, "{}: {k:?}", camera.name);
@@ -91,7 +90,8 @@ fn kitti_sequence_moves_forward_about_1_2_metres_per_frame() {
     assert!(window.view(0, 0).world_from_camera.max_abs_difference(&dggt_geom::Rigid::IDENTITY) < 1e-12);
     assert!((window.frames[9].timestamp - 0.9).abs() < 1e-12);
 
-    let view = prepare_view(&scene, 3, 0, &Preprocess { target_width: 518, patch_size: 14, crop_to_square: true }).unwrap();
+    let view =
+        prepare_view(&scene, 3, 0, &Preprocess { target_width: 518, patch_size: 14, crop_to_square: true }).unwrap();
     assert_eq!((view.image.size.width, view.image.size.height), (518, 154));
     let plane = view.image.size.area();
     let (r, g, b) = (&view.image.data[..plane], &view.image.data[plane..2 * plane], &view.image.data[2 * plane..]);

@@ -114,16 +114,13 @@ impl PinholeIntrinsics {
 
     /// `K` as rows in `f32`, for tensors.
     pub fn to_rows_f32(&self) -> [[f32; 3]; 3] {
-        [
-            [self.fx as f32, 0.0, self.cx as f32],
-            [0.0, self.fy as f32, self.cy as f32],
-            [0.0, 0.0, 1.0],
-        ]
+        [[self.fx as f32, 0.0, self.cx as f32], [0.0, self.fy as f32, self.cy as f32], [0.0, 0.0, 1.0]]
     }
 
     /// Projects a camera-space point (OpenCV axes) to continuous pixel coordinates; `None` unless `z > 0`.
     pub fn project(&self, point: DVec3) -> Option<DVec2> {
-        (point.z > 0.0).then(|| DVec2::new(self.fx * point.x / point.z + self.cx, self.fy * point.y / point.z + self.cy))
+        (point.z > 0.0)
+            .then(|| DVec2::new(self.fx * point.x / point.z + self.cx, self.fy * point.y / point.z + self.cy))
     }
 
     /// The camera-space point at z-depth `depth` behind continuous pixel coordinates `pixel`.
@@ -144,10 +141,7 @@ impl PinholeIntrinsics {
     /// Vertical and horizontal field of view in radians, `(fov_h, fov_w)`, as VGGT defines them:
     /// `fov_h = 2 atan(H / (2 fy))`, `fov_w = 2 atan(W / (2 fx))`.
     pub fn fov(&self, size: ImageSize) -> (f64, f64) {
-        (
-            2.0 * (size.height as f64 / (2.0 * self.fy)).atan(),
-            2.0 * (size.width as f64 / (2.0 * self.fx)).atan(),
-        )
+        (2.0 * (size.height as f64 / (2.0 * self.fy)).atan(), 2.0 * (size.width as f64 / (2.0 * self.fx)).atan())
     }
 
     /// Intrinsics with the given fields of view and the principal point at the image centre (VGGT's decoding).

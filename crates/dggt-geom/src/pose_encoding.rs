@@ -35,10 +35,8 @@ impl PoseEncoding {
     /// (VGGT's decoding divides by its squared norm); a zero or non-finite encoding is an error.
     pub fn decode(&self, size: ImageSize) -> Result<(CameraFromWorld, PinholeIntrinsics), GeomError> {
         let rotation: DQuat = self.rotation.to_rotation()?;
-        let extrinsic = CameraFromWorld::from_matrix3_translation(
-            DMat3::from_quat(rotation),
-            DVec3::from_array(self.translation),
-        )?;
+        let extrinsic =
+            CameraFromWorld::from_matrix3_translation(DMat3::from_quat(rotation), DVec3::from_array(self.translation))?;
         let intrinsics = PinholeIntrinsics::from_fov(self.fov_h, self.fov_w, size)?;
         Ok((extrinsic, intrinsics))
     }

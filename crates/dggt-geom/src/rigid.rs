@@ -65,11 +65,7 @@ impl<To, From> Default for Rigid<To, From> {
 
 impl<To, From> Rigid<To, From> {
     /// The transform that changes nothing (the two frames coincide).
-    pub const IDENTITY: Self = Self {
-        rotation: DQuat::IDENTITY,
-        translation: DVec3::ZERO,
-        frames: PhantomData,
-    };
+    pub const IDENTITY: Self = Self { rotation: DQuat::IDENTITY, translation: DVec3::ZERO, frames: PhantomData };
 
     /// Builds a transform from a rotation quaternion (normalised here) and a translation.
     pub fn from_rotation_translation(rotation: DQuat, translation: DVec3) -> Result<Self, GeomError> {
@@ -86,10 +82,7 @@ impl<To, From> Rigid<To, From> {
             return Err(GeomError::NonFinite { what: "rigid transform" });
         }
         let gram = rotation.transpose() * rotation;
-        let deviation = (gram - DMat3::IDENTITY)
-            .to_cols_array()
-            .iter()
-            .fold(0.0f64, |m, v| m.max(v.abs()));
+        let deviation = (gram - DMat3::IDENTITY).to_cols_array().iter().fold(0.0f64, |m, v| m.max(v.abs()));
         if deviation > ORTHONORMALITY_TOLERANCE {
             return Err(GeomError::NotRigid {
                 what: "rotation block",
@@ -232,8 +225,8 @@ mod tests {
 
     #[test]
     fn composition_and_inverse_agree_with_matrices() {
-        let a = WorldFromEgo::from_rotation_translation(DQuat::from_rotation_z(0.3), DVec3::new(10.0, -2.0, 0.5))
-            .unwrap();
+        let a =
+            WorldFromEgo::from_rotation_translation(DQuat::from_rotation_z(0.3), DVec3::new(10.0, -2.0, 0.5)).unwrap();
         let b = EgoFromCamera::from_rotation_translation(
             DQuat::from_euler(glam::EulerRot::XYZ, 0.1, -0.2, 0.7),
             DVec3::new(1.5, 0.0, 2.0),
