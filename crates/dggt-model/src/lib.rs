@@ -13,6 +13,9 @@
 //!   lists (`tests/checkpoint_keys.rs`).
 //!
 //! - [`sky`]: the sky model's Gaussians and their colours sampled from the input views;
+//! - [`lifespan`]: frame times, the static/dynamic opacity split and the lifespan decay;
+//! - [`scene_render`]: the release's inference render (static and dynamic Gaussians over the sky), with
+//!   `dggt-splat`;
 //! - [`parity`]: running a folder of reference vectors and comparing every output (`dggt parity`).
 //!
 //! Not built: the tracker head (never run by DGGT).
@@ -28,11 +31,13 @@ pub mod dino;
 pub mod dpt;
 mod error;
 pub mod gaussian_maps;
+pub mod lifespan;
 pub mod mlp;
 pub mod model;
 pub mod parity;
 pub mod resample;
 pub mod rope;
+pub mod scene_render;
 pub mod sky;
 pub mod uv_embed;
 pub mod weights;

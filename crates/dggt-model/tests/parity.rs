@@ -1,6 +1,6 @@
 //! Parity with the release: the tiny model of `shared/parity/dggt_tiny_s3_56x70`, built from its
-//! `config.json`, loaded from its weights and run on its inputs, reproduces every reference output that does
-//! not need rendering ([`dggt_model::parity`] does the comparing).
+//! `config.json`, loaded from its weights and run on its inputs, reproduces every reference output, renders
+//! included ([`dggt_model::parity`] does the comparing).
 //!
 //! The folder is read in place (`../../../shared/parity/dggt_tiny_s3_56x70` from this crate), or from
 //! `$DGGT_PARITY_DIR/dggt_tiny_s3_56x70` when that variable names the shared parity folder.
@@ -9,7 +9,7 @@ use std::path::PathBuf;
 use std::sync::OnceLock;
 
 use burn::tensor::Device;
-use dggt_model::parity::{NEEDS_RENDERING, ParityReport, ParityVectors, Status, read_safetensors, run_parity};
+use dggt_model::parity::{ParityReport, ParityVectors, Status, read_safetensors, run_parity};
 use dggt_model::{Dggt, ModelConfig, ModelError};
 
 fn parity_dir() -> PathBuf {
@@ -55,15 +55,13 @@ fn config_json_matches_tiny_preset() {
 }
 
 #[test]
-fn every_output_is_reproduced_or_needs_rendering() {
+fn every_output_is_reproduced() {
     let report = report();
     println!("\n{report}{}", report.summary());
     assert!(report.passed(), "out of tolerance: {:?}", report.failed().map(|row| &row.name).collect::<Vec<_>>());
     assert_eq!(report.rows.len(), vectors().outputs.len(), "one row per reference output");
     for row in &report.rows {
-        let rendering = ["render.", "lifespan."].iter().any(|p| row.name.starts_with(p)) || row.name == "timestamps";
-        let expected = if rendering { Status::Skipped(NEEDS_RENDERING.into()) } else { Status::Pass };
-        assert_eq!(row.status, expected, "{}", row.name);
+        assert_eq!(row.status, Status::Pass, "{}", row.name);
     }
 }
 
