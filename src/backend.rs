@@ -45,6 +45,14 @@ impl DeviceChoice {
 
     /// The burn device, or an error naming the missing feature.
     pub fn device(self) -> Result<Device> {
+        self.device_at(0)
+    }
+
+    /// Device number `index` of this backend (GPUs; the CPU backends have one device).
+    pub fn device_at(self, index: usize) -> Result<Device> {
+        if index > 0 && matches!(self, Self::Cpu | Self::Ndarray) {
+            bail!("the {self:?} backend has one device; `{self:?}:{index}` does not exist");
+        }
         match self {
             #[cfg(feature = "flex")]
             Self::Cpu => Ok(Device::flex()),
@@ -52,9 +60,11 @@ impl DeviceChoice {
             #[allow(deprecated)]
             Self::Ndarray => Ok(Device::ndarray()),
             #[cfg(feature = "wgpu")]
-            Self::Wgpu => Ok(Device::wgpu(burn::tensor::DeviceKind::default())),
+            Self::Wgpu if index == 0 => Ok(Device::wgpu(burn::tensor::DeviceKind::default())),
+            #[cfg(feature = "wgpu")]
+            Self::Wgpu => Ok(Device::wgpu(burn::tensor::DeviceKind::DiscreteGpu(index))),
             #[cfg(feature = "cuda")]
-            Self::Cuda => Ok(Device::cuda(0)),
+            Self::Cuda => Ok(Device::cuda(index)),
             #[allow(unreachable_patterns)]
             other => bail!(
                 "this build of dggt has no {other:?} backend; rebuild with `cargo build --release --features {}`",
@@ -62,6 +72,20 @@ impl DeviceChoice {
             ),
         }
     }
+}
+
+/// Parses a device name: `cpu`, `ndarray`, `wgpu`, `cuda`, optionally with `:N` for the N-th GPU.
+pub fn parse_device(text: &str) -> Result<Device> {
+    let (name, index) = match text.split_once(':') {
+        Some((name, index)) => {
+            let index = index.parse().map_err(|_| anyhow::anyhow!("bad device index in `{text}`"))?;
+            (name, index)
+        }
+        None => (text, 0),
+    };
+    let choice = <DeviceChoice as clap::ValueEnum>::from_str(name, true)
+        .map_err(|_| anyhow::anyhow!("unknown device `{text}` (cpu, ndarray, wgpu[:N], cuda[:N])"))?;
+    choice.device_at(index)
 }
 
 /// Runs a small matrix product on `device` and returns the largest difference from the same product on the

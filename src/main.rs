@@ -63,6 +63,27 @@ enum Command {
         #[arg(long)]
         weights: Option<PathBuf>,
     },
+    /// Train (or fine-tune) the network as a TOML configuration describes (`configs/`).
+    Train {
+        /// The configuration file.
+        #[arg(long)]
+        config: PathBuf,
+        /// Continue from the newest checkpoint in the run's output folder.
+        #[arg(long)]
+        resume: bool,
+        /// Devices to train on, overriding `run.devices` (e.g. `cpu`, `wgpu`, `cuda:0,cuda:1`).
+        #[arg(long, value_delimiter = ',')]
+        device: Option<Vec<String>>,
+        /// Override `run.steps`.
+        #[arg(long)]
+        steps: Option<u64>,
+        /// Override `run.out_dir`.
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Build everything and run no step (checks a configuration and its files).
+        #[arg(long)]
+        dry_run: bool,
+    },
     /// List the compute backends of this build and check that each one computes.
     Devices {
         /// Check only this backend.
@@ -79,6 +100,69 @@ fn parse_range(text: &str) -> Result<std::ops::Range<usize>, String> {
         return Err(format!("empty range {text:?}"));
     }
     Ok(start..end)
+}
+
+/// `dggt train`: builds the run, trains with a progress bar, prints where the results are.
+fn train(
+    path: &std::path::Path,
+    resume: bool,
+    devices: Option<Vec<String>>,
+    steps: Option<u64>,
+    out: Option<PathBuf>,
+    dry_run: bool,
+) -> Result<()> {
+    let mut config = dggt_train::TrainConfig::load(path)?;
+    if let Some(steps) = steps {
+        config.run.steps = steps;
+    }
+    if let Some(out) = out {
+        config.run.out_dir = out;
+    }
+    if let Some(devices) = devices {
+        config.run.devices = devices;
+    }
+    config.validate().map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    let devices = config.run.devices.iter().map(|d| backend::parse_device(d)).collect::<Result<Vec<_>>>()?;
+    let mut trainer = dggt_train::Trainer::new(config, devices, resume)?;
+    let params = burn::module::Module::num_params(trainer.model());
+    tracing::info!(
+        "{} parameters, starting at step {} of {}",
+        params,
+        trainer.state().step,
+        trainer.config().run.steps
+    );
+    if dry_run {
+        let validation = trainer.validate()?;
+        println!(
+            "dry run: configuration, scene, network ({params} parameters), losses and optimiser built; validation {}",
+            validation.map_or("not configured".into(), |v| format!("PSNR {:.2} dB, SSIM {:.3}", v.psnr, v.ssim))
+        );
+        return Ok(());
+    }
+    let summary = trainer.run(dggt_train::RunOptions {
+        progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
+        stop_after: None,
+    })?;
+    let out = &trainer.config().run.out_dir;
+    println!(
+        "trained steps {}..{} in {:.1} s ({} skipped); loss {:.4} -> {:.4}; target PSNR {:.2} -> {:.2} dB",
+        summary.final_step - summary.steps_run,
+        summary.final_step,
+        summary.elapsed_s,
+        summary.skipped_steps,
+        summary.first_loss.unwrap_or(f64::NAN),
+        summary.last_loss.unwrap_or(f64::NAN),
+        summary.first_target_psnr.unwrap_or(f64::NAN),
+        summary.last_target_psnr.unwrap_or(f64::NAN),
+    );
+    if let Some(v) = &summary.validation {
+        println!("validation: PSNR {:.2} dB, SSIM {:.4} over {} target views", v.psnr, v.ssim, v.views.len());
+    }
+    println!("metrics: {}", out.join("metrics.jsonl").display());
+    if let Some(dir) = &summary.checkpoint {
+        println!("checkpoint: {}", dir.display());
+    }
+    Ok(())
 }
 
 /// `dggt parity`: prints the comparison table and a summary line; an error when any output fails.
@@ -135,6 +219,9 @@ fn main() -> Result<()> {
             }
         }
         Command::Parity { vectors, device, weights } => parity(&vectors, device, weights)?,
+        Command::Train { config, resume, device, steps, out, dry_run } => {
+            train(&config, resume, device, steps, out, dry_run)?
+        }
         Command::Devices { device } => {
             let choices = device.map_or(DeviceChoice::ALL.to_vec(), |d| vec![d]);
             let mut failed = false;

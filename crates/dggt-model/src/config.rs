@@ -167,6 +167,11 @@ pub struct DptHeadConfig {
 pub struct GaussianHeadConfig {
     pub dim_in: usize,
     pub output_dim: usize,
+    /// Adds each input pixel's colour logit to the colour channels, `rgb = sigmoid(raw + logit(pixel))`: a
+    /// per-pixel path from the image to the Gaussian colours that 14-pixel patch tokens lack, so a small model
+    /// trained from scratch starts from the observed colours. Off in the release (its checkpoints assume so).
+    #[serde(default)]
+    pub color_skip: bool,
 }
 
 /// The sky model: `resolution^2` Gaussians on a hemisphere of `radius` (the points themselves are checkpoint
@@ -265,7 +270,7 @@ impl ModelConfig {
             activation: HeadActivation::Linear,
             conf_activation: HeadActivation::Expp1,
         };
-        self.gs_head = Some(GaussianHeadConfig { dim_in: 3 * c, output_dim: 12 });
+        self.gs_head = Some(GaussianHeadConfig { dim_in: 3 * c, output_dim: 12, color_skip: false });
         self.instance_head = Some(dino_head(2));
         self.semantic_head = Some(dino_head(11));
         self.sky_model = Some(SkyConfig { resolution: sky_resolution, radius: 50.0 });

@@ -32,7 +32,13 @@ pub struct Dggt {
     pub semantic_head: Option<DptHead>,
     /// Coloured from the input views with predicted cameras, outside [`Dggt::forward`].
     pub sky_model: Option<SkyModel>,
+    /// See [`GaussianHeadConfig::color_skip`](crate::config::GaussianHeadConfig::color_skip).
+    #[module(skip)]
+    pub color_skip: bool,
 }
+
+/// Input colours are clamped to `[COLOR_SKIP_EPS, 1 - COLOR_SKIP_EPS]` before the logit.
+const COLOR_SKIP_EPS: f64 = 1e-3;
 
 /// The Gaussian head's raw output and its activated parameters.
 #[derive(Debug, Clone)]
@@ -78,6 +84,7 @@ impl Dggt {
             instance_head: config.instance_head.as_ref().map(|head| DptHead::new(&config.dpt, head, device)),
             semantic_head: config.semantic_head.as_ref().map(|head| DptHead::new(&config.dpt, head, device)),
             sky_model: config.sky_model.as_ref().map(|sky| SkyModel::new(sky, device)),
+            color_skip: config.gs_head.as_ref().is_some_and(|gs| gs.color_skip),
         })
     }
 
@@ -108,6 +115,11 @@ impl Dggt {
 
     /// `images`: `[B, S, 3, H, W]` RGB in `[0, 1]`.
     pub fn forward(&self, images: Tensor<5>) -> Result<DggtOutput, ModelError> {
+        let color_logit = self.color_skip.then(|| {
+            // [B, S, 3, H, W] -> [B, S, H, W, 3] logits.
+            let p = images.clone().permute([0, 1, 3, 4, 2]).clamp(COLOR_SKIP_EPS, 1.0 - COLOR_SKIP_EPS);
+            (p.clone() / p.neg().add_scalar(1.0)).log()
+        });
         let aggregator = self.aggregator.forward(images)?;
         let last = aggregator.output_list.last().expect("aggregator depth is at least one").clone();
         let camera = self.camera_head.forward(last);
@@ -118,7 +130,15 @@ impl Dggt {
         let points = self.point_head.predict(frame_global, start, grid);
         let gaussians = self.gs_head.as_ref().map(|head| {
             let dpt = head.forward(|i| aggregator.output_with_dino_tokens(i), start, grid);
-            GaussianOutput { maps: GaussianMaps::from_raw(dpt.raw.clone()), dpt }
+            let raw = match &color_logit {
+                Some(logit) => {
+                    let rgb = dpt.raw.clone().narrow(4, 0, 3) + logit.clone();
+                    let channels = dpt.raw.dims()[4];
+                    Tensor::cat(vec![rgb, dpt.raw.clone().narrow(4, 3, channels - 3)], 4)
+                }
+                None => dpt.raw.clone(),
+            };
+            GaussianOutput { maps: GaussianMaps::from_raw(raw), dpt }
         });
         let instance = self.instance_head.as_ref().map(|head| head.predict(dino_tokens, start, grid));
         let semantic = self.semantic_head.as_ref().map(|head| head.predict(dino_tokens, start, grid));

@@ -103,6 +103,25 @@ impl SkyModel {
         }
     }
 
+    /// The buffers a fresh model starts from: [`hemisphere_points`] at `config.radius`, isotropic log scales
+    /// from [`neighbour_log_scales`], opacity one, identity rotations. A checkpoint overwrites them.
+    pub fn initialised(config: &SkyConfig, device: &Device) -> Self {
+        let points = hemisphere_points(config.resolution * config.resolution, config.radius);
+        let n = points.len();
+        let scales = neighbour_log_scales(&points);
+        let tensor = |values: Vec<f32>, width: usize| {
+            Param::from_tensor(Tensor::<2>::from_data(TensorData::new(values, [n, width]), device))
+                .set_require_grad(false)
+        };
+        Self {
+            bg_pcd: tensor(points.iter().flat_map(|p| p.map(|v| v as f32)).collect(), 3),
+            bg_scales: tensor(scales.iter().flat_map(|&s| [s as f32; 3]).collect(), 3),
+            bg_opacity: tensor(vec![1.0; n], 1),
+            bg_quat: tensor((0..n).flat_map(|_| [1.0, 0.0, 0.0, 0.0]).collect(), 4),
+            ..Self::new(config, device)
+        }
+    }
+
     /// Projects every point into every view.
     pub fn project(&self, views: &[(CameraFromWorld, PinholeIntrinsics)], size: ImageSize) -> SkyProjection {
         let points: Vec<f32> = host(self.bg_pcd.val());
@@ -207,6 +226,44 @@ fn sample_bilinear_zeros(image: &[f32], [height, width]: [usize; 2], [gx, gy]: [
         }
     }
     out
+}
+
+/// `count` points of a Fibonacci lattice on the upper hemisphere (`y` in `[-1, 0]`: up is `-y` in OpenCV axes)
+/// of `radius`: point `i` has `y = -1 + i / (count - 1)` and azimuth `i` golden angles (`π (3 - √5)`) from `+x`
+/// towards `+z`.
+pub fn hemisphere_points(count: usize, radius: f64) -> Vec<[f64; 3]> {
+    let golden_angle = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    (0..count)
+        .map(|i| {
+            let y = if count > 1 { -1.0 + i as f64 / (count - 1) as f64 } else { -1.0 };
+            let ring = (1.0 - y * y).max(0.0).sqrt();
+            let azimuth = golden_angle * i as f64;
+            [ring * azimuth.cos() * radius, y * radius, ring * azimuth.sin() * radius]
+        })
+        .collect()
+}
+
+/// Log of each point's mean distance to its three nearest other points (isotropic sky scales).
+pub fn neighbour_log_scales(points: &[[f64; 3]]) -> Vec<f64> {
+    points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let mut nearest = [f64::INFINITY; 3];
+            for (j, q) in points.iter().enumerate() {
+                if i == j {
+                    continue;
+                }
+                let d = ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt();
+                if d < nearest[2] {
+                    nearest[2] = d;
+                    nearest.sort_by(f64::total_cmp);
+                }
+            }
+            let found: Vec<f64> = nearest.into_iter().filter(|d| d.is_finite()).collect();
+            (found.iter().sum::<f64>() / found.len().max(1) as f64).max(f64::MIN_POSITIVE).ln()
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -86,12 +86,32 @@ pub struct LoadReport {
     pub applied: Vec<String>,
     /// Checkpoint tensors (after renaming) that no module parameter took.
     pub unused: Vec<String>,
+    /// Module parameters the checkpoint has no tensor for (empty for a strict load); they keep their values.
+    pub missing: Vec<String>,
+}
+
+/// Whether every parameter of the module must come from the checkpoint.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Coverage {
+    /// A parameter without a tensor is an error (loading a checkpoint of the same network).
+    Complete,
+    /// Parameters without a tensor keep their values (starting DGGT from a VGGT checkpoint).
+    Partial,
 }
 
 /// Loads a checkpoint with release key names into `module`, strictly for every parameter the module has.
 /// The format follows the extension: `.safetensors`, or `.pt` / `.pth` (a `torch.save`d state dict; storages
 /// tagged with a CUDA device are read on the CPU like any other).
 pub fn load_checkpoint<M: Module>(module: &mut M, path: impl AsRef<Path>) -> Result<LoadReport, ModelError> {
+    load_checkpoint_with(module, path, Coverage::Complete)
+}
+
+/// [`load_checkpoint`] with a choice of [`Coverage`]. Shape and type mismatches are errors either way.
+pub fn load_checkpoint_with<M: Module>(
+    module: &mut M,
+    path: impl AsRef<Path>,
+    coverage: Coverage,
+) -> Result<LoadReport, ModelError> {
     let path = path.as_ref();
     let file_error = |message: String| ModelError::WeightsFile { path: path.display().to_string(), message };
     let result = match path.extension().and_then(|e| e.to_str()) {
@@ -129,10 +149,11 @@ pub fn load_checkpoint<M: Module>(module: &mut M, path: impl AsRef<Path>) -> Res
             }
         });
     }
-    if !result.missing.is_empty() {
-        return Err(ModelError::MissingWeights(result.missing.iter().map(|(path, _)| path.clone()).collect()));
+    let missing: Vec<String> = result.missing.iter().map(|(path, _)| path.clone()).collect();
+    if coverage == Coverage::Complete && !missing.is_empty() {
+        return Err(ModelError::MissingWeights(missing));
     }
-    Ok(LoadReport { applied: result.applied, unused: result.unused })
+    Ok(LoadReport { applied: result.applied, unused: result.unused, missing })
 }
 
 #[cfg(test)]

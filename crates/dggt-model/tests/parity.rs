@@ -182,3 +182,25 @@ fn missing_folder_is_a_clear_error() {
     std::fs::remove_dir(&empty).unwrap();
     assert!(error.contains("config.json is missing"), "{error}");
 }
+
+/// A fresh sky model's buffers (Fibonacci hemisphere, neighbour scales, unit opacity, identity rotations) are
+/// the ones the release stores in its checkpoints.
+#[test]
+fn fresh_sky_buffers_match_the_release() {
+    use burn::module::Param;
+    use dggt_model::sky::SkyModel;
+    let config = vectors().config.sky_model.clone().expect("the tiny model has a sky");
+    let sky = SkyModel::initialised(&config, &Device::flex());
+    let stored = read_safetensors(parity_dir().join("weights.safetensors")).unwrap();
+    let compare = |name: &str, buffer: &Param<burn::tensor::Tensor<2>>, tolerance: f32| {
+        let (_, reference) = stored.iter().find(|(key, _)| key == name).unwrap_or_else(|| panic!("{name} stored"));
+        let ours: Vec<f32> = buffer.val().into_data().try_into_vec().unwrap();
+        assert_eq!(ours.len(), reference.values.len(), "{name}");
+        let worst = ours.iter().zip(&reference.values).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+        assert!(worst <= tolerance, "{name}: max abs difference {worst}");
+    };
+    compare("sky_model.bg_pcd", &sky.bg_pcd, 2e-5 * config.radius as f32);
+    compare("sky_model.bg_scales", &sky.bg_scales, 1e-5);
+    compare("sky_model.bg_opacity", &sky.bg_opacity, 0.0);
+    compare("sky_model.bg_quat", &sky.bg_quat, 0.0);
+}

@@ -3,6 +3,11 @@
 //!
 //! `cargo bench -p dggt-splat --bench raster` runs N in {10k, 100k, 1M}; set `DGGT_BENCH_GAUSSIANS` (comma
 //! separated, e.g. `10000,100000,1000000,2200000`) and `DGGT_BENCH_VIEWS` (e.g. `1,12`) to choose.
+//!
+//! With the `wgpu` feature the same scenes are also rendered by the CubeCL kernels on burn's default wgpu
+//! device, through the tensor API with autodiff (`--features wgpu`; `DGGT_BENCH_DEVICES=host`, `wgpu` or
+//! `host,wgpu` chooses). Each GPU measurement follows one untimed warm-up call (kernel compilation) and ends
+//! by reading one value back, so it covers the whole call.
 
 use std::time::Instant;
 
@@ -82,10 +87,21 @@ fn list(var: &str, default: &[usize]) -> Vec<usize> {
 }
 
 fn main() {
+    let devices = std::env::var("DGGT_BENCH_DEVICES").unwrap_or_else(|_| "host,wgpu".into());
+    if devices.split(',').any(|d| d.trim() == "host") {
+        host();
+    }
+    #[cfg(feature = "wgpu")]
+    if devices.split(',').any(|d| d.trim() == "wgpu") {
+        gpu::wgpu();
+    }
+}
+
+fn host() {
     let size = ImageSize::new(518, 350).expect("size");
     let k = PinholeIntrinsics::new(300.0, 300.0, 259.0, 175.0).expect("intrinsics");
     let settings = RasterSettings::default();
-    println!("threads: {}", rayon::current_num_threads());
+    println!("host, threads: {}", rayon::current_num_threads());
     println!(
         "{:>9} {:>5} {:>12} {:>12} {:>10} {:>14}",
         "gaussians", "views", "forward ms", "fwd+bwd ms", "kept/view", "peak RSS MiB"
@@ -108,6 +124,78 @@ fn main() {
                 "{count:>9} {view_count:>5} {forward_ms:>12.1} {total_ms:>12.1} {kept:>10} {:>14.0}",
                 peak_rss_mib()
             );
+        }
+    }
+}
+
+#[cfg(feature = "wgpu")]
+mod gpu {
+    use std::time::Instant;
+
+    use burn::tensor::{Device, DeviceKind, Tensor, TensorData};
+    use dggt_geom::{ImageSize, PinholeIntrinsics};
+    use dggt_splat::{CameraTensors, GaussianTensors, OpacityTensor, RenderSettings, ViewBatch, render_with_stats};
+
+    use super::{list, scene, views};
+
+    fn tensor<const D: usize>(values: &[f32], shape: [usize; D], device: &Device) -> Tensor<D> {
+        Tensor::from_data(TensorData::new(values.to_vec(), shape), device)
+    }
+
+    fn cameras(batch: &ViewBatch, device: &Device) -> CameraTensors {
+        let mut viewmats = Vec::new();
+        let mut intrinsics = Vec::new();
+        for view in batch.views() {
+            viewmats.extend(view.world_to_camera.iter().flatten());
+            viewmats.extend([0.0, 0.0, 0.0, 1.0]);
+            intrinsics.extend([view.fx, 0.0, view.cx, 0.0, view.fy, view.cy, 0.0, 0.0, 1.0]);
+        }
+        CameraTensors {
+            world_to_camera: tensor(&viewmats, [batch.len(), 4, 4], device),
+            intrinsics: tensor(&intrinsics, [batch.len(), 3, 3], device),
+            size: batch.size(),
+        }
+    }
+
+    /// One forward (and, with `backward`, backward) call; returns the milliseconds and the kept count per view.
+    fn call(gaussians: &GaussianTensors, cameras: &CameraTensors, backward: bool) -> (f64, usize) {
+        let started = Instant::now();
+        let (images, stats) = render_with_stats(gaussians, cameras, &RenderSettings::default()).expect("render");
+        let loss = images.colors.sum();
+        let value = if backward {
+            let grads = loss.backward();
+            let grad = gaussians.means.grad(&grads).expect("means gradient");
+            grad.sum().into_scalar::<f32>()
+        } else {
+            loss.into_scalar::<f32>()
+        };
+        std::hint::black_box(value);
+        let kept = stats.iter().map(|s| s.kept).sum::<usize>() / stats.len().max(1);
+        (started.elapsed().as_secs_f64() * 1e3, kept)
+    }
+
+    pub fn wgpu() {
+        let size = ImageSize::new(518, 350).expect("size");
+        let k = PinholeIntrinsics::new(300.0, 300.0, 259.0, 175.0).expect("intrinsics");
+        let device = Device::wgpu(DeviceKind::DefaultDevice).autodiff();
+        println!("wgpu (CubeCL kernels), default adapter");
+        println!("{:>9} {:>5} {:>12} {:>12} {:>10}", "gaussians", "views", "forward ms", "fwd+bwd ms", "kept/view");
+        for count in list("DGGT_BENCH_GAUSSIANS", &[10_000, 100_000, 1_000_000]) {
+            let s = scene(count, size, &k);
+            let gaussians = GaussianTensors {
+                means: tensor(&s.means, [count, 3], &device).require_grad(),
+                quats_wxyz: tensor(&s.quats, [count, 4], &device).require_grad(),
+                scales: tensor(&s.scales, [count, 3], &device).require_grad(),
+                opacities: OpacityTensor::Shared(tensor(&s.opacities, [count], &device).require_grad()),
+                colors: tensor(&s.colors, [count, 3], &device).require_grad(),
+            };
+            for view_count in list("DGGT_BENCH_VIEWS", &[1, 12]) {
+                let cameras = cameras(&views(view_count, size, &k), &device);
+                call(&gaussians, &cameras, true);
+                let (forward_ms, kept) = call(&gaussians, &cameras, false);
+                let (total_ms, _) = call(&gaussians, &cameras, true);
+                println!("{count:>9} {view_count:>5} {forward_ms:>12.1} {total_ms:>12.1} {kept:>10}");
+            }
         }
     }
 }

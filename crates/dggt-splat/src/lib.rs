@@ -15,7 +15,9 @@
 //! 5. [`rasterize`] / [`rasterize_backward`] run the stages over a batch of views.
 //!
 //! On burn tensors: [`render`] checks typed tensor inputs and calls [`SplatOps`], a backend extension whose CPU
-//! implementation runs the host pipeline above and whose autodiff implementation calls its backward pass.
+//! implementation runs the host pipeline above and whose autodiff implementation calls its backward pass. With the
+//! `wgpu` or `cuda` feature the same op runs on burn's CubeCL backend: the pipeline's stages as CubeCL kernels on
+//! the device, one kernel set for every CubeCL runtime, tested against this host implementation (see `op`).
 //!
 //! Sanitising (never NaN, never a panic): a Gaussian with any non-finite parameter, or one whose projected
 //! covariance is not positive definite or overflows, is culled in that view and counted in [`CullStats`];
@@ -44,6 +46,8 @@ pub use cull::{CullReason, CullStats};
 pub use error::SplatError;
 pub use forward::{Images, Rasterized, rasterize};
 pub use gaussians::{Gaussians, Opacities};
+#[cfg(any(feature = "wgpu", feature = "cuda"))]
+pub use op::CubeForward;
 pub use op::{HostForward, PACKED_EXTRA_CHANNELS, SplatGrads, SplatInputs, SplatKernels, SplatOps, SplatOutputs};
 pub use projection::Projection;
 pub use render::{

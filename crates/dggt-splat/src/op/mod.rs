@@ -6,14 +6,35 @@
 //! - [`SplatKernels`] is what a backend implements: a forward that can keep state for the backward pass, and
 //!   that backward. Every `SplatKernels` backend gets `SplatOps` (forward only), and `Autodiff<B>` gets it with a
 //!   hand-written backward for every `B: SplatKernels` (see `autodiff`). The saved state is the backend's own
-//!   associated type, so the autodiff glue never sees a host buffer: the CPU backends (`host`) keep host copies,
-//!   a CubeCL backend will keep device buffers, and both slot into the same graph node.
+//!   associated type, so the autodiff glue never sees a host buffer: the CPU backends keep host copies, the
+//!   CubeCL backend keeps device buffers, and both slot into the same graph node.
+//!
+//! The implementations:
+//!
+//! - `host` (Flex, and NdArray with the `ndarray` feature): reads the tensors into host buffers and runs the host
+//!   pipeline ([`rasterize`](crate::rasterize), [`rasterize_backward`](crate::rasterize_backward)); the outputs
+//!   are bit-identical to it.
+//! - `cube` (features `wgpu` / `cuda`): burn's `CubeBackend`, the one backend type of every CubeCL runtime, so a
+//!   single set of CubeCL kernels serves wgpu (Vulkan, Metal, DX12) and CUDA. The stages of the host pipeline run
+//!   as kernels on the device, in `f32`, with the host's rules and culling codes; the only read-back is the total
+//!   number of tile intersections (one integer per call) that sizes the tile-list buffer. Gradients are added
+//!   with atomics (native `f32` atomic add where the device has it, compare-and-swap otherwise), so results agree
+//!   with the host to float rounding rather than bit for bit.
+//! - `fusion` (feature `fusion` with `wgpu` / `cuda`): `Fusion<CubeBackend>`, which is what burn's `Cube`
+//!   dispatch type, and so `Device::wgpu(..)` / `Device::cuda(..)`, is when burn's `fusion` feature is on.
+//!   Without it a CubeCL device dispatches to `CubeBackend` directly. The fused implementation resolves its
+//!   inputs, runs the `cube` kernels eagerly and registers the results in the fusion stream.
 //!
 //! Outputs are packed so that autodiff tracks one tensor per call: `images` is `[V, H, W, K + 2]`, channels
 //! `0..K` the colours, `K` the alpha and `K + 1` the expected depth (the meanings of [`Images`](crate::Images)).
-//! The public wrapper in `render` slices it; the slices' gradients flow back into one packed gradient.
+//! The public wrapper in `render` slices it; the slices' gradients flow back into one packed gradient. The
+//! statistics are integers of the backend's choice (`i64` on the CPU backends, `i32` on CubeCL).
 
 mod autodiff;
+#[cfg(any(feature = "wgpu", feature = "cuda"))]
+mod cube;
+#[cfg(all(any(feature = "wgpu", feature = "cuda"), feature = "fusion"))]
+mod fusion;
 mod host;
 
 use burn::backend::tensor::{FloatTensor, IntTensor};
@@ -22,6 +43,8 @@ use dggt_geom::ImageSize;
 
 use crate::settings::RasterSettings;
 
+#[cfg(any(feature = "wgpu", feature = "cuda"))]
+pub use cube::CubeForward;
 pub use host::HostForward;
 
 /// Extra channels after the `K` colours in the packed image tensor: alpha, then depth.
@@ -54,7 +77,13 @@ pub const PACKED_EXTRA_CHANNELS: usize = 2;
 /// On inputs the rasteriser refuses (wrong shapes, non-finite cameras, invalid settings, non-finite image
 /// gradients in the backward pass). [`render`](crate::render) checks shapes, element types and settings first
 /// and reports them as [`SplatError`](crate::SplatError)s.
-#[backend_extension(Flex, NdArray: cfg(feature = "ndarray"), Autodiff)]
+#[backend_extension(
+    Flex,
+    NdArray: cfg(feature = "ndarray"),
+    // burn's `Cube` type: `CubeBackend`, or `Fusion<CubeBackend>` when burn's `fusion` feature is on.
+    Cube: cfg(any(feature = "wgpu", feature = "cuda")),
+    Autodiff
+)]
 pub trait SplatOps: Backend {
     #[allow(clippy::too_many_arguments)]
     fn splat_render(

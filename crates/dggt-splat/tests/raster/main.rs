@@ -1,6 +1,9 @@
 //! Integration tests of the rasteriser: parity with gsplat, finite differences, per-view opacities,
-//! robustness and determinism, empty scenes, and the burn tensor op against the host functions.
+//! robustness and determinism, empty scenes, the burn tensor op against the host functions, and (feature
+//! `wgpu`) the CubeCL kernels against the host.
 
+#[cfg(feature = "wgpu")]
+mod cube;
 mod empty;
 mod finite_difference;
 mod parity;

@@ -72,14 +72,14 @@ pub fn compare(actual: &[f32], expected: &[f32], keep: impl Fn(usize) -> bool) -
 /// Tolerance of one tensor: `|a - b| <= atol + rtol · max|reference|`.
 #[derive(Clone, Copy)]
 pub struct Tolerance {
-    atol: f64,
-    rtol: f64,
+    pub atol: f64,
+    pub rtol: f64,
 }
 
 /// Colour and alpha: the reference's own f32-vs-f64 spread reaches 1.8e-5 (case b).
-const IMAGE: Tolerance = Tolerance { atol: 3e-5, rtol: 0.0 };
+pub const IMAGE: Tolerance = Tolerance { atol: 3e-5, rtol: 0.0 };
 /// Expected depth divides by alpha.
-const DEPTH: Tolerance = Tolerance { atol: 1e-4, rtol: 0.0 };
+pub const DEPTH: Tolerance = Tolerance { atol: 1e-4, rtol: 0.0 };
 /// Gradients: half the 1e-3 the reference suggests; measured at most 1e-4.
 pub const GRADIENT: Tolerance = Tolerance { atol: 1e-5, rtol: 5e-4 };
 

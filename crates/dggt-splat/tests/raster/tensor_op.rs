@@ -13,15 +13,15 @@ use dggt_splat::{
 use crate::parity::{GRADIENT, Tensors, check_both, parity_dir};
 use crate::scenes::{LossWeights, Rng, Scene, render_with_grads, view_at};
 
-fn tensor<const D: usize>(values: &[f32], shape: [usize; D], device: &Device) -> Tensor<D> {
+pub fn tensor<const D: usize>(values: &[f32], shape: [usize; D], device: &Device) -> Tensor<D> {
     Tensor::from_data(TensorData::new(values.to_vec(), shape), device)
 }
 
-fn values<const D: usize>(tensor: Tensor<D>) -> Vec<f32> {
+pub fn values<const D: usize>(tensor: Tensor<D>) -> Vec<f32> {
     tensor.into_data().try_into_vec::<f32>().unwrap()
 }
 
-fn gaussian_tensors(scene: &Scene, views: usize, device: &Device, require_grad: bool) -> GaussianTensors {
+pub fn gaussian_tensors(scene: &Scene, views: usize, device: &Device, require_grad: bool) -> GaussianTensors {
     let (n, k) = (scene.len(), scene.channels);
     let leaf = |t: Tensor<2>| if require_grad { t.require_grad() } else { t };
     GaussianTensors {
@@ -39,7 +39,7 @@ fn gaussian_tensors(scene: &Scene, views: usize, device: &Device, require_grad: 
     }
 }
 
-fn camera_tensors(views: &ViewBatch, device: &Device) -> CameraTensors {
+pub fn camera_tensors(views: &ViewBatch, device: &Device) -> CameraTensors {
     let count = views.len();
     let mut viewmats = Vec::with_capacity(16 * count);
     let mut intrinsics = Vec::with_capacity(9 * count);
@@ -56,7 +56,7 @@ fn camera_tensors(views: &ViewBatch, device: &Device) -> CameraTensors {
 }
 
 /// `L = Σ colors·wc + Σ alpha·wa + Σ depth·wd` on tensors.
-fn weighted_loss(images: &RenderTensors, weights: &LossWeights, device: &Device) -> Tensor<1> {
+pub fn weighted_loss(images: &RenderTensors, weights: &LossWeights, device: &Device) -> Tensor<1> {
     let [v, h, w, k] = images.colors.dims();
     let colors = tensor(&weights.colors, [v, h, w, k], device);
     let alpha = tensor(&weights.alpha, [v, h, w], device);
@@ -106,7 +106,7 @@ fn assert_matches_host(
     tensor_grads
 }
 
-fn per_view_scene(rng: &mut Rng, views: usize) -> Scene {
+pub fn per_view_scene(rng: &mut Rng, views: usize) -> Scene {
     let mut scene = Scene::random(rng, 60, 4, (0.05, 0.4));
     let mut per_view = rng.vec(views * scene.len(), 0.02, 0.95);
     for k in (0..per_view.len()).step_by(7) {
@@ -116,7 +116,7 @@ fn per_view_scene(rng: &mut Rng, views: usize) -> Scene {
     scene
 }
 
-fn three_views(size: ImageSize) -> ViewBatch {
+pub fn three_views(size: ImageSize) -> ViewBatch {
     let cameras = vec![
         view_at([0.0; 3], 0.0, size),
         view_at([0.4, 0.1, 0.3], 0.12, size),

@@ -1,0 +1,239 @@
+//! What is rendered at a target time `t` from one forward pass:
+//!
+//! - the **static** union of every input view's Gaussians, opacity `o · (1 - sigmoid(dynamic logit))` faded by
+//!   the lifespan to `t` ([`opacity_at`]);
+//! - the **dynamic** Gaussians of the input view of the target's rig camera nearest to `t`, opacity
+//!   `o · sigmoid(dynamic logit)`, held where they were predicted (the network has no motion head);
+//! - culled before the rasteriser sees them: a Gaussian whose opacity at `t` is below the rasteriser's own
+//!   1/255 threshold, or whose conservative screen footprint misses the target image, is dropped.
+//!
+//! The culling rules only remove Gaussians the rasteriser would skip anyway (its alpha threshold and its
+//! three-sigma tile footprint), so a culled render equals the uncut one; [`AssemblySettings::exact`] turns
+//! culling off to measure that.
+
+use burn::tensor::{Int, Tensor, TensorData};
+use dggt_model::lifespan::{dynamic_opacity, opacity_at, static_opacity};
+use dggt_splat::{GaussianTensors, OpacityTensor};
+use rayon::prelude::*;
+
+use crate::error::SceneError;
+use crate::pixels::{PixelGaussians, host_values};
+use crate::timeline::{TargetView, nearest_view};
+
+/// The rasteriser's alpha threshold: Gaussians below it never contribute.
+pub const MIN_OPACITY: f32 = 1.0 / 255.0;
+
+/// How Gaussians are chosen for a target view.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AssemblySettings {
+    /// Drop Gaussians whose opacity at the target time is below this.
+    pub min_opacity: f32,
+    /// Drop Gaussians whose footprint misses the image or that lie behind `near_plane`.
+    pub cull_off_screen: bool,
+    /// Camera-space depth below which a Gaussian is behind the camera (the rasteriser's near plane).
+    pub near_plane: f32,
+}
+
+impl Default for AssemblySettings {
+    fn default() -> Self {
+        Self { min_opacity: MIN_OPACITY, cull_off_screen: true, near_plane: 0.01 }
+    }
+}
+
+impl AssemblySettings {
+    /// Every Gaussian reaches the rasteriser.
+    pub fn exact() -> Self {
+        Self { min_opacity: 0.0, cull_off_screen: false, near_plane: 0.01 }
+    }
+}
+
+/// How many Gaussians each stage kept or dropped for one target view.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct AssemblyCounts {
+    /// Static and dynamic candidates before culling.
+    pub candidates: usize,
+    /// Dropped: opacity at the target time below the threshold (faded by the lifespan, or transparent).
+    pub transparent: usize,
+    /// Dropped: footprint outside the image or behind the camera.
+    pub off_screen: usize,
+    pub static_kept: usize,
+    pub dynamic_kept: usize,
+}
+
+impl AssemblyCounts {
+    pub fn kept(&self) -> usize {
+        self.static_kept + self.dynamic_kept
+    }
+}
+
+/// The Gaussians of one target view, ready for the rasteriser.
+#[derive(Debug, Clone)]
+pub struct AssembledGaussians {
+    pub gaussians: GaussianTensors,
+    pub counts: AssemblyCounts,
+}
+
+/// Assembles the Gaussians visible at `target`.
+pub fn assemble(
+    pixels: &PixelGaussians,
+    target: &TargetView,
+    settings: &AssemblySettings,
+) -> Result<AssembledGaussians, SceneError> {
+    let device = pixels.opacity.device();
+    let per_view = pixels.per_view();
+    let (static_opacity_all, dynamic_opacity_all) = match &pixels.dynamic_logit {
+        Some(logit) => (
+            static_opacity(pixels.opacity.clone(), logit.clone()),
+            Some(dynamic_opacity(pixels.opacity.clone(), logit.clone())),
+        ),
+        None => (pixels.opacity.clone(), None),
+    };
+    let faded = opacity_at(static_opacity_all, pixels.lifespan.clone(), pixels.source_time.clone(), target.time);
+
+    // Candidates: every Gaussian as static, the nearest view's as dynamic.
+    let dynamic_range = match &dynamic_opacity_all {
+        Some(_) => nearest_view(&pixels.views, target.rig_camera, target.time)
+            .map(|view| view * per_view..(view + 1) * per_view)
+            .unwrap_or(0..0),
+        None => 0..0,
+    };
+    let static_values = host_values(faded.clone(), "static opacity")?;
+    let dynamic_values = match &dynamic_opacity_all {
+        Some(opacity) if !dynamic_range.is_empty() => {
+            host_values(opacity.clone().narrow(0, dynamic_range.start, dynamic_range.len()), "dynamic opacity")?
+        }
+        _ => Vec::new(),
+    };
+
+    let footprint = Footprint::new(target, pixels.size, settings);
+    let keep = |index: usize, opacity: f32| -> Verdict {
+        if !(opacity >= settings.min_opacity) {
+            Verdict::Transparent
+        } else if settings.cull_off_screen
+            && !footprint.on_screen(pixels.host_means[index], pixels.host_max_scale[index])
+        {
+            Verdict::OffScreen
+        } else {
+            Verdict::Keep
+        }
+    };
+    let static_verdicts: Vec<Verdict> = static_values.par_iter().enumerate().map(|(i, &o)| keep(i, o)).collect();
+    let dynamic_verdicts: Vec<Verdict> =
+        dynamic_values.par_iter().enumerate().map(|(i, &o)| keep(dynamic_range.start + i, o)).collect();
+
+    let mut counts =
+        AssemblyCounts { candidates: static_verdicts.len() + dynamic_verdicts.len(), ..Default::default() };
+    for verdict in static_verdicts.iter().chain(&dynamic_verdicts) {
+        match verdict {
+            Verdict::Transparent => counts.transparent += 1,
+            Verdict::OffScreen => counts.off_screen += 1,
+            Verdict::Keep => {}
+        }
+    }
+    let kept = |verdicts: &[Verdict], offset: usize| -> Vec<i64> {
+        verdicts.iter().enumerate().filter(|(_, v)| **v == Verdict::Keep).map(|(i, _)| (offset + i) as i64).collect()
+    };
+    let static_index = kept(&static_verdicts, 0);
+    let dynamic_index = kept(&dynamic_verdicts, dynamic_range.start);
+    counts.static_kept = static_index.len();
+    counts.dynamic_kept = dynamic_index.len();
+
+    let index_tensor =
+        |index: &[i64]| Tensor::<1, Int>::from_data(TensorData::new(index.to_vec(), [index.len()]), &device);
+    let all: Vec<i64> = static_index.iter().chain(&dynamic_index).copied().collect();
+    let all = index_tensor(&all);
+    let pick = |tensor: &Tensor<2>| tensor.clone().select(0, all.clone());
+    let mut opacities = vec![faded.select(0, index_tensor(&static_index))];
+    if let Some(dynamic) = dynamic_opacity_all
+        && !dynamic_index.is_empty()
+    {
+        opacities.push(dynamic.select(0, index_tensor(&dynamic_index)));
+    }
+    tracing::debug!(
+        time = target.time,
+        candidates = counts.candidates,
+        transparent = counts.transparent,
+        off_screen = counts.off_screen,
+        kept = counts.kept(),
+        "assembled a target view"
+    );
+    Ok(AssembledGaussians {
+        gaussians: GaussianTensors {
+            means: pick(&pixels.means),
+            quats_wxyz: pick(&pixels.quats_wxyz),
+            scales: pick(&pixels.scales),
+            opacities: OpacityTensor::Shared(Tensor::cat(opacities, 0)),
+            colors: pick(&pixels.colors),
+        },
+        counts,
+    })
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Verdict {
+    Keep,
+    Transparent,
+    OffScreen,
+}
+
+/// A conservative test of whether a Gaussian can touch the image: its centre in front of the near plane and
+/// within its screen radius of the image. The radius bounds the rasteriser's three-sigma extent: three times
+/// the largest scale projected at the centre's depth with the larger focal length, plus the 2D blur and a pixel.
+struct Footprint {
+    rotation: [[f32; 3]; 3],
+    translation: [f32; 3],
+    focal: [f32; 2],
+    centre: [f32; 2],
+    /// Bounds the norm of a row of the projection's Jacobian times depth: the larger focal length times
+    /// `sqrt(1 + lim_x² + lim_y²)`, with `lim` the rasteriser's clamp of `x/z`, `y/z` (1.3x the field of view).
+    radius_gain: f32,
+    width: f32,
+    height: f32,
+    near: f32,
+}
+
+/// Pixels added to every radius: three sigmas of the rasteriser's 0.3 px² blur, plus one for rounding.
+const BLUR_MARGIN_PX: f32 = 3.0 * 0.548 + 1.0;
+
+impl Footprint {
+    fn new(target: &TargetView, size: dggt_geom::ImageSize, settings: &AssemblySettings) -> Self {
+        let camera_from_world = target.camera.world_from_camera.inverse();
+        let rows = camera_from_world.to_rows();
+        let k = &target.camera.intrinsics;
+        Self {
+            rotation: std::array::from_fn(|r| std::array::from_fn(|c| rows[r][c] as f32)),
+            translation: std::array::from_fn(|r| rows[r][3] as f32),
+            focal: [k.fx as f32, k.fy as f32],
+            centre: [k.cx as f32, k.cy as f32],
+            radius_gain: {
+                let (w, h) = (size.width as f64, size.height as f64);
+                let lim_x = (w - k.cx).max(k.cx) / k.fx + 0.3 * w / k.fx;
+                let lim_y = (h - k.cy).max(k.cy) / k.fy + 0.3 * h / k.fy;
+                (k.fx.max(k.fy) * (1.0 + lim_x * lim_x + lim_y * lim_y).sqrt()) as f32
+            },
+            width: size.width as f32,
+            height: size.height as f32,
+            near: settings.near_plane,
+        }
+    }
+
+    fn on_screen(&self, mean: [f32; 3], max_scale: f32) -> bool {
+        let p: [f32; 3] = std::array::from_fn(|r| {
+            self.rotation[r][0] * mean[0]
+                + self.rotation[r][1] * mean[1]
+                + self.rotation[r][2] * mean[2]
+                + self.translation[r]
+        });
+        if !(p[2] > self.near) {
+            return false;
+        }
+        let u = self.focal[0] * p[0] / p[2] + self.centre[0];
+        let v = self.focal[1] * p[1] / p[2] + self.centre[1];
+        let radius = 3.0 * max_scale * self.radius_gain / p[2] + BLUR_MARGIN_PX;
+        if !(u.is_finite() && v.is_finite() && radius.is_finite()) {
+            // Left to the rasteriser, which sanitises and counts such Gaussians.
+            return true;
+        }
+        u + radius >= 0.0 && u - radius <= self.width && v + radius >= 0.0 && v - radius <= self.height
+    }
+}

@@ -1,0 +1,82 @@
+//! Rendering one target view: its assembled Gaussians as the foreground, composited over the sky Gaussians
+//! rendered from the same camera: `rgb = alpha · foreground + (1 - alpha) · sky` (black without a sky model).
+//!
+//! The release's inference additionally min-max normalises the sky over all views (`dggt_model::scene_render`);
+//! a trained model of this project composites the sky as rendered, in training and inference alike.
+
+use burn::tensor::{Device, Tensor, TensorData};
+use dggt_geom::{CameraFromWorld, ImageSize, PinholeIntrinsics, PosedCamera};
+use dggt_model::sky::SkyGaussians;
+use dggt_splat::{CameraTensors, GaussianTensors, OpacityTensor, RenderSettings, RenderTensors, render};
+
+use crate::assemble::{AssembledGaussians, AssemblyCounts, AssemblySettings, assemble};
+use crate::error::SceneError;
+use crate::pixels::PixelGaussians;
+use crate::timeline::TargetView;
+
+/// One rendered view.
+#[derive(Debug, Clone)]
+pub struct ViewRender {
+    /// `[H, W, 3]` the final colours.
+    pub rgb: Tensor<3>,
+    /// `[H, W]` foreground opacity.
+    pub alpha: Tensor<3>,
+    /// `[H, W]` expected depth of the foreground (0 where empty).
+    pub depth: Tensor<3>,
+    /// `[H, W, 3]` the sky as rendered, when there is one.
+    pub sky: Option<Tensor<3>>,
+    pub counts: AssemblyCounts,
+}
+
+/// Assembles and renders `target`, over `sky` when given.
+pub fn render_target(
+    pixels: &PixelGaussians,
+    sky: Option<&SkyGaussians>,
+    target: &TargetView,
+    assembly: &AssemblySettings,
+) -> Result<ViewRender, SceneError> {
+    let AssembledGaussians { gaussians, counts } = assemble(pixels, target, assembly)?;
+    let device = pixels.opacity.device();
+    let cameras = camera_tensors(&[target.camera], pixels.size, &device)?;
+    let settings = RenderSettings::default();
+    let what = || format!("the view of camera {} at t = {}", target.rig_camera, target.time);
+    let foreground =
+        render(&gaussians, &cameras, &settings).map_err(|source| SceneError::Render { what: what(), source })?;
+    let RenderTensors { colors, alpha, depth } = foreground;
+    let (rgb, sky) = match sky {
+        Some(sky) => {
+            let sky_gaussians = GaussianTensors {
+                means: sky.means.clone(),
+                quats_wxyz: sky.quats.clone(),
+                scales: sky.scales.clone(),
+                opacities: OpacityTensor::Shared(sky.opacities.clone()),
+                colors: sky.colors.clone(),
+            };
+            let sky_rgb = render(&sky_gaussians, &cameras, &settings)
+                .map_err(|source| SceneError::Render { what: format!("the sky of {}", what()), source })?
+                .colors;
+            let a = alpha.clone().unsqueeze_dim::<4>(3);
+            (a.clone() * colors + a.neg().add_scalar(1.0) * sky_rgb.clone(), Some(sky_rgb))
+        }
+        None => (colors, None),
+    };
+    let squeeze3 = |t: Tensor<4>| t.squeeze_dim::<3>(0);
+    Ok(ViewRender { rgb: squeeze3(rgb), alpha, depth, sky: sky.map(squeeze3), counts })
+}
+
+/// Cameras as the rasteriser takes them: world-to-camera `[V, 4, 4]` and pinhole `K` `[V, 3, 3]`.
+pub fn camera_tensors(cameras: &[PosedCamera], size: ImageSize, device: &Device) -> Result<CameraTensors, SceneError> {
+    let pairs: Vec<(CameraFromWorld, PinholeIntrinsics)> =
+        cameras.iter().map(|c| (c.world_from_camera.inverse(), c.intrinsics)).collect();
+    let views = pairs.len();
+    let viewmats: Vec<f32> = pairs.iter().flat_map(|(c, _)| c.to_rows()).flatten().map(|v| v as f32).collect();
+    let intrinsics: Vec<f32> = pairs.iter().flat_map(|(_, k)| k.to_rows_f32()).flatten().collect();
+    if viewmats.iter().chain(&intrinsics).any(|v| !v.is_finite()) {
+        return Err(SceneError::Invalid { what: "camera", detail: "non-finite pose or intrinsics".into() });
+    }
+    Ok(CameraTensors {
+        world_to_camera: Tensor::from_data(TensorData::new(viewmats, [views, 4, 4]), device),
+        intrinsics: Tensor::from_data(TensorData::new(intrinsics, [views, 3, 3]), device),
+        size,
+    })
+}

@@ -1,0 +1,25 @@
+//! 4D scene assembly: from one forward pass of the network to the Gaussians rendered at any time.
+//!
+//! The data flow, one module per step:
+//!
+//! 1. [`timeline`]: the input views' rig cameras and scene times; target cameras interpolated from them.
+//! 2. [`pixels`]: the per-pixel Gaussians of every input view, means unprojected from the predicted depth.
+//! 3. [`assemble`]: the static union faded by the lifespan to the target time, the nearest view's dynamic
+//!    Gaussians, and culling of what the rasteriser would skip.
+//! 4. [`compose`]: rasterising the assembled Gaussians and compositing them over the sky.
+//!
+//! Conventions: cameras are [`PosedCamera`](dggt_geom::PosedCamera)s (world-from-camera poses, OpenCV axes);
+//! quaternions `w x y z`; scales linear; opacities in `[0, 1]`; the world is the first input camera's frame
+//! when cameras are predicted.
+
+pub mod assemble;
+pub mod compose;
+mod error;
+pub mod pixels;
+pub mod timeline;
+
+pub use assemble::{AssembledGaussians, AssemblyCounts, AssemblySettings, MIN_OPACITY, assemble};
+pub use compose::{ViewRender, camera_tensors, render_target};
+pub use error::SceneError;
+pub use pixels::{MeansGradient, PixelGaussians};
+pub use timeline::{InputView, TargetView, Timeline, interpolate_camera, nearest_view};

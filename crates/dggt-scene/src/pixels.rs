@@ -1,0 +1,203 @@
+//! The per-pixel Gaussians of one forward pass, flattened view-major (Gaussian `v · H · W + row · W + col` is
+//! pixel `(col, row)` of input view `v`), with the camera and time of the view each came from.
+//!
+//! Means are the predicted depth unprojected at integer pixel coordinates (the release's convention) with the
+//! views' cameras: `X_world = c + d · Rᵀ K⁻¹ (u, v, 1)`, `c` the camera centre. The cameras are constants; the
+//! depth carries gradients unless [`MeansGradient::Detached`] (the release detaches the means). Host copies of
+//! the means and of each Gaussian's largest scale are kept for culling.
+
+use burn::tensor::{Device, Tensor, TensorData};
+use dggt_geom::glam::DVec3;
+use dggt_geom::{ImageSize, PixelConvention};
+use dggt_model::gaussian_maps::GaussianMaps;
+
+use crate::error::SceneError;
+use crate::timeline::InputView;
+
+/// Whether gradients reach the depth through the Gaussian means.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum MeansGradient {
+    /// As the release trains: the means are constants.
+    #[default]
+    Detached,
+    /// The rendering losses also train the depth.
+    Through,
+}
+
+/// `M = S · H · W` Gaussians, one per input pixel.
+#[derive(Debug, Clone)]
+pub struct PixelGaussians {
+    pub views: Vec<InputView>,
+    pub size: ImageSize,
+    /// `[M, 3]` world coordinates.
+    pub means: Tensor<2>,
+    /// `[M, 4]` unit quaternions, `w x y z`.
+    pub quats_wxyz: Tensor<2>,
+    /// `[M, 3]` linear scales.
+    pub scales: Tensor<2>,
+    /// `[M, 3]` RGB.
+    pub colors: Tensor<2>,
+    /// `[M]` opacity before the static/dynamic split.
+    pub opacity: Tensor<1>,
+    /// `[M]` dynamic logits; `None` when the model has no dynamic head (everything static).
+    pub dynamic_logit: Option<Tensor<1>>,
+    /// `[M]` lifespan `gamma`.
+    pub lifespan: Tensor<1>,
+    /// `[M]` scene time of the view each Gaussian came from.
+    pub source_time: Tensor<1>,
+    pub(crate) host_means: Vec<[f32; 3]>,
+    pub(crate) host_max_scale: Vec<f32>,
+}
+
+impl PixelGaussians {
+    /// The Gaussians of a batch-of-one prediction: `maps` over `[1, S, H, W, ..]`, `depth` `[1, S, H, W]`,
+    /// `dynamic_logit` `[1, S, H, W]`, and one [`InputView`] per frame.
+    pub fn new(
+        maps: &GaussianMaps,
+        depth: Tensor<4>,
+        dynamic_logit: Option<Tensor<4>>,
+        views: Vec<InputView>,
+        means_gradient: MeansGradient,
+    ) -> Result<Self, SceneError> {
+        let [batch, frames, height, width] = maps.opacity.dims();
+        if batch != 1 || frames != views.len() {
+            return Err(SceneError::Shape {
+                tensor: "gaussian maps",
+                expected: format!("[1, S, H, W] with S = {} views", views.len()),
+                actual: maps.opacity.dims().to_vec(),
+            });
+        }
+        let expect = |tensor: &'static str, dims: [usize; 4]| {
+            if dims == [1, frames, height, width] {
+                Ok(())
+            } else {
+                Err(SceneError::Shape {
+                    tensor,
+                    expected: format!("[1, {frames}, {height}, {width}]"),
+                    actual: dims.to_vec(),
+                })
+            }
+        };
+        expect("depth", depth.dims())?;
+        if let Some(logit) = &dynamic_logit {
+            expect("dynamic_logit", logit.dims())?;
+        }
+        let size = ImageSize::new(width as u32, height as u32)?;
+        let device = maps.opacity.device();
+        let count = frames * height * width;
+
+        let host_depth = host_values(depth.clone(), "depth")?;
+        if let Some(i) = host_depth.iter().position(|d| !d.is_finite()) {
+            return Err(SceneError::Invalid {
+                what: "depth",
+                detail: format!(
+                    "non-finite value {} at view {}, pixel {}",
+                    host_depth[i],
+                    i / (height * width),
+                    i % (height * width)
+                ),
+            });
+        }
+        let rays = Rays::new(&views, size);
+        let host_means: Vec<[f32; 3]> = (0..count)
+            .map(|i| {
+                let point = rays.centre(i) + rays.direction(i) * host_depth[i] as f64;
+                point.to_array().map(|v| v as f32)
+            })
+            .collect();
+
+        let depth = match means_gradient {
+            MeansGradient::Detached => depth.detach(),
+            MeansGradient::Through => depth,
+        };
+        let means = rays.centres_tensor(&device) + rays.directions_tensor(&device) * depth.reshape([count, 1]);
+
+        let flat = |tensor: Tensor<5>, channels: usize| tensor.reshape([count, channels]);
+        let scales = flat(maps.scale.clone(), 3);
+        let host_max_scale =
+            host_values(scales.clone(), "scales")?.chunks_exact(3).map(|s| s[0].max(s[1]).max(s[2])).collect();
+        let times: Vec<f32> = views.iter().flat_map(|v| std::iter::repeat_n(v.time as f32, height * width)).collect();
+        Ok(Self {
+            size,
+            means,
+            quats_wxyz: flat(maps.rotation.clone(), 4),
+            scales,
+            colors: flat(maps.rgb.clone(), 3),
+            opacity: maps.opacity.clone().reshape([count]),
+            dynamic_logit: dynamic_logit.map(|logit| logit.reshape([count])),
+            lifespan: maps.lifespan.clone().reshape([count]),
+            source_time: Tensor::from_data(TensorData::new(times, [count]), &device),
+            host_means,
+            host_max_scale,
+            views,
+        })
+    }
+
+    /// Number of Gaussians `M`.
+    pub fn len(&self) -> usize {
+        self.host_means.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.host_means.is_empty()
+    }
+
+    /// Gaussians per view (`H · W`).
+    pub fn per_view(&self) -> usize {
+        self.size.area()
+    }
+}
+
+/// Per-pixel camera centres and world-space ray directions scaled so that `z_cam = 1`.
+struct Rays {
+    centres: Vec<DVec3>,
+    directions: Vec<DVec3>,
+    per_view: usize,
+}
+
+impl Rays {
+    fn new(views: &[InputView], size: ImageSize) -> Self {
+        let per_view = size.area();
+        let mut directions = Vec::with_capacity(views.len() * per_view);
+        let centres = views.iter().map(|v| v.camera.world_from_camera.translation()).collect();
+        for view in views {
+            let pose = &view.camera.world_from_camera;
+            for row in 0..size.height {
+                for column in 0..size.width {
+                    let pixel = PixelConvention::Integer.coordinates(column, row);
+                    directions.push(pose.transform_vector(view.camera.intrinsics.unproject(pixel, 1.0)));
+                }
+            }
+        }
+        Self { centres, directions, per_view }
+    }
+
+    fn centre(&self, i: usize) -> DVec3 {
+        self.centres[i / self.per_view]
+    }
+
+    fn direction(&self, i: usize) -> DVec3 {
+        self.directions[i]
+    }
+
+    fn centres_tensor(&self, device: &Device) -> Tensor<2> {
+        let count = self.directions.len();
+        let values: Vec<f32> = (0..count).flat_map(|i| self.centre(i).to_array().map(|v| v as f32)).collect();
+        Tensor::from_data(TensorData::new(values, [count, 3]), device)
+    }
+
+    fn directions_tensor(&self, device: &Device) -> Tensor<2> {
+        let count = self.directions.len();
+        let values: Vec<f32> = self.directions.iter().flat_map(|d| d.to_array().map(|v| v as f32)).collect();
+        Tensor::from_data(TensorData::new(values, [count, 3]), device)
+    }
+}
+
+/// Reads an `f32` tensor to the host.
+pub(crate) fn host_values<const D: usize>(tensor: Tensor<D>, name: &'static str) -> Result<Vec<f32>, SceneError> {
+    tensor
+        .into_data()
+        .convert::<f32>()
+        .try_into_vec::<f32>()
+        .map_err(|e| SceneError::Invalid { what: name, detail: format!("cannot read as f32: {e:?}") })
+}

@@ -1,0 +1,155 @@
+//! Scene assembly on small synthetic predictions: culling never changes the render, gradients reach the maps
+//! (and the depth only when asked), dynamic Gaussians appear only near their own time, lifespans fade.
+
+use burn::tensor::{Device, Tensor, TensorData};
+use dggt_geom::glam::{DQuat, DVec3};
+use dggt_geom::{PinholeIntrinsics, PosedCamera, WorldFromCamera};
+use dggt_model::gaussian_maps::GaussianMaps;
+use dggt_scene::{
+    AssemblySettings, InputView, MeansGradient, PixelGaussians, TargetView, assemble, interpolate_camera, render_target,
+};
+
+const W: usize = 24;
+const H: usize = 16;
+const S: usize = 3;
+
+fn camera(x: f64, yaw: f64) -> PosedCamera {
+    PosedCamera {
+        world_from_camera: WorldFromCamera::from_rotation_translation(
+            DQuat::from_rotation_y(yaw),
+            DVec3::new(x, 0.0, 0.0),
+        )
+        .unwrap(),
+        intrinsics: PinholeIntrinsics::new(20.0, 20.0, W as f64 / 2.0, H as f64 / 2.0).unwrap(),
+    }
+}
+
+fn views() -> Vec<InputView> {
+    (0..S).map(|i| InputView { rig_camera: 0, time: i as f64 * 0.5, camera: camera(i as f64 * 0.3, 0.0) }).collect()
+}
+
+/// Deterministic pseudo-random values in `[-1, 1)`.
+fn noise(count: usize, seed: u64) -> Vec<f32> {
+    let mut state = seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
+    (0..count)
+        .map(|_| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            ((state >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+        })
+        .collect()
+}
+
+/// Raw head output `[1, S, H, W, 12]`: visible colours, mostly opaque, small scales, short or long lifespans.
+fn raw_maps(device: &Device, lifespan_raw: f32) -> Tensor<5> {
+    let values = noise(S * H * W * 12, 7);
+    let shaped: Vec<f32> = values
+        .chunks_exact(12)
+        .flat_map(|c| {
+            let mut v = c.to_vec();
+            v[3] = 2.0 + c[3]; // opacity logit
+            for s in &mut v[4..7] {
+                *s = -2.5 + 0.3 * *s; // 0.1 softplus -> ~0.008
+            }
+            v[7] += 2.0; // rotation near identity
+            v[11] = lifespan_raw + 0.1 * c[11];
+            v
+        })
+        .collect();
+    Tensor::from_data(TensorData::new(shaped, [1, S, H, W, 12]), device)
+}
+
+fn depth(device: &Device) -> Tensor<4> {
+    let values: Vec<f32> = noise(S * H * W, 3).iter().map(|v| 4.0 + v).collect();
+    Tensor::from_data(TensorData::new(values, [1, S, H, W]), device)
+}
+
+fn logits(device: &Device, value: f32) -> Tensor<4> {
+    Tensor::full([1, S, H, W], value, device)
+}
+
+fn host(tensor: Tensor<3>) -> Vec<f32> {
+    tensor.into_data().try_into_vec::<f32>().unwrap()
+}
+
+#[test]
+fn culling_keeps_the_render_and_drops_what_cannot_show() {
+    let device = Device::flex();
+    // Lifespan raw 4 -> gamma 0.25: frames 0.5 apart fade to a tenth or less.
+    let maps = GaussianMaps::from_raw(raw_maps(&device, 4.0));
+    let pixels =
+        PixelGaussians::new(&maps, depth(&device), Some(logits(&device, -3.0)), views(), MeansGradient::Detached)
+            .unwrap();
+    // Turned away from the last views: some Gaussians fall off screen.
+    let target = TargetView { rig_camera: 0, time: 0.2, camera: camera(0.1, 0.5) };
+    let culled = render_target(&pixels, None, &target, &AssemblySettings::default()).unwrap();
+    let exact = render_target(&pixels, None, &target, &AssemblySettings::exact()).unwrap();
+    assert!(culled.counts.transparent > 0 && culled.counts.off_screen > 0, "{:?}", culled.counts);
+    assert_eq!(exact.counts.kept(), S * H * W + H * W);
+    assert!(culled.counts.kept() < exact.counts.kept() / 2, "{:?}", culled.counts);
+    let (a, b) = (host(culled.rgb), host(exact.rgb));
+    let worst = a.iter().zip(&b).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+    assert!(worst < 1e-5, "culling changed the render by {worst}");
+    assert!(a.iter().any(|v| *v > 0.05), "the render is not empty");
+}
+
+#[test]
+fn dynamic_gaussians_come_from_the_nearest_view_only() {
+    let device = Device::flex();
+    let maps = GaussianMaps::from_raw(raw_maps(&device, 0.0));
+    // Everything dynamic: only the nearest view's Gaussians survive (static opacity ~ 0).
+    let pixels =
+        PixelGaussians::new(&maps, depth(&device), Some(logits(&device, 12.0)), views(), MeansGradient::Detached)
+            .unwrap();
+    let target = TargetView { rig_camera: 0, time: 0.9, camera: interpolate_camera(&pixels.views, 0, 0.9).unwrap() };
+    let assembled = assemble(&pixels, &target, &AssemblySettings::default()).unwrap();
+    assert_eq!(assembled.counts.static_kept, 0, "{:?}", assembled.counts);
+    assert!(assembled.counts.dynamic_kept > H * W / 2, "{:?}", assembled.counts);
+    // Without a dynamic head everything is static and long-lived (raw lifespan <= 0 -> gamma 1e6).
+    let pixels = PixelGaussians::new(&maps, depth(&device), None, views(), MeansGradient::Detached).unwrap();
+    let assembled = assemble(&pixels, &target, &AssemblySettings::default()).unwrap();
+    assert_eq!(assembled.counts.dynamic_kept, 0);
+    assert!(assembled.counts.static_kept > S * H * W / 2, "{:?}", assembled.counts);
+}
+
+#[test]
+fn gradients_reach_the_maps_and_the_depth_only_when_asked() {
+    let device = Device::flex().autodiff();
+    for mode in [MeansGradient::Detached, MeansGradient::Through] {
+        let raw = raw_maps(&device, 1.0).require_grad();
+        let depth = depth(&device).require_grad();
+        let maps = GaussianMaps::from_raw(raw.clone());
+        let pixels = PixelGaussians::new(&maps, depth.clone(), Some(logits(&device, -1.0)), views(), mode).unwrap();
+        let target =
+            TargetView { rig_camera: 0, time: 0.25, camera: interpolate_camera(&pixels.views, 0, 0.25).unwrap() };
+        let view = render_target(&pixels, None, &target, &AssemblySettings::default()).unwrap();
+        let grads = view.rgb.powi_scalar(2).sum().backward();
+        let raw_grad: Vec<f32> = raw.grad(&grads).expect("maps gradient").into_data().try_into_vec().unwrap();
+        assert!(raw_grad.iter().all(|g| g.is_finite()) && raw_grad.iter().any(|g| *g != 0.0));
+        let depth_grad = depth.grad(&grads);
+        match mode {
+            MeansGradient::Detached => {
+                let zero = depth_grad.map(|g| g.abs().max().into_scalar::<f32>() == 0.0).unwrap_or(true);
+                assert!(zero, "detached means must not train the depth");
+            }
+            MeansGradient::Through => {
+                let g: Vec<f32> = depth_grad.expect("depth gradient").into_data().try_into_vec().unwrap();
+                assert!(g.iter().all(|v| v.is_finite()) && g.iter().any(|v| *v != 0.0));
+            }
+        }
+    }
+}
+
+#[test]
+fn bad_inputs_are_errors() {
+    let device = Device::flex();
+    let maps = GaussianMaps::from_raw(raw_maps(&device, 1.0));
+    let short = views()[..2].to_vec();
+    assert!(PixelGaussians::new(&maps, depth(&device), None, short, MeansGradient::Detached).is_err());
+    let nan = Tensor::<4>::full([1, S, H, W], f32::NAN, &device);
+    let error = PixelGaussians::new(&maps, nan, None, views(), MeansGradient::Detached).unwrap_err();
+    assert!(error.to_string().contains("depth"), "{error}");
+    let wrong = Tensor::<4>::zeros([1, S, H, W + 1], &device);
+    assert!(PixelGaussians::new(&maps, wrong, None, views(), MeansGradient::Detached).is_err());
+}

@@ -1,0 +1,498 @@
+//! [`SplatKernels`] for burn's CubeCL backend: the host pipeline's stages as CubeCL kernels, so that one kernel
+//! set runs on every CubeCL runtime (wgpu/Vulkan/Metal, CUDA, ROCm).
+//!
+//! Forward, for a batch of `V` views (`kernels` has the details of each stage):
+//!
+//! 1. `project_kernel`: one unit per (view, Gaussian) projects and culls exactly as the host does (same rules
+//!    and order, same culling codes), in `f32` where the host uses `f64`.
+//! 2. `count_kernel`: per-tile intersection counts and the statistics rows (atomics).
+//! 3. `scan_kernel`: exclusive prefix sum of the counts of all `V · tiles` lists (one cube), giving each list
+//!    its slice of the intersection buffer. The total is **read back to the host** (one `u32`) to size that
+//!    buffer: the only device-to-host transfer of the forward pass, once per call whatever `V`.
+//! 4. `fill_kernel`: each kept Gaussian appends its index to every list it touches (atomic cursors).
+//! 5. `sort_kernel`: each list sorted by (depth, index), one cube per list, by ranking: the host's order.
+//! 6. `composite_kernel`: one unit per pixel, front to back with gsplat's classic rules.
+//!
+//! Backward: `composite_backward_kernel` walks each pixel's list back to front and adds footprint gradients
+//! with atomics (native `f32` atomic add where the device has it, a compare-and-swap loop on `u32` bits
+//! otherwise); `project_backward_kernel` pulls them through the projection, one unit per Gaussian summing its
+//! views in order; the background gradient `Σ_pixels dL/dcolour · T_final` is a reduction on tensors.
+//!
+//! Everything stays on the device; the saved state ([`CubeForward`]) holds device buffers only. Kernels bind at
+//! most 13 storage buffers (the compositing backward adds into one buffer holding all its gradients), within
+//! what wgpu adapters offer.
+//!
+//! Against the host implementation: the images agree to float rounding (the host projects in `f64`, these
+//! kernels in `f32`, and accumulation orders differ under atomics), so the GPU path is tested against the host
+//! with tolerances, not bit for bit. A footprint radius or tile boundary that falls within rounding of an
+//! integer can differ by one between the two, which changes `tile_intersections` (never a pixel value).
+
+mod kernels;
+
+use std::fmt;
+use std::sync::Arc;
+
+use burn::backend::ops::FloatTensorOps;
+use burn::backend::tensor::FloatTensor;
+use burn::backend::{DType, Shape, TensorMetadata};
+use burn::tensor::Slice;
+use burn_cubecl::cubecl::features::AtomicUsage;
+use burn_cubecl::cubecl::ir::{FloatKind, Type};
+use burn_cubecl::cubecl::prelude::*;
+use burn_cubecl::cubecl::{self, calculate_cube_count_elemwise};
+use burn_cubecl::kernel::into_contiguous;
+use burn_cubecl::ops::into_data_sync;
+use burn_cubecl::ops::numeric::{empty_device_dtype, zeros_client};
+use burn_cubecl::tensor::CubeTensor;
+use burn_cubecl::{CubeBackend, CubeDevice};
+use dggt_geom::ImageSize;
+
+use super::{PACKED_EXTRA_CHANNELS, SplatGrads, SplatInputs, SplatKernels, SplatOutputs};
+use crate::cull::CullStats;
+use crate::settings::RasterSettings;
+use kernels::{NativeAdd, SCAN_THREADS, SwapAdd};
+
+/// Units per cube of the per-element kernels.
+const ELEMENT_UNITS: u32 = 256;
+/// Side of the square of pixels one cube composites.
+const PIXEL_BLOCK: u32 = 16;
+/// Units per cube of the per-list sort.
+const SORT_UNITS: u32 = 128;
+
+/// Sizes and settings of one call.
+#[derive(Debug, Clone, Copy)]
+struct Layout {
+    views: usize,
+    count: usize,
+    channels: usize,
+    width: u32,
+    height: u32,
+    tile_size: u32,
+    tiles_x: u32,
+    tiles_y: u32,
+    per_view: bool,
+    near: f32,
+    far: f32,
+    eps2d: f32,
+}
+
+impl Layout {
+    fn tiles(&self) -> usize {
+        (self.tiles_x * self.tiles_y) as usize
+    }
+
+    fn pixels(&self) -> usize {
+        self.width as usize * self.height as usize
+    }
+
+    fn pairs(&self) -> usize {
+        self.views * self.count
+    }
+}
+
+/// What the backward pass reads, all on the device: the contiguous inputs, the projection (`[V, N, ..]`), the
+/// sorted tile lists and the per-pixel results of compositing.
+///
+/// Memory, for `N` Gaussians with `K` channels, `V` views of `P` pixels and `I` tile intersections: the inputs
+/// (as given, made contiguous), `9 · V · N` values of projection and culling, `2 · I + V · tiles` list
+/// entries, and `V · P · (K + 4)` per-pixel values (the packed image, transmittance and list end).
+#[derive(Clone)]
+pub struct CubeForward {
+    layout: Layout,
+    means: CubeTensor,
+    quats: CubeTensor,
+    scales: CubeTensor,
+    opacities: CubeTensor,
+    colors: CubeTensor,
+    background: CubeTensor,
+    viewmats: CubeTensor,
+    intrinsics: CubeTensor,
+    means2d: CubeTensor,
+    conics: CubeTensor,
+    depths: CubeTensor,
+    reasons: CubeTensor,
+    offsets: CubeTensor,
+    ids: CubeTensor,
+    images: CubeTensor,
+    transmittance: CubeTensor,
+    list_ends: CubeTensor,
+}
+
+impl fmt::Debug for CubeForward {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("CubeForward").field("layout", &self.layout).finish_non_exhaustive()
+    }
+}
+
+fn buffer(device: &CubeDevice, len: usize, dtype: DType) -> CubeTensor {
+    empty_device_dtype(device.client(), device.clone(), Shape::new([len.max(1)]), dtype)
+}
+
+fn zeroed(device: &CubeDevice, len: usize, dtype: DType) -> CubeTensor {
+    zeros_client(device.client(), device.clone(), Shape::new([len.max(1)]), dtype)
+}
+
+fn arg(tensor: &CubeTensor) -> TensorArg {
+    tensor.clone().into_tensor_arg()
+}
+
+/// Checks an input and makes it contiguous, so kernels index it linearly.
+fn contiguous(tensor: CubeTensor, what: &str) -> CubeTensor {
+    assert_eq!(tensor.dtype, DType::F32, "splat: `{what}` must be an f32 tensor, got {:?}", tensor.dtype);
+    into_contiguous(tensor)
+}
+
+fn element_launch(client: &cubecl::client::Client, elements: usize) -> (CubeCount, CubeDim) {
+    let dim = CubeDim::new_1d(ELEMENT_UNITS);
+    (calculate_cube_count_elemwise(client, elements, dim), dim)
+}
+
+fn pixel_launch(layout: &Layout) -> (CubeCount, CubeDim) {
+    (
+        CubeCount::new_3d(layout.width.div_ceil(PIXEL_BLOCK), layout.height.div_ceil(PIXEL_BLOCK), layout.views as u32),
+        CubeDim::new_2d(PIXEL_BLOCK, PIXEL_BLOCK),
+    )
+}
+
+/// Whether the backward pass adds gradients with native `f32` atomics: when the device supports them, unless
+/// the environment variable `DGGT_SPLAT_CAS_ATOMICS` is set (to test the compare-and-swap path on any device).
+fn native_float_atomics(client: &cubecl::client::Client) -> bool {
+    std::env::var_os("DGGT_SPLAT_CAS_ATOMICS").is_none()
+        && client.properties().atomic_type_usage(Type::atomic(FloatKind::F32)).contains(AtomicUsage::Add)
+}
+
+fn layout(inputs: &SplatInputs<CubeBackend>, settings: &RasterSettings, size: ImageSize) -> Layout {
+    let count = inputs.means.shape()[0];
+    let views = inputs.viewmats.shape()[0];
+    let channels = inputs.colors.shape()[1];
+    let tile_size = settings.tile_size;
+    assert!(tile_size > 0, "splat: tile_size must be positive");
+    assert!(channels > 0, "splat: colours need at least one channel");
+    Layout {
+        views,
+        count,
+        channels,
+        width: size.width,
+        height: size.height,
+        tile_size,
+        tiles_x: size.width.div_ceil(tile_size),
+        tiles_y: size.height.div_ceil(tile_size),
+        per_view: inputs.opacities.shape().num_dims() == 2,
+        near: settings.near_plane,
+        far: settings.far_plane,
+        eps2d: settings.eps2d,
+    }
+}
+
+fn forward_saved(
+    inputs: SplatInputs<CubeBackend>,
+    settings: &RasterSettings,
+    size: ImageSize,
+) -> (SplatOutputs<CubeBackend>, CubeForward) {
+    let layout = layout(&inputs, settings, size);
+    let device = inputs.means.device.clone();
+    let client = device.client();
+    let means = contiguous(inputs.means, "means");
+    let quats = contiguous(inputs.quats, "quats");
+    let scales = contiguous(inputs.scales, "scales");
+    let opacities = contiguous(inputs.opacities, "opacities");
+    let colors = contiguous(inputs.colors, "colors");
+    let background = contiguous(inputs.background, "background");
+    let viewmats = contiguous(inputs.viewmats, "viewmats");
+    let intrinsics = contiguous(inputs.intrinsics, "intrinsics");
+    let (views, count, channels) = (layout.views, layout.count, layout.channels);
+    let pairs = layout.pairs();
+    let lists = views * layout.tiles();
+
+    let means2d = buffer(&device, 2 * pairs, DType::F32);
+    let conics = buffer(&device, 3 * pairs, DType::F32);
+    let depths = buffer(&device, pairs, DType::F32);
+    let radii = buffer(&device, 2 * pairs, DType::U32);
+    let reasons = buffer(&device, pairs, DType::U32);
+    let tile_counts = zeroed(&device, lists, DType::U32);
+    let stats = zeros_client(client.clone(), device.clone(), Shape::new([views, CullStats::COUNTS]), DType::I32);
+    let offsets = buffer(&device, lists + 1, DType::U32);
+    let total = buffer(&device, 1, DType::U32);
+    let (count32, views32) = (count as u32, views as u32);
+    let (width, height) = (layout.width, layout.height);
+    let (tile_size, tiles_x, tiles_y) = (layout.tile_size, layout.tiles_x, layout.tiles_y);
+    let per_view = layout.per_view as u32;
+
+    if pairs > 0 {
+        let (cubes, dim) = element_launch(&client, pairs);
+        kernels::project_kernel::launch(
+            &client,
+            cubes.clone(),
+            dim,
+            arg(&means),
+            arg(&quats),
+            arg(&scales),
+            arg(&opacities),
+            arg(&colors),
+            arg(&viewmats),
+            arg(&intrinsics),
+            arg(&means2d),
+            arg(&conics),
+            arg(&depths),
+            arg(&radii),
+            arg(&reasons),
+            count32,
+            views32,
+            per_view,
+            width,
+            height,
+            layout.near,
+            layout.far,
+            layout.eps2d,
+            channels,
+        );
+        kernels::count_kernel::launch(
+            &client,
+            cubes,
+            dim,
+            arg(&means2d),
+            arg(&radii),
+            arg(&reasons),
+            arg(&tile_counts),
+            arg(&stats),
+            count32,
+            views32,
+            tile_size,
+            tiles_x,
+            tiles_y,
+        );
+    }
+    let mut intersections = 0usize;
+    if lists > 0 {
+        kernels::scan_kernel::launch(
+            &client,
+            CubeCount::new_single(),
+            CubeDim::new_1d(SCAN_THREADS),
+            arg(&tile_counts),
+            arg(&offsets),
+            arg(&total),
+            lists as u32,
+            (lists as u32).div_ceil(SCAN_THREADS),
+        );
+        let data = into_data_sync(total);
+        intersections = data.iter::<u32>().next().expect("one total") as usize;
+    }
+    let ids = buffer(&device, intersections, DType::U32);
+    if intersections > 0 {
+        let unsorted = buffer(&device, intersections, DType::U32);
+        let cursors = zeroed(&device, lists, DType::U32);
+        let (cubes, dim) = element_launch(&client, pairs);
+        kernels::fill_kernel::launch(
+            &client,
+            cubes,
+            dim,
+            arg(&means2d),
+            arg(&radii),
+            arg(&reasons),
+            arg(&offsets),
+            arg(&cursors),
+            arg(&unsorted),
+            count32,
+            views32,
+            tile_size,
+            tiles_x,
+            tiles_y,
+        );
+        kernels::sort_kernel::launch(
+            &client,
+            CubeCount::new_3d(tiles_x, tiles_y, views32),
+            CubeDim::new_1d(SORT_UNITS),
+            arg(&unsorted),
+            arg(&offsets),
+            arg(&depths),
+            arg(&ids),
+            count32,
+            tiles_x,
+            layout.tiles() as u32,
+        );
+    }
+
+    let pixels = views * layout.pixels();
+    let images_shape = Shape::new([views, height as usize, width as usize, channels + PACKED_EXTRA_CHANNELS]);
+    let images = empty_device_dtype(client.clone(), device.clone(), images_shape, DType::F32);
+    let transmittance = buffer(&device, pixels, DType::F32);
+    let list_ends = buffer(&device, pixels, DType::U32);
+    if pixels > 0 {
+        let (cubes, dim) = pixel_launch(&layout);
+        kernels::composite_kernel::launch(
+            &client,
+            cubes,
+            dim,
+            arg(&ids),
+            arg(&offsets),
+            arg(&means2d),
+            arg(&conics),
+            arg(&depths),
+            arg(&opacities),
+            arg(&colors),
+            arg(&background),
+            arg(&images),
+            arg(&transmittance),
+            arg(&list_ends),
+            count32,
+            per_view,
+            width,
+            height,
+            tile_size,
+            tiles_x,
+            tiles_y,
+            channels,
+        );
+    }
+
+    let saved = CubeForward {
+        layout,
+        means,
+        quats,
+        scales,
+        opacities,
+        colors,
+        background,
+        viewmats,
+        intrinsics,
+        means2d,
+        conics,
+        depths,
+        reasons,
+        offsets,
+        ids,
+        images: images.clone(),
+        transmittance,
+        list_ends,
+    };
+    (SplatOutputs { images, stats }, saved)
+}
+
+/// The `f32` gradient buffers the backward kernels add into, zeroed, sized like `shape`.
+fn gradient(device: &CubeDevice, shape: Shape) -> CubeTensor {
+    zeros_client(device.client(), device.clone(), shape, DType::F32)
+}
+
+fn backward(saved: &CubeForward, grad_images: FloatTensor<CubeBackend>) -> SplatGrads<CubeBackend> {
+    let layout = saved.layout;
+    let device = saved.means.device.clone();
+    let client = device.client();
+    let (views, count, channels) = (layout.views, layout.count, layout.channels);
+    let pairs = layout.pairs();
+    let pixels = views * layout.pixels();
+    let grad_images = contiguous(grad_images, "image gradient");
+    let (count32, views32) = (count as u32, views as u32);
+    let per_view = layout.per_view as u32;
+
+    // One buffer for everything the compositing backward adds into (see `composite_backward_kernel`).
+    let opacity_len = if layout.per_view { views * count } else { count };
+    let (opacity_offset, color_offset) = (6 * pairs, 6 * pairs + opacity_len);
+    let accumulated = zeroed(&device, color_offset + count * channels, DType::F32);
+    let grad_means = gradient(&device, Shape::new([count, 3]));
+    let grad_quats = gradient(&device, Shape::new([count, 4]));
+    let grad_scales = gradient(&device, Shape::new([count, 3]));
+
+    if pixels > 0 && count > 0 {
+        let (cubes, dim) = pixel_launch(&layout);
+        let launch = if native_float_atomics(&client) {
+            kernels::composite_backward_kernel::launch::<NativeAdd>
+        } else {
+            kernels::composite_backward_kernel::launch::<SwapAdd>
+        };
+        launch(
+            &client,
+            cubes,
+            dim,
+            arg(&saved.ids),
+            arg(&saved.offsets),
+            arg(&saved.means2d),
+            arg(&saved.conics),
+            arg(&saved.depths),
+            arg(&saved.opacities),
+            arg(&saved.colors),
+            arg(&saved.background),
+            arg(&saved.images),
+            arg(&saved.transmittance),
+            arg(&saved.list_ends),
+            arg(&grad_images),
+            arg(&accumulated),
+            count32,
+            views32,
+            opacity_offset as u32,
+            color_offset as u32,
+            per_view,
+            layout.width,
+            layout.height,
+            layout.tile_size,
+            layout.tiles_x,
+            layout.tiles_y,
+            channels,
+        );
+        let (cubes, dim) = element_launch(&client, count);
+        kernels::project_backward_kernel::launch(
+            &client,
+            cubes,
+            dim,
+            arg(&saved.means),
+            arg(&saved.quats),
+            arg(&saved.scales),
+            arg(&saved.viewmats),
+            arg(&saved.intrinsics),
+            arg(&saved.reasons),
+            arg(&accumulated),
+            arg(&grad_means),
+            arg(&grad_quats),
+            arg(&grad_scales),
+            count32,
+            views32,
+            layout.width,
+            layout.height,
+            layout.eps2d,
+        );
+    }
+    let part = |start: usize, len: usize, shape: Shape| {
+        let slice = CubeBackend::float_slice(accumulated.clone(), &[Slice::from(start..start + len)]);
+        into_contiguous(CubeBackend::float_reshape(slice, shape))
+    };
+    let opacity_shape = if layout.per_view { Shape::new([views, count]) } else { Shape::new([count]) };
+    let grad_opacities = part(opacity_offset, opacity_len, opacity_shape);
+    let grad_colors = part(color_offset, count * channels, Shape::new([count, channels]));
+
+    let background = if pixels > 0 {
+        // dL/dbg = Σ_pixels dL/dcolour · T_final.
+        let stride = channels + PACKED_EXTRA_CHANNELS;
+        let flat = CubeBackend::float_reshape(grad_images, Shape::new([pixels, stride]));
+        let colour_grads = CubeBackend::float_slice(flat, &[Slice::from(0..pixels), Slice::from(0..channels)]);
+        let transmittance = CubeBackend::float_reshape(saved.transmittance.clone(), Shape::new([pixels, 1]));
+        let weighted = CubeBackend::float_mul(colour_grads, transmittance);
+        CubeBackend::float_reshape(CubeBackend::float_sum_dim(weighted, 0), Shape::new([channels]))
+    } else {
+        gradient(&device, Shape::new([channels]))
+    };
+
+    SplatGrads {
+        means: grad_means,
+        quats: grad_quats,
+        scales: grad_scales,
+        opacities: grad_opacities,
+        colors: grad_colors,
+        background,
+    }
+}
+
+impl SplatKernels for CubeBackend {
+    type Saved = Arc<CubeForward>;
+
+    fn splat_forward_saved(
+        inputs: SplatInputs<Self>,
+        settings: &RasterSettings,
+        size: ImageSize,
+    ) -> (SplatOutputs<Self>, Self::Saved) {
+        let (outputs, saved) = forward_saved(inputs, settings, size);
+        (outputs, Arc::new(saved))
+    }
+
+    fn splat_backward(saved: Self::Saved, grad_images: FloatTensor<Self>) -> SplatGrads<Self> {
+        backward(&saved, grad_images)
+    }
+}

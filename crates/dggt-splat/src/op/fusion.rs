@@ -1,0 +1,78 @@
+//! [`SplatKernels`] for burn's fused CubeCL backend, `Fusion<CubeBackend>`: what a wgpu or CUDA device
+//! dispatches to when burn's `fusion` feature is on.
+//!
+//! The rasteriser's intersection count depends on the data, so the call cannot be recorded lazily into a
+//! fusion stream. Each pass instead resolves its inputs (flushing the operations queued on them), runs the
+//! CubeCL kernels of [`CubeBackend`] eagerly, and registers the results as new tensors of the stream, the way
+//! fusion registers data created outside it. The saved state is the unfused backend's, device buffers only.
+
+use std::sync::Arc;
+
+use burn::backend::TensorMetadata;
+use burn::backend::fusion::stream::StreamId;
+use burn::backend::fusion::{Fusion, FusionBackend, FusionTensor, NoOp, get_client};
+use burn::backend::ir::{BackendIr, InitOperationIr, OperationIr, OperationOutput};
+use burn::backend::tensor::FloatTensor;
+use burn_cubecl::CubeBackend;
+use burn_cubecl::tensor::CubeTensor;
+use dggt_geom::ImageSize;
+
+use super::cube::CubeForward;
+use super::{SplatGrads, SplatInputs, SplatKernels, SplatOutputs};
+use crate::settings::RasterSettings;
+
+type Runtime = <CubeBackend as FusionBackend>::FusionRuntime;
+type Fused = Fusion<CubeBackend>;
+
+/// The device tensor behind a fused tensor, once every operation producing it has run.
+fn resolve(tensor: FusionTensor<Runtime>) -> CubeTensor {
+    let client = tensor.client.clone();
+    client.resolve_tensor_float::<CubeBackend>(tensor)
+}
+
+/// Registers a computed device tensor in the current fusion stream.
+fn publish(tensor: CubeTensor, int: bool) -> FusionTensor<Runtime> {
+    let client = get_client::<CubeBackend>(&tensor.device);
+    let (shape, dtype) = (tensor.shape(), tensor.dtype);
+    let handle = if int { CubeBackend::int_tensor_handle(tensor) } else { CubeBackend::float_tensor_handle(tensor) };
+    let desc = InitOperationIr::create(shape, dtype, || client.register_tensor_handle(handle));
+    client.register(StreamId::current(), OperationIr::Init(desc), NoOp::<CubeBackend>::new()).output()
+}
+
+fn resolve_inputs(inputs: SplatInputs<Fused>) -> SplatInputs<CubeBackend> {
+    SplatInputs {
+        means: resolve(inputs.means),
+        quats: resolve(inputs.quats),
+        scales: resolve(inputs.scales),
+        opacities: resolve(inputs.opacities),
+        colors: resolve(inputs.colors),
+        background: resolve(inputs.background),
+        viewmats: resolve(inputs.viewmats),
+        intrinsics: resolve(inputs.intrinsics),
+    }
+}
+
+impl SplatKernels for Fused {
+    type Saved = Arc<CubeForward>;
+
+    fn splat_forward_saved(
+        inputs: SplatInputs<Self>,
+        settings: &RasterSettings,
+        size: ImageSize,
+    ) -> (SplatOutputs<Self>, Self::Saved) {
+        let (outputs, saved) = CubeBackend::splat_forward_saved(resolve_inputs(inputs), settings, size);
+        (SplatOutputs { images: publish(outputs.images, false), stats: publish(outputs.stats, true) }, saved)
+    }
+
+    fn splat_backward(saved: Self::Saved, grad_images: FloatTensor<Self>) -> SplatGrads<Self> {
+        let grads = CubeBackend::splat_backward(saved, resolve(grad_images));
+        SplatGrads {
+            means: publish(grads.means, false),
+            quats: publish(grads.quats, false),
+            scales: publish(grads.scales, false),
+            opacities: publish(grads.opacities, false),
+            colors: publish(grads.colors, false),
+            background: publish(grads.background, false),
+        }
+    }
+}

@@ -1,0 +1,312 @@
+//! One sample's training objective: run the network, place the per-pixel Gaussians with the chosen cameras,
+//! render every target (and input) view at its time over the sky, and combine the weighted losses.
+//!
+//! Terms (each averaged over the views that have what it needs):
+//! - `rgb_l2`: mean squared error of the final colours;
+//! - `lpips`: LPIPS on the renders (the release's train-style input, `[0, 1]` unscaled);
+//! - `gram`: Gram-matrix loss of VGG-16 features;
+//! - `opacity_bce`: rendered foreground alpha against `1 - sky`;
+//! - `dynamic_bce`: dynamic logits of the inputs against their dynamic masks;
+//! - `lifespan_l1`: mean `1 / lifespan` over Gaussians predicted static;
+//! - `camera`: L1 of every camera-head iteration's encoding against the ground truth (relative to input 0);
+//! - `depth`: L1 of log depth against the export's depth.
+
+use std::collections::BTreeMap;
+
+use burn::tensor::{Int, Tensor, TensorData};
+use dggt_geom::{PoseEncoding, PosedCamera};
+use dggt_losses::{GramLoss, Lpips, LpipsKind, bce_with_logits, l2, lifespan_l1, opacity_loss, psnr};
+use dggt_model::Dggt;
+use dggt_scene::{
+    AssemblyCounts, AssemblySettings, InputView, MeansGradient, PixelGaussians, TargetView, interpolate_camera,
+    render_target,
+};
+
+use crate::batch::{StepBatch, ViewTruth};
+use crate::config::{CameraSource, LossWeights, MeansGradientSetting, RenderSection};
+use crate::error::TrainError;
+
+/// Predicted fields of view are clamped to this range (radians) before decoding, so an untrained camera head
+/// still yields a finite camera.
+const FOV_RANGE: (f64, f64) = (0.05, 3.0);
+
+/// The losses and what they need, built once per run.
+pub struct Objective {
+    pub weights: LossWeights,
+    pub render: RenderSection,
+    pub assembly: AssemblySettings,
+    lpips: Option<Lpips>,
+    gram: Option<GramLoss>,
+}
+
+/// The result of one sample.
+#[derive(Debug, Clone)]
+pub struct SampleLoss {
+    /// The weighted sum.
+    pub total: Tensor<1>,
+    /// Each unweighted term, on the host.
+    pub terms: BTreeMap<&'static str, f64>,
+    /// Mean PSNR of the target renders (dB).
+    pub target_psnr: f64,
+    /// Gaussians assembled per rendered view, summed.
+    pub counts: AssemblyCounts,
+}
+
+/// What a forward pass rendered for one view.
+pub struct RenderedView {
+    pub truth_index: usize,
+    pub is_target: bool,
+    pub rgb: Tensor<3>,
+    pub alpha: Tensor<2>,
+    pub counts: AssemblyCounts,
+}
+
+impl Objective {
+    pub fn new(weights: LossWeights, render: RenderSection, device: &burn::tensor::Device) -> Result<Self, TrainError> {
+        let lpips = match (&weights.lpips_weights, &weights.lpips_backbone) {
+            (Some(linear), Some(backbone)) if weights.lpips > 0.0 => {
+                let kind = if weights.lpips_net == "vgg" { LpipsKind::Vgg } else { LpipsKind::Alex };
+                Some(Lpips::load(kind, backbone, linear, device)?)
+            }
+            _ => None,
+        };
+        let gram = match &weights.gram_backbone {
+            Some(path) if weights.gram > 0.0 => Some(GramLoss::load(path, device)?),
+            _ => None,
+        };
+        Ok(Self { weights, render, assembly: AssemblySettings::default(), lpips, gram })
+    }
+
+    /// Runs the network on the batch and renders its views (targets, then inputs when configured).
+    pub fn render(
+        &self,
+        model: &Dggt,
+        batch: &StepBatch,
+        with_inputs: bool,
+    ) -> Result<(Forward, Vec<RenderedView>), TrainError> {
+        let forward = Forward::run(model, batch, &self.render)?;
+        let mut views = Vec::new();
+        let mut wanted: Vec<(usize, bool)> = (0..batch.targets.len()).map(|i| (i, true)).collect();
+        if with_inputs {
+            wanted.extend((0..batch.inputs.len()).map(|i| (i, false)));
+        }
+        for (index, is_target) in wanted {
+            let truth = if is_target { &batch.targets[index] } else { &batch.inputs[index] };
+            let camera = match self.render.cameras {
+                CameraSource::GroundTruth => truth.camera,
+                CameraSource::Predicted => interpolate_camera(&forward.pixels.views, truth.rig_camera, truth.time)?,
+            };
+            let target = TargetView { rig_camera: truth.rig_camera, time: truth.time, camera };
+            let sky = forward.sky.as_ref();
+            let view = render_target(&forward.pixels, sky, &target, &self.assembly)?;
+            let alpha = view.alpha.squeeze_dim::<2>(0);
+            views.push(RenderedView { truth_index: index, is_target, rgb: view.rgb, alpha, counts: view.counts });
+        }
+        Ok((forward, views))
+    }
+
+    /// The weighted loss of one sample.
+    pub fn loss(&self, model: &Dggt, batch: &StepBatch) -> Result<SampleLoss, TrainError> {
+        let w = &self.weights;
+        let (forward, views) = self.render(model, batch, self.render.render_inputs)?;
+        let device = batch.images.device();
+        let truth = |view: &RenderedView| -> &ViewTruth {
+            if view.is_target { &batch.targets[view.truth_index] } else { &batch.inputs[view.truth_index] }
+        };
+        let mut terms: BTreeMap<&'static str, f64> = BTreeMap::new();
+        let mut total = Tensor::<1>::zeros([1], &device);
+        let mut add = |name: &'static str, weight: f64, value: Tensor<1>, terms: &mut BTreeMap<&'static str, f64>| {
+            let host = scalar(&value);
+            terms.insert(name, host);
+            if weight > 0.0 {
+                total = total.clone() + value.mul_scalar(weight);
+            }
+        };
+
+        let rendered = Tensor::stack::<4>(views.iter().map(|v| v.rgb.clone()).collect(), 0);
+        let expected = Tensor::stack::<4>(views.iter().map(|v| truth(v).image.clone()).collect(), 0);
+        add("rgb_l2", w.rgb_l2, l2(rendered.clone(), expected.clone())?, &mut terms);
+        if let Some(lpips) = &self.lpips {
+            add("lpips", w.lpips, lpips.train_style(rendered.clone(), expected.clone())?.mean(), &mut terms);
+        }
+        if let Some(gram) = &self.gram {
+            add("gram", w.gram, gram.forward(rendered.clone(), expected.clone())?.value.mean(), &mut terms);
+        }
+        let with_sky: Vec<&RenderedView> = views.iter().filter(|v| truth(v).sky.is_some()).collect();
+        if w.opacity_bce > 0.0 && !with_sky.is_empty() {
+            let alpha = Tensor::stack::<3>(with_sky.iter().map(|v| v.alpha.clone()).collect(), 0);
+            let sky = Tensor::stack::<3>(with_sky.iter().map(|v| truth(v).sky.clone().unwrap()).collect(), 0);
+            add("opacity_bce", w.opacity_bce, opacity_loss(alpha, sky)?, &mut terms);
+        }
+        if w.dynamic_bce > 0.0
+            && let Some(logits) = &forward.dynamic_logit
+        {
+            let labelled: Vec<usize> = (0..batch.inputs.len()).filter(|&i| batch.inputs[i].dynamic.is_some()).collect();
+            if !labelled.is_empty() {
+                let frames = logits.clone().squeeze_dim::<3>(0);
+                let index = Tensor::<1, Int>::from_data(
+                    TensorData::new(labelled.iter().map(|&i| i as i64).collect::<Vec<_>>(), [labelled.len()]),
+                    &device,
+                );
+                let masks =
+                    Tensor::stack::<3>(labelled.iter().map(|&i| batch.inputs[i].dynamic.clone().unwrap()).collect(), 0);
+                add("dynamic_bce", w.dynamic_bce, bce_with_logits(frames.select(0, index), masks)?, &mut terms);
+            }
+        }
+        if w.lifespan_l1 > 0.0 {
+            let lifespan = forward.pixels.lifespan.clone();
+            let statics = match &forward.pixels.dynamic_logit {
+                Some(logit) => {
+                    let values = host(logit.clone());
+                    let index: Vec<i64> = (0..values.len()).filter(|&i| values[i] < 0.0).map(|i| i as i64).collect();
+                    let count = index.len();
+                    lifespan.select(0, Tensor::<1, Int>::from_data(TensorData::new(index, [count]), &device))
+                }
+                None => lifespan,
+            };
+            if statics.dims()[0] > 0 {
+                add("lifespan_l1", w.lifespan_l1, lifespan_l1(statics)?, &mut terms);
+            }
+        }
+        if w.camera > 0.0 {
+            add("camera", w.camera, camera_loss(model_encodings(&forward), batch)?, &mut terms);
+        }
+        if w.depth > 0.0
+            && let Some(loss) = depth_loss(&forward.depth, batch)?
+        {
+            add("depth", w.depth, loss, &mut terms);
+        }
+
+        let mut psnrs = Vec::new();
+        let mut counts = AssemblyCounts::default();
+        for view in &views {
+            counts.candidates += view.counts.candidates;
+            counts.transparent += view.counts.transparent;
+            counts.off_screen += view.counts.off_screen;
+            counts.static_kept += view.counts.static_kept;
+            counts.dynamic_kept += view.counts.dynamic_kept;
+            if view.is_target {
+                psnrs.push(psnr(&host(view.rgb.clone()), &host(truth(view).image.clone()))?);
+            }
+        }
+        let target_psnr = if psnrs.is_empty() { f64::NAN } else { psnrs.iter().sum::<f64>() / psnrs.len() as f64 };
+        Ok(SampleLoss { total, terms, target_psnr, counts })
+    }
+}
+
+/// The network's outputs that the losses and the renders read.
+pub struct Forward {
+    pub pixels: PixelGaussians,
+    pub sky: Option<dggt_model::sky::SkyGaussians>,
+    /// `[1, S, H, W]`.
+    pub depth: Tensor<4>,
+    /// `[1, S, H, W]`.
+    pub dynamic_logit: Option<Tensor<4>>,
+    /// Every camera-head iteration's `[1, S, 9]` encoding.
+    pub encodings: Vec<Tensor<3>>,
+}
+
+impl Forward {
+    pub fn run(model: &Dggt, batch: &StepBatch, render: &RenderSection) -> Result<Self, TrainError> {
+        let out = model.forward(batch.images.clone())?;
+        let gaussians = out.gaussians.as_ref().ok_or_else(|| TrainError::Invalid {
+            what: "model".into(),
+            detail: "the configuration has no Gaussian head (gs_head); it cannot be trained to render".into(),
+        })?;
+        let cameras: Vec<PosedCamera> = match render.cameras {
+            CameraSource::GroundTruth => batch.inputs.iter().map(|v| v.camera).collect(),
+            CameraSource::Predicted => decode_cameras(out.camera.pose_encoding(), batch.size)?,
+        };
+        let views: Vec<InputView> = batch
+            .inputs
+            .iter()
+            .zip(cameras)
+            .map(|(truth, camera)| InputView { rig_camera: truth.rig_camera, time: truth.time, camera })
+            .collect();
+        let depth = out.depth.prediction.clone().narrow(4, 0, 1).squeeze_dim::<4>(4);
+        let dynamic_logit = out.instance.as_ref().map(|p| p.prediction.clone().narrow(4, 0, 1).squeeze_dim::<4>(4));
+        let means_gradient = match render.means_gradient {
+            MeansGradientSetting::Detached => MeansGradient::Detached,
+            MeansGradientSetting::Through => MeansGradient::Through,
+        };
+        let pixels = PixelGaussians::new(&gaussians.maps, depth.clone(), dynamic_logit.clone(), views, means_gradient)?;
+        let sky = match (&model.sky_model, render.sky) {
+            (Some(sky_model), true) => {
+                let [_, s, c, h, w] = batch.images.dims();
+                let cameras: Vec<_> =
+                    pixels.views.iter().map(|v| (v.camera.world_from_camera.inverse(), v.camera.intrinsics)).collect();
+                Some(sky_model.gaussians(batch.images.clone().reshape([s, c, h, w]), &cameras))
+            }
+            _ => None,
+        };
+        Ok(Self { pixels, sky, depth, dynamic_logit, encodings: out.camera.encodings.clone() })
+    }
+}
+
+fn model_encodings(forward: &Forward) -> &[Tensor<3>] {
+    &forward.encodings
+}
+
+/// Decodes `[1, S, 9]` encodings to cameras (fields of view clamped to [`FOV_RANGE`]).
+pub fn decode_cameras(encoding: Tensor<3>, size: dggt_geom::ImageSize) -> Result<Vec<PosedCamera>, TrainError> {
+    let values = host(encoding);
+    values
+        .chunks_exact(9)
+        .map(|v| {
+            let mut array: [f64; 9] = std::array::from_fn(|i| v[i] as f64);
+            for fov in &mut array[7..9] {
+                *fov = fov.clamp(FOV_RANGE.0, FOV_RANGE.1);
+            }
+            let (camera_from_world, intrinsics) = PoseEncoding::from_array(array).decode(size)?;
+            Ok(PosedCamera { world_from_camera: camera_from_world.inverse(), intrinsics })
+        })
+        .collect()
+}
+
+/// Mean over iterations of the L1 distance between predicted and ground-truth encodings.
+fn camera_loss(encodings: &[Tensor<3>], batch: &StepBatch) -> Result<Tensor<1>, TrainError> {
+    let device = batch.images.device();
+    let truth: Vec<f32> = batch
+        .inputs
+        .iter()
+        .flat_map(|v| {
+            PoseEncoding::encode(&v.camera.world_from_camera.inverse(), &v.camera.intrinsics, batch.size)
+                .to_array()
+                .map(|x| x as f32)
+        })
+        .collect();
+    let truth = Tensor::<3>::from_data(TensorData::new(truth, [1, batch.inputs.len(), 9]), &device);
+    let per_iteration: Vec<Tensor<1>> =
+        encodings.iter().map(|e| (e.clone() - truth.clone()).abs().mean().reshape([1])).collect();
+    let count = per_iteration.len().max(1) as f64;
+    Ok(Tensor::cat(per_iteration, 0).sum().div_scalar(count))
+}
+
+/// L1 of log depth at the pixels with a measured depth; `None` when no input view has any.
+fn depth_loss(depth: &Tensor<4>, batch: &StepBatch) -> Result<Option<Tensor<1>>, TrainError> {
+    let device = depth.device();
+    let [_, frames, h, w] = depth.dims();
+    let (mut index, mut values) = (Vec::new(), Vec::new());
+    for (frame, view) in batch.inputs.iter().enumerate().take(frames) {
+        if let Some((pixels, depths)) = &view.depth {
+            index.extend(pixels.iter().map(|&p| p + (frame * h * w) as i64));
+            values.extend(depths.iter().map(|d| d.ln()));
+        }
+    }
+    if index.is_empty() {
+        return Ok(None);
+    }
+    let count = index.len();
+    let predicted = depth.clone().reshape([frames * h * w]).clamp_min(1e-6).log();
+    let picked = predicted.select(0, Tensor::<1, Int>::from_data(TensorData::new(index, [count]), &device));
+    let truth = Tensor::<1>::from_data(TensorData::new(values, [count]), &device);
+    Ok(Some((picked - truth).abs().mean()))
+}
+
+fn host<const D: usize>(tensor: Tensor<D>) -> Vec<f32> {
+    tensor.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default()
+}
+
+fn scalar(tensor: &Tensor<1>) -> f64 {
+    host(tensor.clone()).first().copied().map(f64::from).unwrap_or(f64::NAN)
+}

@@ -1,0 +1,527 @@
+//! The training loop.
+//!
+//! Each optimiser step draws `accumulation` samples (sample `k = step · accumulation + j`, a pure function of
+//! the seed), computes each sample's loss and gradients, sums them (spread over the configured devices, one
+//! thread each), clips the global norm, and steps AdamW per parameter group at the scheduled rate. A sample with
+//! a non-finite loss, or a step with a non-finite gradient norm, is skipped with a warning and leaves the
+//! weights untouched. Metrics go to `metrics.jsonl`, checkpoints to `checkpoints/` (see [`checkpoint`]).
+//!
+//! [`checkpoint`]: crate::checkpoint
+
+use std::fs;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+use burn::module::Module;
+use burn::optim::{GradientsAccumulator, GradientsParams};
+use burn::tensor::Device;
+use dggt_data::{LoadedSample, LoaderOptions, Prefetcher, Sampler, Scene, TrainingSample, open_scene, training_stream};
+use dggt_model::sky::SkyModel;
+use dggt_model::weights::{Coverage, load_checkpoint_with};
+use dggt_model::{Dggt, ModelConfig};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use serde_json::json;
+
+use crate::batch::StepBatch;
+use crate::checkpoint::{self, RunState};
+use crate::config::TrainConfig;
+use crate::error::TrainError;
+use crate::objective::Objective;
+use crate::optimizer::{Optimizer, freeze};
+use crate::schedule::WarmupCosine;
+use crate::validate::{Validation, validate, validation_sample};
+
+/// The network configuration of a preset name.
+pub fn model_config(preset: &str) -> Result<ModelConfig, TrainError> {
+    match preset {
+        "tiny" => Ok(ModelConfig::tiny()),
+        "vggt_1b" => Ok(ModelConfig::vggt_1b()),
+        "dggt" => Ok(ModelConfig::dggt()),
+        other => Err(TrainError::Invalid {
+            what: "model.preset".into(),
+            detail: format!("unknown preset `{other}` (tiny, vggt_1b, dggt)"),
+        }),
+    }
+}
+
+/// A fresh network: random layers, the sky model's fixed buffers, then the starting checkpoint when given.
+pub fn fresh_model(config: &ModelConfig, init: Option<&Path>, device: &Device) -> Result<Dggt, TrainError> {
+    let mut model = Dggt::new(config, device)?;
+    if let Some(sky) = &config.sky_model {
+        model.sky_model = Some(SkyModel::initialised(sky, device));
+    }
+    if let Some(path) = init {
+        let report = load_checkpoint_with(&mut model, path, Coverage::Partial)?;
+        tracing::info!(
+            checkpoint = %path.display(),
+            applied = report.applied.len(),
+            missing = report.missing.len(),
+            unused = report.unused.len(),
+            "starting weights loaded (parameters the checkpoint lacks start fresh)"
+        );
+    }
+    Ok(model)
+}
+
+/// How a run ended.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunSummary {
+    pub steps_run: u64,
+    pub final_step: u64,
+    pub skipped_steps: u64,
+    pub first_loss: Option<f64>,
+    pub last_loss: Option<f64>,
+    pub first_target_psnr: Option<f64>,
+    pub last_target_psnr: Option<f64>,
+    pub validation: Option<Validation>,
+    pub elapsed_s: f64,
+    pub checkpoint: Option<PathBuf>,
+}
+
+/// Options of [`Trainer::run`] beyond the configuration.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RunOptions {
+    /// Show a progress bar on stderr.
+    pub progress: bool,
+    /// Stop after this step even if the configuration runs longer (for interrupting runs on purpose).
+    pub stop_after: Option<u64>,
+}
+
+pub struct Trainer {
+    config: TrainConfig,
+    model_config: ModelConfig,
+    scene: Arc<Scene>,
+    sampler: Sampler,
+    objective: Objective,
+    /// Training devices with autodiff; the first holds the master weights.
+    devices: Vec<Device>,
+    /// The first device without autodiff (validation).
+    plain_device: Device,
+    model: Dggt,
+    optimizer: Optimizer,
+    state: RunState,
+}
+
+impl Trainer {
+    /// Builds a run on `devices` (at least one); resumes from the newest checkpoint in the output folder when
+    /// `resume` is set and one exists.
+    pub fn new(config: TrainConfig, devices: Vec<Device>, resume: bool) -> Result<Self, TrainError> {
+        let plain_device = devices.first().cloned().ok_or_else(|| TrainError::Invalid {
+            what: "devices".into(),
+            detail: "training needs at least one device".into(),
+        })?;
+        let autodiff: Vec<Device> = devices.iter().map(|d| d.clone().autodiff()).collect();
+        let device = autodiff[0].clone();
+        let frames = config.data.frames.map(|[a, b]| a..b);
+        let cameras = (!config.sampler.cameras.is_empty()).then(|| config.sampler.cameras.clone());
+        let scene = Arc::new(open_scene(&config.data.scene, frames, cameras)?);
+        let mut sampler_config = config.sampler.clone();
+        // The scene was opened with only the chosen cameras: they are positions 0.. in it.
+        sampler_config.cameras.clear();
+        let sampler = Sampler::new(sampler_config, scene.frames.len(), scene.cameras.len())?;
+        let objective = Objective::new(config.loss.clone(), config.render.clone(), &device)?;
+
+        let checkpoints = config.run.out_dir.join("checkpoints");
+        let resume_from = if resume { checkpoint::latest(&checkpoints)? } else { None };
+        let (model, model_config, optimizer, state) = match resume_from {
+            Some(dir) => {
+                let model_config = checkpoint::read_model_config(&dir)?;
+                let blank = Dggt::new(&model_config, &device)?;
+                let seeded = Optimizer::new(&config.optim, &blank);
+                let loaded = checkpoint::load(&dir, blank, seeded.adamw().clone())?;
+                let model = freeze(loaded.model, &config.optim.frozen)?;
+                let mut optimizer = Optimizer::new(&config.optim, &model);
+                optimizer.set_adamw(loaded.optimizer);
+                tracing::info!(checkpoint = %dir.display(), step = loaded.state.step, "resuming");
+                (model, loaded.config, optimizer, loaded.state)
+            }
+            None => {
+                device.seed(config.run.seed);
+                let mut model_config = model_config(&config.model.preset)?;
+                if let Some(gs) = &mut model_config.gs_head {
+                    gs.color_skip = config.model.color_skip;
+                }
+                let model = fresh_model(&model_config, config.model.init_checkpoint.as_deref(), &device)?;
+                let model = freeze(model, &config.optim.frozen)?;
+                let optimizer = Optimizer::new(&config.optim, &model);
+                let state = RunState { step: 0, seed: config.run.seed, skipped_steps: 0, elapsed_s: 0.0 };
+                (model, model_config, optimizer, state)
+            }
+        };
+        if state.seed != config.run.seed {
+            return Err(TrainError::Invalid {
+                what: "resume".into(),
+                detail: format!("the checkpoint's seed {} differs from run.seed {}", state.seed, config.run.seed),
+            });
+        }
+        Ok(Self {
+            config,
+            model_config,
+            scene,
+            sampler,
+            objective,
+            devices: autodiff,
+            plain_device,
+            model,
+            optimizer,
+            state,
+        })
+    }
+
+    pub fn model(&self) -> &Dggt {
+        &self.model
+    }
+
+    pub fn model_config(&self) -> &ModelConfig {
+        &self.model_config
+    }
+
+    pub fn state(&self) -> &RunState {
+        &self.state
+    }
+
+    pub fn config(&self) -> &TrainConfig {
+        &self.config
+    }
+
+    /// The learning-rate schedule as factors of each group's peak rate.
+    pub fn schedule(&self) -> WarmupCosine {
+        let o = &self.config.optim;
+        WarmupCosine { peak: 1.0, warmup: o.warmup_steps, total: self.config.run.steps, min_ratio: o.min_lr_ratio }
+    }
+
+    fn validation(&self) -> Option<TrainingSample> {
+        let v = &self.config.data.validation;
+        (!v.inputs.is_empty()).then(|| validation_sample(&v.inputs, &v.targets, self.sampler.cameras()))
+    }
+
+    /// Scores the current weights on the validation frames.
+    pub fn validate(&self) -> Result<Option<Validation>, TrainError> {
+        let Some(sample) = self.validation() else { return Ok(None) };
+        let model = self.model.clone().valid().fork(&self.plain_device);
+        let preprocess = &self.config.data.preprocess;
+        validate(&model, &self.objective, &self.scene, preprocess, &sample, &self.plain_device).map(Some)
+    }
+
+    /// The sample drawn for sample index `index` (`step · accumulation + j`), decoded.
+    pub fn sample(&self, index: u64) -> Result<LoadedSample, TrainError> {
+        let sample = self.sampler.sample_at(self.config.run.seed, index);
+        Ok(dggt_data::load_sample(&self.scene, &self.config.data.preprocess, index, sample)?)
+    }
+
+    /// Trains until `run.steps` (or the time limit, or `options.stop_after`), checkpointing on the way.
+    pub fn run(&mut self, options: RunOptions) -> Result<RunSummary, TrainError> {
+        let run = self.config.run.clone();
+        fs::create_dir_all(&run.out_dir).map_err(|source| TrainError::Io { path: run.out_dir.clone(), source })?;
+        let metrics_path = run.out_dir.join("metrics.jsonl");
+        truncate_metrics(&metrics_path, self.state.step)?;
+        let mut metrics = fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&metrics_path)
+            .map_err(|source| TrainError::Io { path: metrics_path.clone(), source })?;
+        let mut log = |value: serde_json::Value| -> Result<(), TrainError> {
+            writeln!(metrics, "{value}").map_err(|source| TrainError::Io { path: metrics_path.clone(), source })
+        };
+
+        let accumulation = self.config.optim.accumulation as u64;
+        let first_sample = self.state.step * accumulation;
+        let options_loader =
+            LoaderOptions { workers: self.config.data.workers.max(1), capacity: 2 * self.config.data.workers.max(1) };
+        let mut stream = training_stream(
+            self.scene.clone(),
+            self.sampler.clone(),
+            self.config.data.preprocess,
+            self.config.run.seed,
+            first_sample,
+            options_loader,
+        )?;
+
+        let last_step = options.stop_after.map_or(run.steps, |s| s.min(run.steps));
+        let bar = progress_bar(options.progress, self.state.step, run.steps);
+        let started = Instant::now();
+        let elapsed_before = self.state.elapsed_s;
+        let schedule = self.schedule();
+        let mut summary = RunSummary {
+            steps_run: 0,
+            final_step: self.state.step,
+            skipped_steps: self.state.skipped_steps,
+            first_loss: None,
+            last_loss: None,
+            first_target_psnr: None,
+            last_target_psnr: None,
+            validation: None,
+            elapsed_s: elapsed_before,
+            checkpoint: None,
+        };
+        let checkpoints = run.out_dir.join("checkpoints");
+        let with_depth = self.config.loss.depth > 0.0;
+
+        while self.state.step < last_step {
+            let step = self.state.step;
+            let samples = (0..accumulation).map(|_| next_sample(&mut stream)).collect::<Result<Vec<_>, _>>()?;
+            let mut record = self.train_step(&samples, schedule.factor(step), with_depth)?;
+            if let Some(loss) = record["loss"].as_f64() {
+                let psnr = record["target_psnr"].as_f64().unwrap_or(f64::NAN);
+                summary.first_loss.get_or_insert(loss);
+                summary.first_target_psnr.get_or_insert(psnr);
+                summary.last_loss = Some(loss);
+                summary.last_target_psnr = Some(psnr);
+                bar.set_message(format!("loss {loss:.4}  target PSNR {psnr:.2} dB"));
+            }
+            summary.steps_run += 1;
+            let elapsed = elapsed_before + started.elapsed().as_secs_f64();
+            self.state.elapsed_s = elapsed;
+            record["time_s"] = json!(elapsed);
+            log(record)?;
+            bar.inc(1);
+
+            let done = self.state.step >= last_step
+                || run.time_limit_s.is_some_and(|limit| started.elapsed().as_secs_f64() >= limit);
+            if (run.validate_every > 0 && self.state.step % run.validate_every == 0) || done {
+                if let Some(validation) = self.validate()? {
+                    tracing::info!(
+                        step = self.state.step,
+                        psnr = validation.psnr,
+                        ssim = validation.ssim,
+                        "validation"
+                    );
+                    log(json!({ "kind": "validation", "step": self.state.step, "psnr": validation.psnr,
+                        "ssim": validation.ssim, "views": validation.views, "time_s": elapsed }))?;
+                    summary.validation = Some(validation);
+                }
+            }
+            if self.state.step % run.checkpoint_every == 0 || done {
+                let dir = checkpoint::save(
+                    &checkpoints,
+                    &self.model,
+                    &self.model_config,
+                    self.optimizer.adamw(),
+                    &self.state,
+                    run.keep_checkpoints,
+                )?;
+                summary.checkpoint = Some(dir);
+            }
+            if done {
+                break;
+            }
+        }
+        bar.finish_and_clear();
+        summary.final_step = self.state.step;
+        summary.skipped_steps = self.state.skipped_steps;
+        summary.elapsed_s = self.state.elapsed_s;
+        Ok(summary)
+    }
+
+    /// One optimiser step on `samples` at schedule factor `factor`: returns the step's metrics record. A
+    /// non-finite loss or gradient norm skips the step (counted, logged) and leaves the weights untouched.
+    pub fn train_step(
+        &mut self,
+        samples: &[LoadedSample],
+        factor: f64,
+        with_depth: bool,
+    ) -> Result<serde_json::Value, TrainError> {
+        let step = self.state.step;
+        let started = Instant::now();
+        let outcome = self.accumulate(samples, with_depth)?;
+        let mut record = json!({ "kind": "train", "step": step, "lr_factor": factor });
+        match outcome {
+            Some(outcome) => {
+                let update = Instant::now();
+                let model = self.model.clone();
+                let (model, report) = self.optimizer.step(model, outcome.grads, factor);
+                self.model = model;
+                match report {
+                    Some(report) => {
+                        record["grad_norm"] = json!(report.grad_norm);
+                        record["clipped"] = json!(report.clipped);
+                    }
+                    None => {
+                        self.state.skipped_steps += 1;
+                        tracing::warn!(step, "non-finite gradient norm: step skipped, weights untouched");
+                        record["skipped"] = json!("non-finite gradient");
+                    }
+                }
+                record["loss"] = json!(outcome.loss);
+                record["terms"] = json!(outcome.terms);
+                record["target_psnr"] = json!(outcome.target_psnr);
+                record["gaussians_kept"] = json!(outcome.kept);
+                let mut stages = outcome.stages;
+                stages.insert("update".into(), update.elapsed().as_secs_f64());
+                record["stage_s"] = json!(stages);
+            }
+            None => {
+                self.state.skipped_steps += 1;
+                tracing::warn!(step, "non-finite loss: step skipped, weights untouched");
+                record["skipped"] = json!("non-finite loss");
+            }
+        }
+        record["step_s"] = json!(started.elapsed().as_secs_f64());
+        self.state.step += 1;
+        Ok(record)
+    }
+
+    /// Loss and summed gradients of the samples of one step, spread over the devices; `None` when a loss is
+    /// not finite.
+    fn accumulate(&self, samples: &[LoadedSample], with_depth: bool) -> Result<Option<StepOutcome>, TrainError> {
+        let scale = 1.0 / samples.len() as f64;
+        let shares: Vec<Vec<&LoadedSample>> = (0..self.devices.len())
+            .map(|d| samples.iter().skip(d).step_by(self.devices.len()).collect())
+            .filter(|share: &Vec<&LoadedSample>| !share.is_empty())
+            .collect();
+        let master = &self.devices[0];
+        let results: Vec<Result<Vec<SampleResult>, TrainError>> = if shares.len() == 1 {
+            vec![self.run_share(&self.model, &shares[0], master, scale, with_depth)]
+        } else {
+            std::thread::scope(|scope| {
+                let handles: Vec<_> = shares
+                    .iter()
+                    .zip(&self.devices)
+                    .map(|(share, device)| {
+                        let model = self.model.clone().fork(device);
+                        scope.spawn(move || self.run_share(&model, share, device, scale, with_depth))
+                    })
+                    .collect();
+                handles.into_iter().map(|h| h.join().expect("a training thread panicked")).collect()
+            })
+        };
+        let mut accumulator = GradientsAccumulator::<Dggt>::new();
+        let (mut loss, mut target_psnr, mut kept) = (0.0, 0.0, 0);
+        let mut terms = std::collections::BTreeMap::<String, f64>::new();
+        let mut stages = std::collections::BTreeMap::<String, f64>::new();
+        for share in results {
+            for result in share? {
+                let Some(grads) = result.grads else { return Ok(None) };
+                accumulator.accumulate(&self.model, grads.to_device(master, &self.model));
+                loss += result.loss * scale;
+                target_psnr += result.target_psnr * scale;
+                kept += result.kept;
+                for (name, value) in result.terms {
+                    *terms.entry(name.to_string()).or_default() += value * scale;
+                }
+                for (name, value) in result.stages {
+                    *stages.entry(name.to_string()).or_default() += value;
+                }
+            }
+        }
+        Ok(Some(StepOutcome { grads: accumulator.grads(), loss, terms, target_psnr, kept, stages }))
+    }
+
+    fn run_share(
+        &self,
+        model: &Dggt,
+        share: &[&LoadedSample],
+        device: &Device,
+        scale: f64,
+        with_depth: bool,
+    ) -> Result<Vec<SampleResult>, TrainError> {
+        share
+            .iter()
+            .map(|sample| {
+                let started = Instant::now();
+                let batch = StepBatch::new(sample, &self.scene, &self.config.data.preprocess, with_depth, device)?;
+                let prepared = Instant::now();
+                let loss = self.objective.loss(model, &batch)?;
+                let evaluated = Instant::now();
+                let value = loss.terms.iter().fold(0.0, |sum, (name, v)| sum + v * weight(&self.config.loss, name));
+                let grads = if value.is_finite() {
+                    let gradients = loss.total.mul_scalar(scale).backward();
+                    Some(GradientsParams::from_grads(gradients, model))
+                } else {
+                    tracing::warn!(step = sample.step, ?loss.terms, "non-finite loss");
+                    None
+                };
+                let stages = [
+                    ("batch", (prepared - started).as_secs_f64()),
+                    ("forward_and_render", (evaluated - prepared).as_secs_f64()),
+                    ("backward", evaluated.elapsed().as_secs_f64()),
+                ];
+                Ok(SampleResult {
+                    grads,
+                    loss: value,
+                    terms: loss.terms,
+                    target_psnr: loss.target_psnr,
+                    kept: loss.counts.kept(),
+                    stages,
+                })
+            })
+            .collect()
+    }
+}
+
+struct SampleResult {
+    grads: Option<GradientsParams>,
+    loss: f64,
+    terms: std::collections::BTreeMap<&'static str, f64>,
+    target_psnr: f64,
+    kept: usize,
+    stages: [(&'static str, f64); 3],
+}
+
+struct StepOutcome {
+    grads: GradientsParams,
+    loss: f64,
+    terms: std::collections::BTreeMap<String, f64>,
+    target_psnr: f64,
+    kept: usize,
+    stages: std::collections::BTreeMap<String, f64>,
+}
+
+fn weight(weights: &crate::config::LossWeights, name: &str) -> f64 {
+    match name {
+        "rgb_l2" => weights.rgb_l2,
+        "lpips" => weights.lpips,
+        "gram" => weights.gram,
+        "opacity_bce" => weights.opacity_bce,
+        "dynamic_bce" => weights.dynamic_bce,
+        "lifespan_l1" => weights.lifespan_l1,
+        "camera" => weights.camera,
+        "depth" => weights.depth,
+        _ => 0.0,
+    }
+}
+
+fn next_sample(stream: &mut Prefetcher<LoadedSample>) -> Result<LoadedSample, TrainError> {
+    match stream.next() {
+        Some(sample) => Ok(sample?),
+        None => Err(TrainError::Invalid { what: "data stream".into(), detail: "ended early".into() }),
+    }
+}
+
+/// Drops records of steps at or after `step` (a resumed run writes them again).
+fn truncate_metrics(path: &Path, step: u64) -> Result<(), TrainError> {
+    if !path.exists() {
+        return Ok(());
+    }
+    let text = fs::read_to_string(path).map_err(|source| TrainError::Io { path: path.into(), source })?;
+    let kept: String = text
+        .lines()
+        .filter(|line| {
+            serde_json::from_str::<serde_json::Value>(line).ok().and_then(|v| v["step"].as_u64()).is_some_and(|s| {
+                match step {
+                    0 => false,
+                    _ => s < step || (s == step && line.contains("\"validation\"")),
+                }
+            })
+        })
+        .map(|line| format!("{line}\n"))
+        .collect();
+    dggt_data::io::write_atomically(path, kept.as_bytes())
+        .map_err(|e| TrainError::Invalid { what: path.display().to_string(), detail: e.to_string() })
+}
+
+fn progress_bar(visible: bool, position: u64, total: u64) -> ProgressBar {
+    let bar = ProgressBar::with_draw_target(
+        Some(total),
+        if visible { ProgressDrawTarget::stderr() } else { ProgressDrawTarget::hidden() },
+    );
+    bar.set_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} ({eta}) {msg}")
+            .expect("a valid template")
+            .progress_chars("=> "),
+    );
+    bar.set_position(position);
+    bar
+}

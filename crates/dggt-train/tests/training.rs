@@ -1,0 +1,119 @@
+//! The trainer end to end on the bundled fixture (CPU): a few dozen steps reduce the loss and raise the target
+//! PSNR; a run interrupted and resumed ends with the same weights as the uninterrupted one; a non-finite loss
+//! skips the step and leaves the weights untouched; the shipped configurations parse and validate.
+
+use std::path::{Path, PathBuf};
+
+use burn::module::{Module, ModuleVisitor, Param};
+use burn::tensor::{Device, Tensor};
+use dggt_train::{RunOptions, TrainConfig, Trainer};
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// The overfit configuration made small: 56-pixel-wide images, four inputs, no input re-renders.
+fn small_config(out: &Path, steps: u64) -> TrainConfig {
+    let mut config = TrainConfig::load(&repo().join("configs/tiny-overfit.toml")).expect("tiny-overfit.toml loads");
+    config.data.preprocess.target_width = 56;
+    config.sampler.max_inputs = 4;
+    config.render.render_inputs = false;
+    config.optim.warmup_steps = 2;
+    config.run.steps = steps;
+    config.run.out_dir = out.to_path_buf();
+    config.run.validate_every = 0;
+    config.run.checkpoint_every = 1000;
+    config.run.time_limit_s = None;
+    config.data.validation.inputs.clear();
+    config.data.validation.targets.clear();
+    config
+}
+
+/// Every parameter value, in visiting order.
+fn weights(trainer: &Trainer) -> Vec<f32> {
+    struct Collect(Vec<f32>);
+    impl ModuleVisitor for Collect {
+        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+            self.0.extend(param.val().into_data().convert::<f32>().try_into_vec::<f32>().unwrap());
+        }
+    }
+    let mut collect = Collect(Vec::new());
+    trainer.model().visit(&mut collect);
+    collect.0
+}
+
+#[test]
+fn a_few_dozen_steps_reduce_the_loss_and_raise_target_psnr() {
+    let out = tempfile::tempdir().unwrap();
+    let mut trainer = Trainer::new(small_config(out.path(), 30), vec![Device::flex()], false).unwrap();
+    let summary = trainer.run(RunOptions::default()).unwrap();
+    assert_eq!(summary.steps_run, 30);
+    assert_eq!(summary.skipped_steps, 0);
+    let text = std::fs::read_to_string(out.path().join("metrics.jsonl")).unwrap();
+    let records: Vec<serde_json::Value> = text.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let mean = |range: std::ops::Range<usize>, key: &str| {
+        range.clone().map(|i| records[i][key].as_f64().unwrap()).sum::<f64>() / range.len() as f64
+    };
+    let (loss_start, loss_end) = (mean(0..5, "loss"), mean(25..30, "loss"));
+    let (psnr_start, psnr_end) = (mean(0..5, "target_psnr"), mean(25..30, "target_psnr"));
+    assert!(loss_end < 0.7 * loss_start, "loss {loss_start} -> {loss_end}");
+    assert!(psnr_end > psnr_start + 1.0, "target PSNR {psnr_start} -> {psnr_end}");
+    assert!(summary.checkpoint.is_some_and(|dir| dir.join("model.bpk").is_file()));
+}
+
+#[test]
+fn an_interrupted_run_resumes_exactly() {
+    let straight = tempfile::tempdir().unwrap();
+    let mut trainer = Trainer::new(small_config(straight.path(), 4), vec![Device::flex()], false).unwrap();
+    trainer.run(RunOptions::default()).unwrap();
+    let expected = weights(&trainer);
+
+    let split = tempfile::tempdir().unwrap();
+    let mut first = Trainer::new(small_config(split.path(), 4), vec![Device::flex()], false).unwrap();
+    let summary = first.run(RunOptions { progress: false, stop_after: Some(2) }).unwrap();
+    assert_eq!(summary.final_step, 2);
+    drop(first);
+    let mut resumed = Trainer::new(small_config(split.path(), 4), vec![Device::flex()], true).unwrap();
+    assert_eq!(resumed.state().step, 2);
+    resumed.run(RunOptions::default()).unwrap();
+    let actual = weights(&resumed);
+    assert_eq!(expected.len(), actual.len());
+    let worst = expected.iter().zip(&actual).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+    assert!(worst == 0.0, "resumed weights differ by up to {worst}");
+}
+
+#[test]
+fn a_non_finite_loss_skips_the_step_and_keeps_the_weights() {
+    let out = tempfile::tempdir().unwrap();
+    let mut trainer = Trainer::new(small_config(out.path(), 3), vec![Device::flex()], false).unwrap();
+    let before = weights(&trainer);
+    let mut sample = trainer.sample(0).unwrap();
+    sample.targets[0].image.data[5] = f32::NAN;
+    let record = trainer.train_step(&[sample], 1.0, false).unwrap();
+    assert_eq!(record["skipped"], "non-finite loss", "{record}");
+    assert_eq!(trainer.state().skipped_steps, 1);
+    assert_eq!(before, weights(&trainer));
+    // The next, finite step trains.
+    let sample = trainer.sample(1).unwrap();
+    let record = trainer.train_step(&[sample], 1.0, false).unwrap();
+    assert!(record["loss"].as_f64().unwrap().is_finite(), "{record}");
+    assert_ne!(before, weights(&trainer));
+}
+
+#[test]
+fn shipped_configurations_parse_and_validate() {
+    let dir = repo().join("configs");
+    let mut count = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "toml") {
+            TrainConfig::load(&path).unwrap_or_else(|e| panic!("{e}"));
+            count += 1;
+        }
+    }
+    assert!(count >= 1);
+    let bad = tempfile::NamedTempFile::new().unwrap();
+    std::fs::write(bad.path(), "[optim]\nlearning_rate = 1.0\n").unwrap();
+    let error = TrainConfig::load(bad.path()).unwrap_err().to_string();
+    assert!(error.contains("learning_rate"), "{error}");
+}
