@@ -126,14 +126,7 @@ pub fn render_scene(inputs: &SceneInputs<'_>, size: ImageSize) -> Result<SceneRe
         depth: Tensor::cat(renders.iter().map(|r| r.depth.clone()).collect(), 0),
     };
 
-    let sky = inputs.sky;
-    let sky_gaussians = GaussianTensors {
-        means: sky.means.clone(),
-        quats_wxyz: sky.quats.clone(),
-        scales: sky.scales.clone(),
-        opacities: OpacityTensor::Shared(sky.opacities.clone()),
-        colors: sky.colors.clone(),
-    };
+    let sky_gaussians = inputs.sky.to_splat();
     let cameras = camera_tensors(inputs.cameras, size, &device);
     let sky_raw = render(&sky_gaussians, &cameras, &settings).map_err(|e| format!("rendering the sky: {e}"))?.colors;
     // Inference only: one min and max over every frame and channel.

@@ -7,7 +7,7 @@
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_geom::{CameraFromWorld, ImageSize, PinholeIntrinsics, PosedCamera};
 use dggt_model::sky::SkyGaussians;
-use dggt_splat::{CameraTensors, GaussianTensors, OpacityTensor, RenderSettings, RenderTensors, render};
+use dggt_splat::{CameraTensors, RenderSettings, RenderTensors, render};
 
 use crate::assemble::{AssembledGaussians, AssemblyCounts, AssemblySettings, assemble};
 use crate::error::SceneError;
@@ -45,14 +45,7 @@ pub fn render_target(
     let RenderTensors { colors, alpha, depth } = foreground;
     let (rgb, sky) = match sky {
         Some(sky) => {
-            let sky_gaussians = GaussianTensors {
-                means: sky.means.clone(),
-                quats_wxyz: sky.quats.clone(),
-                scales: sky.scales.clone(),
-                opacities: OpacityTensor::Shared(sky.opacities.clone()),
-                colors: sky.colors.clone(),
-            };
-            let sky_rgb = render(&sky_gaussians, &cameras, &settings)
+            let sky_rgb = render(&sky.to_splat(), &cameras, &settings)
                 .map_err(|source| SceneError::Render { what: format!("the sky of {}", what()), source })?
                 .colors;
             let a = alpha.clone().unsqueeze_dim::<4>(3);
