@@ -169,7 +169,7 @@ impl Objective {
             }
         }
         if w.camera > 0.0 {
-            add("camera", w.camera, camera_loss(model_encodings(&forward), batch)?, &mut terms);
+            add("camera", w.camera, camera_loss(&forward.encodings, batch)?, &mut terms);
         }
         if w.depth > 0.0
             && let Some(loss) = depth_loss(&forward.depth, batch)?
@@ -241,10 +241,6 @@ impl Forward {
         };
         Ok(Self { pixels, sky, depth, dynamic_logit, encodings: out.camera.encodings.clone() })
     }
-}
-
-fn model_encodings(forward: &Forward) -> &[Tensor<3>] {
-    &forward.encodings
 }
 
 /// Decodes `[1, S, 9]` encodings to cameras (fields of view clamped to [`FOV_RANGE`]).
