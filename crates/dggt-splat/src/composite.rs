@@ -11,6 +11,7 @@
 //! by `1 - alpha` (at least 0.001), and sums per-footprint gradients over the tile's pixels in `f64`. Both
 //! passes evaluate alpha with the same function, so their skip decisions agree exactly.
 
+use crate::blocks::{BlockLists, Reach};
 use crate::gaussians::Gaussians;
 use crate::projection::Projection;
 use crate::tiles::{TileBins, TileGrid};
@@ -89,34 +90,38 @@ struct TileSplats {
     depths: Vec<f32>,
     /// `[n, K]`.
     colors: Vec<f32>,
+    /// Sigma beyond which each footprint is skipped (below the alpha threshold), tested before `exp`.
+    cutoffs: Vec<f32>,
+    /// Which footprints can reach each block of the tile's pixels.
+    blocks: BlockLists,
 }
 
 impl TileSplats {
-    fn gather(scene: &ViewScene, ids: &[u32]) -> Self {
+    fn gather(scene: &ViewScene, tile: usize) -> Self {
+        let ids = scene.bins.tile(tile);
         let count = scene.gaussians.len();
         let channels = scene.gaussians.channels();
-        let mut splats = TileSplats {
-            means2d: Vec::with_capacity(ids.len()),
-            conics: Vec::with_capacity(ids.len()),
-            opacities: Vec::with_capacity(ids.len()),
-            depths: Vec::with_capacity(ids.len()),
-            colors: Vec::with_capacity(ids.len() * channels),
-        };
+        let mut means2d = Vec::with_capacity(ids.len());
+        let mut conics = Vec::with_capacity(ids.len());
+        let mut opacities = Vec::with_capacity(ids.len());
+        let mut depths = Vec::with_capacity(ids.len());
+        let mut colors = Vec::with_capacity(ids.len() * channels);
+        let mut reaches = Vec::with_capacity(ids.len());
         for &id in ids {
             let i = id as usize;
             let footprint =
                 scene.projection.footprint(scene.view * count + i).expect("tile lists hold only kept Gaussians");
-            splats.means2d.push(footprint.mean2d);
-            splats.conics.push(footprint.conic);
-            splats.depths.push(footprint.depth);
-            splats.opacities.push(scene.gaussians.opacity(scene.view, i));
-            splats.colors.extend_from_slice(scene.gaussians.color(i));
+            let opacity = scene.gaussians.opacity(scene.view, i);
+            means2d.push(footprint.mean2d);
+            conics.push(footprint.conic);
+            depths.push(footprint.depth);
+            opacities.push(opacity);
+            colors.extend_from_slice(scene.gaussians.color(i));
+            reaches.push(Reach::new(footprint.conic, opacity, ALPHA_THRESHOLD));
         }
-        splats
-    }
-
-    fn len(&self) -> usize {
-        self.opacities.len()
+        let blocks = BlockLists::build(scene.grid.pixel_rect(tile), &means2d, &reaches);
+        let cutoffs = reaches.iter().map(|r| r.cutoff).collect();
+        TileSplats { means2d, conics, opacities, depths, colors, cutoffs, blocks }
     }
 
     /// Alpha of footprint `j` at pixel centre `(px, py)`, or `None` if it is skipped there.
@@ -125,6 +130,9 @@ impl TileSplats {
         let [a, b, c] = self.conics[j];
         let (dx, dy) = (mx - px, my - py);
         let sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy;
+        if sigma > self.cutoffs[j] {
+            return None;
+        }
         let falloff = (-sigma).exp();
         let raw = self.opacities[j] * falloff;
         let alpha = raw.min(MAX_ALPHA);
@@ -143,7 +151,7 @@ pub(crate) fn composite_band(scene: &ViewScene, tile_row: usize, out: BandOutput
     let row0 = tile_row * grid.tile_size;
     let mut accumulated = vec![0.0f32; channels];
     for tile in tile_row * grid.tiles_x..(tile_row + 1) * grid.tiles_x {
-        let splats = TileSplats::gather(scene, scene.bins.tile(tile));
+        let splats = TileSplats::gather(scene, tile);
         let [x0, x1, y0, y1] = grid.pixel_rect(tile);
         for y in y0..y1 {
             for x in x0..x1 {
@@ -153,7 +161,8 @@ pub(crate) fn composite_band(scene: &ViewScene, tile_row: usize, out: BandOutput
                 let mut depth = 0.0f32;
                 let mut transmittance = 1.0f32;
                 let mut end = 0usize;
-                for j in 0..splats.len() {
+                for &j in splats.blocks.at(x, y) {
+                    let j = j as usize;
                     let Some(coverage) = splats.coverage(j, px, py) else { continue };
                     let next = transmittance * (1.0 - coverage.alpha);
                     if next <= MIN_TRANSMITTANCE {
@@ -195,7 +204,7 @@ pub(crate) fn composite_tile_backward(
     let grid = &scene.grid;
     let channels = scene.gaussians.channels();
     let stride = grad_stride(channels);
-    let splats = TileSplats::gather(scene, scene.bins.tile(tile));
+    let splats = TileSplats::gather(scene, tile);
     let mut grad_color = vec![0.0f64; channels];
     let mut behind = vec![0.0f64; channels];
     let [x0, x1, y0, y1] = grid.pixel_rect(tile);
@@ -230,7 +239,10 @@ pub(crate) fn composite_tile_backward(
             let mut transmittance = final_transmittance;
             behind.fill(0.0);
             let mut depth_behind = 0.0f64;
-            for j in (0..end).rev() {
+            let reaching = splats.blocks.at(x, y);
+            let listed = reaching.partition_point(|&j| (j as usize) < end);
+            for &j in reaching[..listed].iter().rev() {
+                let j = j as usize;
                 let Some(coverage) = splats.coverage(j, px, py) else { continue };
                 let alpha = coverage.alpha as f64;
                 let remaining = 1.0 - alpha;
@@ -274,12 +286,15 @@ mod tests {
     use super::*;
 
     fn single(conic: [f32; 3], opacity: f32) -> TileSplats {
+        let reach = Reach::new(conic, opacity, ALPHA_THRESHOLD);
         TileSplats {
             means2d: vec![[0.0, 0.0]],
             conics: vec![conic],
             opacities: vec![opacity],
             depths: vec![1.0],
             colors: vec![1.0],
+            cutoffs: vec![reach.cutoff],
+            blocks: BlockLists::build([0, 16, 0, 16], &[[0.0, 0.0]], &[reach]),
         }
     }
 

@@ -25,6 +25,7 @@
 //! lengths, invalid cameras or settings, and non-finite image gradients are a [`SplatError`].
 
 mod backward;
+mod blocks;
 mod composite;
 mod covariance;
 mod cull;
