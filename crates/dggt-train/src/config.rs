@@ -48,7 +48,8 @@ pub struct DataSection {
     /// Log frames `[start, end)` to use; all when absent.
     pub frames: Option<[usize; 2]>,
     pub preprocess: Preprocess,
-    /// Held-out validation: frames rendered between fixed inputs, never drawn as training targets.
+    /// Validation: target frames rendered between fixed input frames and scored. The sampler may also draw
+    /// these frames in training (an overfit check); validate on another scene to measure generalisation.
     pub validation: ValidationSection,
     /// Decoding threads.
     pub workers: usize,
