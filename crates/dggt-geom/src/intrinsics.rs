@@ -40,6 +40,7 @@ impl std::fmt::Display for ImageSize {
 /// `(column, row)` instead ([`PixelConvention::Integer`]); its weights were trained that way, so the network
 /// code uses that convention explicitly.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum PixelConvention {
     /// Pixel `(c, r)` is at `(c, r)`: the release's depth unprojection.
     Integer,

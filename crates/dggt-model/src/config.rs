@@ -5,6 +5,7 @@
 
 use std::path::Path;
 
+use dggt_geom::PixelConvention;
 use serde::{Deserialize, Serialize};
 
 use crate::error::ModelError;
@@ -172,6 +173,15 @@ pub struct GaussianHeadConfig {
     /// trained from scratch starts from the observed colours. Off in the release (its checkpoints assume so).
     #[serde(default)]
     pub color_skip: bool,
+    /// Where each pixel's Gaussian mean is unprojected from its depth: at integer pixel coordinates, as the
+    /// release does (its weights assume it; a Gaussian then lands half a pixel off its pixel's centre in its
+    /// own view), or at pixel centres, where the rasteriser samples (for models trained from scratch).
+    #[serde(default = "release_unprojection")]
+    pub unproject_at: PixelConvention,
+}
+
+fn release_unprojection() -> PixelConvention {
+    PixelConvention::Integer
 }
 
 /// The sky model: `resolution^2` Gaussians on a hemisphere of `radius` (the points themselves are checkpoint
@@ -270,7 +280,12 @@ impl ModelConfig {
             activation: HeadActivation::Linear,
             conf_activation: HeadActivation::Expp1,
         };
-        self.gs_head = Some(GaussianHeadConfig { dim_in: 3 * c, output_dim: 12, color_skip: false });
+        self.gs_head = Some(GaussianHeadConfig {
+            dim_in: 3 * c,
+            output_dim: 12,
+            color_skip: false,
+            unproject_at: release_unprojection(),
+        });
         self.instance_head = Some(dino_head(2));
         self.semantic_head = Some(dino_head(11));
         self.sky_model = Some(SkyConfig { resolution: sky_resolution, radius: 50.0 });

@@ -44,4 +44,4 @@ pub mod weights;
 
 pub use config::ModelConfig;
 pub use error::ModelError;
-pub use model::{Dggt, DggtOutput, GaussianOutput};
+pub use model::{Dggt, DggtOutput, ExtraHeads, GaussianOutput};

@@ -10,6 +10,7 @@ use std::path::Path;
 
 use burn::module::Module;
 use burn::tensor::{Device, Tensor};
+use dggt_geom::PixelConvention;
 
 use crate::aggregator::{Aggregator, AggregatorOutput};
 use crate::camera_head::{CameraHead, CameraHeadOutput};
@@ -35,6 +36,9 @@ pub struct Dggt {
     /// See [`GaussianHeadConfig::color_skip`](crate::config::GaussianHeadConfig::color_skip).
     #[module(skip)]
     pub color_skip: bool,
+    /// See [`GaussianHeadConfig::unproject_at`](crate::config::GaussianHeadConfig::unproject_at).
+    #[module(skip)]
+    pub unproject_at: PixelConvention,
 }
 
 /// Input colours are clamped to `[COLOR_SKIP_EPS, 1 - COLOR_SKIP_EPS]` before the logit.
@@ -54,13 +58,31 @@ pub struct DggtOutput {
     pub camera: CameraHeadOutput,
     /// Depth `[B, S, H, W, 1]` and its confidence.
     pub depth: DptPrediction,
-    /// World points `[B, S, H, W, 3]` and their confidence (VGGT's point head; DGGT does not use it).
-    pub points: DptPrediction,
+    /// World points `[B, S, H, W, 3]` and their confidence (VGGT's point head; DGGT does not use it); `None`
+    /// when not requested.
+    pub points: Option<DptPrediction>,
     pub gaussians: Option<GaussianOutput>,
     /// Channel 0 of the prediction is the dynamic logit.
     pub instance: Option<DptPrediction>,
-    /// Semantic logits (channels `0..C-1`); DGGT computes but does not use them.
+    /// Semantic logits (channels `0..C-1`); DGGT computes but does not use them. `None` when not requested.
     pub semantic: Option<DptPrediction>,
+}
+
+/// Which of the heads nothing downstream of DGGT reads a forward pass computes: each is a full-resolution DPT
+/// head, so training and reconstruction skip them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ExtraHeads {
+    /// VGGT's world-point head.
+    pub points: bool,
+    /// The semantic head.
+    pub semantic: bool,
+}
+
+impl ExtraHeads {
+    /// Every head the network has (as the release's forward computes).
+    pub const ALL: Self = Self { points: true, semantic: true };
+    /// Only what rendering and the DGGT losses read: cameras, depth, Gaussians, dynamic logits.
+    pub const NONE: Self = Self { points: false, semantic: false };
 }
 
 impl Dggt {
@@ -85,6 +107,7 @@ impl Dggt {
             semantic_head: config.semantic_head.as_ref().map(|head| DptHead::new(&config.dpt, head, device)),
             sky_model: config.sky_model.as_ref().map(|sky| SkyModel::new(sky, device)),
             color_skip: config.gs_head.as_ref().is_some_and(|gs| gs.color_skip),
+            unproject_at: config.gs_head.as_ref().map_or(PixelConvention::Integer, |gs| gs.unproject_at),
         })
     }
 
@@ -113,8 +136,13 @@ impl Dggt {
         Ok((model, report))
     }
 
-    /// `images`: `[B, S, 3, H, W]` RGB in `[0, 1]`.
+    /// `images`: `[B, S, 3, H, W]` RGB in `[0, 1]`. Every head runs.
     pub fn forward(&self, images: Tensor<5>) -> Result<DggtOutput, ModelError> {
+        self.forward_with(images, ExtraHeads::ALL)
+    }
+
+    /// [`Dggt::forward`] running the point and semantic heads only where `extra` asks.
+    pub fn forward_with(&self, images: Tensor<5>, extra: ExtraHeads) -> Result<DggtOutput, ModelError> {
         let color_logit = self.color_skip.then(|| {
             // [B, S, 3, H, W] -> [B, S, H, W, 3] logits.
             let p = images.clone().permute([0, 1, 3, 4, 2]).clamp(COLOR_SKIP_EPS, 1.0 - COLOR_SKIP_EPS);
@@ -127,7 +155,7 @@ impl Dggt {
         let dino_tokens = |i: usize| aggregator.dino_token_list[i].clone();
         let (start, grid) = (aggregator.patch_start_idx, aggregator.grid);
         let depth = self.depth_head.predict(frame_global, start, grid);
-        let points = self.point_head.predict(frame_global, start, grid);
+        let points = extra.points.then(|| self.point_head.predict(frame_global, start, grid));
         let gaussians = self.gs_head.as_ref().map(|head| {
             let dpt = head.forward(|i| aggregator.output_with_dino_tokens(i), start, grid);
             let raw = match &color_logit {
@@ -141,7 +169,8 @@ impl Dggt {
             GaussianOutput { maps: GaussianMaps::from_raw(raw), dpt }
         });
         let instance = self.instance_head.as_ref().map(|head| head.predict(dino_tokens, start, grid));
-        let semantic = self.semantic_head.as_ref().map(|head| head.predict(dino_tokens, start, grid));
+        let semantic =
+            self.semantic_head.as_ref().filter(|_| extra.semantic).map(|head| head.predict(dino_tokens, start, grid));
         Ok(DggtOutput { aggregator, camera, depth, points, gaussians, instance, semantic })
     }
 }

@@ -393,8 +393,8 @@ const OUTPUTS: &[(&str, Rule)] = &[
     // Depth and point heads.
     ("depth", Rule::Compare(|p, _| Ok(dense(p.out.depth.prediction.clone())))),
     ("depth_conf", Rule::Compare(|p, _| Ok(dense(p.out.depth.confidence.clone())))),
-    ("world_points", Rule::Compare(|p, _| Ok(dense(p.out.points.prediction.clone())))),
-    ("world_points_conf", Rule::Compare(|p, _| Ok(dense(p.out.points.confidence.clone())))),
+    ("world_points", Rule::Compare(|p, _| Ok(dense(p.points()?.prediction.clone())))),
+    ("world_points_conf", Rule::Compare(|p, _| Ok(dense(p.points()?.confidence.clone())))),
     // Gaussian head.
     ("gs_map", Rule::Compare(|p, _| Ok(dense(p.gaussians()?.maps.gs_map())))),
     (
@@ -695,7 +695,7 @@ impl<'a> Prediction<'a> {
     fn dpt(&self, head: &str) -> Result<&DptOutput, String> {
         match head {
             "depth_head" => Ok(&self.out.depth.dpt),
-            "point_head" => Ok(&self.out.points.dpt),
+            "point_head" => Ok(&self.points()?.dpt),
             "gs_head" => Ok(&self.gaussians()?.dpt),
             "instance_head" => Ok(&self.instance()?.dpt),
             "semantic_head" => Ok(&self.semantic()?.dpt),
@@ -709,6 +709,10 @@ impl<'a> Prediction<'a> {
 
     fn instance(&self) -> Result<&DptPrediction, String> {
         self.out.instance.as_ref().ok_or_else(|| "the network has no instance_head".into())
+    }
+
+    fn points(&self) -> Result<&DptPrediction, String> {
+        self.out.points.as_ref().ok_or_else(|| "the forward pass did not run the point_head".into())
     }
 
     fn semantic(&self) -> Result<&DptPrediction, String> {

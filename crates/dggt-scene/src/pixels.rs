@@ -1,8 +1,8 @@
 //! The per-pixel Gaussians of one forward pass, flattened view-major (Gaussian `v · H · W + row · W + col` is
 //! pixel `(col, row)` of input view `v`), with the camera and time of the view each came from.
 //!
-//! Means are the predicted depth unprojected at integer pixel coordinates (the release's convention) with the
-//! views' cameras: `X_world = c + d · Rᵀ K⁻¹ (u, v, 1)`, `c` the camera centre. The cameras are constants; the
+//! Means are the predicted depth unprojected at the pixel coordinates the model was trained with (integer ones
+//! for the release's weights, pixel centres for models trained here; [`PixelConvention`]) with the views' cameras: `X_world = c + d · Rᵀ K⁻¹ (u, v, 1)`, `c` the camera centre. The cameras are constants; the
 //! depth carries gradients unless [`MeansGradient::Detached`] (the release detaches the means). Host copies of
 //! the means and of each Gaussian's largest scale are kept for culling.
 
@@ -58,6 +58,7 @@ impl PixelGaussians {
         dynamic_logit: Option<Tensor<4>>,
         views: Vec<InputView>,
         means_gradient: MeansGradient,
+        unproject_at: PixelConvention,
     ) -> Result<Self, SceneError> {
         let [batch, frames, height, width] = maps.opacity.dims();
         if batch != 1 || frames != views.len() {
@@ -88,17 +89,14 @@ impl PixelGaussians {
 
         let host_depth = host_values(depth.clone(), "depth")?;
         if let Some(i) = host_depth.iter().position(|d| !d.is_finite()) {
-            return Err(SceneError::Invalid {
-                what: "depth",
-                detail: format!(
-                    "non-finite value {} at view {}, pixel {}",
-                    host_depth[i],
-                    i / (height * width),
-                    i % (height * width)
-                ),
+            return Err(SceneError::NonFinite {
+                tensor: "depth",
+                value: host_depth[i],
+                view: i / (height * width),
+                pixel: i % (height * width),
             });
         }
-        let rays = Rays::new(&views, size);
+        let rays = Rays::new(&views, size, unproject_at);
         let host_means: Vec<[f32; 3]> = (0..count)
             .map(|i| {
                 let point = rays.centre(i) + rays.direction(i) * host_depth[i] as f64;
@@ -156,7 +154,7 @@ struct Rays {
 }
 
 impl Rays {
-    fn new(views: &[InputView], size: ImageSize) -> Self {
+    fn new(views: &[InputView], size: ImageSize, convention: PixelConvention) -> Self {
         let per_view = size.area();
         let mut directions = Vec::with_capacity(views.len() * per_view);
         let centres = views.iter().map(|v| v.camera.world_from_camera.translation()).collect();
@@ -164,7 +162,7 @@ impl Rays {
             let pose = &view.camera.world_from_camera;
             for row in 0..size.height {
                 for column in 0..size.width {
-                    let pixel = PixelConvention::Integer.coordinates(column, row);
+                    let pixel = convention.coordinates(column, row);
                     directions.push(pose.transform_vector(view.camera.intrinsics.unproject(pixel, 1.0)));
                 }
             }

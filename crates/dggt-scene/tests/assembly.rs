@@ -3,7 +3,7 @@
 
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_geom::glam::{DQuat, DVec3};
-use dggt_geom::{PinholeIntrinsics, PosedCamera, WorldFromCamera};
+use dggt_geom::{PinholeIntrinsics, PixelConvention, PosedCamera, WorldFromCamera};
 use dggt_model::gaussian_maps::GaussianMaps;
 use dggt_scene::{
     AssemblySettings, InputView, MeansGradient, PixelGaussians, TargetView, assemble, interpolate_camera, render_target,
@@ -78,9 +78,15 @@ fn culling_keeps_the_render_and_drops_what_cannot_show() {
     let device = Device::flex();
     // Lifespan raw 4 -> gamma 0.25: frames 0.5 apart fade to a tenth or less.
     let maps = GaussianMaps::from_raw(raw_maps(&device, 4.0));
-    let pixels =
-        PixelGaussians::new(&maps, depth(&device), Some(logits(&device, -3.0)), views(), MeansGradient::Detached)
-            .unwrap();
+    let pixels = PixelGaussians::new(
+        &maps,
+        depth(&device),
+        Some(logits(&device, -3.0)),
+        views(),
+        MeansGradient::Detached,
+        PixelConvention::Integer,
+    )
+    .unwrap();
     // Turned away from the last views: some Gaussians fall off screen.
     let target = TargetView { rig_camera: 0, time: 0.2, camera: camera(0.1, 0.5) };
     let culled = render_target(&pixels, None, &target, &AssemblySettings::default()).unwrap();
@@ -99,15 +105,23 @@ fn dynamic_gaussians_come_from_the_nearest_view_only() {
     let device = Device::flex();
     let maps = GaussianMaps::from_raw(raw_maps(&device, 0.0));
     // Everything dynamic: only the nearest view's Gaussians survive (static opacity ~ 0).
-    let pixels =
-        PixelGaussians::new(&maps, depth(&device), Some(logits(&device, 12.0)), views(), MeansGradient::Detached)
-            .unwrap();
+    let pixels = PixelGaussians::new(
+        &maps,
+        depth(&device),
+        Some(logits(&device, 12.0)),
+        views(),
+        MeansGradient::Detached,
+        PixelConvention::Integer,
+    )
+    .unwrap();
     let target = TargetView { rig_camera: 0, time: 0.9, camera: interpolate_camera(&pixels.views, 0, 0.9).unwrap() };
     let assembled = assemble(&pixels, &target, &AssemblySettings::default()).unwrap();
     assert_eq!(assembled.counts.static_kept, 0, "{:?}", assembled.counts);
     assert!(assembled.counts.dynamic_kept > H * W / 2, "{:?}", assembled.counts);
     // Without a dynamic head everything is static and long-lived (raw lifespan <= 0 -> gamma 1e6).
-    let pixels = PixelGaussians::new(&maps, depth(&device), None, views(), MeansGradient::Detached).unwrap();
+    let pixels =
+        PixelGaussians::new(&maps, depth(&device), None, views(), MeansGradient::Detached, PixelConvention::Integer)
+            .unwrap();
     let assembled = assemble(&pixels, &target, &AssemblySettings::default()).unwrap();
     assert_eq!(assembled.counts.dynamic_kept, 0);
     assert!(assembled.counts.static_kept > S * H * W / 2, "{:?}", assembled.counts);
@@ -120,7 +134,15 @@ fn gradients_reach_the_maps_and_the_depth_only_when_asked() {
         let raw = raw_maps(&device, 1.0).require_grad();
         let depth = depth(&device).require_grad();
         let maps = GaussianMaps::from_raw(raw.clone());
-        let pixels = PixelGaussians::new(&maps, depth.clone(), Some(logits(&device, -1.0)), views(), mode).unwrap();
+        let pixels = PixelGaussians::new(
+            &maps,
+            depth.clone(),
+            Some(logits(&device, -1.0)),
+            views(),
+            mode,
+            PixelConvention::Integer,
+        )
+        .unwrap();
         let target =
             TargetView { rig_camera: 0, time: 0.25, camera: interpolate_camera(&pixels.views, 0, 0.25).unwrap() };
         let view = render_target(&pixels, None, &target, &AssemblySettings::default()).unwrap();
@@ -146,10 +168,16 @@ fn bad_inputs_are_errors() {
     let device = Device::flex();
     let maps = GaussianMaps::from_raw(raw_maps(&device, 1.0));
     let short = views()[..2].to_vec();
-    assert!(PixelGaussians::new(&maps, depth(&device), None, short, MeansGradient::Detached).is_err());
+    assert!(
+        PixelGaussians::new(&maps, depth(&device), None, short, MeansGradient::Detached, PixelConvention::Integer)
+            .is_err()
+    );
     let nan = Tensor::<4>::full([1, S, H, W], f32::NAN, &device);
-    let error = PixelGaussians::new(&maps, nan, None, views(), MeansGradient::Detached).unwrap_err();
+    let error =
+        PixelGaussians::new(&maps, nan, None, views(), MeansGradient::Detached, PixelConvention::Integer).unwrap_err();
     assert!(error.to_string().contains("depth"), "{error}");
     let wrong = Tensor::<4>::zeros([1, S, H, W + 1], &device);
-    assert!(PixelGaussians::new(&maps, wrong, None, views(), MeansGradient::Detached).is_err());
+    assert!(
+        PixelGaussians::new(&maps, wrong, None, views(), MeansGradient::Detached, PixelConvention::Integer).is_err()
+    );
 }

@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use dggt_data::{Preprocess, SamplerConfig};
+use dggt_geom::PixelConvention;
 use serde::{Deserialize, Serialize};
 
 use crate::error::TrainError;
@@ -31,11 +32,14 @@ pub struct ModelSection {
     pub init_checkpoint: Option<PathBuf>,
     /// Turn on the Gaussian head's colour skip (`GaussianHeadConfig::color_skip`; off in the release).
     pub color_skip: bool,
+    /// Where Gaussian means are unprojected (`GaussianHeadConfig::unproject_at`): `integer` (the release's
+    /// convention, required by its weights) or `centred` (pixel centres, for training from scratch).
+    pub unproject_at: PixelConvention,
 }
 
 impl Default for ModelSection {
     fn default() -> Self {
-        Self { preset: "tiny".into(), init_checkpoint: None, color_skip: false }
+        Self { preset: "tiny".into(), init_checkpoint: None, color_skip: false, unproject_at: PixelConvention::Integer }
     }
 }
 
@@ -226,7 +230,8 @@ pub struct RunSection {
     pub checkpoint_every: u64,
     /// Checkpoints kept on disk (oldest removed first).
     pub keep_checkpoints: usize,
-    /// Validate every this many steps (and at the end); 0 only at the end.
+    /// Validate every this many steps (and at the end); 0 only at the end. Each pass writes its renders to
+    /// `out_dir/validation/step-N/`.
     pub validate_every: u64,
     /// Stop when this many seconds have passed (after the step that crosses it), checkpointing first.
     pub time_limit_s: Option<f64>,

@@ -16,7 +16,7 @@ use std::collections::BTreeMap;
 use burn::tensor::{Int, Tensor, TensorData};
 use dggt_geom::{PoseEncoding, PosedCamera};
 use dggt_losses::{GramLoss, Lpips, LpipsKind, bce_with_logits, l2, lifespan_l1, opacity_loss, psnr};
-use dggt_model::Dggt;
+use dggt_model::{Dggt, ExtraHeads};
 use dggt_scene::{
     AssemblyCounts, AssemblySettings, InputView, MeansGradient, PixelGaussians, TargetView, interpolate_camera,
     render_target,
@@ -208,7 +208,7 @@ pub struct Forward {
 
 impl Forward {
     pub fn run(model: &Dggt, batch: &StepBatch, render: &RenderSection) -> Result<Self, TrainError> {
-        let out = model.forward(batch.images.clone())?;
+        let out = model.forward_with(batch.images.clone(), ExtraHeads::NONE)?;
         let gaussians = out.gaussians.as_ref().ok_or_else(|| TrainError::Invalid {
             what: "model".into(),
             detail: "the configuration has no Gaussian head (gs_head); it cannot be trained to render".into(),
@@ -229,7 +229,14 @@ impl Forward {
             MeansGradientSetting::Detached => MeansGradient::Detached,
             MeansGradientSetting::Through => MeansGradient::Through,
         };
-        let pixels = PixelGaussians::new(&gaussians.maps, depth.clone(), dynamic_logit.clone(), views, means_gradient)?;
+        let pixels = PixelGaussians::new(
+            &gaussians.maps,
+            depth.clone(),
+            dynamic_logit.clone(),
+            views,
+            means_gradient,
+            model.unproject_at,
+        )?;
         let sky = match (&model.sky_model, render.sky) {
             (Some(sky_model), true) => {
                 let [_, s, c, h, w] = batch.images.dims();

@@ -3,8 +3,8 @@
 //! Each optimiser step draws `accumulation` samples (sample `k = step · accumulation + j`, a pure function of
 //! the seed), computes each sample's loss and gradients, sums them (spread over the configured devices, one
 //! thread each), clips the global norm, and steps AdamW per parameter group at the scheduled rate. A sample with
-//! a non-finite loss, or a step with a non-finite gradient norm, is skipped with a warning and leaves the
-//! weights untouched. Metrics go to `metrics.jsonl`, checkpoints to `checkpoints/` (see [`checkpoint`]).
+//! a non-finite loss or network output (a depth that overflowed, say), or a step with a non-finite gradient
+//! norm, is skipped with a warning and leaves the weights untouched. Metrics go to `metrics.jsonl`, checkpoints to `checkpoints/` (see [`checkpoint`]).
 //!
 //! [`checkpoint`]: crate::checkpoint
 
@@ -14,13 +14,14 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
-use burn::module::Module;
+use burn::module::{Module, ModuleVisitor, Param};
 use burn::optim::{GradientsAccumulator, GradientsParams};
-use burn::tensor::Device;
+use burn::tensor::{Device, Tensor};
 use dggt_data::{LoadedSample, LoaderOptions, Prefetcher, Sampler, Scene, TrainingSample, open_scene, training_stream};
 use dggt_model::sky::SkyModel;
 use dggt_model::weights::{Coverage, load_checkpoint_with};
 use dggt_model::{Dggt, ModelConfig};
+use dggt_scene::SceneError;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde_json::json;
 
@@ -49,6 +50,7 @@ pub fn model_config(preset: &str) -> Result<ModelConfig, TrainError> {
 /// A fresh network: random layers, the sky model's fixed buffers, then the starting checkpoint when given.
 pub fn fresh_model(config: &ModelConfig, init: Option<&Path>, device: &Device) -> Result<Dggt, TrainError> {
     let mut model = Dggt::new(config, device)?;
+    materialise(&model);
     if let Some(sky) = &config.sky_model {
         model.sky_model = Some(SkyModel::initialised(sky, device));
     }
@@ -63,6 +65,19 @@ pub fn fresh_model(config: &ModelConfig, init: Option<&Path>, device: &Device) -
         );
     }
     Ok(model)
+}
+
+/// Initialises every lazily created parameter now, in visiting order, so that the starting weights depend on
+/// the seed alone and not on which thread or operation first reads a parameter (data-parallel threads would
+/// otherwise draw them in a racy order).
+fn materialise(model: &Dggt) {
+    struct Touch;
+    impl ModuleVisitor for Touch {
+        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+            let _ = param.val();
+        }
+    }
+    model.visit(&mut Touch);
 }
 
 /// How a run ended.
@@ -142,6 +157,7 @@ impl Trainer {
                 let mut model_config = model_config(&config.model.preset)?;
                 if let Some(gs) = &mut model_config.gs_head {
                     gs.color_skip = config.model.color_skip;
+                    gs.unproject_at = config.model.unproject_at;
                 }
                 let model = fresh_model(&model_config, config.model.init_checkpoint.as_deref(), &device)?;
                 let model = freeze(model, &config.optim.frozen)?;
@@ -199,10 +215,15 @@ impl Trainer {
 
     /// Scores the current weights on the validation frames.
     pub fn validate(&self) -> Result<Option<Validation>, TrainError> {
+        self.validate_into(None)
+    }
+
+    /// [`Trainer::validate`], writing each target's render, truth and difference as a PNG into `save_to`.
+    pub fn validate_into(&self, save_to: Option<&Path>) -> Result<Option<Validation>, TrainError> {
         let Some(sample) = self.validation() else { return Ok(None) };
         let model = self.model.clone().valid().fork(&self.plain_device);
         let preprocess = &self.config.data.preprocess;
-        validate(&model, &self.objective, &self.scene, preprocess, &sample, &self.plain_device).map(Some)
+        validate(&model, &self.objective, &self.scene, preprocess, &sample, &self.plain_device, save_to).map(Some)
     }
 
     /// The sample drawn for sample index `index` (`step · accumulation + j`), decoded.
@@ -281,7 +302,8 @@ impl Trainer {
             let done = self.state.step >= last_step
                 || run.time_limit_s.is_some_and(|limit| started.elapsed().as_secs_f64() >= limit);
             if (run.validate_every > 0 && self.state.step % run.validate_every == 0) || done {
-                if let Some(validation) = self.validate()? {
+                let renders = run.out_dir.join("validation").join(format!("step-{:08}", self.state.step));
+                if let Some(validation) = self.validate_into(Some(&renders))? {
                     tracing::info!(
                         step = self.state.step,
                         psnr = validation.psnr,
@@ -423,7 +445,13 @@ impl Trainer {
                 let started = Instant::now();
                 let batch = StepBatch::new(sample, &self.scene, &self.config.data.preprocess, with_depth, device)?;
                 let prepared = Instant::now();
-                let loss = self.objective.loss(model, &batch)?;
+                let loss = match self.objective.loss(model, &batch) {
+                    Err(TrainError::Scene(error @ SceneError::NonFinite { .. })) => {
+                        tracing::warn!(step = sample.step, %error, "non-finite network output");
+                        return Ok(SampleResult::non_finite());
+                    }
+                    other => other?,
+                };
                 let evaluated = Instant::now();
                 let value = loss.terms.iter().fold(0.0, |sum, (name, v)| sum + v * weight(&self.config.loss, name));
                 let grads = if value.is_finite() {
@@ -458,6 +486,20 @@ struct SampleResult {
     target_psnr: f64,
     kept: usize,
     stages: [(&'static str, f64); 3],
+}
+
+impl SampleResult {
+    /// A sample whose network outputs were not finite: no gradients, so the step is skipped.
+    fn non_finite() -> Self {
+        Self {
+            grads: None,
+            loss: f64::NAN,
+            terms: Default::default(),
+            target_psnr: f64::NAN,
+            kept: 0,
+            stages: [("batch", 0.0), ("forward_and_render", 0.0), ("backward", 0.0)],
+        }
+    }
 }
 
 struct StepOutcome {

@@ -1,6 +1,7 @@
 //! The trainer end to end on the bundled fixture (CPU): a few dozen steps reduce the loss and raise the target
 //! PSNR; a run interrupted and resumed ends with the same weights as the uninterrupted one; a non-finite loss
-//! skips the step and leaves the weights untouched; the shipped configurations parse and validate.
+//! skips the step and leaves the weights untouched; two devices sharing the accumulated samples train like
+//! one; the shipped configurations parse and validate.
 
 use std::path::{Path, PathBuf};
 
@@ -93,6 +94,13 @@ fn a_non_finite_loss_skips_the_step_and_keeps_the_weights() {
     assert_eq!(record["skipped"], "non-finite loss", "{record}");
     assert_eq!(trainer.state().skipped_steps, 1);
     assert_eq!(before, weights(&trainer));
+    // A non-finite input makes every network output non-finite: also a skip, not an error that ends the run.
+    let mut sample = trainer.sample(1).unwrap();
+    sample.inputs[0].image.data[7] = f32::INFINITY;
+    let record = trainer.train_step(&[sample], 1.0, false).unwrap();
+    assert_eq!(record["skipped"], "non-finite loss", "{record}");
+    assert_eq!(trainer.state().skipped_steps, 2);
+    assert_eq!(before, weights(&trainer));
     // The next, finite step trains.
     let sample = trainer.sample(1).unwrap();
     let record = trainer.train_step(&[sample], 1.0, false).unwrap();
@@ -116,4 +124,28 @@ fn shipped_configurations_parse_and_validate() {
     std::fs::write(bad.path(), "[optim]\nlearning_rate = 1.0\n").unwrap();
     let error = TrainConfig::load(bad.path()).unwrap_err().to_string();
     assert!(error.contains("learning_rate"), "{error}");
+}
+
+#[test]
+fn two_devices_train_like_one_with_the_same_accumulated_samples() {
+    let run = |devices: Vec<Device>| {
+        let out = tempfile::tempdir().unwrap();
+        let mut config = small_config(out.path(), 2);
+        config.optim.accumulation = 2;
+        let mut trainer = Trainer::new(config, devices, false).unwrap();
+        let summary = trainer.run(RunOptions::default()).unwrap();
+        assert_eq!((summary.steps_run, summary.skipped_steps), (2, 0));
+        weights(&trainer)
+    };
+    let single = run(vec![Device::flex()]);
+    let split = run(vec![Device::flex(), Device::flex()]);
+    assert_eq!(single.len(), split.len());
+    let initial = {
+        let out = tempfile::tempdir().unwrap();
+        weights(&Trainer::new(small_config(out.path(), 2), vec![Device::flex()], false).unwrap())
+    };
+    let moved = initial.iter().zip(&single).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+    let worst = single.iter().zip(&split).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+    assert!(moved > 1e-4, "the steps changed the weights by only {moved}");
+    assert!(worst <= 1e-6 * moved.max(1.0), "two devices differ from one by up to {worst} (steps moved {moved})");
 }
