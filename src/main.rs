@@ -84,6 +84,47 @@ enum Command {
         #[arg(long)]
         dry_run: bool,
     },
+    /// Reconstruct a driving scene from unposed images with one forward pass: cameras (JSON, COLMAP,
+    /// nerfstudio), depth, dynamic and sky maps, Gaussians as PLY (static, sky, dynamic per time) and renders.
+    Reconstruct {
+        /// A folder of images (one camera), a folder of per-camera image folders, or a scene export.
+        #[arg(long)]
+        images: PathBuf,
+        /// A trainer checkpoint folder (or run folder), or a release / VGGT `.pt` / `.safetensors` file.
+        #[arg(long)]
+        checkpoint: PathBuf,
+        /// Architecture of a `.pt` / `.safetensors` checkpoint: a model `config.json`, or a training `.toml`
+        /// (its model and preprocessing sections).
+        #[arg(long, conflicts_with = "preset")]
+        config: Option<PathBuf>,
+        /// Architecture preset of a `.pt` / `.safetensors` checkpoint: tiny, vggt_1b, dggt [default: dggt].
+        #[arg(long)]
+        preset: Option<String>,
+        /// Only these cameras (positions of the per-camera folders, or export camera ids).
+        #[arg(long, value_delimiter = ',')]
+        cameras: Option<Vec<usize>>,
+        /// Only these frames, as `START..END` (end exclusive).
+        #[arg(long, value_parser = parse_range)]
+        frames: Option<std::ops::Range<usize>>,
+        /// Render at these times (seconds since the first chosen frame) [default: the input frames' times].
+        #[arg(long, value_delimiter = ',', conflicts_with = "every")]
+        times: Option<Vec<f64>>,
+        /// Render K evenly spaced times per interval between input frames.
+        #[arg(long)]
+        every: Option<usize>,
+        /// Network input width, a multiple of 14 [default: the --config training file's, else 518].
+        #[arg(long)]
+        width: Option<u32>,
+        /// Frames per chunk of the dense heads (lower uses less memory).
+        #[arg(long, default_value_t = 4)]
+        chunk: usize,
+        /// Device: cpu, ndarray, wgpu[:N], cuda[:N].
+        #[arg(long, default_value = "cpu")]
+        device: String,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// List the compute backends of this build and check that each one computes.
     Devices {
         /// Check only this backend.
@@ -165,6 +206,16 @@ fn train(
     Ok(())
 }
 
+/// `dggt reconstruct`: runs the reconstruction with progress on stderr and prints its summary.
+fn reconstruct(options: dggt_reconstruct::ReconstructOptions, device: &str) -> Result<()> {
+    let device = backend::parse_device(device)?;
+    tracing::info!("reconstructing {} with {} on {device:?}", options.images.display(), options.checkpoint.display());
+    let summary = dggt_reconstruct::reconstruct(&options, &device)?;
+    println!("{summary}");
+    println!("outputs: {} (summary.json)", options.out.display());
+    Ok(())
+}
+
 /// `dggt parity`: prints the comparison table and a summary line; an error when any output fails.
 fn parity(dir: &std::path::Path, device: DeviceChoice, weights: Option<PathBuf>) -> Result<()> {
     let started = std::time::Instant::now();
@@ -221,6 +272,38 @@ fn main() -> Result<()> {
         Command::Parity { vectors, device, weights } => parity(&vectors, device, weights)?,
         Command::Train { config, resume, device, steps, out, dry_run } => {
             train(&config, resume, device, steps, out, dry_run)?
+        }
+        Command::Reconstruct {
+            images,
+            checkpoint,
+            config,
+            preset,
+            cameras,
+            frames,
+            times,
+            every,
+            width,
+            chunk,
+            device,
+            out,
+        } => {
+            let mut options = dggt_reconstruct::ReconstructOptions::new(images, checkpoint, out);
+            options.architecture = match (config, preset) {
+                (Some(path), _) => Some(dggt_reconstruct::Architecture::Config(path)),
+                (None, Some(name)) => Some(dggt_reconstruct::Architecture::Preset(name)),
+                (None, None) => None,
+            };
+            options.cameras = cameras;
+            options.frames = frames;
+            options.times = match (times, every) {
+                (Some(times), _) => dggt_reconstruct::TimeRequest::Seconds(times),
+                (None, Some(k)) => dggt_reconstruct::TimeRequest::Every(k),
+                (None, None) => dggt_reconstruct::TimeRequest::Inputs,
+            };
+            options.width = width;
+            options.chunk_frames = chunk;
+            options.progress = std::io::IsTerminal::is_terminal(&std::io::stderr());
+            reconstruct(options, &device)?
         }
         Command::Devices { device } => {
             let choices = device.map_or(DeviceChoice::ALL.to_vec(), |d| vec![d]);

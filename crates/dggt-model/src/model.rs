@@ -141,14 +141,22 @@ impl Dggt {
         self.forward_with(images, ExtraHeads::ALL)
     }
 
+    /// The Gaussian head's raw output `[B, S, H, W, C]` with the colour skip of `images` (`[B, S, 3, H, W]`, the
+    /// same frames) added to its colour channels; unchanged when the model has no colour skip.
+    pub fn apply_color_skip(&self, raw: Tensor<5>, images: Tensor<5>) -> Tensor<5> {
+        if !self.color_skip {
+            return raw;
+        }
+        // [B, S, 3, H, W] -> [B, S, H, W, 3] logits.
+        let p = images.permute([0, 1, 3, 4, 2]).clamp(COLOR_SKIP_EPS, 1.0 - COLOR_SKIP_EPS);
+        let logit = (p.clone() / p.neg().add_scalar(1.0)).log();
+        let channels = raw.dims()[4];
+        Tensor::cat(vec![raw.clone().narrow(4, 0, 3) + logit, raw.narrow(4, 3, channels - 3)], 4)
+    }
+
     /// [`Dggt::forward`] running the point and semantic heads only where `extra` asks.
     pub fn forward_with(&self, images: Tensor<5>, extra: ExtraHeads) -> Result<DggtOutput, ModelError> {
-        let color_logit = self.color_skip.then(|| {
-            // [B, S, 3, H, W] -> [B, S, H, W, 3] logits.
-            let p = images.clone().permute([0, 1, 3, 4, 2]).clamp(COLOR_SKIP_EPS, 1.0 - COLOR_SKIP_EPS);
-            (p.clone() / p.neg().add_scalar(1.0)).log()
-        });
-        let aggregator = self.aggregator.forward(images)?;
+        let aggregator = self.aggregator.forward(images.clone())?;
         let last = aggregator.output_list.last().expect("aggregator depth is at least one").clone();
         let camera = self.camera_head.forward(last);
         let frame_global = |i: usize| aggregator.output_list[i].clone();
@@ -158,14 +166,7 @@ impl Dggt {
         let points = extra.points.then(|| self.point_head.predict(frame_global, start, grid));
         let gaussians = self.gs_head.as_ref().map(|head| {
             let dpt = head.forward(|i| aggregator.output_with_dino_tokens(i), start, grid);
-            let raw = match &color_logit {
-                Some(logit) => {
-                    let rgb = dpt.raw.clone().narrow(4, 0, 3) + logit.clone();
-                    let channels = dpt.raw.dims()[4];
-                    Tensor::cat(vec![rgb, dpt.raw.clone().narrow(4, 3, channels - 3)], 4)
-                }
-                None => dpt.raw.clone(),
-            };
+            let raw = self.apply_color_skip(dpt.raw.clone(), images.clone());
             GaussianOutput { maps: GaussianMaps::from_raw(raw), dpt }
         });
         let instance = self.instance_head.as_ref().map(|head| head.predict(dino_tokens, start, grid));

@@ -301,7 +301,7 @@ impl Trainer {
 
             let done = self.state.step >= last_step
                 || run.time_limit_s.is_some_and(|limit| started.elapsed().as_secs_f64() >= limit);
-            if (run.validate_every > 0 && self.state.step % run.validate_every == 0) || done {
+            if (run.validate_every > 0 && self.state.step.is_multiple_of(run.validate_every)) || done {
                 let renders = run.out_dir.join("validation").join(format!("step-{:08}", self.state.step));
                 if let Some(validation) = self.validate_into(Some(&renders))? {
                     tracing::info!(
@@ -315,7 +315,7 @@ impl Trainer {
                     summary.validation = Some(validation);
                 }
             }
-            if self.state.step % run.checkpoint_every == 0 || done {
+            if self.state.step.is_multiple_of(run.checkpoint_every) || done {
                 let dir = checkpoint::save(
                     &checkpoints,
                     &self.model,

@@ -1,0 +1,27 @@
+//! Errors of writing and reading export files; each names the file.
+
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, thiserror::Error)]
+pub enum ExportError {
+    #[error("{}: {source}", path.display())]
+    Io { path: PathBuf, source: std::io::Error },
+    #[error("{}: expected {expected}, found {found}", path.display())]
+    Malformed { path: PathBuf, expected: String, found: String },
+    #[error("{}: {detail}", path.display())]
+    Invalid { path: PathBuf, detail: String },
+}
+
+impl ExportError {
+    pub(crate) fn io(path: &Path, source: std::io::Error) -> Self {
+        Self::Io { path: path.to_owned(), source }
+    }
+
+    pub(crate) fn malformed(path: &Path, expected: impl Into<String>, found: impl Into<String>) -> Self {
+        Self::Malformed { path: path.to_owned(), expected: expected.into(), found: found.into() }
+    }
+
+    pub(crate) fn invalid(path: &Path, detail: impl Into<String>) -> Self {
+        Self::Invalid { path: path.to_owned(), detail: detail.into() }
+    }
+}

@@ -1,0 +1,39 @@
+//! The files a reconstruction is delivered in, each written so that existing tools open it, and read back so
+//! that tests can check what was written.
+//!
+//! One module per format, each naming its conventions in its types and docs:
+//! - [`ply`]: Gaussians in the INRIA 3DGS binary PLY layout (pre-activation values, SH degree 0);
+//! - [`colmap`]: COLMAP text cameras (`PINHOLE`) and images (camera-from-world `qw qx qy qz tx ty tz`);
+//! - [`nerfstudio`]: `transforms.json` (camera-to-world in OpenGL axes);
+//! - [`cameras_json`]: this project's camera file, which states its convention inside;
+//! - [`depth`]: float32 `.npy` depth maps and 16-bit PNGs with their scale in a JSON beside them;
+//! - [`masks`]: 8-bit PNG probability maps and binary masks; [`images`]: RGB PNG frames.
+//!
+//! Every reader treats its file as untrusted and returns an [`ExportError`] naming it.
+
+pub mod cameras_json;
+pub mod colmap;
+pub mod depth;
+mod error;
+pub mod images;
+pub mod masks;
+pub mod nerfstudio;
+pub mod ply;
+
+pub use error::ExportError;
+
+/// Writes `bytes` to `path` through a temporary file in the same folder and a rename, creating the folder.
+pub(crate) fn write_file(path: &std::path::Path, bytes: &[u8]) -> Result<(), ExportError> {
+    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).map_err(|e| ExportError::io(parent, e))?;
+    }
+    let mut temporary = path.as_os_str().to_owned();
+    temporary.push(".partial");
+    let temporary = std::path::PathBuf::from(temporary);
+    std::fs::write(&temporary, bytes).map_err(|e| ExportError::io(&temporary, e))?;
+    std::fs::rename(&temporary, path).map_err(|e| ExportError::io(path, e))
+}
+
+pub(crate) fn read_file(path: &std::path::Path) -> Result<Vec<u8>, ExportError> {
+    std::fs::read(path).map_err(|e| ExportError::io(path, e))
+}

@@ -1,0 +1,35 @@
+//! Errors of a reconstruction; each names the file or setting at fault.
+
+use std::path::PathBuf;
+
+#[derive(Debug, thiserror::Error)]
+pub enum ReconstructError {
+    #[error("{}: {detail}", path.display())]
+    Input { path: PathBuf, detail: String },
+    #[error("checkpoint {}: {detail}", path.display())]
+    Checkpoint { path: PathBuf, detail: String },
+    #[error("{what}: {detail}")]
+    Invalid { what: String, detail: String },
+    #[error("{0}")]
+    Data(#[from] dggt_data::DataError),
+    #[error("{0}")]
+    Model(#[from] dggt_model::ModelError),
+    #[error("{0}")]
+    Scene(#[from] dggt_scene::SceneError),
+    #[error("{0}")]
+    Train(#[from] dggt_train::TrainError),
+    #[error("{0}")]
+    Export(#[from] dggt_export::ExportError),
+    #[error("{0}")]
+    Geom(#[from] dggt_geom::GeomError),
+}
+
+impl ReconstructError {
+    pub(crate) fn input(path: impl Into<PathBuf>, detail: impl Into<String>) -> Self {
+        Self::Input { path: path.into(), detail: detail.into() }
+    }
+
+    pub(crate) fn invalid(what: impl Into<String>, detail: impl Into<String>) -> Self {
+        Self::Invalid { what: what.into(), detail: detail.into() }
+    }
+}

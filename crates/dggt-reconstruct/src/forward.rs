@@ -1,0 +1,64 @@
+//! One forward pass with the DPT heads run a few frames at a time.
+//!
+//! The aggregator attends across all frames, so it runs once on the whole sequence; the dense heads work on
+//! each frame independently, so running them on chunks of frames gives the same maps as
+//! [`Dggt::forward`](dggt_model::Dggt::forward) while holding only one chunk's intermediate feature maps at a
+//! time. Only what the reconstruction reads is kept: camera encodings, depth, dynamic logits and the Gaussian
+//! maps. The point and semantic heads, unused by DGGT, are not run; the aggregator's tokens are dropped as soon
+//! as the heads are done.
+
+use burn::tensor::Tensor;
+use dggt_model::Dggt;
+use dggt_model::gaussian_maps::GaussianMaps;
+
+use crate::error::ReconstructError;
+
+/// The outputs a reconstruction uses, over `S` frames of `H x W`.
+#[derive(Debug, Clone)]
+pub struct Prediction {
+    /// `[1, S, 9]` the camera head's final encoding.
+    pub pose_encoding: Tensor<3>,
+    /// `[1, S, H, W]` depth.
+    pub depth: Tensor<4>,
+    /// `[1, S, H, W]` dynamic logits, when the model has an instance head.
+    pub dynamic_logit: Option<Tensor<4>>,
+    /// Activated Gaussian maps, when the model has a Gaussian head.
+    pub gaussians: Option<GaussianMaps>,
+}
+
+/// Runs `model` on `images` (`[1, S, 3, H, W]`, RGB in `[0, 1]`) with the dense heads on `chunk` frames at a
+/// time (at least one).
+pub fn forward_chunked(model: &Dggt, images: Tensor<5>, chunk: usize) -> Result<Prediction, ReconstructError> {
+    let [batch, frames, _, _, _] = images.dims();
+    if batch != 1 {
+        return Err(ReconstructError::invalid("images", format!("batch of {batch}, expected 1")));
+    }
+    let chunk = chunk.max(1);
+    let aggregator = model.aggregator.forward(images.clone())?;
+    let last = aggregator.output_list.last().expect("the aggregator has at least one layer").clone();
+    let pose_encoding = model.camera_head.forward(last).pose_encoding();
+    let (start, grid) = (aggregator.patch_start_idx, aggregator.grid);
+
+    let (mut depth, mut dynamic, mut gaussian_raw) = (Vec::new(), Vec::new(), Vec::new());
+    for first in (0..frames).step_by(chunk) {
+        let count = chunk.min(frames - first);
+        let pick = |tokens: Tensor<4>| tokens.narrow(1, first, count);
+        let prediction = model.depth_head.predict(|i| pick(aggregator.output_list[i].clone()), start, grid);
+        depth.push(prediction.prediction.narrow(4, 0, 1).squeeze_dim::<4>(4));
+        if let Some(head) = &model.instance_head {
+            let prediction = head.predict(|i| pick(aggregator.dino_token_list[i].clone()), start, grid);
+            dynamic.push(prediction.prediction.narrow(4, 0, 1).squeeze_dim::<4>(4));
+        }
+        if let Some(head) = &model.gs_head {
+            let raw = head.forward(|i| pick(aggregator.output_with_dino_tokens(i)), start, grid).raw;
+            gaussian_raw.push(model.apply_color_skip(raw, images.clone().narrow(1, first, count)));
+        }
+    }
+    drop(aggregator);
+    Ok(Prediction {
+        pose_encoding,
+        depth: Tensor::cat(depth, 1),
+        dynamic_logit: (!dynamic.is_empty()).then(|| Tensor::cat(dynamic, 1)),
+        gaussians: (!gaussian_raw.is_empty()).then(|| GaussianMaps::from_raw(Tensor::cat(gaussian_raw, 1))),
+    })
+}

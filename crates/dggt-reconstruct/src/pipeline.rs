@@ -1,0 +1,513 @@
+//! The reconstruction: inputs -> one forward pass -> cameras, depth, dynamic and sky maps, Gaussians and
+//! renders on disk, with a [`Summary`].
+//!
+//! Output folder layout (every per-view file is named `{frame:03}_{camera}`):
+//! - `images/`: the inputs as the network saw them (preprocessed); all intrinsics refer to this resolution;
+//! - `cameras.json` (OpenCV, both pose directions, states its convention), `sparse/0/` (COLMAP text, so the
+//!   output folder is a COLMAP project with `images/`), `transforms.json` (nerfstudio, OpenGL axes);
+//! - `depth/NAME.npy` (float32) and `depth/NAME.png` + `depth/NAME.json` (16-bit, one scale for all views);
+//! - `dynamic/NAME.png` (dynamic probability), `sky/NAME.png` (255 where the re-rendered foreground opacity is
+//!   below one half, i.e. the sky shows through);
+//! - `gaussians/static.ply` (every input pixel's static part, unfaded), `gaussians/sky.ply`,
+//!   `gaussians/dynamic_tNNNN.ply` (the dynamic part shown at requested time `NNNN`: each camera's nearest input
+//!   view, as the renders use it);
+//! - `renders/tNNNN_camC.png` at the requested times (cameras interpolated between input views);
+//! - `summary.json`.
+//!
+//! The world is the first input view's camera frame (view 0: first frame, first camera); distances are in
+//! the network's units (up to scale).
+
+use std::collections::HashMap;
+use std::ops::Range;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use burn::tensor::{Device, Tensor, TensorData};
+use dggt_data::PlanarImage;
+use dggt_export::cameras_json::{CameraRecord, Convention, write_cameras_json};
+use dggt_export::colmap::{ColmapCamera, ColmapImage, write_colmap};
+use dggt_export::depth::{scale_for, write_depth_npy, write_depth_png16};
+use dggt_export::images::write_rgb_png;
+use dggt_export::masks::{write_binary_png, write_probability_png};
+use dggt_export::nerfstudio::{NerfstudioFrame, write_transforms};
+use dggt_export::ply::{GaussianCloud, write_ply};
+use dggt_geom::{ImageSize, PosedCamera, WorldFromCamera};
+use dggt_scene::{
+    AssemblySettings, InputView, MIN_OPACITY, MeansGradient, PixelGaussians, TargetView, Timeline, interpolate_camera,
+    nearest_view, render_target,
+};
+use dggt_train::batch::relative_pose;
+use dggt_train::objective::decode_cameras;
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+use crate::align::pose_error;
+use crate::error::ReconstructError;
+use crate::forward::forward_chunked;
+use crate::inputs::InputSet;
+use crate::network::{Architecture, load_network};
+use crate::summary::{GaussianCounts, RenderRecord, StageTime, Summary, peak_memory_mib};
+
+/// Which times to render (and export dynamic Gaussians at).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub enum TimeRequest {
+    /// The input frames' times.
+    #[default]
+    Inputs,
+    /// These times, seconds since the first chosen frame (between, before or after input frames).
+    Seconds(Vec<f64>),
+    /// `K` evenly spaced times per interval between consecutive input frames (1 = the input times).
+    Every(usize),
+}
+
+/// Everything a reconstruction is asked.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReconstructOptions {
+    /// A folder of images (or of per-camera folders), or a scene export.
+    pub images: PathBuf,
+    pub checkpoint: PathBuf,
+    /// Architecture of `.pt` / `.safetensors` checkpoints (default: the `dggt` preset).
+    pub architecture: Option<Architecture>,
+    /// Camera positions (folders) or ids (exports).
+    pub cameras: Option<Vec<usize>>,
+    /// Frame positions (folders) or indices (exports), end exclusive.
+    pub frames: Option<Range<usize>>,
+    pub times: TimeRequest,
+    /// Network input width (a multiple of 14); default: the `--config` training file's, else 518.
+    pub width: Option<u32>,
+    /// Frames per chunk of the dense heads.
+    pub chunk_frames: usize,
+    pub out: PathBuf,
+    /// Show a progress bar on stderr.
+    pub progress: bool,
+}
+
+impl ReconstructOptions {
+    /// Options with defaults for everything but the three paths.
+    pub fn new(images: impl Into<PathBuf>, checkpoint: impl Into<PathBuf>, out: impl Into<PathBuf>) -> Self {
+        Self {
+            images: images.into(),
+            checkpoint: checkpoint.into(),
+            architecture: None,
+            cameras: None,
+            frames: None,
+            times: TimeRequest::Inputs,
+            width: None,
+            chunk_frames: 4,
+            out: out.into(),
+            progress: false,
+        }
+    }
+}
+
+struct Stages {
+    started: Instant,
+    list: Vec<StageTime>,
+}
+
+impl Stages {
+    fn done(&mut self, stage: &str) {
+        let seconds = self.started.elapsed().as_secs_f64();
+        tracing::info!("{stage}: {seconds:.2} s");
+        self.list.push(StageTime { stage: stage.into(), seconds });
+        self.started = Instant::now();
+    }
+}
+
+/// Files written so far, relative to the output folder.
+struct Written {
+    root: PathBuf,
+    files: Vec<String>,
+}
+
+impl Written {
+    fn path(&mut self, relative: &str) -> PathBuf {
+        self.files.push(relative.to_string());
+        self.root.join(relative)
+    }
+}
+
+/// Runs the whole reconstruction on `device`.
+pub fn reconstruct(options: &ReconstructOptions, device: &Device) -> Result<Summary, ReconstructError> {
+    let mut stages = Stages { started: Instant::now(), list: Vec::new() };
+    let inputs = InputSet::open(&options.images, options.frames.clone(), options.cameras.clone())?;
+    let network = load_network(&options.checkpoint, options.architecture.as_ref(), device)?;
+    let mut warnings = network.warnings.clone();
+    for warning in &warnings {
+        tracing::warn!("{warning}");
+    }
+    stages.done("load checkpoint");
+
+    let mut preprocess = network.preprocess.unwrap_or_default();
+    if let Some(width) = options.width {
+        preprocess.target_width = width;
+    }
+    preprocess.patch_size = network.config.aggregator.patch_size as u32;
+    let (images, size) = inputs.load(&preprocess)?;
+    let times_s = requested_times(&inputs, &options.times)?;
+    tracing::info!(
+        "{} views ({} frames x {} cameras) at {} -> {size}; {} times to render",
+        inputs.views.len(),
+        inputs.frames.len(),
+        inputs.cameras.len(),
+        inputs.size,
+        times_s.len()
+    );
+    stages.done("load images");
+
+    let batch = images_tensor(&images, size, device);
+    let prediction = forward_chunked(&network.model, batch.clone(), options.chunk_frames)?;
+    let cameras = decode_cameras(prediction.pose_encoding.clone(), size)?;
+    stages.done("forward");
+
+    std::fs::create_dir_all(&options.out).map_err(|e| ReconstructError::input(&options.out, e.to_string()))?;
+    let mut written = Written { root: options.out.clone(), files: Vec::new() };
+    write_cameras(&mut written, &inputs, &images, &cameras, size)?;
+    let depth = host(prediction.depth.clone());
+    let dynamic = prediction.dynamic_logit.clone().map(|l| host(burn::tensor::activation::sigmoid(l)));
+    write_maps(&mut written, &inputs, size, &depth, dynamic.as_deref())?;
+    if dynamic.is_none() {
+        warnings.push("the network has no instance head: no dynamic maps; everything is static".into());
+    }
+    stages.done("write cameras and maps");
+
+    let timeline = Timeline::new(&inputs.frames)?;
+    let scene_time = |time_s: f64| timeline.time(inputs.frame_at(time_s));
+    let views: Vec<InputView> = inputs
+        .views
+        .iter()
+        .zip(&cameras)
+        .map(|(v, camera)| InputView { rig_camera: v.camera, time: scene_time(v.time_s), camera: *camera })
+        .collect();
+    let mut counts = GaussianCounts::default();
+    let mut renders = Vec::new();
+    let mut input_psnr_db = Vec::new();
+    match &prediction.gaussians {
+        None => warnings.push("the network has no Gaussian head: no Gaussians, sky masks or renders".into()),
+        Some(maps) => {
+            let pixels = PixelGaussians::new(
+                maps,
+                prediction.depth.clone(),
+                prediction.dynamic_logit.clone(),
+                views.clone(),
+                MeansGradient::Detached,
+                network.model.unproject_at,
+            )?;
+            let sky = network.model.sky_model.as_ref().map(|model| {
+                let [_, s, c, h, w] = batch.dims();
+                let cameras: Vec<_> =
+                    views.iter().map(|v| (v.camera.world_from_camera.inverse(), v.camera.intrinsics)).collect();
+                model.gaussians(batch.clone().reshape([s, c, h, w]), &cameras)
+            });
+            drop(prediction);
+            stages.done("gaussians");
+
+            let host_pixels = HostPixels::new(&pixels);
+            counts.per_pixel = host_pixels.len();
+            let statics = host_pixels.static_cloud();
+            counts.static_kept = statics.len();
+            write_ply(&written.path("gaussians/static.ply"), &statics)?;
+            drop(statics);
+            let sky_cloud = sky.as_ref().map(sky_cloud).unwrap_or_default();
+            counts.sky_kept = sky_cloud.len();
+            write_ply(&written.path("gaussians/sky.ply"), &sky_cloud)?;
+            if sky.is_none() {
+                warnings.push("the network has no sky model: sky.ply is empty and renders have a black sky".into());
+            }
+            for (k, &time_s) in times_s.iter().enumerate() {
+                let cloud = host_pixels.dynamic_cloud(&views, inputs.cameras.len(), scene_time(time_s));
+                counts.dynamic_kept.push(cloud.len());
+                write_ply(&written.path(&format!("gaussians/dynamic_t{k:04}.ply")), &cloud)?;
+            }
+            drop(host_pixels);
+            stages.done("write gaussians");
+
+            let settings = AssemblySettings::default();
+            let total = inputs.views.len() + times_s.len() * inputs.cameras.len();
+            let bar = progress_bar(options.progress, total as u64);
+            // Input views re-rendered: the sky masks, the PSNR, and the renders at input times.
+            let mut at_inputs: HashMap<(usize, u64), (Vec<f32>, dggt_scene::AssemblyCounts)> = HashMap::new();
+            for (i, view) in inputs.views.iter().enumerate() {
+                let target = TargetView { rig_camera: view.camera, time: views[i].time, camera: views[i].camera };
+                let render = render_target(&pixels, sky.as_ref(), &target, &settings)?;
+                let rgb = host(render.rgb);
+                let alpha = host(render.alpha);
+                let sky_mask: Vec<bool> = alpha.iter().map(|&a| a < 0.5).collect();
+                write_binary_png(&written.path(&format!("sky/{}.png", view.name)), size, &sky_mask)?;
+                input_psnr_db.push(psnr(&rgb, &interleaved(&images[i])));
+                at_inputs.insert((view.camera, view.time_s.to_bits()), (rgb, render.counts));
+                bar.inc(1);
+            }
+            let input_times = inputs.input_times();
+            for (k, &time_s) in times_s.iter().enumerate() {
+                for camera in 0..inputs.cameras.len() {
+                    let file = format!("renders/t{k:04}_cam{camera}.png");
+                    let (rgb, assembly) = match at_inputs.get(&(camera, time_s.to_bits())) {
+                        Some((rgb, assembly)) => (rgb.clone(), *assembly),
+                        None => {
+                            let t = scene_time(time_s);
+                            let target = TargetView {
+                                rig_camera: camera,
+                                time: t,
+                                camera: interpolate_camera(&views, camera, t)?,
+                            };
+                            let render = render_target(&pixels, sky.as_ref(), &target, &settings)?;
+                            (host(render.rgb), render.counts)
+                        }
+                    };
+                    write_rgb_png(&written.path(&file), size, &rgb)?;
+                    renders.push(RenderRecord {
+                        file,
+                        camera,
+                        time_s,
+                        at_input: input_times.contains(&time_s),
+                        candidates: assembly.candidates,
+                        transparent: assembly.transparent,
+                        off_screen: assembly.off_screen,
+                        static_kept: assembly.static_kept,
+                        dynamic_kept: assembly.dynamic_kept,
+                    });
+                    bar.inc(1);
+                }
+            }
+            bar.finish_and_clear();
+            stages.done("render");
+        }
+    }
+
+    let pose_error = inputs.ground_truth.as_ref().and_then(|truth| {
+        let reference = truth.world_from_camera[0];
+        let truth: Vec<WorldFromCamera> =
+            truth.world_from_camera.iter().map(|p| relative_pose(&reference, p)).collect();
+        let predicted: Vec<WorldFromCamera> = cameras.iter().map(|c| c.world_from_camera).collect();
+        pose_error(&predicted, &truth)
+    });
+    written.files.push("summary.json".into());
+    let summary = Summary {
+        input: inputs.root.clone(),
+        input_kind: inputs.kind.into(),
+        frames: inputs.frames.len(),
+        cameras: inputs.cameras.clone(),
+        views: inputs.views.len(),
+        input_size: [inputs.size.width, inputs.size.height],
+        network_size: [size.width, size.height],
+        checkpoint: network.info.clone(),
+        device: format!("{device:?}"),
+        gaussians: counts,
+        times_s,
+        renders,
+        input_psnr_db,
+        pose_error,
+        stages: stages.list,
+        peak_memory_mib: peak_memory_mib(),
+        warnings,
+        files: written.files,
+    };
+    let path = options.out.join("summary.json");
+    let text = serde_json::to_string_pretty(&summary).expect("summaries serialise");
+    std::fs::write(&path, text).map_err(|e| ReconstructError::input(&path, e.to_string()))?;
+    Ok(summary)
+}
+
+/// The requested times in seconds, ascending as given.
+fn requested_times(inputs: &InputSet, request: &TimeRequest) -> Result<Vec<f64>, ReconstructError> {
+    let input_times = inputs.input_times();
+    match request {
+        TimeRequest::Inputs => Ok(input_times),
+        TimeRequest::Seconds(times) => {
+            if times.is_empty() || times.iter().any(|t| !t.is_finite()) {
+                return Err(ReconstructError::invalid("--times", format!("{times:?}: give finite seconds")));
+            }
+            Ok(times.clone())
+        }
+        TimeRequest::Every(k) => {
+            if *k == 0 {
+                return Err(ReconstructError::invalid("--every", "must be at least 1"));
+            }
+            let mut times = Vec::new();
+            for pair in input_times.windows(2) {
+                times.extend((0..*k).map(|i| pair[0] + (pair[1] - pair[0]) * i as f64 / *k as f64));
+            }
+            times.extend(input_times.last());
+            Ok(times)
+        }
+    }
+}
+
+fn images_tensor(images: &[PlanarImage], size: ImageSize, device: &Device) -> Tensor<5> {
+    let data: Vec<f32> = images.iter().flat_map(|i| i.data.iter().copied()).collect();
+    let shape = [1, images.len(), 3, size.height as usize, size.width as usize];
+    Tensor::from_data(TensorData::new(data, shape), device)
+}
+
+fn host<const D: usize>(tensor: Tensor<D>) -> Vec<f32> {
+    tensor.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default()
+}
+
+/// Planar `[3, H, W]` to interleaved `[H, W, 3]`.
+fn interleaved(image: &PlanarImage) -> Vec<f32> {
+    let plane = image.size.area();
+    (0..plane).flat_map(|i| [image.data[i], image.data[plane + i], image.data[2 * plane + i]]).collect()
+}
+
+/// PSNR in dB of two images in `[0, 1]` (the render clamped as it is saved).
+fn psnr(rendered: &[f32], reference: &[f32]) -> f64 {
+    let mse = rendered.iter().zip(reference).map(|(a, b)| ((a.clamp(0.0, 1.0) - b) as f64).powi(2)).sum::<f64>()
+        / reference.len().max(1) as f64;
+    10.0 * (1.0 / mse.max(1e-12)).log10()
+}
+
+fn write_cameras(
+    written: &mut Written,
+    inputs: &InputSet,
+    images: &[PlanarImage],
+    cameras: &[PosedCamera],
+    size: ImageSize,
+) -> Result<(), ReconstructError> {
+    let mut records = Vec::new();
+    let (mut colmap_cameras, mut colmap_images, mut frames) = (Vec::new(), Vec::new(), Vec::new());
+    for (i, ((view, image), camera)) in inputs.views.iter().zip(images).zip(cameras).enumerate() {
+        let file = format!("images/{}.png", view.name);
+        write_rgb_png(&written.path(&file), size, &interleaved(image))?;
+        records.push(CameraRecord {
+            name: view.name.clone(),
+            frame: view.frame,
+            camera: view.camera,
+            time_s: view.time_s,
+            size,
+            intrinsics: camera.intrinsics,
+            world_from_camera: camera.world_from_camera,
+        });
+        let id = i as u32 + 1;
+        colmap_cameras.push(ColmapCamera { id, size, intrinsics: camera.intrinsics });
+        colmap_images.push(ColmapImage {
+            id,
+            camera_id: id,
+            name: format!("{}.png", view.name),
+            camera_from_world: camera.world_from_camera.inverse(),
+        });
+        frames.push(NerfstudioFrame {
+            file_path: file,
+            size,
+            intrinsics: camera.intrinsics,
+            world_from_camera: camera.world_from_camera,
+        });
+    }
+    let world = "the camera frame of the first input view (predicted poses; distances up to scale)";
+    write_cameras_json(&written.path("cameras.json"), &Convention::opencv(world), &records)?;
+    for file in ["sparse/0/cameras.txt", "sparse/0/images.txt", "sparse/0/points3D.txt"] {
+        written.path(file);
+    }
+    write_colmap(&written.root.join("sparse/0"), &colmap_cameras, &colmap_images)?;
+    write_transforms(&written.path("transforms.json"), &frames)?;
+    Ok(())
+}
+
+fn write_maps(
+    written: &mut Written,
+    inputs: &InputSet,
+    size: ImageSize,
+    depth: &[f32],
+    dynamic: Option<&[f32]>,
+) -> Result<(), ReconstructError> {
+    let per_view = size.area();
+    let max = depth.iter().copied().filter(|d| d.is_finite()).fold(0.0f32, f32::max);
+    let scale = scale_for(max);
+    for (i, view) in inputs.views.iter().enumerate() {
+        let range = i * per_view..(i + 1) * per_view;
+        write_depth_npy(&written.path(&format!("depth/{}.npy", view.name)), size, &depth[range.clone()])?;
+        write_depth_png16(&written.path(&format!("depth/{}.png", view.name)), size, &depth[range.clone()], scale)?;
+        written.path(&format!("depth/{}.json", view.name));
+        if let Some(dynamic) = dynamic {
+            write_probability_png(&written.path(&format!("dynamic/{}.png", view.name)), size, &dynamic[range])?;
+        }
+    }
+    Ok(())
+}
+
+/// The per-pixel Gaussians on the host, activated.
+struct HostPixels {
+    cloud: GaussianCloud,
+    /// Opacity before the static/dynamic split.
+    opacity: Vec<f32>,
+    /// `sigmoid(dynamic logit)`; zeros without an instance head.
+    dynamic_probability: Vec<f32>,
+    per_view: usize,
+}
+
+impl HostPixels {
+    fn new(pixels: &PixelGaussians) -> Self {
+        let triples = |t: &Tensor<2>| host(t.clone()).chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        let opacity = host(pixels.opacity.clone());
+        let dynamic_probability = match &pixels.dynamic_logit {
+            Some(logit) => host(burn::tensor::activation::sigmoid(logit.clone())),
+            None => vec![0.0; opacity.len()],
+        };
+        let cloud = GaussianCloud {
+            means: triples(&pixels.means),
+            quats_wxyz: host(pixels.quats_wxyz.clone()).chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect(),
+            scales: triples(&pixels.scales),
+            opacities: Vec::new(),
+            colors: triples(&pixels.colors),
+        };
+        Self { cloud, opacity, dynamic_probability, per_view: pixels.per_view() }
+    }
+
+    fn len(&self) -> usize {
+        self.opacity.len()
+    }
+
+    /// Gaussians from `range` with opacity `opacity(i)`, kept at or above the rasteriser's threshold.
+    fn select(&self, range: Range<usize>, opacity: impl Fn(usize) -> f32, into: &mut GaussianCloud) {
+        for i in range {
+            let o = opacity(i);
+            if o >= MIN_OPACITY {
+                into.means.push(self.cloud.means[i]);
+                into.quats_wxyz.push(self.cloud.quats_wxyz[i]);
+                into.scales.push(self.cloud.scales[i]);
+                into.colors.push(self.cloud.colors[i]);
+                into.opacities.push(o);
+            }
+        }
+    }
+
+    /// Every pixel's static part, opacity `o (1 - p_dynamic)`, unfaded.
+    fn static_cloud(&self) -> GaussianCloud {
+        let mut cloud = GaussianCloud::default();
+        self.select(0..self.len(), |i| self.opacity[i] * (1.0 - self.dynamic_probability[i]), &mut cloud);
+        cloud
+    }
+
+    /// The dynamic part shown at scene time `time`: each camera's nearest input view, opacity `o p_dynamic`.
+    fn dynamic_cloud(&self, views: &[InputView], cameras: usize, time: f64) -> GaussianCloud {
+        let mut cloud = GaussianCloud::default();
+        for camera in 0..cameras {
+            if let Some(view) = nearest_view(views, camera, time) {
+                let range = view * self.per_view..(view + 1) * self.per_view;
+                self.select(range, |i| self.opacity[i] * self.dynamic_probability[i], &mut cloud);
+            }
+        }
+        cloud
+    }
+}
+
+fn sky_cloud(sky: &dggt_model::sky::SkyGaussians) -> GaussianCloud {
+    let triples = |t: &Tensor<2>| host(t.clone()).chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    GaussianCloud {
+        means: triples(&sky.means),
+        quats_wxyz: host(sky.quats.clone()).chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect(),
+        scales: triples(&sky.scales),
+        opacities: host(sky.opacities.clone()),
+        colors: triples(&sky.colors),
+    }
+}
+
+fn progress_bar(show: bool, total: u64) -> ProgressBar {
+    let bar = ProgressBar::with_draw_target(
+        Some(total),
+        if show { ProgressDrawTarget::stderr() } else { ProgressDrawTarget::hidden() },
+    );
+    if let Ok(style) = ProgressStyle::with_template("rendering {bar:30} {pos}/{len} [{elapsed}<{eta}]") {
+        bar.set_style(style);
+    }
+    bar
+}

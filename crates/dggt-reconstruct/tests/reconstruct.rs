@@ -1,0 +1,315 @@
+//! `dggt reconstruct` end to end on the bundled fixture (CPU): a tiny network trained a few steps, then one
+//! reconstruction from its checkpoint, checked file by file; and the errors bad inputs give.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use burn::tensor::Device;
+use dggt_export::cameras_json::read_cameras_json;
+use dggt_export::colmap::{read_cameras_txt, read_images_txt};
+use dggt_export::depth::{read_depth_npy, read_depth_png16};
+use dggt_export::images::read_rgb_png;
+use dggt_export::masks::read_mask_png;
+use dggt_export::nerfstudio::read_transforms;
+use dggt_export::ply::{INRIA_PROPERTIES, read_ply};
+use dggt_reconstruct::align::pose_error;
+use dggt_reconstruct::{Architecture, ReconstructOptions, TimeRequest, reconstruct};
+use dggt_train::{RunOptions, TrainConfig, Trainer};
+
+/// Training steps of the checkpoint under test.
+const TRAIN_STEPS: u64 = 100;
+/// Every render at an input time must reach this PSNR against that input (dB). Loose on purpose: short runs
+/// from scratch land between about 16 and 21 dB on average depending on the initial draw, one step about
+/// 14.5 dB; a render from a misplaced camera or with misassigned colours falls far below.
+const PSNR_FLOOR_DB: f64 = 13.0;
+/// Poses, loosely (a network trained this briefly predicts one common offset for every view after the first,
+/// not per-frame positions, so the similarity-aligned centre error is reported, not bounded): the predicted
+/// direction of travel from the first view must agree with the fixture's within this cosine (about 25 degrees;
+/// a flipped or transposed pose convention gives about -1 or 0)...
+const TRAVEL_COSINE_FLOOR: f64 = 0.9;
+/// ...and every view's rotation relative to the first within this many degrees (trained: 2 to 5; one step from
+/// scratch: up to about 8).
+const ROTATION_TOLERANCE_DEG: f64 = 10.0;
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn fixture() -> PathBuf {
+    repo().join("data-fixtures/synth-s0")
+}
+
+/// The tiny overfit configuration at 56 pixels wide, front camera, four inputs, a short run.
+fn train_config(out: &Path) -> TrainConfig {
+    let mut config = TrainConfig::load(&repo().join("configs/tiny-overfit.toml")).expect("tiny-overfit.toml loads");
+    config.data.scene = fixture();
+    config.data.preprocess.target_width = 56;
+    config.sampler.max_inputs = 4;
+    config.render.render_inputs = false;
+    // Optimiser and sampling pinned here rather than taken from the shipped file, whose tuning targets long runs.
+    config.data.frames = None;
+    config.sampler.window = 12;
+    config.optim.lr = 1e-3;
+    config.optim.groups.insert("sky_model".into(), 1e-3);
+    config.optim.warmup_steps = 2;
+    config.run.steps = TRAIN_STEPS;
+    // The camera head learns faster than the shipped configuration lets it, so that a short run predicts
+    // usable poses.
+    config.loss.camera = 1.0;
+    config.optim.groups.insert("camera_head".into(), 1e-2);
+    config.run.out_dir = out.to_path_buf();
+    config.run.validate_every = 0;
+    config.run.checkpoint_every = 1000;
+    config.run.time_limit_s = None;
+    config.data.validation.inputs.clear();
+    config.data.validation.targets.clear();
+    config
+}
+
+#[test]
+fn reconstructs_the_fixture_from_a_trained_checkpoint() {
+    let started = Instant::now();
+    let run = tempfile::tempdir().unwrap();
+    let mut trainer = Trainer::new(train_config(run.path()), vec![Device::flex()], false).unwrap();
+    let trained = trainer.run(RunOptions::default()).unwrap();
+    assert!(trained.checkpoint.is_some(), "the run ends with a checkpoint");
+    eprintln!("trained {TRAIN_STEPS} steps in {:.1} s", started.elapsed().as_secs_f64());
+
+    // The run folder is accepted (its latest checkpoint is used).
+    let out = tempfile::tempdir().unwrap();
+    let out = out.path();
+    let mut options = ReconstructOptions::new(fixture(), run.path(), out);
+    options.cameras = Some(vec![0]);
+    options.frames = Some(0..8);
+    options.width = Some(56);
+    options.chunk_frames = 3;
+    options.times = TimeRequest::Every(2);
+    let summary = reconstruct(&options, &Device::flex()).unwrap();
+    eprintln!("{summary}");
+
+    // Every listed file exists, and the expected ones are listed.
+    let names: Vec<String> = (0..8).map(|f| format!("{f:03}_0")).collect();
+    for file in &summary.files {
+        assert!(out.join(file).is_file(), "{file} listed but not written");
+    }
+    let mut expected: Vec<String> = [
+        "cameras.json",
+        "transforms.json",
+        "sparse/0/cameras.txt",
+        "sparse/0/images.txt",
+        "sparse/0/points3D.txt",
+        "gaussians/static.ply",
+        "gaussians/sky.ply",
+        "summary.json",
+    ]
+    .map(String::from)
+    .to_vec();
+    for name in &names {
+        for pattern in
+            ["images/{}.png", "depth/{}.npy", "depth/{}.png", "depth/{}.json", "dynamic/{}.png", "sky/{}.png"]
+        {
+            expected.push(pattern.replace("{}", name));
+        }
+    }
+    // Every(2) over 8 input frames: 7 intervals x 2 + the last = 15 times.
+    assert_eq!(summary.times_s.len(), 15);
+    for k in 0..15 {
+        expected.push(format!("gaussians/dynamic_t{k:04}.ply"));
+        expected.push(format!("renders/t{k:04}_cam0.png"));
+    }
+    for file in &expected {
+        assert!(summary.files.contains(file) && out.join(file).is_file(), "{file} missing");
+    }
+    assert_eq!(summary.files.len(), expected.len(), "{:?}", summary.files);
+    let on_disk: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(on_disk["frames"], 8);
+    assert_eq!(on_disk["checkpoint"]["format"], "trainer");
+    assert!(on_disk["peak_memory_mib"].as_f64().unwrap() > 0.0);
+    assert!(on_disk["stages"].as_array().unwrap().len() >= 5);
+
+    // PLY headers are INRIA's and vertex counts are the Gaussians kept.
+    let g = &summary.gaussians;
+    assert_eq!(g.per_pixel, 8 * 56 * 42);
+    let ply = |file: &str| read_ply(&out.join(file)).unwrap();
+    let statics = ply("gaussians/static.ply");
+    assert_eq!(statics.properties, INRIA_PROPERTIES.map(String::from).to_vec());
+    assert_eq!(statics.count, g.static_kept);
+    assert!(g.static_kept > g.per_pixel / 2, "{g:?}");
+    let cloud = statics.to_cloud().unwrap();
+    assert!(cloud.opacities.iter().all(|&o| (1.0 / 255.0 - 1e-6..=1.0).contains(&o)));
+    assert!(cloud.means.iter().flatten().all(|v| v.is_finite()));
+    assert_eq!(ply("gaussians/sky.ply").count, g.sky_kept);
+    assert!(g.sky_kept > 0, "{g:?}");
+    for (k, &count) in g.dynamic_kept.iter().enumerate() {
+        assert_eq!(ply(&format!("gaussians/dynamic_t{k:04}.ply")).count, count);
+        assert!(count <= 56 * 42, "one view's pixels at most");
+    }
+
+    // Cameras: the three formats agree with each other.
+    let (convention, records) = read_cameras_json(&out.join("cameras.json")).unwrap();
+    assert!(convention.axes.contains("OpenCV"));
+    assert_eq!(records.iter().map(|r| r.name.clone()).collect::<Vec<_>>(), names);
+    let colmap_cameras = read_cameras_txt(&out.join("sparse/0/cameras.txt")).unwrap();
+    let colmap_images = read_images_txt(&out.join("sparse/0/images.txt")).unwrap();
+    let transforms = read_transforms(&out.join("transforms.json")).unwrap();
+    assert_eq!((colmap_cameras.len(), colmap_images.len(), transforms.len()), (8, 8, 8));
+    for (i, record) in records.iter().enumerate() {
+        assert_eq!(colmap_images[i].name, format!("{}.png", record.name));
+        let camera = colmap_cameras.iter().find(|c| c.id == colmap_images[i].camera_id).unwrap();
+        let (a, b) = (camera.intrinsics, record.intrinsics);
+        assert!([a.fx - b.fx, a.fy - b.fy, a.cx - b.cx, a.cy - b.cy].iter().all(|d| d.abs() < 1e-9), "{a:?} {b:?}");
+        assert!(colmap_images[i].camera_from_world.max_abs_difference(&record.world_from_camera.inverse()) < 1e-6);
+        assert!(transforms[i].world_from_camera.max_abs_difference(&record.world_from_camera) < 1e-6);
+        assert!(out.join(&transforms[i].file_path).is_file());
+    }
+
+    // Poses against the fixture's ground truth, relative to the first view, after similarity alignment.
+    let scene = dggt_data::open_scene(&fixture(), Some(0..8), Some(vec![0])).unwrap();
+    let truth: Vec<_> = (0..8)
+        .map(|f| {
+            dggt_train::batch::relative_pose(&scene.view(0, 0).world_from_camera, &scene.view(f, 0).world_from_camera)
+        })
+        .collect();
+    let predicted: Vec<_> = records.iter().map(|r| r.world_from_camera).collect();
+    let error = pose_error(&predicted, &truth).expect("distinct camera centres");
+    eprintln!("{error:?}");
+    assert!(error.centre_rmse.is_finite() && error.scale > 0.0, "{error:?}");
+    // The direction of travel: mean displacement of the later views from the first, predicted and true.
+    let travel = |poses: &[dggt_geom::WorldFromCamera]| {
+        let origin = poses[0].translation();
+        poses[1..].iter().map(|p| p.translation() - origin).sum::<dggt_geom::glam::DVec3>().normalize()
+    };
+    let cosine = travel(&predicted).dot(travel(&truth));
+    eprintln!("direction of travel: cosine {cosine:.3}");
+    assert!(cosine > TRAVEL_COSINE_FLOOR, "direction of travel off: cosine {cosine:.3}");
+    assert!(error.rotation_max_deg < ROTATION_TOLERANCE_DEG, "{error:?}");
+    let reported = summary.pose_error.as_ref().expect("scene exports report pose errors");
+    assert!(
+        (reported.centre_rmse - error.centre_rmse).abs() < 1e-9
+            && (reported.rotation_max_deg - error.rotation_max_deg).abs() < 1e-6
+    );
+
+    // Depth in both formats agrees; maps have the network's size.
+    for name in &names {
+        let (size, npy) = read_depth_npy(&out.join(format!("depth/{name}.npy"))).unwrap();
+        assert_eq!((size.width, size.height), (56, 42));
+        assert!(npy.iter().all(|d| d.is_finite() && *d > 0.0));
+        let (_, png, meta) = read_depth_png16(&out.join(format!("depth/{name}.png"))).unwrap();
+        assert!(npy.iter().zip(&png).all(|(a, b)| ((a - b).abs() as f64) <= meta.scale / 2.0 + 1e-4));
+        let (size, _) = read_mask_png(&out.join(format!("dynamic/{name}.png"))).unwrap();
+        assert_eq!((size.width, size.height), (56, 42));
+        read_mask_png(&out.join(format!("sky/{name}.png"))).unwrap();
+    }
+
+    // Renders at the input times reproduce the inputs; renders between them exist.
+    let mut at_inputs = 0;
+    let mut psnrs = Vec::new();
+    for render in &summary.renders {
+        if !render.at_input {
+            continue;
+        }
+        at_inputs += 1;
+        let frame = (render.time_s * 10.0).round() as usize;
+        let (_, rgb) = read_rgb_png(&out.join(&render.file)).unwrap();
+        let (_, input) = read_rgb_png(&out.join(format!("images/{frame:03}_0.png"))).unwrap();
+        let mse = rgb.iter().zip(&input).map(|(a, b)| ((a - b) as f64).powi(2)).sum::<f64>() / rgb.len() as f64;
+        let psnr = -10.0 * mse.log10();
+        assert!(psnr > PSNR_FLOOR_DB, "{}: PSNR {psnr:.2} dB against frame {frame}", render.file);
+        psnrs.push(psnr);
+    }
+    assert_eq!(at_inputs, 8);
+    let mean_psnr = psnrs.iter().sum::<f64>() / psnrs.len() as f64;
+    let reported = summary.input_psnr_db.iter().sum::<f64>() / summary.input_psnr_db.len() as f64;
+    assert!((mean_psnr - reported).abs() < 0.5, "summary says {reported:.2} dB, the files {mean_psnr:.2} dB");
+    let elapsed = started.elapsed().as_secs_f64();
+    eprintln!("total {elapsed:.1} s");
+}
+
+fn write_safetensors(path: &Path, tensors: &[(&str, Vec<usize>)]) {
+    let data: Vec<(String, Vec<usize>, Vec<u8>)> = tensors
+        .iter()
+        .map(|(name, shape)| (name.to_string(), shape.clone(), vec![0u8; 4 * shape.iter().product::<usize>()]))
+        .collect();
+    let views: Vec<(String, safetensors::tensor::TensorView)> = data
+        .iter()
+        .map(|(name, shape, bytes)| {
+            (name.clone(), safetensors::tensor::TensorView::new(safetensors::Dtype::F32, shape.clone(), bytes).unwrap())
+        })
+        .collect();
+    safetensors::serialize_to_file(views, None, path).unwrap();
+}
+
+fn error_of(options: &ReconstructOptions) -> String {
+    match reconstruct(options, &Device::flex()) {
+        Ok(_) => panic!("{options:?} should fail"),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn bad_inputs_give_errors_naming_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let fixture_options = |checkpoint: &Path| {
+        let mut options = ReconstructOptions::new(fixture(), checkpoint, &out);
+        options.cameras = Some(vec![0]);
+        options.frames = Some(0..2);
+        options.width = Some(56);
+        options.architecture = Some(Architecture::Preset("tiny".into()));
+        options
+    };
+    let garbage = dir.path().join("garbage.pt");
+    std::fs::write(&garbage, b"this is not a checkpoint").unwrap();
+
+    // No images.
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let error = error_of(&ReconstructOptions::new(&empty, &garbage, &out));
+    assert!(error.contains("empty") && error.contains("no images"), "{error}");
+
+    // Mixed sizes: the odd file is named with both sizes.
+    let mixed = dir.path().join("mixed");
+    std::fs::create_dir(&mixed).unwrap();
+    image::RgbImage::new(64, 48).save(mixed.join("000.png")).unwrap();
+    image::RgbImage::new(64, 48).save(mixed.join("001.png")).unwrap();
+    image::RgbImage::new(60, 48).save(mixed.join("002.png")).unwrap();
+    let error = error_of(&ReconstructOptions::new(&mixed, &garbage, &out));
+    assert!(error.contains("002.png") && error.contains("60x48") && error.contains("64x48"), "{error}");
+
+    // Cameras with different frame counts.
+    let rig = dir.path().join("rig");
+    for (camera, frames) in [("front", 3), ("left", 2)] {
+        std::fs::create_dir_all(rig.join(camera)).unwrap();
+        for f in 0..frames {
+            image::RgbImage::new(64, 48).save(rig.join(camera).join(format!("{f}.png"))).unwrap();
+        }
+    }
+    let error = error_of(&ReconstructOptions::new(&rig, &garbage, &out));
+    assert!(error.contains("left") && error.contains("one image per frame"), "{error}");
+
+    // Unreadable checkpoints: garbage, a missing file, a folder that is no checkpoint.
+    let error = error_of(&fixture_options(&garbage));
+    assert!(error.contains("garbage.pt"), "{error}");
+    let error = error_of(&fixture_options(&dir.path().join("missing.safetensors")));
+    assert!(error.contains("missing.safetensors") && error.contains("does not exist"), "{error}");
+    let error = error_of(&fixture_options(&empty));
+    assert!(error.contains("empty") && error.contains("model.json"), "{error}");
+
+    // Wrong architecture: a tensor whose shape the tiny network does not have is named with both shapes.
+    let wrong = dir.path().join("wide.safetensors");
+    write_safetensors(&wrong, &[("aggregator.camera_token", vec![1, 2, 1, 1024])]);
+    let error = error_of(&fixture_options(&wrong));
+    assert!(error.contains("wide.safetensors") && error.contains("aggregator.camera_token"), "{error}");
+    assert!(error.contains("1024") && error.contains("64"), "{error}");
+    // A file none of whose tensors the network has.
+    let foreign = dir.path().join("foreign.safetensors");
+    write_safetensors(&foreign, &[("encoder.layer.0.weight", vec![4, 4])]);
+    let error = error_of(&fixture_options(&foreign));
+    assert!(error.contains("foreign.safetensors") && error.contains("no tensor"), "{error}");
+    // A file with only part of the core (an aggregator tensor of the right shape, nothing else).
+    let partial = dir.path().join("partial.safetensors");
+    write_safetensors(&partial, &[("aggregator.camera_token", vec![1, 2, 1, 64])]);
+    let error = error_of(&fixture_options(&partial));
+    assert!(error.contains("partial.safetensors") && error.contains("camera_head"), "{error}");
+    assert!(!out.join("summary.json").exists(), "nothing is written on failure");
+}
