@@ -28,22 +28,26 @@ pub const MIN_OPACITY: f32 = 1.0 / 255.0;
 pub struct AssemblySettings {
     /// Drop Gaussians whose opacity at the target time is below this.
     pub min_opacity: f32,
-    /// Drop Gaussians whose footprint misses the image or that lie behind `near_plane`.
+    /// Drop Gaussians whose footprint misses the image or that lie outside `[near_plane, far_plane]`.
     pub cull_off_screen: bool,
     /// Camera-space depth below which a Gaussian is behind the camera (the rasteriser's near plane).
     pub near_plane: f32,
+    /// Camera-space depth beyond which Gaussians are not drawn (the rasteriser's far plane). A finite one
+    /// bounds a scene: a Gaussian pushed beyond it gets no gradient, so depths without supervision cannot
+    /// grow without limit.
+    pub far_plane: f32,
 }
 
 impl Default for AssemblySettings {
     fn default() -> Self {
-        Self { min_opacity: MIN_OPACITY, cull_off_screen: true, near_plane: 0.01 }
+        Self { min_opacity: MIN_OPACITY, cull_off_screen: true, near_plane: 0.01, far_plane: 1e10 }
     }
 }
 
 impl AssemblySettings {
     /// Every Gaussian reaches the rasteriser.
     pub fn exact() -> Self {
-        Self { min_opacity: 0.0, cull_off_screen: false, near_plane: 0.01 }
+        Self { min_opacity: 0.0, cull_off_screen: false, near_plane: 0.01, far_plane: 1e10 }
     }
 }
 
@@ -190,6 +194,7 @@ struct Footprint {
     width: f32,
     height: f32,
     near: f32,
+    far: f32,
 }
 
 /// Pixels added to every radius: three sigmas of the rasteriser's 0.3 px² blur, plus one for rounding.
@@ -214,6 +219,7 @@ impl Footprint {
             width: size.width as f32,
             height: size.height as f32,
             near: settings.near_plane,
+            far: settings.far_plane,
         }
     }
 
@@ -224,7 +230,7 @@ impl Footprint {
                 + self.rotation[r][2] * mean[2]
                 + self.translation[r]
         });
-        if !(p[2] > self.near) {
+        if !(p[2] > self.near && p[2] < self.far) {
             return false;
         }
         let u = self.focal[0] * p[0] / p[2] + self.centre[0];

@@ -7,7 +7,7 @@
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_geom::{CameraFromWorld, ImageSize, PinholeIntrinsics, PosedCamera};
 use dggt_model::sky::SkyGaussians;
-use dggt_splat::{CameraTensors, RenderSettings, RenderTensors, render};
+use dggt_splat::{CameraTensors, RasterSettings, RenderSettings, RenderTensors, render};
 
 use crate::assemble::{AssembledGaussians, AssemblyCounts, AssemblySettings, assemble};
 use crate::error::SceneError;
@@ -38,7 +38,9 @@ pub fn render_target(
     let AssembledGaussians { gaussians, counts } = assemble(pixels, target, assembly)?;
     let device = pixels.opacity.device();
     let cameras = camera_tensors(&[target.camera], pixels.size, &device)?;
-    let settings = RenderSettings::default();
+    let raster =
+        RasterSettings { near_plane: assembly.near_plane, far_plane: assembly.far_plane, ..Default::default() };
+    let settings = RenderSettings { raster, background: None };
     let what = || format!("the view of camera {} at t = {}", target.rig_camera, target.time);
     let foreground =
         render(&gaussians, &cameras, &settings).map_err(|source| SceneError::Render { what: what(), source })?;

@@ -181,3 +181,27 @@ fn bad_inputs_are_errors() {
         PixelGaussians::new(&maps, wrong, None, views(), MeansGradient::Detached, PixelConvention::Integer).is_err()
     );
 }
+
+#[test]
+fn gaussians_beyond_the_far_plane_are_dropped_and_draw_nothing() {
+    let device = Device::flex();
+    let maps = GaussianMaps::from_raw(raw_maps(&device, 0.0));
+    let pixels =
+        PixelGaussians::new(&maps, depth(&device), None, views(), MeansGradient::Detached, PixelConvention::Centred)
+            .unwrap();
+    let target = TargetView { rig_camera: 0, time: 0.5, camera: views()[1].camera };
+    // Every depth lies in [4, 5) in front of cameras a few decimetres apart.
+    let near = AssemblySettings { far_plane: 3.0, ..AssemblySettings::default() };
+    let assembled = assemble(&pixels, &target, &near).unwrap();
+    assert_eq!(assembled.counts.kept(), 0, "{:?}", assembled.counts);
+    assert!(assembled.counts.off_screen > 0, "{:?}", assembled.counts);
+    let view = render_target(&pixels, None, &target, &near).unwrap();
+    assert!(host(view.alpha.clone()).iter().all(|a| *a == 0.0));
+    let far = AssemblySettings { far_plane: 100.0, ..AssemblySettings::default() };
+    assert_eq!(
+        assemble(&pixels, &target, &far).unwrap().counts,
+        assemble(&pixels, &target, &AssemblySettings::default()).unwrap().counts
+    );
+    let alpha = host(render_target(&pixels, None, &target, &far).unwrap().alpha);
+    assert!(alpha.iter().filter(|a| **a > 0.5).count() > H * W / 2);
+}

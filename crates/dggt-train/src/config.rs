@@ -100,6 +100,9 @@ pub struct RenderSection {
     pub render_inputs: bool,
     /// Render the sky model as the background.
     pub sky: bool,
+    /// Camera-space depth beyond which Gaussians are not drawn (gsplat's far plane). A finite bound keeps
+    /// depths that nothing supervises from running away (a scene without sky masks pushes its background out).
+    pub far_plane: f64,
 }
 
 impl Default for RenderSection {
@@ -109,6 +112,7 @@ impl Default for RenderSection {
             means_gradient: MeansGradientSetting::Detached,
             render_inputs: true,
             sky: true,
+            far_plane: 1e10,
         }
     }
 }
@@ -335,6 +339,9 @@ impl TrainConfig {
         }
         if l.gram > 0.0 && l.gram_backbone.is_none() {
             return Err("loss.gram > 0 needs loss.gram_backbone".into());
+        }
+        if !(self.render.far_plane > 0.01) {
+            return Err(format!("render.far_plane must exceed the near plane 0.01, got {}", self.render.far_plane));
         }
         if self.run.devices.is_empty() {
             return Err("run.devices must name at least one device".into());

@@ -74,7 +74,8 @@ impl Objective {
             Some(path) if weights.gram > 0.0 => Some(GramLoss::load(path, device)?),
             _ => None,
         };
-        Ok(Self { weights, render, assembly: AssemblySettings::default(), lpips, gram })
+        let assembly = AssemblySettings { far_plane: render.far_plane as f32, ..AssemblySettings::default() };
+        Ok(Self { weights, render, assembly, lpips, gram })
     }
 
     /// Runs the network on the batch and renders its views (targets, then inputs when configured).
