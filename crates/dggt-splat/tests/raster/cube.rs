@@ -323,3 +323,31 @@ fn wgpu_forward_without_autodiff_matches_the_host() {
     check("forward only", "alpha vs host", compare(&values(images.alpha), &forward.images.alpha, all), IMAGE);
     check("forward only", "depth vs host", compare(&values(images.depth), &forward.images.depth, all), DEPTH);
 }
+
+#[test]
+fn wgpu_matches_the_host_on_a_dense_scene_with_coincident_gaussians() {
+    // Thousands of small Gaussians per tile, as a pixel-aligned scene gives, and exact depth ties: a copy of
+    // the first quarter at the same positions with other opacities (the static and dynamic copies of a pixel).
+    let device = wgpu_device().autodiff();
+    let mut rng = Rng::new(5);
+    let size = ImageSize::new(70, 56).unwrap();
+    let views = ViewBatch::new(vec![view_at([0.0; 3], 0.0, size)], size).unwrap();
+    let mut scene = Scene::random(&mut rng, 8000, 3, (0.003, 0.03));
+    let copies = 2000;
+    let Opacities::Shared(opacities) = &mut scene.opacities else { unreachable!() };
+    let extra: Vec<f32> = rng.vec(copies, 0.05, 0.95);
+    opacities.extend(extra);
+    let (means, quats, scales, colors) = (
+        scene.means[..3 * copies].to_vec(),
+        scene.quats[..4 * copies].to_vec(),
+        scene.scales[..3 * copies].to_vec(),
+        scene.colors[..3 * copies].to_vec(),
+    );
+    scene.means.extend(means);
+    scene.quats.extend(quats);
+    scene.scales.extend(scales);
+    scene.colors.extend(colors);
+    let weights = LossWeights::random(&mut rng, views.len(), size, scene.channels);
+    let result = render_on(&device, &scene, &views, None, &weights);
+    assert_close_to_host("dense 70x56", &result, &scene, &views, None, &weights);
+}
