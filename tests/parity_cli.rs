@@ -63,6 +63,18 @@ fn passes_from_the_default_weights() {
     print!("{stdout}");
 }
 
+/// The same vectors through the CubeCL kernels (on CI, Mesa's software Vulkan driver): every network output and
+/// every render within tolerance, so both kernel sets reproduce the release.
+#[cfg(feature = "wgpu")]
+#[test]
+fn passes_on_wgpu() {
+    let dir = vectors();
+    let stdout = assert_passes(&["parity", "--vectors", dir.to_str().unwrap(), "--device", "wgpu"]);
+    for name in ["render.fg_rgb", "render.fg_alpha", "render.fg_expected_depth", "render.final_rgb"] {
+        assert!(has_status(&stdout, name, "pass"), "{}", row(&stdout, name));
+    }
+}
+
 #[test]
 fn passes_from_the_pytorch_checkpoints() {
     let dir = vectors();

@@ -530,16 +530,21 @@ pub fn scan_kernel(counts: &Tensor<u32>, offsets: &mut Tensor<u32>, total: &mut 
     }
 }
 
-/// Writes every kept Gaussian's index into each tile list it touches, in arrival order.
+/// Writes one sort entry per (kept Gaussian, tile it touches) into the list's slice of the intersection
+/// buffer, in arrival order: the list index, the Gaussian's depth in that view and its index. The slot within
+/// the slice does not matter, since [`bitonic_step_kernel`] orders the entries by all three afterwards.
 #[cube(launch)]
 #[allow(clippy::too_many_arguments)]
 pub fn fill_kernel(
     means2d: &Tensor<f32>,
     radii: &Tensor<u32>,
     reasons: &Tensor<u32>,
+    depths: &Tensor<f32>,
     offsets: &Tensor<u32>,
     cursors: &Tensor<Atomic<u32>>,
-    ids: &mut Tensor<u32>,
+    entry_lists: &mut Tensor<u32>,
+    entry_depths: &mut Tensor<f32>,
+    entry_ids: &mut Tensor<u32>,
     count: u32,
     views: u32,
     tile_size: u32,
@@ -554,50 +559,78 @@ pub fn fill_kernel(
     if reasons[k] == 0 {
         let v = k / count;
         let n = (k % count) as u32;
+        let depth = depths[k];
         let (x0, x1, y0, y1) =
             tile_rect(means2d[2 * k], means2d[2 * k + 1], radii[2 * k], radii[2 * k + 1], tile_size, tiles_x, tiles_y);
         let base = v * (tiles_x * tiles_y) as usize;
         for ty in y0..y1 {
             for tx in x0..x1 {
                 let list = base + (ty * tiles_x + tx) as usize;
-                let slot = cursors[list].fetch_add(1u32);
-                ids[(offsets[list] + slot) as usize] = n;
+                let slot = (offsets[list] + cursors[list].fetch_add(1u32)) as usize;
+                entry_lists[slot] = list as u32;
+                entry_depths[slot] = depth;
+                entry_ids[slot] = n;
             }
         }
     }
 }
 
-/// Sorts each tile list front to back by depth, ties by Gaussian index (the host order): one cube per list
-/// (`CUBE_POS_X/Y` the tile, `CUBE_POS_Z` the view); each unit ranks some entries against the whole list.
+/// Marks the entries past the last intersection (the sort runs on a power-of-two length) with a list index
+/// above every real one, so they sort to the end.
 #[cube(launch)]
-pub fn sort_kernel(
-    unsorted: &Tensor<u32>,
-    offsets: &Tensor<u32>,
-    depths: &Tensor<f32>,
-    sorted: &mut Tensor<u32>,
-    count: u32,
-    tiles_x: u32,
-    tiles: u32,
+pub fn pad_kernel(
+    entry_lists: &mut Tensor<u32>,
+    entry_depths: &mut Tensor<f32>,
+    entry_ids: &mut Tensor<u32>,
+    from: u32,
+    len: u32,
 ) {
-    let v = CUBE_POS_Z as usize;
-    let list = v * tiles as usize + (CUBE_POS_Y * tiles_x + CUBE_POS_X) as usize;
-    let start = offsets[list] as usize;
-    let len = offsets[list + 1] as usize - start;
-    let base = v * count as usize;
-    let mut i = UNIT_POS_X as usize;
-    while i < len {
-        let id = unsorted[start + i];
-        let depth = depths[base + id as usize];
-        let mut rank = 0usize;
-        for j in 0..len {
-            let other = unsorted[start + j];
-            let other_depth = depths[base + other as usize];
-            if other_depth < depth || (other_depth == depth && other < id) {
-                rank += 1;
-            }
-        }
-        sorted[start + rank] = id;
-        i += CUBE_DIM_X as usize;
+    let i = ABSOLUTE_POS as u32 + from;
+    if i >= len {
+        terminate!();
+    }
+    entry_lists[i as usize] = u32::MAX;
+    entry_depths[i as usize] = 0.0;
+    entry_ids[i as usize] = i;
+}
+
+/// Whether entry `a` goes before entry `b`: by list, then depth (front to back), then Gaussian index (the
+/// host's order for equal depths). A strict total order, so the sorted result does not depend on the arrival
+/// order the atomics of [`fill_kernel`] gave.
+#[cube]
+fn entry_before(list_a: u32, depth_a: f32, id_a: u32, list_b: u32, depth_b: f32, id_b: u32) -> bool {
+    list_a < list_b || (list_a == list_b && (depth_a < depth_b || (depth_a == depth_b && id_a < id_b)))
+}
+
+/// One compare-and-exchange stage `(block, stride)` of a bitonic sort of all entries at once (every list of
+/// every view), one unit per pair: `log2(len) · (log2(len) + 1) / 2` launches sort `len` (a power of two)
+/// entries. Each unit does constant work, so no list length makes a unit run long.
+#[cube(launch)]
+pub fn bitonic_step_kernel(
+    entry_lists: &mut Tensor<u32>,
+    entry_depths: &mut Tensor<f32>,
+    entry_ids: &mut Tensor<u32>,
+    block: u32,
+    stride: u32,
+    len: u32,
+) {
+    let pair = ABSOLUTE_POS as u32;
+    if pair >= len / 2 {
+        terminate!();
+    }
+    let low = (pair / stride) * 2 * stride + pair % stride;
+    let high = low + stride;
+    let ascending = (low & block) == 0;
+    let (a, b) = (low as usize, high as usize);
+    let (list_a, depth_a, id_a) = (entry_lists[a], entry_depths[a], entry_ids[a]);
+    let (list_b, depth_b, id_b) = (entry_lists[b], entry_depths[b], entry_ids[b]);
+    if entry_before(list_b, depth_b, id_b, list_a, depth_a, id_a) == ascending {
+        entry_lists[a] = list_b;
+        entry_depths[a] = depth_b;
+        entry_ids[a] = id_b;
+        entry_lists[b] = list_a;
+        entry_depths[b] = depth_a;
+        entry_ids[b] = id_a;
     }
 }
 

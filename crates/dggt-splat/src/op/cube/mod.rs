@@ -9,8 +9,10 @@
 //! 3. `scan_kernel`: exclusive prefix sum of the counts of all `V · tiles` lists (one cube), giving each list
 //!    its slice of the intersection buffer. The total is **read back to the host** (one `u32`) to size that
 //!    buffer: the only device-to-host transfer of the forward pass, once per call whatever `V`.
-//! 4. `fill_kernel`: each kept Gaussian appends its index to every list it touches (atomic cursors).
-//! 5. `sort_kernel`: each list sorted by (depth, index), one cube per list, by ranking: the host's order.
+//! 4. `fill_kernel`: each kept Gaussian appends an entry (list, depth, index) to every list it touches (atomic
+//!    cursors, so in arrival order).
+//! 5. `bitonic_step_kernel`: one bitonic sort of all entries of all lists at once by (list, depth, index), the
+//!    host's order, `O(I log² I)` work for `I` intersections in constant-time units whatever a list's length.
 //! 6. `composite_kernel`: one unit per pixel, front to back with gsplat's classic rules.
 //!
 //! Backward: `composite_backward_kernel` walks each pixel's list back to front and adds footprint gradients
@@ -56,8 +58,6 @@ use kernels::{NativeAdd, SCAN_THREADS, SwapAdd};
 const ELEMENT_UNITS: u32 = 256;
 /// Side of the square of pixels one cube composites.
 const PIXEL_BLOCK: u32 = 16;
-/// Units per cube of the per-list sort.
-const SORT_UNITS: u32 = 128;
 
 /// Sizes and settings of one call.
 #[derive(Debug, Clone, Copy)]
@@ -94,8 +94,8 @@ impl Layout {
 /// sorted tile lists and the per-pixel results of compositing.
 ///
 /// Memory, for `N` Gaussians with `K` channels, `V` views of `P` pixels and `I` tile intersections: the inputs
-/// (as given, made contiguous), `9 · V · N` values of projection and culling, `2 · I + V · tiles` list
-/// entries, and `V · P · (K + 4)` per-pixel values (the packed image, transmittance and list end).
+/// (as given, made contiguous), `9 · V · N` values of projection and culling, `I` sorted list entries (rounded
+/// up to a power of two) and `V · tiles + 1` offsets, and `V · P · (K + 4)` per-pixel values (the packed image, transmittance and list end).
 #[derive(Clone)]
 pub struct CubeForward {
     layout: Layout,
@@ -182,6 +182,85 @@ fn layout(inputs: &SplatInputs<CubeBackend>, settings: &RasterSettings, size: Im
         far: settings.far_plane,
         eps2d: settings.eps2d,
     }
+}
+
+/// Steps 4 and 5: fills the intersection buffer and sorts it, returning the Gaussian indices of every tile
+/// list in order (list `l` at `offsets[l]..offsets[l + 1]`; the buffer is padded to a power of two).
+#[allow(clippy::too_many_arguments)]
+fn sorted_tile_lists(
+    client: &cubecl::client::Client,
+    device: &CubeDevice,
+    layout: &Layout,
+    means2d: &CubeTensor,
+    radii: &CubeTensor,
+    reasons: &CubeTensor,
+    depths: &CubeTensor,
+    offsets: &CubeTensor,
+    intersections: usize,
+) -> CubeTensor {
+    let len = intersections.next_power_of_two().max(2);
+    let len32 = u32::try_from(len).expect("splat: more than 2^31 tile intersections in one call");
+    let entry_lists = buffer(device, len, DType::U32);
+    let entry_depths = buffer(device, len, DType::F32);
+    let entry_ids = buffer(device, len, DType::U32);
+    if intersections == 0 {
+        return entry_ids;
+    }
+    let cursors = zeroed(device, layout.views * layout.tiles(), DType::U32);
+    let (cubes, dim) = element_launch(client, layout.pairs());
+    kernels::fill_kernel::launch(
+        client,
+        cubes,
+        dim,
+        arg(means2d),
+        arg(radii),
+        arg(reasons),
+        arg(depths),
+        arg(offsets),
+        arg(&cursors),
+        arg(&entry_lists),
+        arg(&entry_depths),
+        arg(&entry_ids),
+        layout.count as u32,
+        layout.views as u32,
+        layout.tile_size,
+        layout.tiles_x,
+        layout.tiles_y,
+    );
+    if len > intersections {
+        let (cubes, dim) = element_launch(client, len - intersections);
+        kernels::pad_kernel::launch(
+            client,
+            cubes,
+            dim,
+            arg(&entry_lists),
+            arg(&entry_depths),
+            arg(&entry_ids),
+            intersections as u32,
+            len32,
+        );
+    }
+    let (cubes, dim) = element_launch(client, len / 2);
+    let mut block = 2u32;
+    while block <= len32 {
+        let mut stride = block / 2;
+        while stride > 0 {
+            kernels::bitonic_step_kernel::launch(
+                client,
+                cubes.clone(),
+                dim,
+                arg(&entry_lists),
+                arg(&entry_depths),
+                arg(&entry_ids),
+                block,
+                stride,
+                len32,
+            );
+            stride /= 2;
+        }
+        block *= 2;
+    }
+    entry_ids
 }
 
 fn forward_saved(
@@ -277,41 +356,8 @@ fn forward_saved(
         let data = into_data_sync(total);
         intersections = data.iter::<u32>().next().expect("one total") as usize;
     }
-    let ids = buffer(&device, intersections, DType::U32);
-    if intersections > 0 {
-        let unsorted = buffer(&device, intersections, DType::U32);
-        let cursors = zeroed(&device, lists, DType::U32);
-        let (cubes, dim) = element_launch(&client, pairs);
-        kernels::fill_kernel::launch(
-            &client,
-            cubes,
-            dim,
-            arg(&means2d),
-            arg(&radii),
-            arg(&reasons),
-            arg(&offsets),
-            arg(&cursors),
-            arg(&unsorted),
-            count32,
-            views32,
-            tile_size,
-            tiles_x,
-            tiles_y,
-        );
-        kernels::sort_kernel::launch(
-            &client,
-            CubeCount::new_3d(tiles_x, tiles_y, views32),
-            CubeDim::new_1d(SORT_UNITS),
-            arg(&unsorted),
-            arg(&offsets),
-            arg(&depths),
-            arg(&ids),
-            count32,
-            tiles_x,
-            layout.tiles() as u32,
-        );
-    }
-
+    let ids =
+        sorted_tile_lists(&client, &device, &layout, &means2d, &radii, &reasons, &depths, &offsets, intersections);
     let pixels = views * layout.pixels();
     let images_shape = Shape::new([views, height as usize, width as usize, channels + PACKED_EXTRA_CHANNELS]);
     let images = empty_device_dtype(client.clone(), device.clone(), images_shape, DType::F32);
