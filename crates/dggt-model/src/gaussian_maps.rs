@@ -32,7 +32,9 @@ impl GaussianMaps {
         assert_eq!(raw.dims()[4], GAUSSIAN_CHANNELS, "the Gaussian head has {GAUSSIAN_CHANNELS} channels");
         let channels = |start: usize, count: usize| raw.clone().narrow(4, start, count);
         let rotation = channels(7, 4);
-        let norm = rotation.clone().powi_scalar(2).sum_dim(4).sqrt().clamp_min(1e-12);
+        // The release divides by max(|q|, 1e-12). Clamping the squared norm before the square root gives the
+        // same values and a zero (not NaN) gradient for an all-zero quaternion, where sqrt's derivative is infinite.
+        let norm = rotation.clone().powi_scalar(2).sum_dim(4).clamp_min(1e-24).sqrt();
         let lifespan_raw = channels(11, 1).squeeze_dim::<4>(4);
         Self {
             rgb: sigmoid(channels(0, 3)),

@@ -86,6 +86,17 @@ impl Objective {
         with_inputs: bool,
     ) -> Result<(Forward, Vec<RenderedView>), TrainError> {
         let forward = Forward::run(model, batch, &self.render)?;
+        let views = self.render_views(&forward, batch, with_inputs)?;
+        Ok((forward, views))
+    }
+
+    /// Renders the batch's views (targets, then inputs when asked) from a forward pass's Gaussians.
+    pub fn render_views(
+        &self,
+        forward: &Forward,
+        batch: &StepBatch,
+        with_inputs: bool,
+    ) -> Result<Vec<RenderedView>, TrainError> {
         let mut views = Vec::new();
         let mut wanted: Vec<(usize, bool)> = (0..batch.targets.len()).map(|i| (i, true)).collect();
         if with_inputs {
@@ -103,13 +114,19 @@ impl Objective {
             let alpha = view.alpha.squeeze_dim::<2>(0);
             views.push(RenderedView { truth_index: index, is_target, rgb: view.rgb, alpha, counts: view.counts });
         }
-        Ok((forward, views))
+        Ok(views)
     }
 
     /// The weighted loss of one sample.
     pub fn loss(&self, model: &Dggt, batch: &StepBatch) -> Result<SampleLoss, TrainError> {
+        let forward = Forward::run(model, batch, &self.render)?;
+        self.loss_of(forward, batch)
+    }
+
+    /// The weighted loss of a forward pass's outputs (from the network, or built by hand) on `batch`.
+    pub fn loss_of(&self, forward: Forward, batch: &StepBatch) -> Result<SampleLoss, TrainError> {
         let w = &self.weights;
-        let (forward, views) = self.render(model, batch, self.render.render_inputs)?;
+        let views = self.render_views(&forward, batch, self.render.render_inputs)?;
         let device = batch.images.device();
         let truth = |view: &RenderedView| -> &ViewTruth {
             if view.is_target { &batch.targets[view.truth_index] } else { &batch.inputs[view.truth_index] }

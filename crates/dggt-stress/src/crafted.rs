@@ -1,0 +1,118 @@
+//! Stress cases that bypass the network: hand-made head outputs at the extremes the activations and the
+//! renderer must survive (opacities at 0 and 1, lifespans near 0 and huge, degenerate, huge and anisotropic
+//! scales, zero quaternions, saturated colours, depths at 0 and 1e6, empty and all-dynamic frames, all-sky and
+//! no-sky views), pushed through the Gaussian activations, placement, rendering, every loss and the backward
+//! pass to the hand-made outputs.
+//!
+//! The raw head output is `[1, S, H, W, 12]`: RGB logits (0-2), opacity logit (3), scale pre-softplus (4-6),
+//! rotation `w x y z` before normalisation (7-10), lifespan pre-activation (11), as the Gaussian head emits it.
+
+use std::ops::Range;
+
+use burn::tensor::{Device, Tensor, TensorData};
+use dggt_geom::PixelConvention;
+use dggt_model::gaussian_maps::GaussianMaps;
+use dggt_model::sky::SkyModel;
+use dggt_scene::{InputView, MeansGradient, PixelGaussians};
+use dggt_train::objective::{Forward, Objective};
+
+use crate::pipeline::{probe_gradient, render_and_differentiate};
+use crate::probe::Probe;
+use crate::scenario::{Scenario, Sequence};
+
+/// Channels of the raw Gaussian head output.
+pub const RAW_CHANNELS: usize = 12;
+pub const RGB: Range<usize> = 0..3;
+pub const OPACITY: Range<usize> = 3..4;
+pub const SCALE: Range<usize> = 4..7;
+pub const ROTATION: Range<usize> = 7..11;
+pub const LIFESPAN: Range<usize> = 11..12;
+
+/// A hand-made prediction for the input views of a [`Scenario`], on the host.
+#[derive(Debug, Clone)]
+pub struct Prediction {
+    /// `[S, H, W, 12]` raw Gaussian head output.
+    pub raw: Vec<f32>,
+    /// `[S, H, W]` depth along the optical axis.
+    pub depth: Vec<f32>,
+    /// `[S, H, W]` dynamic logits.
+    pub dynamic_logit: Vec<f32>,
+}
+
+impl Prediction {
+    /// Moderate random values: what a network might output.
+    pub fn random(scenario: &Scenario, seed: u64) -> Self {
+        let pixels = scenario.input_frames.len() * scenario.size.area();
+        let mut random = Sequence::new(seed);
+        let raw = (0..pixels * RAW_CHANNELS)
+            .map(|i| match i % RAW_CHANNELS {
+                3 => random.range(-1.0, 3.0),
+                _ => random.range(-1.0, 1.0),
+            })
+            .collect();
+        let depth = (0..pixels).map(|_| random.range(2.0, 30.0)).collect();
+        let dynamic_logit = (0..pixels).map(|_| random.range(-4.0, 4.0)).collect();
+        Self { raw, depth, dynamic_logit }
+    }
+
+    /// Sets `channels` of every pixel to `value`.
+    pub fn set_channels(&mut self, channels: Range<usize>, value: f32) {
+        for pixel in self.raw.chunks_exact_mut(RAW_CHANNELS) {
+            pixel[channels.clone()].fill(value);
+        }
+    }
+
+    /// Sets `channels` of every pixel to values drawn from `choices`.
+    pub fn scatter_channels(&mut self, channels: Range<usize>, choices: &[f32], random: &mut Sequence) {
+        for pixel in self.raw.chunks_exact_mut(RAW_CHANNELS) {
+            for value in &mut pixel[channels.clone()] {
+                *value = random.pick(choices);
+            }
+        }
+    }
+}
+
+/// Runs a hand-made prediction through placement, rendering, the objective and the backward pass.
+pub fn run(
+    probe: &mut Probe,
+    scenario: &Scenario,
+    prediction: &Prediction,
+    objective: &Objective,
+    sky_model: &SkyModel,
+    device: &Device,
+) -> Result<(), String> {
+    let frames = scenario.input_frames.len();
+    let (width, height) = (scenario.size.width as usize, scenario.size.height as usize);
+    let batch = scenario.batch(device);
+    let raw = Tensor::<5>::from_data(
+        TensorData::new(prediction.raw.clone(), [1, frames, height, width, RAW_CHANNELS]),
+        device,
+    )
+    .require_grad();
+    let map = |values: &[f32]| {
+        Tensor::<4>::from_data(TensorData::new(values.to_vec(), [1, frames, height, width]), device).require_grad()
+    };
+    let (depth, logit) = (map(&prediction.depth), map(&prediction.dynamic_logit));
+    let maps = GaussianMaps::from_raw(raw.clone());
+    let views: Vec<InputView> =
+        batch.inputs.iter().map(|v| InputView { rig_camera: v.rig_camera, time: v.time, camera: v.camera }).collect();
+    let pixels = PixelGaussians::new(
+        &maps,
+        depth.clone(),
+        Some(logit.clone()),
+        views,
+        MeansGradient::Through,
+        PixelConvention::Integer,
+    )
+    .map_err(|e| e.to_string())?;
+    let cameras: Vec<_> =
+        batch.inputs.iter().map(|v| (v.camera.world_from_camera.inverse(), v.camera.intrinsics)).collect();
+    let images = batch.images.clone().reshape([frames, 3, height, width]);
+    let sky = Some(sky_model.gaussians(images, &cameras));
+    let forward = Forward { pixels, sky, depth: depth.clone(), dynamic_logit: Some(logit.clone()), encodings: vec![] };
+    let grads = render_and_differentiate(probe, objective, forward, &batch)?;
+    probe_gradient(probe, &grads, "raw Gaussian head output", &raw);
+    probe_gradient(probe, &grads, "depth", &depth);
+    probe_gradient(probe, &grads, "dynamic logits", &logit);
+    Ok(())
+}

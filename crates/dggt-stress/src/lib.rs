@@ -1,0 +1,25 @@
+//! The numerical stress suite: drives the pipeline through what breaks numerics and reports every non-finite
+//! value by stage (geometry, network, Gaussians, render, losses, gradients).
+//!
+//! Three groups of cases ([`run_suite`]):
+//! - geometry: SLERP between near-identical and opposite rotations, huge translations, one-frame and
+//!   huge-index timelines, extreme pose encodings;
+//! - crafted: hand-made head outputs at the extremes (opacities 0 and 1, lifespans near 0 and huge, degenerate,
+//!   huge and anisotropic scales, zero quaternions, depths 0 and 1e6, empty and all-dynamic frames, all-sky and
+//!   no-sky views, random mixtures of all of them) through placement, rendering, every loss and the backward
+//!   pass; non-finite depths must be rejected with an error;
+//! - network: the tiny architecture on black, white and grey images, all-sky and sky-free masks, one and 64
+//!   input frames, with its own predicted cameras, through to every parameter's gradient.
+//!
+//! `dggt stress` runs it (`--full` for the larger version); the `stress_suite` test runs the bounded version.
+
+mod crafted;
+mod geometry;
+mod network;
+mod pipeline;
+pub mod probe;
+mod scenario;
+pub mod suite;
+
+pub use probe::{Finding, Probe, Stage};
+pub use suite::{CaseOutcome, Expect, StressOptions, StressReport, run_suite};

@@ -1,0 +1,351 @@
+//! The suite: every case with what it must do, each run in isolation (a panic is caught and reported as a
+//! failure, never ends the run), and the report by case and by stage.
+//!
+//! A case passes when nothing it probed is non-finite or broken and it ends as expected: most must run to the
+//! end; inputs that are invalid (a NaN depth) must instead be rejected with an error that says what is wrong.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::path::PathBuf;
+
+use burn::tensor::Device;
+use dggt_geom::ImageSize;
+use dggt_model::ModelConfig;
+use dggt_model::sky::SkyModel;
+use dggt_train::config::{CameraSource, LossWeights, MeansGradientSetting, RenderSection};
+use dggt_train::fresh_model;
+use dggt_train::objective::Objective;
+use serde::Serialize;
+
+use crate::crafted::{self, LIFESPAN, OPACITY, Prediction, RGB, ROTATION, SCALE};
+use crate::geometry;
+use crate::network;
+use crate::probe::{Finding, Probe, Stage};
+use crate::scenario::{Scenario, Sequence};
+
+/// How a case must end.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Expect {
+    /// Run to the end with every probed value finite.
+    Finite,
+    /// Be rejected with an error (the input is invalid), with nothing non-finite probed before that.
+    Rejected,
+}
+
+/// What to run.
+#[derive(Debug, Clone, Default)]
+pub struct StressOptions {
+    /// The full suite: larger scenarios, more random extreme mixtures. The default (bounded) suite is CI's.
+    pub full: bool,
+    /// A folder holding `lpips_alex.safetensors` and `vgg16_features.safetensors` (the layout of the shared
+    /// metrics vectors): adds the LPIPS and Gram terms to the objective.
+    pub loss_weights: Option<PathBuf>,
+}
+
+/// The result of one case.
+#[derive(Debug, Clone, Serialize)]
+pub struct CaseOutcome {
+    pub group: &'static str,
+    pub name: String,
+    pub expect: Expect,
+    pub findings: Vec<Finding>,
+    /// The error the pipeline returned, if any.
+    pub error: Option<String>,
+    /// The panic message, if the case panicked.
+    pub panic: Option<String>,
+    /// Values checked, per stage in [`Stage::ALL`] order.
+    pub checked: Vec<usize>,
+}
+
+impl CaseOutcome {
+    pub fn passed(&self) -> bool {
+        self.panic.is_none()
+            && self.findings.is_empty()
+            && match self.expect {
+                Expect::Finite => self.error.is_none(),
+                Expect::Rejected => self.error.is_some(),
+            }
+    }
+}
+
+/// Every case's outcome.
+#[derive(Debug, Clone, Serialize)]
+pub struct StressReport {
+    pub device: String,
+    pub full: bool,
+    pub cases: Vec<CaseOutcome>,
+}
+
+impl StressReport {
+    pub fn passed(&self) -> bool {
+        self.cases.iter().all(CaseOutcome::passed)
+    }
+
+    pub fn failures(&self) -> impl Iterator<Item = &CaseOutcome> {
+        self.cases.iter().filter(|c| !c.passed())
+    }
+
+    /// Non-finite or broken values found at each stage, over all cases.
+    pub fn bad_values_by_stage(&self) -> BTreeMap<Stage, usize> {
+        let mut by_stage: BTreeMap<Stage, usize> = Stage::ALL.iter().map(|&s| (s, 0)).collect();
+        for finding in self.cases.iter().flat_map(|c| &c.findings) {
+            *by_stage.entry(finding.stage).or_default() += finding.bad;
+        }
+        by_stage
+    }
+
+    /// A plain-text table: one row per case, then the findings of the failed ones and the totals by stage.
+    pub fn table(&self) -> String {
+        let mut out = String::new();
+        let _ = writeln!(out, "{:<9} {:<44} {:<8} {:>12}  result", "group", "case", "expect", "values");
+        for case in &self.cases {
+            let result = if case.passed() { "pass" } else { "FAIL" };
+            let expect = match case.expect {
+                Expect::Finite => "finite",
+                Expect::Rejected => "rejected",
+            };
+            let values: usize = case.checked.iter().sum();
+            let _ = writeln!(out, "{:<9} {:<44} {expect:<8} {values:>12}  {result}", case.group, case.name);
+        }
+        for case in self.failures() {
+            let _ = writeln!(out, "\n{} / {}:", case.group, case.name);
+            if let Some(panic) = &case.panic {
+                let _ = writeln!(out, "  panicked: {panic}");
+            }
+            match (&case.error, case.expect) {
+                (Some(error), Expect::Finite) => {
+                    let _ = writeln!(out, "  unexpected error: {error}");
+                }
+                (None, Expect::Rejected) => {
+                    let _ = writeln!(out, "  accepted an invalid input without an error");
+                }
+                _ => {}
+            }
+            for finding in &case.findings {
+                let _ = writeln!(out, "  {finding}");
+            }
+        }
+        let failed = self.failures().count();
+        let _ = writeln!(out, "\nbad values by stage:");
+        for (stage, count) in self.bad_values_by_stage() {
+            let _ = writeln!(out, "  {:<10} {count}", stage.name());
+        }
+        let _ = writeln!(out, "{} cases: {} pass, {failed} fail", self.cases.len(), self.cases.len() - failed);
+        out
+    }
+}
+
+/// A case to run: its identity, and what it does with a probe.
+struct Case<'a> {
+    group: &'static str,
+    name: String,
+    expect: Expect,
+    run: Box<dyn FnOnce(&mut Probe) -> Result<(), String> + 'a>,
+}
+
+fn run_case(case: Case<'_>) -> CaseOutcome {
+    tracing::info!("stress case {} / {}", case.group, case.name);
+    let mut probe = Probe::default();
+    let run = case.run;
+    let result = catch_unwind(AssertUnwindSafe(|| run(&mut probe)));
+    let (error, panic) = match result {
+        Ok(Ok(())) => (None, None),
+        Ok(Err(error)) => (Some(error), None),
+        Err(payload) => {
+            let message = payload
+                .downcast_ref::<String>()
+                .cloned()
+                .or_else(|| payload.downcast_ref::<&str>().map(|s| s.to_string()))
+                .unwrap_or_else(|| "a panic without a message".into());
+            (None, Some(message))
+        }
+    };
+    CaseOutcome {
+        group: case.group,
+        name: case.name,
+        expect: case.expect,
+        checked: Stage::ALL.iter().map(|&s| probe.checked(s)).collect(),
+        findings: probe.into_findings(),
+        error,
+        panic,
+    }
+}
+
+/// An edit of a hand-made prediction (and of the scenario's masks) that makes one extreme.
+type Edit = fn(&mut Scenario, &mut Prediction, &mut Sequence);
+
+/// The hand-made extremes: name, expectation, edit.
+fn crafted_extremes() -> Vec<(&'static str, Expect, Edit)> {
+    vec![
+        ("moderate values", Expect::Finite, |_, _, _| {}),
+        ("opacities at 0", Expect::Finite, |_, p, _| p.set_channels(OPACITY, -1e4)),
+        ("opacities at 1, no sky", Expect::Finite, |s, p, _| {
+            p.set_channels(OPACITY, 1e4);
+            s.fill_sky(0.0);
+        }),
+        ("opacities at 1, all sky", Expect::Finite, |s, p, _| {
+            p.set_channels(OPACITY, 1e4);
+            s.fill_sky(1.0);
+        }),
+        ("opacities at 0, no sky", Expect::Finite, |s, p, _| {
+            p.set_channels(OPACITY, -1e4);
+            s.fill_sky(0.0);
+        }),
+        ("lifespan near 0 (1e-4)", Expect::Finite, |_, p, _| p.set_channels(LIFESPAN, 1e4)),
+        ("lifespan near 0 (1e-30)", Expect::Finite, |_, p, _| p.set_channels(LIFESPAN, 1e30)),
+        ("lifespan huge (1e6)", Expect::Finite, |_, p, _| p.set_channels(LIFESPAN, -1e4)),
+        ("degenerate scales", Expect::Finite, |_, p, _| p.set_channels(SCALE, -1e4)),
+        ("huge scales", Expect::Finite, |_, p, _| p.set_channels(SCALE, 1e4)),
+        ("anisotropic scales", Expect::Finite, |_, p, _| {
+            for pixel in p.raw.chunks_exact_mut(crafted::RAW_CHANNELS) {
+                pixel[SCALE].copy_from_slice(&[1e3, -1e4, 0.0]);
+            }
+        }),
+        ("zero quaternions", Expect::Finite, |_, p, _| p.set_channels(ROTATION, 0.0)),
+        ("saturated colours", Expect::Finite, |_, p, r| p.scatter_channels(RGB, &[-1e4, 1e4], r)),
+        ("depth 0", Expect::Finite, |_, p, _| p.depth.fill(0.0)),
+        ("depth 1e6", Expect::Finite, |_, p, _| p.depth.fill(1e6)),
+        ("depth mixed 0 .. 1e6", Expect::Finite, |_, p, r| {
+            p.depth.iter_mut().for_each(|d| *d = r.pick(&[0.0, 1e-8, 1.0, 1e6]));
+        }),
+        ("no dynamic pixels", Expect::Finite, |s, p, _| {
+            p.dynamic_logit.fill(-1e4);
+            s.fill_dynamic(0.0);
+        }),
+        ("all pixels dynamic", Expect::Finite, |s, p, _| {
+            p.dynamic_logit.fill(1e4);
+            s.fill_dynamic(1.0);
+        }),
+        ("black images, all sky", Expect::Finite, |s, _, _| {
+            s.fill_images(0.0);
+            s.fill_sky(1.0);
+        }),
+        ("NaN depth", Expect::Rejected, |_, p, _| p.depth[5] = f32::NAN),
+        ("infinite depth", Expect::Rejected, |_, p, _| p.depth[0] = f32::INFINITY),
+    ]
+}
+
+/// Every channel, depth, logit and mask drawn from extremes at random.
+fn mixed_extremes(scenario: &mut Scenario, prediction: &mut Prediction, random: &mut Sequence) {
+    let extremes = [-1e4, -30.0, 0.0, 30.0, 1e4];
+    prediction.scatter_channels(0..crafted::RAW_CHANNELS, &extremes, random);
+    prediction.depth.iter_mut().for_each(|d| *d = random.pick(&[0.0, 1e-6, 1.0, 1e6]));
+    prediction.dynamic_logit.iter_mut().for_each(|l| *l = random.pick(&extremes));
+    for view in &mut scenario.views {
+        view.sky.iter_mut().for_each(|v| *v = random.pick(&[0.0, 1.0]));
+        view.dynamic.iter_mut().for_each(|v| *v = random.pick(&[0.0, 1.0]));
+        view.image.iter_mut().for_each(|v| *v = random.pick(&[0.0, 1.0]));
+    }
+}
+
+fn loss_weights(options: &StressOptions, camera: f64) -> LossWeights {
+    let mut weights = LossWeights { camera, depth: 0.1, gram: 0.01, ..LossWeights::default() };
+    if let Some(dir) = &options.loss_weights {
+        let lpips = dir.join("lpips_alex.safetensors");
+        weights.lpips_weights = Some(lpips.clone());
+        weights.lpips_backbone = Some(lpips);
+        weights.gram_backbone = Some(dir.join("vgg16_features.safetensors"));
+    }
+    weights
+}
+
+/// Runs the suite on `device` (training runs on its autodiff form).
+pub fn run_suite(options: &StressOptions, device: &Device) -> Result<StressReport, String> {
+    let device = device.clone().autodiff();
+    let mut outcomes = Vec::new();
+
+    let geometry_cases: [(&str, fn(&mut Probe) -> Result<(), String>); 5] = [
+        ("SLERP between near-identical rotations", geometry::near_identical_rotations),
+        ("SLERP between opposite rotations", geometry::opposite_rotations),
+        ("huge translations", geometry::huge_translations),
+        ("timelines: one frame, repeats, huge indices", geometry::timelines),
+        ("extreme pose encodings", geometry::extreme_pose_encodings),
+    ];
+    for (name, run) in geometry_cases {
+        outcomes.push(run_case(Case {
+            group: "geometry",
+            name: name.into(),
+            expect: Expect::Finite,
+            run: Box::new(run),
+        }));
+    }
+
+    let config = ModelConfig::tiny();
+    let sky_config = config.sky_model.clone().ok_or("the tiny preset has no sky model")?;
+    let sky_model = SkyModel::initialised(&sky_config, &device);
+    let crafted_render = RenderSection {
+        cameras: CameraSource::GroundTruth,
+        means_gradient: MeansGradientSetting::Through,
+        ..RenderSection::default()
+    };
+    let crafted_objective =
+        Objective::new(loss_weights(options, 0.0), crafted_render, &device).map_err(|e| e.to_string())?;
+    let (size, inputs) = if options.full { (ImageSize::new(70, 56), 3) } else { (ImageSize::new(56, 42), 2) };
+    let size = size.map_err(|e| e.to_string())?;
+    let mut crafted_cases: Vec<(String, Expect, Edit)> =
+        crafted_extremes().into_iter().map(|(name, expect, edit)| (name.to_string(), expect, edit)).collect();
+    for seed in 0..if options.full { 16 } else { 2 } {
+        crafted_cases.push((format!("random extremes, seed {seed}"), Expect::Finite, mixed_extremes));
+    }
+    for (index, (name, expect, edit)) in crafted_cases.into_iter().enumerate() {
+        let (objective, sky_model, device) = (&crafted_objective, &sky_model, &device);
+        outcomes.push(run_case(Case {
+            group: "crafted",
+            name,
+            expect,
+            run: Box::new(move |probe| {
+                let mut scenario = Scenario::new(size, inputs, 2, index as u64);
+                let mut prediction = Prediction::random(&scenario, index as u64);
+                edit(&mut scenario, &mut prediction, &mut Sequence::new(1000 + index as u64));
+                crafted::run(probe, &scenario, &prediction, objective, sky_model, device)
+            }),
+        }));
+    }
+
+    device.seed(0);
+    let model = fresh_model(&config, None, &device).map_err(|e| e.to_string())?;
+    let network_render = RenderSection {
+        cameras: CameraSource::Predicted,
+        means_gradient: MeansGradientSetting::Through,
+        ..RenderSection::default()
+    };
+    let network_objective =
+        Objective::new(loss_weights(options, 1.0), network_render.clone(), &device).map_err(|e| e.to_string())?;
+    let normal = ImageSize::new(70, 56).map_err(|e| e.to_string())?;
+    let small = ImageSize::new(42, 42).map_err(|e| e.to_string())?;
+    let many = if options.full { (normal, 64) } else { (small, 64) };
+    type Setup = fn(&mut Scenario);
+    let network_cases: Vec<(&str, ImageSize, usize, Setup)> = vec![
+        ("random images", normal, 3, |_| {}),
+        ("black images, all sky", normal, 3, |s| {
+            s.fill_images(0.0);
+            s.fill_sky(1.0);
+        }),
+        ("white images, no sky", normal, 3, |s| {
+            s.fill_images(1.0);
+            s.fill_sky(0.0);
+        }),
+        ("grey images, all dynamic", normal, 3, |s| {
+            s.fill_images(0.5);
+            s.fill_dynamic(1.0);
+        }),
+        ("a single input frame", normal, 1, |_| {}),
+        ("64 input frames", many.0, many.1, |_| {}),
+    ];
+    for (index, (name, size, inputs, setup)) in network_cases.into_iter().enumerate() {
+        let (model, objective, render, device) = (&model, &network_objective, &network_render, &device);
+        outcomes.push(run_case(Case {
+            group: "network",
+            name: format!("{name} ({inputs} at {size})"),
+            expect: Expect::Finite,
+            run: Box::new(move |probe| {
+                let mut scenario = Scenario::new(size, inputs, 2, 100 + index as u64);
+                setup(&mut scenario);
+                network::run(probe, &scenario, model, objective, render, device)
+            }),
+        }));
+    }
+    Ok(StressReport { device: format!("{device:?}"), full: options.full, cases: outcomes })
+}

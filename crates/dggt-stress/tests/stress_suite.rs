@@ -1,0 +1,49 @@
+//! The bounded stress suite, as CI runs it: every case passes on the default CPU backend, every stage is
+//! actually probed, and the probe itself notices what it is there to notice.
+
+use std::path::PathBuf;
+
+use burn::tensor::{Device, Tensor, TensorData};
+use dggt_stress::{Expect, Probe, Stage, StressOptions, run_suite};
+
+/// The shared metrics vectors (LPIPS-Alex and VGG-16 weights), when present.
+fn loss_weights() -> Option<PathBuf> {
+    let root = std::env::var_os("DGGT_PARITY_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/parity"));
+    let dir = root.join("metrics");
+    dir.join("lpips_alex.safetensors").is_file().then_some(dir)
+}
+
+#[test]
+fn the_bounded_suite_finds_nothing_non_finite() {
+    let options = StressOptions { full: false, loss_weights: loss_weights() };
+    let report = run_suite(&options, &Device::flex()).expect("the suite runs");
+    println!("{}", report.table());
+    assert!(report.passed(), "{}", report.table());
+    for group in ["geometry", "crafted", "network"] {
+        assert!(report.cases.iter().filter(|c| c.group == group).count() >= 5, "too few {group} cases");
+    }
+    assert!(report.cases.iter().any(|c| c.expect == Expect::Rejected), "no invalid input is exercised");
+    for (i, stage) in Stage::ALL.iter().enumerate() {
+        let checked: usize = report.cases.iter().map(|c| c.checked[i]).sum();
+        assert!(checked > 0, "nothing was checked at the {stage} stage");
+    }
+}
+
+#[test]
+fn the_probe_reports_non_finite_values_and_broken_invariants() {
+    let device = Device::flex();
+    let mut probe = Probe::default();
+    let clean = Tensor::<2>::from_data(TensorData::new(vec![1.0f32, 2.0, 3.0, 4.0], [2, 2]), &device);
+    probe.tensor(Stage::Render, "clean", &clean);
+    assert!(probe.findings().is_empty());
+    let dirty = Tensor::<1>::from_data(TensorData::new(vec![1.0f32, f32::NAN, f32::INFINITY], [3]), &device);
+    probe.tensor(Stage::Losses, "dirty", &dirty);
+    probe.require(Stage::Geometry, "rotation", false, "norm 2");
+    let findings = probe.findings();
+    assert_eq!(findings.len(), 2);
+    assert_eq!((findings[0].stage, findings[0].bad, findings[0].total), (Stage::Losses, 2, 3));
+    assert_eq!(findings[1].stage, Stage::Geometry);
+    assert_eq!(probe.checked(Stage::Render), 4);
+}
