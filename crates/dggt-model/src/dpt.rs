@@ -14,11 +14,10 @@ use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
 use burn::nn::{LayerNorm, LayerNormConfig, PaddingConfig2d};
 use burn::tensor::activation::{relu, sigmoid};
-use burn::tensor::module::interpolate;
-use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
 use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::config::{DptConfig, DptHeadConfig, HeadActivation};
+use crate::resample::bilinear_aligned;
 use crate::uv_embed::uv_sincos_embedding;
 
 /// Scale of the UV positional embedding added to feature maps.
@@ -35,11 +34,6 @@ fn conv3x3(input: usize, output: usize, bias: bool, device: &Device) -> Conv2d {
 
 fn conv1x1(input: usize, output: usize, device: &Device) -> Conv2d {
     Conv2dConfig::new([input, output], [1, 1]).init(device)
-}
-
-/// Bilinear resize with `align_corners = True`.
-fn resize_bilinear(x: Tensor<4>, size: [usize; 2]) -> Tensor<4> {
-    interpolate(x, InterpolateOptions::new(InterpolateMode::Bilinear).with_align_corners(true).with_output_size(size))
 }
 
 /// Two 3x3 convs with a residual connection; see the module docs for the in-place-ReLU skip.
@@ -87,7 +81,7 @@ impl FusionBlock {
         };
         let x = self.res_conf_unit2.forward(x);
         let [_, _, h, w] = x.dims();
-        self.out_conv.forward(resize_bilinear(x, size.unwrap_or([2 * h, 2 * w])))
+        self.out_conv.forward(bilinear_aligned(x, size.unwrap_or([2 * h, 2 * w])))
     }
 }
 
@@ -265,7 +259,7 @@ impl DptHead {
         let x = sc.refinenet1.forward(x, Some(l1), None);
         let fused = sc.output_conv1.forward(x);
 
-        let head_in = self.add_pos_embed(resize_bilinear(fused.clone(), [height, width]), aspect);
+        let head_in = self.add_pos_embed(bilinear_aligned(fused.clone(), [height, width]), aspect);
         let out = sc.output_conv2.out.forward(relu(sc.output_conv2.hidden.forward(head_in.clone())));
         let [frames, channels, _, _] = out.dims();
         let raw = out.permute([0, 2, 3, 1]).reshape([batch, frames / batch, height, width, channels]);

@@ -10,6 +10,12 @@
 //! the input samples `j` in `[trunc(c - support + 0.5), trunc(c + support + 0.5))` clipped to the input, with
 //! weight `keys((j - c + 0.5) / max(scale, 1))` (Keys cubic, a = -0.5), normalised to sum to one. Upscaling is
 //! therefore plain a = -0.5 bicubic whose border taps are dropped and renormalised rather than clamped.
+//!
+//! The DPT heads' bilinear resize with `align_corners = True` ([`bilinear_aligned`]) is built the same way, one
+//! axis at a time, from gathers and products: burn's CubeCL backends have no backward for bilinear
+//! `interpolate`, and this form is differentiable on every backend.
+
+use burn::tensor::{Int, Tensor, TensorData};
 
 /// Keys' cubic convolution kernel with `a = -0.5`, the kernel of PyTorch's antialiased bicubic mode.
 fn keys_cubic(x: f64) -> f64 {
@@ -80,9 +86,74 @@ pub fn antialiased_bicubic_matrix_2d(input: [usize; 2], output: [usize; 2], step
     matrix
 }
 
+/// Source taps of a one-axis bilinear resize with `align_corners = True`: output sample `i` reads input samples
+/// `lower[i]` and `lower[i] + 1` (clamped) with weight `fraction[i]` on the upper one, at source coordinate
+/// `i · (input - 1) / (output - 1)` (the scale in `f32`, as PyTorch computes it; 0 for one output sample).
+fn bilinear_aligned_taps(input: usize, output: usize) -> (Vec<i64>, Vec<i64>, Vec<f32>) {
+    let scale = if output > 1 { (input as f32 - 1.0) / (output as f32 - 1.0) } else { 0.0 };
+    let mut taps = (Vec::with_capacity(output), Vec::with_capacity(output), Vec::with_capacity(output));
+    for i in 0..output {
+        let source = scale * i as f32;
+        let lower = (source.floor() as usize).min(input - 1);
+        taps.0.push(lower as i64);
+        taps.1.push((lower + 1).min(input - 1) as i64);
+        taps.2.push(source - lower as f32);
+    }
+    taps
+}
+
+/// Resizes axis `axis` of `x` to `output` samples, bilinearly with `align_corners = True`.
+fn bilinear_aligned_axis(x: Tensor<4>, axis: usize, output: usize) -> Tensor<4> {
+    let input = x.dims()[axis];
+    if input == output {
+        return x;
+    }
+    let device = x.device();
+    let (lower, upper, fraction) = bilinear_aligned_taps(input, output);
+    let index = |taps: Vec<i64>| Tensor::<1, Int>::from_data(TensorData::new(taps, [output]), &device);
+    let mut shape = [1; 4];
+    shape[axis] = output;
+    let fraction = Tensor::<1>::from_data(TensorData::new(fraction, [output]), &device).reshape(shape);
+    let below = x.clone().select(axis, index(lower));
+    let above = x.select(axis, index(upper));
+    below.clone() + (above - below) * fraction
+}
+
+/// `[B, C, H, W]` resized to `size = [height, width]` like PyTorch's
+/// `interpolate(mode="bilinear", align_corners=True)`: along the width, then along the height (the 2D
+/// interpolation is separable, so this is the same weighted sum of the four neighbours).
+pub fn bilinear_aligned(x: Tensor<4>, size: [usize; 2]) -> Tensor<4> {
+    let [_, _, height, width] = x.dims();
+    assert!(height > 0 && width > 0 && size[0] > 0 && size[1] > 0, "bilinear resize of an empty map");
+    bilinear_aligned_axis(bilinear_aligned_axis(x, 3, size[1]), 2, size[0])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use burn::tensor::Device;
+    use burn::tensor::module::interpolate;
+    use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
+
+    #[test]
+    fn bilinear_aligned_matches_the_backend_interpolation_and_has_a_gradient() {
+        let device = Device::flex().autodiff();
+        let values: Vec<f32> = (0..2 * 3 * 5 * 7).map(|i| ((i * 37) % 101) as f32 / 101.0 - 0.5).collect();
+        let x = Tensor::<4>::from_data(TensorData::new(values, [2, 3, 5, 7]), &device).require_grad();
+        for size in [[10, 14], [5, 7], [3, 4], [1, 1], [9, 2], [56, 70]] {
+            let ours = bilinear_aligned(x.clone(), size);
+            let options = InterpolateOptions::new(InterpolateMode::Bilinear).with_align_corners(true);
+            let reference = interpolate(x.clone(), options.with_output_size(size));
+            assert_eq!(ours.dims(), reference.dims());
+            let difference: f32 = (ours.clone() - reference).abs().max().into_scalar();
+            assert!(difference < 1e-6, "{size:?}: differs by {difference}");
+            let grad = ours.sum().backward();
+            let grad = x.grad(&grad).expect("a gradient").into_data().to_vec::<f32>().unwrap();
+            // Each output sample's weights sum to one, so the input gradients sum to the output count.
+            let (total, expected) = (grad.iter().map(|&g| f64::from(g)).sum::<f64>(), (6 * size[0] * size[1]) as f64);
+            assert!((total - expected).abs() < 1e-5 * expected, "{size:?}: {total}");
+        }
+    }
 
     #[test]
     fn same_size_is_identity() {
