@@ -125,6 +125,28 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Drive the pipeline through extreme inputs and report every non-finite value by stage; fails when any
+    /// case does.
+    Stress {
+        /// The larger suite (bigger scenarios, more random extreme mixtures).
+        #[arg(long)]
+        full: bool,
+        /// A folder with `lpips_alex.safetensors` and `vgg16_features.safetensors`: adds LPIPS and Gram terms.
+        #[arg(long)]
+        loss_weights: Option<PathBuf>,
+        /// Device: cpu, ndarray, wgpu[:N], cuda[:N].
+        #[arg(long, default_value = "cpu")]
+        device: String,
+        /// Also write the report as JSON to this file.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
+    /// Evaluate a checkpoint on scene exports under the paper's or the release's protocol: PSNR, SSIM,
+    /// LPIPS, aligned depth RMSE and scene-flow metrics per view, split and scene; `eval.json` and `eval.md`.
+    Eval(dggt_eval::cli::EvalArgs),
+    /// Measure run time against error over the knobs that trade speed for accuracy (input width, input
+    /// frames, culling threshold, precision, sky); `bench.csv`, `bench.png` with the Pareto front.
+    Bench(dggt_bench::cli::BenchArgs),
     /// List the compute backends of this build and check that each one computes.
     Devices {
         /// Check only this backend.
@@ -235,6 +257,23 @@ fn parity(dir: &std::path::Path, device: DeviceChoice, weights: Option<PathBuf>)
     Ok(())
 }
 
+/// `dggt stress`: runs the suite, prints the table; an error when any case fails.
+fn stress(full: bool, loss_weights: Option<PathBuf>, device: &str, json: Option<PathBuf>) -> Result<()> {
+    let device = backend::parse_device(device)?;
+    let started = std::time::Instant::now();
+    let options = dggt_stress::StressOptions { full, loss_weights };
+    let report = dggt_stress::run_suite(&options, &device).map_err(|e| anyhow::anyhow!("stress suite: {e}"))?;
+    print!("{}", report.table());
+    println!("({:.1} s on {device:?})", started.elapsed().as_secs_f64());
+    if let Some(path) = json {
+        std::fs::write(&path, serde_json::to_string_pretty(&report)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    let failed: Vec<String> = report.failures().map(|c| format!("{} / {}", c.group, c.name)).collect();
+    anyhow::ensure!(failed.is_empty(), "{} stress case(s) failed: {}", failed.len(), failed.join(", "));
+    Ok(())
+}
+
 fn main() -> Result<()> {
     tracing_subscriber::fmt()
         .with_env_filter(EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info")))
@@ -304,6 +343,15 @@ fn main() -> Result<()> {
             options.chunk_frames = chunk;
             options.progress = std::io::IsTerminal::is_terminal(&std::io::stderr());
             reconstruct(options, &device)?
+        }
+        Command::Stress { full, loss_weights, device, json } => stress(full, loss_weights, &device, json)?,
+        Command::Eval(args) => {
+            let device = backend::parse_device(&args.device)?;
+            print!("{}", dggt_eval::cli::run(&args, &device)?);
+        }
+        Command::Bench(args) => {
+            let device = backend::parse_device(&args.device)?;
+            print!("{}", dggt_bench::cli::run(&args, &device)?);
         }
         Command::Devices { device } => {
             let choices = device.map_or(DeviceChoice::ALL.to_vec(), |d| vec![d]);

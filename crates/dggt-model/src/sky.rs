@@ -32,6 +32,11 @@ pub struct BackgroundField {
 }
 
 impl BackgroundField {
+    /// Channels of the output.
+    pub fn output_width(&self) -> usize {
+        self.layers.last().map_or(0, |layer| layer.weight.dims()[1])
+    }
+
     /// `[N, 3]` mean RGB -> `[N, 6]` in (-1, 1).
     pub fn forward(&self, rgb: Tensor<2>) -> Tensor<2> {
         self.layers[1].forward(relu(self.layers[0].forward(rgb))).tanh()
@@ -178,6 +183,22 @@ impl SkyModel {
             }
         }
         let v = visible_index.len();
+        if v == 0 {
+            // No point is seen by any view: an empty set, made without running kernels on zero-sized tensors
+            // (burn's CubeCL backends fail on some of them).
+            let empty = |width: usize| Tensor::<2>::from_data(TensorData::new(Vec::<f32>::new(), [0, width]), &device);
+            let field_width = self.bg_field.output_width();
+            return SkyGaussians {
+                visible_index,
+                rgb_mean: empty(3),
+                field_out: empty(field_width),
+                colors: empty(3),
+                means: empty(3),
+                scales: empty(3),
+                quats: empty(4),
+                opacities: Tensor::<1>::from_data(TensorData::new(Vec::<f32>::new(), [0]), &device),
+            };
+        }
         let gather = |buffer: &Param<Tensor<2>>| {
             let width = buffer.dims()[1];
             let values = host(buffer.val());

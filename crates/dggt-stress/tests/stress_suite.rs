@@ -31,6 +31,18 @@ fn the_bounded_suite_finds_nothing_non_finite() {
     }
 }
 
+/// The same suite through the CubeCL kernels and burn's wgpu backend, training included. Without the LPIPS and
+/// Gram terms: their VGG features of the 64-frame case need a buffer larger than the 128 MiB storage binding
+/// that Mesa's software Vulkan driver allows.
+#[cfg(feature = "wgpu")]
+#[test]
+fn the_bounded_suite_finds_nothing_non_finite_on_wgpu() {
+    let options = StressOptions { full: false, loss_weights: None };
+    let device = Device::wgpu(burn::tensor::DeviceKind::default());
+    let report = run_suite(&options, &device).expect("the suite runs");
+    assert!(report.passed(), "{}", report.table());
+}
+
 #[test]
 fn the_probe_reports_non_finite_values_and_broken_invariants() {
     let device = Device::flex();

@@ -1,0 +1,156 @@
+//! The `dggt bench` command line: options, the sweep they describe, and the run that prints the table and
+//! writes `bench.csv`, `bench.png`, `bench.svg` and `bench-notes.txt`.
+
+use std::path::PathBuf;
+
+use burn::tensor::Device;
+
+use crate::error::BenchError;
+use crate::knobs::{Culling, Knobs, Precision, SweepSpec, parse_opacity};
+use crate::run::{BenchOptions, LpipsFiles, PoseSource, run_bench};
+use crate::{report, write_outputs};
+
+/// Measure run time against error over the knobs that trade speed for accuracy: input width, input frames,
+/// culling threshold, precision, sky. A baseline, the exact render (culling off) and one row per other value
+/// of each knob (`--grid` adds every combination).
+#[derive(Debug, Clone, clap::Args)]
+pub struct BenchArgs {
+    /// A scene export (its images are the ground truth of the target frames).
+    #[arg(long)]
+    pub scene: PathBuf,
+    /// A trainer checkpoint folder (or run folder) or release file [default: a fresh tiny model with a fixed
+    /// seed, whose ground-truth error is meaningless].
+    #[arg(long)]
+    pub checkpoint: Option<PathBuf>,
+    /// Device: cpu, ndarray, wgpu[:N], cuda[:N].
+    #[arg(long, default_value = "cpu")]
+    pub device: String,
+    /// Timed repetitions per configuration (the median is reported).
+    #[arg(long, default_value_t = 3)]
+    pub repeat: usize,
+    /// Untimed warm-up runs per configuration.
+    #[arg(long, default_value_t = 1)]
+    pub warmup: usize,
+    /// Export camera ids.
+    #[arg(long, value_delimiter = ',', default_value = "0")]
+    pub cameras: Vec<usize>,
+    /// Target frames (positions in the scene) [default: 2, 7, 12, ... short of the last two frames].
+    #[arg(long, value_delimiter = ',')]
+    pub targets: Option<Vec<usize>>,
+    /// Baseline network input width (px, a multiple of 14); also the resolution every error is measured at.
+    #[arg(long, default_value_t = 84)]
+    pub width: u32,
+    /// Widths to sweep.
+    #[arg(long, value_delimiter = ',', default_value = "56,84,112,168")]
+    pub widths: Vec<u32>,
+    /// Baseline number of input frames.
+    #[arg(long, default_value_t = 8)]
+    pub frames: usize,
+    /// Input frame counts to sweep.
+    #[arg(long = "frame-counts", value_delimiter = ',', default_value = "4,8,16")]
+    pub frame_counts: Vec<usize>,
+    /// Baseline culling threshold on the opacity after the lifespan fade (a number or N/D).
+    #[arg(long, default_value = "1/255")]
+    pub min_opacity: String,
+    /// Culling thresholds to sweep.
+    #[arg(long, value_delimiter = ',', default_value = "1/255,0.01,0.05")]
+    pub min_opacities: Vec<String>,
+    /// Baseline precision of the network: f32, f16, bf16.
+    #[arg(long, default_value = "f32")]
+    pub precision: String,
+    /// Precisions to sweep (unsupported ones are reported as skipped).
+    #[arg(long, value_delimiter = ',', default_value = "f32,f16,bf16")]
+    pub precisions: Vec<String>,
+    /// Baseline without the sky model.
+    #[arg(long)]
+    pub no_sky: bool,
+    /// Sky settings to sweep (`on`, `off`).
+    #[arg(long, value_delimiter = ',', default_value = "on,off")]
+    pub sky: Vec<String>,
+    /// Also measure every combination of the swept values.
+    #[arg(long)]
+    pub grid: bool,
+    /// Cameras from the camera head instead of the export's poses.
+    #[arg(long)]
+    pub predicted_poses: bool,
+    /// LPIPS-Alex: the AlexNet backbone weights (`.pth` / `.safetensors`).
+    #[arg(long, requires = "lpips_linear")]
+    pub lpips_backbone: Option<PathBuf>,
+    /// LPIPS-Alex: the linear-layer weights (the lpips package's `alex.pth`); may be the backbone's file.
+    #[arg(long, requires = "lpips_backbone")]
+    pub lpips_linear: Option<PathBuf>,
+    /// Seed of the fresh model (without --checkpoint).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Frames per chunk of the dense heads.
+    #[arg(long, default_value_t = 4)]
+    pub chunk: usize,
+    /// Output folder.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+fn parse_sky(text: &str) -> Result<bool, BenchError> {
+    match text.trim().to_ascii_lowercase().as_str() {
+        "on" | "true" | "yes" => Ok(true),
+        "off" | "false" | "no" => Ok(false),
+        other => Err(BenchError::invalid("--sky", format!("`{other}`: expected on or off"))),
+    }
+}
+
+impl BenchArgs {
+    /// The options these arguments describe.
+    pub fn options(&self) -> Result<BenchOptions, BenchError> {
+        let sweep = SweepSpec {
+            baseline: Knobs {
+                width: self.width,
+                input_frames: self.frames,
+                culling: Culling::MinOpacity(parse_opacity(&self.min_opacity)?),
+                precision: Precision::parse(&self.precision)?,
+                sky: !self.no_sky,
+            },
+            widths: self.widths.clone(),
+            input_frames: self.frame_counts.clone(),
+            min_opacities: self.min_opacities.iter().map(|t| parse_opacity(t)).collect::<Result<_, _>>()?,
+            precisions: self.precisions.iter().map(|t| Precision::parse(t)).collect::<Result<_, _>>()?,
+            sky: self.sky.iter().map(|t| parse_sky(t)).collect::<Result<_, _>>()?,
+            full_grid: self.grid,
+        };
+        Ok(BenchOptions {
+            scene: self.scene.clone(),
+            checkpoint: self.checkpoint.clone(),
+            cameras: self.cameras.clone(),
+            targets: self.targets.clone(),
+            sweep,
+            repeat: self.repeat,
+            warmup: self.warmup,
+            poses: if self.predicted_poses { PoseSource::Predicted } else { PoseSource::Truth },
+            lpips: match (&self.lpips_backbone, &self.lpips_linear) {
+                (Some(backbone), Some(linear)) => {
+                    Some(LpipsFiles { backbone: backbone.clone(), linear: linear.clone() })
+                }
+                _ => None,
+            },
+            seed: self.seed,
+            chunk_frames: self.chunk,
+        })
+    }
+}
+
+/// Runs the sweep on `device`, writes the outputs and returns the text to print.
+pub fn run(args: &BenchArgs, device: &Device) -> Result<String, BenchError> {
+    let options = args.options()?;
+    let report = run_bench(&options, device)?;
+    let files = write_outputs(&report, &args.out)?;
+    let mut text = report::table_text(&report);
+    text.push_str(&report::notes_text(&report));
+    text.push_str(&format!(
+        "outputs: {}, {}{}, {}, {}\n",
+        files.csv.display(),
+        files.png.display(),
+        if files.png_has_text { "" } else { " (no font found: no text; see the SVG)" },
+        files.svg.display(),
+        files.notes.display()
+    ));
+    Ok(text)
+}

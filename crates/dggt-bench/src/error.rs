@@ -1,0 +1,35 @@
+//! Errors of a benchmark run, each naming the file, option or stage it concerns.
+
+use std::path::PathBuf;
+
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    #[error("{what}: {detail}")]
+    Invalid { what: String, detail: String },
+    #[error("{}: {detail}", path.display())]
+    File { path: PathBuf, detail: String },
+    #[error(transparent)]
+    Data(#[from] dggt_data::DataError),
+    #[error(transparent)]
+    Model(#[from] dggt_model::ModelError),
+    #[error(transparent)]
+    Scene(#[from] dggt_scene::SceneError),
+    #[error(transparent)]
+    Splat(#[from] dggt_splat::SplatError),
+    #[error(transparent)]
+    Train(#[from] dggt_train::TrainError),
+    #[error(transparent)]
+    Reconstruct(#[from] dggt_reconstruct::ReconstructError),
+    #[error(transparent)]
+    Metric(#[from] dggt_losses::LossError),
+}
+
+impl BenchError {
+    pub(crate) fn file(path: impl Into<PathBuf>, detail: impl ToString) -> Self {
+        Self::File { path: path.into(), detail: detail.to_string() }
+    }
+
+    pub(crate) fn invalid(what: impl Into<String>, detail: impl Into<String>) -> Self {
+        Self::Invalid { what: what.into(), detail: detail.into() }
+    }
+}

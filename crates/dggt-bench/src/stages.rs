@@ -1,0 +1,124 @@
+//! The reconstruction split into the stages the benchmark times, each computing exactly what the pipeline
+//! computes:
+//!
+//! - [`backbone`]: the aggregator (patch embedding and alternating attention) over all frames;
+//! - [`heads`]: the camera head and the dense heads (depth, dynamic, Gaussian) a few frames at a time, as
+//!   [`dggt_reconstruct::forward::forward_chunked`] runs them, with the outputs cast back to f32;
+//! - [`assemble`](dggt_scene::assemble) (called by the runner): the static union faded to the target time, the
+//!   nearest view's dynamic Gaussians and the culling;
+//! - [`rasterise`]: the assembled Gaussians over the sky, as [`dggt_scene::render_target`] composites them.
+//!
+//! A device may run work asynchronously (the GPU backends), so [`settle`] blocks until a stage's outputs are
+//! computed before its clock stops. The runner times the backbone in a run of its own and the backbone and
+//! heads together (the heads' time is the difference): waiting on the aggregator's outputs before the heads
+//! ran made the heads' outputs NaN on wgpu with burn 0.22.1.
+
+use burn::tensor::{Device, FloatDType, Tensor};
+use dggt_model::Dggt;
+use dggt_model::aggregator::AggregatorOutput;
+use dggt_model::gaussian_maps::GaussianMaps;
+use dggt_model::sky::SkyGaussians;
+use dggt_reconstruct::forward::Prediction;
+use dggt_scene::{AssembledGaussians, AssemblySettings, TargetView, camera_tensors};
+use dggt_splat::{RasterSettings, RenderSettings, RenderTensors, render};
+
+use crate::error::BenchError;
+
+/// Blocks until `tensor` is computed, by reading one of its values back. (A device-wide
+/// [`Device::sync`] between stages made later outputs non-finite on wgpu in burn 0.22.1; reading a value back
+/// waits for the work that produces the tensor without disturbing what is still queued.)
+pub fn settle<const D: usize>(tensor: &Tensor<D>) -> Result<(), BenchError> {
+    if tensor.shape().num_elements() == 0 {
+        return Ok(());
+    }
+    tensor
+        .clone()
+        .sum()
+        .into_data()
+        .convert::<f32>()
+        .try_into_vec::<f32>()
+        .map(|_| ())
+        .map_err(|e| BenchError::invalid("device", format!("reading a stage's output back: {e:?}")))
+}
+
+/// The aggregator on `images` (`[1, S, 3, H, W]`, RGB in `[0, 1]`, in the model's float type).
+pub fn backbone(model: &Dggt, images: Tensor<5>) -> Result<AggregatorOutput, BenchError> {
+    Ok(model.aggregator.forward(images)?)
+}
+
+/// The camera head and the dense heads on `aggregator`'s tokens, the dense heads `chunk` frames at a time;
+/// `images` are the backbone's input (for the Gaussian head's colour skip). Outputs are f32 whatever the
+/// model's float type.
+pub fn heads(
+    model: &Dggt,
+    aggregator: AggregatorOutput,
+    images: Tensor<5>,
+    chunk: usize,
+) -> Result<Prediction, BenchError> {
+    let frames = images.dims()[1];
+    let chunk = chunk.max(1);
+    let f32 = |t: Tensor<4>| t.cast(FloatDType::F32);
+    let last = aggregator.output_list.last().ok_or_else(|| BenchError::invalid("model", "no aggregator layer"))?;
+    let pose_encoding = model.camera_head.forward(last.clone()).pose_encoding().cast(FloatDType::F32);
+    let (start, grid) = (aggregator.patch_start_idx, aggregator.grid);
+    let (mut depth, mut dynamic, mut gaussian_raw) = (Vec::new(), Vec::new(), Vec::new());
+    for first in (0..frames).step_by(chunk) {
+        let count = chunk.min(frames - first);
+        let pick = |tokens: Tensor<4>| tokens.narrow(1, first, count);
+        let prediction = model.depth_head.predict(|i| pick(aggregator.output_list[i].clone()), start, grid);
+        depth.push(f32(prediction.prediction.narrow(4, 0, 1).squeeze_dim::<4>(4)));
+        if let Some(head) = &model.instance_head {
+            let prediction = head.predict(|i| pick(aggregator.dino_token_list[i].clone()), start, grid);
+            dynamic.push(f32(prediction.prediction.narrow(4, 0, 1).squeeze_dim::<4>(4)));
+        }
+        if let Some(head) = &model.gs_head {
+            let raw = head.forward(|i| pick(aggregator.output_with_dino_tokens(i)), start, grid).raw;
+            let raw = model.apply_color_skip(raw, images.clone().narrow(1, first, count));
+            gaussian_raw.push(raw.cast(FloatDType::F32));
+        }
+    }
+    drop(aggregator);
+    Ok(Prediction {
+        pose_encoding,
+        depth: Tensor::cat(depth, 1),
+        dynamic_logit: (!dynamic.is_empty()).then(|| Tensor::cat(dynamic, 1)),
+        gaussians: (!gaussian_raw.is_empty()).then(|| GaussianMaps::from_raw(Tensor::cat(gaussian_raw, 1))),
+    })
+}
+
+/// One rendered target view: `[H, W, 3]` colours (on the host, interleaved, not clamped).
+pub struct Rasterised {
+    pub rgb: Vec<f32>,
+}
+
+/// Rasterises assembled Gaussians from `target` and composites them over `sky` (black without):
+/// `rgb = alpha · foreground + (1 - alpha) · sky`, with the rasteriser's planes from `assembly` — the
+/// computation of [`dggt_scene::render_target`] after its assembly step.
+pub fn rasterise(
+    assembled: &AssembledGaussians,
+    sky: Option<&SkyGaussians>,
+    target: &TargetView,
+    size: dggt_geom::ImageSize,
+    assembly: &AssemblySettings,
+    device: &Device,
+) -> Result<Rasterised, BenchError> {
+    let cameras = camera_tensors(&[target.camera], size, device)?;
+    let raster =
+        RasterSettings { near_plane: assembly.near_plane, far_plane: assembly.far_plane, ..Default::default() };
+    let settings = RenderSettings { raster, background: None };
+    let RenderTensors { colors, alpha, .. } = render(&assembled.gaussians, &cameras, &settings)?;
+    let rgb = match sky {
+        Some(sky) => {
+            let sky_rgb = render(&sky.to_splat(), &cameras, &settings)?.colors;
+            let a = alpha.unsqueeze_dim::<4>(3);
+            a.clone() * colors + a.neg().add_scalar(1.0) * sky_rgb
+        }
+        None => colors,
+    };
+    let rgb = rgb
+        .into_data()
+        .convert::<f32>()
+        .try_into_vec::<f32>()
+        .map_err(|e| BenchError::invalid("render", format!("reading the image back: {e:?}")))?;
+    Ok(Rasterised { rgb })
+}

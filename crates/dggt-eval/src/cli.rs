@@ -1,0 +1,136 @@
+//! The `dggt eval` command line: its arguments and their translation into [`EvalOptions`].
+//!
+//! Defaults: the paper protocol, window `0..20`, cameras `0,1,2`, input stride 5 for the interpolation mode
+//! (the paper's stride; the paper protocol fixes it, the reconstruction mode has none).
+
+use std::ops::Range;
+use std::path::PathBuf;
+
+use burn::tensor::Device;
+use dggt_reconstruct::Architecture;
+
+use crate::error::EvalError;
+use crate::protocol::{DEFAULT_CAMERAS, DEFAULT_WINDOW, PAPER_EVERY, Protocol};
+use crate::runner::{EvalOptions, LpipsWeights, evaluate};
+
+/// Which protocol `--protocol` names.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ProtocolChoice {
+    /// Inputs at frames 0, 5, 10, 15 of the window; reconstruction and novel-view splits.
+    Paper,
+    /// Every frame of the window is an input and is scored.
+    Reconstruction,
+    /// Every `--every`-th frame is an input; inputs and in-between frames reported separately.
+    Interpolation,
+}
+
+/// Arguments of `dggt eval`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct EvalArgs {
+    /// A scene export to evaluate (repeat for several).
+    #[arg(long = "scene", required = true)]
+    pub scenes: Vec<PathBuf>,
+    /// A trainer checkpoint folder (or run folder), or a release `.pt` / `.safetensors` file.
+    #[arg(long)]
+    pub checkpoint: PathBuf,
+    /// Architecture of a `.pt` / `.safetensors` checkpoint: a model `config.json` or a training `.toml`.
+    #[arg(long, conflicts_with = "preset")]
+    pub config: Option<PathBuf>,
+    /// Architecture preset of a `.pt` / `.safetensors` checkpoint: tiny, vggt_1b, dggt [default: dggt].
+    #[arg(long)]
+    pub preset: Option<String>,
+    #[arg(long, value_enum, default_value = "paper")]
+    pub protocol: ProtocolChoice,
+    /// Input stride of the interpolation protocol [default: 5].
+    #[arg(long)]
+    pub every: Option<usize>,
+    /// The window, as frame indices `START..END` (end exclusive) [default: 0..20].
+    #[arg(long, value_parser = parse_range)]
+    pub frames: Option<Range<usize>>,
+    /// Export camera ids (comma separated) [default: 0,1,2].
+    #[arg(long, value_delimiter = ',')]
+    pub cameras: Option<Vec<usize>>,
+    /// LPIPS linear weights (the lpips package's `alex.pth`, a full LPIPS state dict, or safetensors).
+    #[arg(long)]
+    pub lpips_weights: Option<PathBuf>,
+    /// AlexNet features for LPIPS [default: the --lpips-weights file, for a full state dict].
+    #[arg(long, requires = "lpips_weights")]
+    pub alexnet: Option<PathBuf>,
+    /// Network input width, a multiple of 14 [default: the --config training file's, else 518].
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Frames per chunk of the dense heads (lower uses less memory).
+    #[arg(long, default_value_t = 4)]
+    pub chunk: usize,
+    /// Device: cpu, ndarray, wgpu[:N], cuda[:N].
+    #[arg(long, default_value = "cpu")]
+    pub device: String,
+    /// Output folder of eval.json and eval.md.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Parses `START..END` (end exclusive, not empty).
+pub fn parse_range(text: &str) -> Result<Range<usize>, String> {
+    let (start, end) = text.split_once("..").ok_or_else(|| format!("expected START..END, got {text:?}"))?;
+    let start: usize = start.trim().parse().map_err(|_| format!("bad range start in {text:?}"))?;
+    let end: usize = end.trim().parse().map_err(|_| format!("bad range end in {text:?}"))?;
+    if end <= start {
+        return Err(format!("empty range {text:?}"));
+    }
+    Ok(start..end)
+}
+
+impl EvalArgs {
+    /// The protocol these arguments describe.
+    pub fn protocol(&self) -> Result<Protocol, EvalError> {
+        let window = self.frames.clone().unwrap_or(0..DEFAULT_WINDOW);
+        let cameras = self.cameras.clone().unwrap_or_else(|| DEFAULT_CAMERAS.to_vec());
+        let (start, length) = (window.start, window.len());
+        let protocol = match self.protocol {
+            ProtocolChoice::Paper => {
+                Protocol { start, length, every: self.every.unwrap_or(PAPER_EVERY), cameras, ..Protocol::paper() }
+            }
+            ProtocolChoice::Reconstruction => {
+                let mut protocol = Protocol::reconstruction(start, length, cameras);
+                protocol.every = self.every.unwrap_or(1);
+                protocol
+            }
+            ProtocolChoice::Interpolation => {
+                Protocol::interpolation(start, length, self.every.unwrap_or(PAPER_EVERY), cameras)
+            }
+        };
+        protocol.validate()?;
+        Ok(protocol)
+    }
+
+    /// The evaluation these arguments ask for.
+    pub fn options(&self) -> Result<EvalOptions, EvalError> {
+        let mut options = EvalOptions::new(self.scenes.clone(), &self.checkpoint, &self.out);
+        options.protocol = self.protocol()?;
+        options.architecture = match (&self.config, &self.preset) {
+            (Some(path), _) => Some(Architecture::Config(path.clone())),
+            (None, Some(name)) => Some(Architecture::Preset(name.clone())),
+            (None, None) => None,
+        };
+        options.width = self.width;
+        options.chunk_frames = self.chunk;
+        options.lpips = self.lpips_weights.as_ref().map(|linear| LpipsWeights {
+            linear: linear.clone(),
+            alexnet: self.alexnet.clone().unwrap_or_else(|| linear.clone()),
+        });
+        Ok(options)
+    }
+}
+
+/// Runs `dggt eval` on `device`; returns the Markdown report followed by where the files are.
+pub fn run(args: &EvalArgs, device: &Device) -> Result<String, EvalError> {
+    let options = args.options()?;
+    let report = evaluate(&options, device)?;
+    Ok(format!(
+        "{}\noutputs: {} and {}\n",
+        report.markdown(),
+        options.out.join("eval.json").display(),
+        options.out.join("eval.md").display()
+    ))
+}

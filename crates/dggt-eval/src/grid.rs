@@ -1,0 +1,59 @@
+//! Where the export's quarter-resolution depth-and-flow cells (`depth_flows_4`) fall in the rendered view.
+//!
+//! Cell `(row, col)` of a map belongs to the full-resolution pixels `4 row .. 4 row + 4` x `4 col .. 4 col + 4`
+//! and is sampled at its centre, continuous coordinates `(4 col + 2, 4 row + 2)` of the original image. The
+//! network sees the image resized by `(sx, sy) = (resized / original)` per axis and cropped by `crop_top`
+//! rows, so that point lies at `(x sx, y sy - crop_top)` in the rendered view; the rendered expected depth is
+//! read there bilinearly ([`crate::metrics::sample_bilinear`]). A cell takes part when its lidar depth is
+//! positive, none of its 16 full-resolution pixels is sky in the export's sky mask (mask value at least 128,
+//! the binarisation the preprocessing uses), and its centre lies inside the cropped view.
+
+use dggt_data::PreprocessPlan;
+use dggt_data::depth_flow::DEPTH_FLOW_STRIDE;
+
+use crate::metrics::sample_bilinear;
+
+/// The map from original-image coordinates to network-image coordinates of one preprocessing plan.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CellMapping {
+    pub scale_x: f64,
+    pub scale_y: f64,
+    pub crop_top: f64,
+    /// The network image size.
+    pub width: usize,
+    pub height: usize,
+}
+
+impl CellMapping {
+    pub fn new(plan: &PreprocessPlan) -> Self {
+        Self {
+            scale_x: f64::from(plan.resized.width) / f64::from(plan.original.width),
+            scale_y: f64::from(plan.resized.height) / f64::from(plan.original.height),
+            crop_top: f64::from(plan.crop_top),
+            width: plan.output.width as usize,
+            height: plan.output.height as usize,
+        }
+    }
+
+    /// Network-image coordinates of the centre of cell `(row, col)`.
+    pub fn cell_centre(&self, row: usize, col: usize) -> (f64, f64) {
+        let stride = f64::from(DEPTH_FLOW_STRIDE);
+        let (x, y) = (stride * col as f64 + stride / 2.0, stride * row as f64 + stride / 2.0);
+        (x * self.scale_x, y * self.scale_y - self.crop_top)
+    }
+
+    /// The rendered map (`width x height`, row-major) at the centre of cell `(row, col)`; `None` outside.
+    pub fn sample(&self, map: &[f32], row: usize, col: usize) -> Option<f32> {
+        let (x, y) = self.cell_centre(row, col);
+        sample_bilinear(map, self.width, self.height, x, y)
+    }
+}
+
+/// Whether any full-resolution pixel of cell `(row, col)` is sky in a row-major 8-bit mask of
+/// `width x height` (value at least 128). Pixels beyond the mask (a cell cut by the integer division of the
+/// map size) are not looked at.
+pub fn cell_has_sky(mask: &[u8], width: usize, height: usize, row: usize, col: usize) -> bool {
+    let stride = DEPTH_FLOW_STRIDE as usize;
+    (stride * row..(stride * row + stride).min(height))
+        .any(|r| (stride * col..(stride * col + stride).min(width)).any(|c| mask[r * width + c] >= 128))
+}

@@ -1,0 +1,246 @@
+//! What an evaluation reports: per-view records, per-scene means split by protocol split, the mean over
+//! scenes, stage times; saved as `eval.json` (these structures, stable field names) and `eval.md` (a Markdown
+//! table per split).
+//!
+//! Aggregation: a scene's split value is the mean over its views of that split (views lacking a metric, e.g.
+//! no lidar cell for D-RMSE, are left out of that metric's mean and the count says how many took part); the
+//! overall value is the mean over the scenes that have one. Units: PSNR in dB, SSIM and LPIPS unitless,
+//! D-RMSE in metres, EPE3D in the export's flow units, Acc5/Acc10 as fractions (percent in the Markdown),
+//! angular error in radians. A PSNR of identical images is infinite, which JSON cannot hold: it is written as
+//! `null`.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use dggt_reconstruct::CheckpointInfo;
+use serde::Serialize;
+
+use crate::metrics::{FlowMetrics, mean_present};
+use crate::protocol::{Protocol, Split};
+
+/// How the predicted 3D motion was obtained.
+pub const MOTION_HELD: &str = "held (no motion head)";
+
+/// Metrics of one rendered target view.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ViewRecord {
+    /// Export frame index.
+    pub frame: usize,
+    /// Export camera id.
+    pub camera: usize,
+    pub camera_name: String,
+    pub split: Split,
+    /// Scene time the view was rendered at (the release's timeline).
+    pub scene_time: f64,
+    /// PSNR in dB against the preprocessed image.
+    pub psnr: f64,
+    pub ssim: f64,
+    /// LPIPS-Alex; absent without weights (see [`EvalReport::lpips_note`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lpips: Option<f64>,
+    /// D-RMSE in metres; absent when the view has no usable lidar cell (see `depth_note`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub d_rmse: Option<f64>,
+    /// The alignment's scale and shift and the cells scored.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub depth_scale: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub depth_shift: Option<f64>,
+    pub depth_cells: usize,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub depth_note: Option<String>,
+    /// Scene-flow metrics of the predicted motion; absent when not evaluated (see the scene's notes).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub motion: Option<FlowMetrics>,
+}
+
+/// Means of one split (of one scene, or over scenes).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SplitSummary {
+    pub split: Split,
+    /// Views of the split (per scene), or scenes (overall).
+    pub count: usize,
+    pub psnr: Option<f64>,
+    pub ssim: Option<f64>,
+    pub lpips: Option<f64>,
+    pub d_rmse: Option<f64>,
+    /// Views (or scenes) with a D-RMSE.
+    pub d_rmse_count: usize,
+    pub epe3d: Option<f64>,
+    pub acc5: Option<f64>,
+    pub acc10: Option<f64>,
+    pub angle_error_rad: Option<f64>,
+    /// Views (or scenes) with motion metrics.
+    pub motion_count: usize,
+}
+
+/// Seconds spent in one stage.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct StageTime {
+    pub stage: String,
+    pub seconds: f64,
+}
+
+/// One scene's records and means.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SceneReport {
+    pub path: PathBuf,
+    pub name: String,
+    pub input_frames: Vec<usize>,
+    /// Network input size `[width, height]`.
+    pub network_size: [u32; 2],
+    pub views: Vec<ViewRecord>,
+    pub splits: Vec<SplitSummary>,
+    pub stages: Vec<StageTime>,
+    pub notes: Vec<String>,
+}
+
+/// The whole evaluation.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct EvalReport {
+    pub protocol: Protocol,
+    pub input_frames: Vec<usize>,
+    pub checkpoint: CheckpointInfo,
+    pub device: String,
+    /// Where the predicted motion comes from.
+    pub motion_source: String,
+    /// What is compared for depth and motion, and how.
+    pub depth_protocol: String,
+    pub motion_protocol: String,
+    /// Why LPIPS is absent, when it is.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lpips_note: Option<String>,
+    pub scenes: Vec<SceneReport>,
+    /// Per split, the mean over scenes.
+    pub overall: Vec<SplitSummary>,
+    /// Summed over scenes; `load` includes the checkpoint.
+    pub stages: Vec<StageTime>,
+    pub warnings: Vec<String>,
+}
+
+/// Means of `views` of `split` (views of other splits are ignored).
+pub fn summarise_views(views: &[ViewRecord], split: Split) -> SplitSummary {
+    let views: Vec<&ViewRecord> = views.iter().filter(|v| v.split == split).collect();
+    let motion = |f: fn(&FlowMetrics) -> Option<f64>| mean_present(views.iter().map(|v| v.motion.as_ref().and_then(f)));
+    let (d_rmse, d_rmse_count) = mean_present(views.iter().map(|v| v.d_rmse));
+    let (epe3d, motion_count) = motion(|m| Some(m.epe3d));
+    SplitSummary {
+        split,
+        count: views.len(),
+        psnr: mean_present(views.iter().map(|v| Some(v.psnr))).0,
+        ssim: mean_present(views.iter().map(|v| Some(v.ssim))).0,
+        lpips: mean_present(views.iter().map(|v| v.lpips)).0,
+        d_rmse,
+        d_rmse_count,
+        epe3d,
+        acc5: motion(|m| Some(m.acc5)).0,
+        acc10: motion(|m| Some(m.acc10)).0,
+        angle_error_rad: motion(|m| m.angle_error_rad).0,
+        motion_count,
+    }
+}
+
+/// Per split, the mean over the scenes' split means.
+pub fn summarise_scenes(scenes: &[SceneReport], splits: &[Split]) -> Vec<SplitSummary> {
+    splits
+        .iter()
+        .map(|&split| {
+            let rows: Vec<&SplitSummary> =
+                scenes.iter().flat_map(|s| s.splits.iter().filter(|r| r.split == split)).collect();
+            let mean = |f: fn(&SplitSummary) -> Option<f64>| mean_present(rows.iter().map(|r| f(r)));
+            SplitSummary {
+                split,
+                count: rows.len(),
+                psnr: mean(|r| r.psnr).0,
+                ssim: mean(|r| r.ssim).0,
+                lpips: mean(|r| r.lpips).0,
+                d_rmse: mean(|r| r.d_rmse).0,
+                d_rmse_count: mean(|r| r.d_rmse).1,
+                epe3d: mean(|r| r.epe3d).0,
+                acc5: mean(|r| r.acc5).0,
+                acc10: mean(|r| r.acc10).0,
+                angle_error_rad: mean(|r| r.angle_error_rad).0,
+                motion_count: mean(|r| r.epe3d).1,
+            }
+        })
+        .collect()
+}
+
+fn cell(value: Option<f64>, digits: usize) -> String {
+    value.map_or_else(|| "-".into(), |v| format!("{v:.digits$}"))
+}
+
+fn percent(value: Option<f64>) -> String {
+    value.map_or_else(|| "-".into(), |v| format!("{:.2}", 100.0 * v))
+}
+
+fn row(label: &str, count: String, s: &SplitSummary) -> String {
+    format!(
+        "| {label} | {count} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+        cell(s.psnr, 2),
+        cell(s.ssim, 4),
+        cell(s.lpips, 4),
+        cell(s.d_rmse, 3),
+        cell(s.epe3d, 3),
+        percent(s.acc5),
+        percent(s.acc10),
+        cell(s.angle_error_rad, 3),
+    )
+}
+
+impl EvalReport {
+    /// The report as Markdown: settings, one table per split (a row per scene and the mean over scenes),
+    /// then the notes and stage times.
+    pub fn markdown(&self) -> String {
+        let mut md = String::new();
+        let p = &self.protocol;
+        let _ = writeln!(md, "# dggt eval: {} protocol\n", p.kind);
+        let _ = writeln!(
+            md,
+            "- window: frames {}..{} (end exclusive), cameras {:?}; inputs: frames {:?}",
+            p.start,
+            p.start + p.length,
+            p.cameras,
+            self.input_frames
+        );
+        let _ = writeln!(md, "- checkpoint: {} ({})", self.checkpoint.path.display(), self.checkpoint.format);
+        let _ = writeln!(md, "- device: {}", self.device);
+        let _ = writeln!(md, "- motion source: {}", self.motion_source);
+        let _ = writeln!(md, "- depth: {}", self.depth_protocol);
+        let _ = writeln!(md, "- motion: {}", self.motion_protocol);
+        if let Some(note) = &self.lpips_note {
+            let _ = writeln!(md, "- LPIPS: {note}");
+        }
+        for summary in &self.overall {
+            let _ = writeln!(md, "\n## {}\n", summary.split.title());
+            md.push_str(
+                "| scene | views | PSNR (dB) | SSIM | LPIPS | D-RMSE (m) | EPE3D | Acc5 (%) | Acc10 (%) | angle (rad) |\n",
+            );
+            md.push_str("|---|---|---|---|---|---|---|---|---|---|\n");
+            for scene in &self.scenes {
+                if let Some(s) = scene.splits.iter().find(|s| s.split == summary.split) {
+                    md.push_str(&row(&scene.name, s.count.to_string(), s));
+                }
+            }
+            let scenes = if summary.count == 1 { "1 scene".to_string() } else { format!("{} scenes", summary.count) };
+            md.push_str(&row("**mean over scenes**", scenes, summary));
+        }
+        let notes: Vec<String> = self
+            .scenes
+            .iter()
+            .flat_map(|s| s.notes.iter().map(move |n| format!("{}: {n}", s.name)))
+            .chain(self.warnings.iter().cloned())
+            .collect();
+        if !notes.is_empty() {
+            md.push_str("\n## notes\n\n");
+            for note in notes {
+                let _ = writeln!(md, "- {note}");
+            }
+        }
+        md.push_str("\n## time per stage\n\n| stage | seconds |\n|---|---|\n");
+        for stage in &self.stages {
+            let _ = writeln!(md, "| {} | {:.2} |", stage.stage, stage.seconds);
+        }
+        md
+    }
+}

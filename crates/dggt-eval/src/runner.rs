@@ -1,0 +1,514 @@
+//! The evaluation run: scene exports + checkpoint + protocol + device -> per-view records, per-scene and
+//! overall means, stage times, written as `eval.json` and `eval.md`.
+//!
+//! Per scene: the protocol's input frames (all chosen cameras) go through one forward pass exactly as in
+//! `dggt reconstruct` (same preprocessing, chunked heads, predicted cameras; the world is the first input
+//! view's camera frame). Every target view is rendered at the release's scene time of its frame: an input
+//! view from its own predicted camera, any other from the camera interpolated between the predicted poses of
+//! the same rig camera's inputs (`dggt_scene::interpolate_camera`; extrapolated beyond the last input). The
+//! render is scored against the export's image preprocessed as the network's inputs are (network
+//! resolution), its expected depth against the export's lidar depth ([`crate::grid`],
+//! [`crate::metrics`]), and the predicted motion against the export's scene flow.
+//!
+//! Motion: the network has no motion head, so dynamic Gaussians are held where they were predicted and the
+//! predicted motion of every surface point is zero ([`MotionSource::Held`]); its metrics are computed
+//! anyway and labelled. As STORM does, motion is scored at the lidar cells (positive depth; here also not sky
+//! and inside the view) and only for windows where some true flow exceeds [`MOTION_GATE`] (STORM skips
+//! samples without such motion, whose accuracies would be trivially high).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use burn::tensor::{Device, Tensor, TensorData};
+use dggt_data::{DepthFlowMap, PlanarImage, Preprocess, Scene, images, open_scene, prepare_view};
+use dggt_geom::ImageSize;
+use dggt_losses::{ImageShape, Lpips, LpipsKind, psnr, ssim};
+use dggt_reconstruct::forward::forward_chunked;
+use dggt_reconstruct::inputs::{GroundTruth, InputSet};
+use dggt_reconstruct::{Architecture, LoadedNetwork, load_network};
+use dggt_scene::{
+    AssemblySettings, InputView, MeansGradient, PixelGaussians, TargetView, Timeline, interpolate_camera, render_target,
+};
+use dggt_train::objective::decode_cameras;
+
+use crate::error::EvalError;
+use crate::grid::{CellMapping, cell_has_sky};
+use crate::metrics::{MetricError, aligned_depth_rmse, scene_flow_metrics};
+use crate::protocol::Protocol;
+use crate::report::{EvalReport, MOTION_HELD, SceneReport, StageTime, ViewRecord, summarise_scenes, summarise_views};
+
+/// Motion is scored only in windows where some true flow is longer than this (STORM's rule; m/s for
+/// velocity-valued exports).
+pub const MOTION_GATE: f64 = 1.0;
+
+/// The stages timed, in order.
+const STAGES: [&str; 5] = ["load", "forward", "assembly", "render", "metrics"];
+
+/// Where the predicted 3D motion of a surface point comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MotionSource {
+    /// No motion head: every Gaussian is held in place, so the predicted flow is zero.
+    Held,
+}
+
+impl MotionSource {
+    /// The label written to the reports.
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::Held => MOTION_HELD,
+        }
+    }
+
+    /// The predicted flow at `points` scored points of one view.
+    pub fn predicted_flow(self, points: usize) -> Vec<[f32; 3]> {
+        match self {
+            Self::Held => vec![[0.0; 3]; points],
+        }
+    }
+}
+
+/// The two files of LPIPS-Alex: the lpips package's linear layers and the AlexNet features.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LpipsWeights {
+    /// `alex.pth` of the lpips package (or a full LPIPS state dict, or safetensors with its names).
+    pub linear: PathBuf,
+    /// AlexNet `features` weights (torchvision or lpips names; may be the same file as `linear`).
+    pub alexnet: PathBuf,
+}
+
+/// Everything an evaluation is asked.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EvalOptions {
+    /// Scene exports, each evaluated on the same window.
+    pub scenes: Vec<PathBuf>,
+    pub checkpoint: PathBuf,
+    /// Architecture of `.pt` / `.safetensors` checkpoints (default: the `dggt` preset).
+    pub architecture: Option<Architecture>,
+    pub protocol: Protocol,
+    /// Network input width (a multiple of 14); default: the `--config` training file's, else 518.
+    pub width: Option<u32>,
+    /// Frames per chunk of the dense heads.
+    pub chunk_frames: usize,
+    /// LPIPS-Alex weights; without them LPIPS is not computed.
+    pub lpips: Option<LpipsWeights>,
+    /// Output folder of `eval.json` and `eval.md`.
+    pub out: PathBuf,
+}
+
+impl EvalOptions {
+    /// The paper protocol with defaults for everything but the paths.
+    pub fn new(scenes: Vec<PathBuf>, checkpoint: impl Into<PathBuf>, out: impl Into<PathBuf>) -> Self {
+        Self {
+            scenes,
+            checkpoint: checkpoint.into(),
+            architecture: None,
+            protocol: Protocol::paper(),
+            width: None,
+            chunk_frames: 4,
+            lpips: None,
+            out: out.into(),
+        }
+    }
+}
+
+/// Seconds per stage.
+#[derive(Debug, Clone, Default)]
+struct Stopwatch {
+    seconds: [f64; STAGES.len()],
+}
+
+impl Stopwatch {
+    fn add(&mut self, stage: usize, since: Instant) {
+        self.seconds[stage] += since.elapsed().as_secs_f64();
+    }
+
+    fn list(&self) -> Vec<StageTime> {
+        STAGES
+            .iter()
+            .zip(self.seconds)
+            .map(|(stage, seconds)| StageTime { stage: stage.to_string(), seconds })
+            .collect()
+    }
+}
+
+const LOAD: usize = 0;
+const FORWARD: usize = 1;
+const ASSEMBLY: usize = 2;
+const RENDER: usize = 3;
+const METRICS: usize = 4;
+
+/// Runs the evaluation on `device`, writes `eval.json` and `eval.md` to `options.out` and returns the report.
+pub fn evaluate(options: &EvalOptions, device: &Device) -> Result<EvalReport, EvalError> {
+    let protocol = &options.protocol;
+    protocol.validate()?;
+    if options.scenes.is_empty() {
+        return Err(EvalError::invalid("--scene", "give at least one scene export"));
+    }
+    // Every scene is checked before the network is loaded, so that a bad one fails fast.
+    let scenes: Vec<Scene> = options.scenes.iter().map(|root| open_window(root, protocol)).collect::<Result<_, _>>()?;
+
+    let mut total = Stopwatch::default();
+    let started = Instant::now();
+    let network = load_network(&options.checkpoint, options.architecture.as_ref(), device)?;
+    let mut warnings = network.warnings.clone();
+    let mut preprocess = network.preprocess.unwrap_or_default();
+    if let Some(width) = options.width {
+        preprocess.target_width = width;
+    }
+    preprocess.patch_size = network.config.aggregator.patch_size as u32;
+    let (lpips, lpips_note) = match &options.lpips {
+        Some(weights) => (Some(Lpips::load(LpipsKind::Alex, &weights.alexnet, &weights.linear, device)?), None),
+        None => (None, Some("not computed: no weights given (--lpips-weights alex.pth --alexnet FILE)".to_string())),
+    };
+    total.add(LOAD, started);
+    if network.model.sky_model.is_none() {
+        warnings.push("the network has no sky model: renders have a black sky".into());
+    }
+
+    let motion = MotionSource::Held;
+    let mut reports = Vec::new();
+    for (root, scene) in options.scenes.iter().zip(&scenes) {
+        tracing::info!("evaluating {}", root.display());
+        let report = evaluate_scene(root, scene, options, &network, preprocess, lpips.as_ref(), motion, device)
+            .map_err(|e| e.in_scene(root))?;
+        for stage in &report.stages {
+            if let Some(i) = STAGES.iter().position(|s| *s == stage.stage) {
+                total.seconds[i] += stage.seconds;
+            }
+        }
+        reports.push(report);
+    }
+    let splits = protocol.splits();
+    let report = EvalReport {
+        protocol: protocol.clone(),
+        input_frames: protocol.input_frames(),
+        checkpoint: network.info.clone(),
+        device: format!("{device:?}"),
+        motion_source: motion.label().into(),
+        depth_protocol: "rendered expected depth vs lidar depth (depth_flows_4), least-squares scale and shift, at \
+                         cells with lidar depth > 0, no sky pixel and the centre (4 col + 2, 4 row + 2) inside the \
+                         view, the render sampled bilinearly there"
+            .into(),
+        motion_protocol: format!(
+            "STORM's EPE3D / Acc5 (EPE < 0.05 or relative < 5 %) / Acc10 (EPE < 0.1 or relative < 10 %) / angle \
+             (true flow > 0.1) on the export's stored flow at the same cells, in windows with some true flow > \
+             {MOTION_GATE}"
+        ),
+        lpips_note,
+        overall: summarise_scenes(&reports, &splits),
+        scenes: reports,
+        stages: total.list(),
+        warnings,
+    };
+    write_report(&report, &options.out)?;
+    Ok(report)
+}
+
+/// Writes `eval.json` and `eval.md` to `out`.
+pub fn write_report(report: &EvalReport, out: &Path) -> Result<(), EvalError> {
+    std::fs::create_dir_all(out).map_err(|e| EvalError::file(out, format!("cannot create the folder: {e}")))?;
+    let json = serde_json::to_string_pretty(report).map_err(|e| EvalError::file(out, e.to_string()))?;
+    let path = out.join("eval.json");
+    std::fs::write(&path, json).map_err(|e| EvalError::file(&path, e.to_string()))?;
+    let path = out.join("eval.md");
+    std::fs::write(&path, report.markdown()).map_err(|e| EvalError::file(&path, e.to_string()))?;
+    Ok(())
+}
+
+/// Checks that `root` is a scene export with the protocol's cameras and window; returns the window.
+pub fn open_window(root: &Path, protocol: &Protocol) -> Result<Scene, EvalError> {
+    if !root.is_dir() {
+        return Err(EvalError::scene(root, "not found (expected a scene export folder)"));
+    }
+    if !root.join("images").is_dir() || !root.join("intrinsics").is_dir() {
+        return Err(EvalError::scene(root, "not a scene export (expected images/ and intrinsics/ in it)"));
+    }
+    let present = export_cameras(root);
+    for &camera in &protocol.cameras {
+        if !present.contains(&camera) {
+            return Err(EvalError::scene(
+                root,
+                format!("has no camera {camera} (no intrinsics/{camera}.txt); its cameras are {present:?}"),
+            ));
+        }
+    }
+    let all = open_scene(root, None, Some(protocol.cameras.clone()))?;
+    let frames: Vec<usize> = all.frames.iter().map(|f| f.index).collect();
+    protocol.check_frames(root, &frames)?;
+    Ok(open_scene(root, Some(protocol.window()), Some(protocol.cameras.clone()))?)
+}
+
+/// Camera ids with an `intrinsics/{id}.txt`, ascending.
+fn export_cameras(root: &Path) -> Vec<usize> {
+    let mut ids: Vec<usize> = std::fs::read_dir(root.join("intrinsics"))
+        .map(|entries| {
+            entries
+                .filter_map(|e| e.ok())
+                .filter_map(|e| {
+                    let name = e.file_name().to_string_lossy().into_owned();
+                    name.strip_suffix(".txt").and_then(|stem| stem.parse().ok())
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    ids.sort_unstable();
+    ids
+}
+
+/// The input views of a window: the frames in `keep`, every camera.
+fn restrict_inputs(window: InputSet, keep: &[usize]) -> InputSet {
+    fn pick<T>(items: Vec<T>, chosen: &[bool]) -> Vec<T> {
+        items.into_iter().zip(chosen).filter(|(_, c)| **c).map(|(item, _)| item).collect()
+    }
+    let chosen: Vec<bool> = window.views.iter().map(|v| keep.contains(&v.frame)).collect();
+    let ground_truth = window.ground_truth.map(|truth| GroundTruth {
+        world_from_camera: pick(truth.world_from_camera, &chosen),
+        intrinsics: pick(truth.intrinsics, &chosen),
+    });
+    InputSet {
+        frames: window.frames.into_iter().filter(|f| keep.contains(f)).collect(),
+        views: pick(window.views, &chosen),
+        ground_truth,
+        ..window
+    }
+}
+
+fn host<const D: usize>(tensor: Tensor<D>, what: &str) -> Result<Vec<f32>, EvalError> {
+    tensor
+        .into_data()
+        .convert::<f32>()
+        .try_into_vec::<f32>()
+        .map_err(|e| EvalError::invalid(what, format!("cannot be read back: {e:?}")))
+}
+
+/// Planar `[3, H, W]` to interleaved `[H, W, 3]`.
+fn interleaved(image: &PlanarImage) -> Vec<f32> {
+    let plane = image.size.area();
+    (0..plane).flat_map(|i| [image.data[i], image.data[plane + i], image.data[2 * plane + i]]).collect()
+}
+
+/// The scored cells of one view: rendered depth, lidar depth and true flow, paired.
+#[derive(Debug, Default)]
+struct Cells {
+    predicted_depth: Vec<f32>,
+    true_depth: Vec<f32>,
+    true_flow: Vec<[f32; 3]>,
+}
+
+/// Pairs the rendered depth with the lidar cells of `map` that are not sky and fall inside the view.
+fn collect_cells(
+    map: &DepthFlowMap,
+    sky: Option<&[u8]>,
+    original: ImageSize,
+    mapping: &CellMapping,
+    depth: &[f32],
+) -> Cells {
+    let mut cells = Cells::default();
+    let (grid_w, grid_h) = (map.size.width as usize, map.size.height as usize);
+    let (w, h) = (original.width as usize, original.height as usize);
+    for row in 0..grid_h {
+        for col in 0..grid_w {
+            let i = row * grid_w + col;
+            if map.depth[i] <= 0.0 || sky.is_some_and(|mask| cell_has_sky(mask, w, h, row, col)) {
+                continue;
+            }
+            if let Some(predicted) = mapping.sample(depth, row, col) {
+                cells.predicted_depth.push(predicted);
+                cells.true_depth.push(map.depth[i]);
+                cells.true_flow.push(map.flow[i]);
+            }
+        }
+    }
+    cells
+}
+
+#[allow(clippy::too_many_arguments)]
+fn evaluate_scene(
+    root: &Path,
+    scene: &Scene,
+    options: &EvalOptions,
+    network: &LoadedNetwork,
+    preprocess: Preprocess,
+    lpips: Option<&Lpips>,
+    motion: MotionSource,
+    device: &Device,
+) -> Result<SceneReport, EvalError> {
+    let protocol = &options.protocol;
+    let mut watch = Stopwatch::default();
+    let mut notes = Vec::new();
+
+    let started = Instant::now();
+    let input_frames = protocol.input_frames();
+    let window = InputSet::open(root, Some(protocol.window()), Some(protocol.cameras.clone()))?;
+    let inputs = restrict_inputs(window, &input_frames);
+    let (input_images, size) = inputs.load(&preprocess)?;
+    let plan = preprocess.plan(inputs.size)?;
+    let mapping = CellMapping::new(&plan);
+    let cameras_count = inputs.cameras.len();
+    let data: Vec<f32> = input_images.iter().flat_map(|i| i.data.iter().copied()).collect();
+    let (h, w) = (size.height as usize, size.width as usize);
+    let batch = Tensor::<5>::from_data(TensorData::new(data, [1, input_images.len(), 3, h, w]), device);
+    watch.add(LOAD, started);
+
+    let started = Instant::now();
+    let prediction = forward_chunked(&network.model, batch.clone(), options.chunk_frames)?;
+    let predicted_cameras = decode_cameras(prediction.pose_encoding.clone(), size)?;
+    watch.add(FORWARD, started);
+
+    let started = Instant::now();
+    let timeline = Timeline::new(&inputs.frames)?;
+    let views: Vec<InputView> = inputs
+        .views
+        .iter()
+        .zip(&predicted_cameras)
+        .map(|(v, camera)| InputView { rig_camera: v.camera, time: timeline.time(v.frame as f64), camera: *camera })
+        .collect();
+    let Some(maps) = &prediction.gaussians else {
+        return Err(EvalError::invalid(
+            format!("checkpoint {}", options.checkpoint.display()),
+            "the network has no Gaussian head: there is nothing to render",
+        ));
+    };
+    let pixels = PixelGaussians::new(
+        maps,
+        prediction.depth.clone(),
+        prediction.dynamic_logit.clone(),
+        views.clone(),
+        MeansGradient::Detached,
+        network.model.unproject_at,
+    )?;
+    let sky = network.model.sky_model.as_ref().map(|model| {
+        let cameras: Vec<_> =
+            views.iter().map(|v| (v.camera.world_from_camera.inverse(), v.camera.intrinsics)).collect();
+        model.gaussians(batch.clone().reshape([input_images.len(), 3, h, w]), &cameras)
+    });
+    drop(prediction);
+    watch.add(ASSEMBLY, started);
+
+    let settings = AssemblySettings::default();
+    let mut records = Vec::new();
+    let mut largest_flow = 0.0f64;
+    let mut has_depth_flow = false;
+    for (frame, split) in protocol.targets() {
+        let frame_position = scene
+            .frames
+            .iter()
+            .position(|f| f.index == frame)
+            .ok_or_else(|| EvalError::scene(root, format!("frame {frame} is missing")))?;
+        let time = timeline.time(frame as f64);
+        for (camera_position, &camera_id) in protocol.cameras.iter().enumerate() {
+            let started = Instant::now();
+            let camera = match inputs.frames.iter().position(|&f| f == frame) {
+                Some(input_position) => views[input_position * cameras_count + camera_position].camera,
+                None => interpolate_camera(&views, camera_position, time)?,
+            };
+            let target = TargetView { rig_camera: camera_position, time, camera };
+            let render = render_target(&pixels, sky.as_ref(), &target, &settings)?;
+            let rgb: Vec<f32> = host(render.rgb, "rendered colours")?.into_iter().map(|v| v.clamp(0.0, 1.0)).collect();
+            let depth = host(render.depth, "rendered depth")?;
+            watch.add(RENDER, started);
+
+            let started = Instant::now();
+            let view = prepare_view(scene, frame_position, camera_position, &preprocess)?;
+            let truth = interleaved(&view.image);
+            let image_psnr = psnr(&rgb, &truth)?;
+            let image_ssim = ssim(&rgb, &truth, ImageShape::new(h, w, 3))?.value;
+            let image_lpips = match lpips {
+                Some(lpips) => {
+                    let as_tensor =
+                        |values: Vec<f32>| Tensor::<4>::from_data(TensorData::new(values, [1, h, w, 3]), device);
+                    let value = lpips.eval(as_tensor(rgb), as_tensor(truth))?;
+                    Some(f64::from(host(value, "LPIPS")?[0]))
+                }
+                None => None,
+            };
+            let files = &scene.view(frame_position, camera_position).files;
+            let original = scene.cameras[camera_position].size;
+            let mut record = ViewRecord {
+                frame,
+                camera: camera_id,
+                camera_name: scene.cameras[camera_position].name.clone(),
+                split,
+                scene_time: time,
+                psnr: image_psnr,
+                ssim: image_ssim,
+                lpips: image_lpips,
+                d_rmse: None,
+                depth_scale: None,
+                depth_shift: None,
+                depth_cells: 0,
+                depth_note: None,
+                motion: None,
+            };
+            match &files.depth_flow {
+                None => record.depth_note = Some("the export has no depth_flows_4 map for this view".into()),
+                Some(path) => {
+                    has_depth_flow = true;
+                    let map = DepthFlowMap::read(path, original)?;
+                    let sky_mask = match &files.sky_mask {
+                        Some(path) => {
+                            let mask = images::read_gray(path)?;
+                            images::expect_size(
+                                path,
+                                ImageSize { width: mask.width(), height: mask.height() },
+                                original,
+                            )?;
+                            Some(mask.into_raw())
+                        }
+                        None => None,
+                    };
+                    let cells = collect_cells(&map, sky_mask.as_deref(), original, &mapping, &depth);
+                    record.depth_cells = cells.true_depth.len();
+                    match aligned_depth_rmse(&cells.predicted_depth, &cells.true_depth) {
+                        Ok(alignment) => {
+                            record.d_rmse = Some(alignment.rmse);
+                            record.depth_scale = Some(alignment.scale);
+                            record.depth_shift = Some(alignment.shift);
+                        }
+                        Err(MetricError::Empty { .. }) => {
+                            record.depth_note = Some("no lidar cell outside the sky inside the view".into())
+                        }
+                        Err(other) => return Err(other.into()),
+                    }
+                    if !cells.true_flow.is_empty() {
+                        let predicted = motion.predicted_flow(cells.true_flow.len());
+                        record.motion = Some(scene_flow_metrics(&predicted, &cells.true_flow)?);
+                        let longest = cells
+                            .true_flow
+                            .iter()
+                            .map(|f| f.iter().map(|c| f64::from(*c).powi(2)).sum::<f64>().sqrt())
+                            .fold(0.0, f64::max);
+                        largest_flow = largest_flow.max(longest);
+                    }
+                }
+            }
+            records.push(record);
+            watch.add(METRICS, started);
+        }
+    }
+    if !has_depth_flow {
+        notes.push("the export has no depth_flows_4: no D-RMSE or motion metrics".into());
+    } else if largest_flow <= MOTION_GATE {
+        for record in &mut records {
+            record.motion = None;
+        }
+        notes.push(format!(
+            "no true scene flow above {MOTION_GATE} at the scored cells (largest {largest_flow:.3}): motion metrics \
+             not evaluated"
+        ));
+    }
+    if sky.is_none() {
+        notes.push("no sky model: the sky renders black".into());
+    }
+    let splits = protocol.splits().into_iter().map(|split| summarise_views(&records, split)).collect();
+    Ok(SceneReport {
+        path: root.to_path_buf(),
+        name: root.file_name().map_or_else(|| root.display().to_string(), |n| n.to_string_lossy().into_owned()),
+        input_frames,
+        network_size: [size.width, size.height],
+        views: records,
+        splits,
+        stages: watch.list(),
+        notes,
+    })
+}

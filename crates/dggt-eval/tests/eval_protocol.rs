@@ -1,0 +1,234 @@
+//! `dggt eval` end to end on the bundled fixture (CPU): a tiny network trained one step (the run checks the
+//! plumbing, not the quality), the paper protocol through the command-line arguments, every view and metric
+//! checked in `eval.json` and `eval.md`; the reconstruction mode with LPIPS when the reference weights are
+//! present; and the errors bad inputs give.
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+
+use burn::tensor::Device;
+use clap::Parser;
+use dggt_eval::cli::{EvalArgs, run};
+use dggt_eval::{EvalOptions, LpipsWeights, MOTION_HELD, Protocol, evaluate};
+use dggt_train::{RunOptions, TrainConfig, Trainer};
+use serde_json::Value;
+
+#[derive(Parser)]
+struct Cli {
+    #[command(flatten)]
+    args: EvalArgs,
+}
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn fixture() -> PathBuf {
+    repo().join("data-fixtures/synth-s0")
+}
+
+fn parity_dir() -> PathBuf {
+    std::env::var_os("DGGT_PARITY_DIR").map_or_else(|| repo().join("../shared/parity"), PathBuf::from)
+}
+
+/// A tiny network after one training step on the fixture, saved as the trainer saves checkpoints.
+fn tiny_checkpoint(run: &Path) {
+    let mut config = TrainConfig::load(&repo().join("configs/tiny-overfit.toml")).expect("tiny-overfit.toml loads");
+    config.data.scene = fixture();
+    config.data.frames = None;
+    config.data.preprocess.target_width = 56;
+    config.sampler.min_inputs = 2;
+    config.sampler.max_inputs = 2;
+    config.sampler.window = 8;
+    config.render.render_inputs = false;
+    config.run.steps = 1;
+    config.run.out_dir = run.to_path_buf();
+    config.run.validate_every = 0;
+    config.run.checkpoint_every = 1000;
+    config.run.time_limit_s = None;
+    config.data.validation.inputs.clear();
+    config.data.validation.targets.clear();
+    let mut trainer = Trainer::new(config, vec![Device::flex()], false).expect("the trainer builds");
+    let summary = trainer.run(RunOptions::default()).expect("one step trains");
+    assert!(summary.checkpoint.is_some(), "the run ends with a checkpoint");
+}
+
+fn number(value: &Value, key: &str) -> f64 {
+    value[key].as_f64().unwrap_or_else(|| panic!("{key} is not a number in {value}"))
+}
+
+#[test]
+fn paper_protocol_scores_every_view_of_the_fixture() {
+    let run_dir = tempfile::tempdir().unwrap();
+    tiny_checkpoint(run_dir.path());
+    let out = tempfile::tempdir().unwrap();
+    let (scene, checkpoint, out_dir) =
+        (fixture().display().to_string(), run_dir.path().display().to_string(), out.path().display().to_string());
+    let cli = Cli::try_parse_from([
+        "eval",
+        "--scene",
+        &scene,
+        "--checkpoint",
+        &checkpoint,
+        "--protocol",
+        "paper",
+        "--width",
+        "84",
+        "--out",
+        &out_dir,
+    ])
+    .unwrap();
+    let printed = run(&cli.args, &Device::flex()).unwrap();
+    eprintln!("{printed}");
+
+    let report: Value = serde_json::from_slice(&std::fs::read(out.path().join("eval.json")).unwrap()).unwrap();
+    assert_eq!(report["motion_source"], MOTION_HELD);
+    assert_eq!(report["input_frames"], serde_json::json!([0, 5, 10, 15]));
+    assert!(report["lpips_note"].as_str().unwrap().contains("no weights"));
+    let scenes = report["scenes"].as_array().unwrap();
+    assert_eq!(scenes.len(), 1);
+    assert_eq!(scenes[0]["network_size"], serde_json::json!([84, 56]));
+    let views = scenes[0]["views"].as_array().unwrap();
+    // Every (frame, camera) of the window once: 4 input frames x 3 cameras reconstruction, 16 x 3 novel.
+    let seen: BTreeSet<(u64, u64, String)> = views
+        .iter()
+        .map(|v| (v["frame"].as_u64().unwrap(), v["camera"].as_u64().unwrap(), v["split"].as_str().unwrap().into()))
+        .collect();
+    assert_eq!(seen.len(), 60);
+    for frame in 0..20u64 {
+        let split = if frame % 5 == 0 { "reconstruction" } else { "novel_view" };
+        for camera in 0..3u64 {
+            assert!(seen.contains(&(frame, camera, split.to_string())), "frame {frame} camera {camera} {split}");
+        }
+    }
+    let mut motion_views = 0;
+    for view in views {
+        let psnr = number(view, "psnr");
+        let ssim = number(view, "ssim");
+        assert!(psnr.is_finite() && psnr > 0.0 && psnr < 100.0, "{view}");
+        assert!((-1.0..=1.0).contains(&ssim), "{view}");
+        assert!(view.get("lpips").is_none(), "LPIPS is absent without weights: {view}");
+        // The fixture has lidar depth on every non-sky cell: every view has a D-RMSE.
+        let d_rmse = number(view, "d_rmse");
+        assert!(d_rmse.is_finite() && d_rmse >= 0.0, "{view}");
+        assert!(view["depth_cells"].as_u64().unwrap() > 0, "{view}");
+        if let Some(motion) = view.get("motion") {
+            motion_views += 1;
+            assert!(number(motion, "epe3d").is_finite() && number(motion, "epe3d") >= 0.0, "{motion}");
+            for key in ["acc5", "acc10"] {
+                assert!((0.0..=1.0).contains(&number(motion, key)), "{motion}");
+            }
+            assert!(number(motion, "acc5") <= number(motion, "acc10"), "{motion}");
+            if let Some(angle) = motion["angle_error_rad"].as_f64() {
+                // A held prediction is zero: every angle is pi/2.
+                assert!((angle - std::f64::consts::FRAC_PI_2).abs() < 1e-9, "{motion}");
+            }
+        }
+    }
+    // The fixture's cars move faster than 1 m/s: motion is scored on every view.
+    assert_eq!(motion_views, 60, "motion metrics on every view");
+
+    let overall = report["overall"].as_array().unwrap();
+    let splits: Vec<&str> = overall.iter().map(|s| s["split"].as_str().unwrap()).collect();
+    assert_eq!(splits, ["reconstruction", "novel_view"]);
+    assert_eq!(scenes[0]["splits"][0]["count"], 12);
+    assert_eq!(scenes[0]["splits"][1]["count"], 48);
+    for summary in overall {
+        for key in ["psnr", "ssim", "d_rmse", "epe3d", "acc5", "acc10", "angle_error_rad"] {
+            assert!(number(summary, key).is_finite(), "{key} in {summary}");
+        }
+        assert!(summary["lpips"].is_null());
+    }
+    let stages: Vec<&str> = report["stages"].as_array().unwrap().iter().map(|s| s["stage"].as_str().unwrap()).collect();
+    assert_eq!(stages, ["load", "forward", "assembly", "render", "metrics"]);
+
+    let markdown = std::fs::read_to_string(out.path().join("eval.md")).unwrap();
+    assert_eq!(markdown, printed.split("\noutputs: ").next().unwrap());
+    for heading in ["## reconstruction (input frames)", "## novel view synthesis", MOTION_HELD, "LPIPS: not computed"] {
+        assert!(markdown.contains(heading), "{heading} missing from\n{markdown}");
+    }
+    assert_eq!(markdown.matches("| synth-s0 |").count(), 2, "{markdown}");
+    assert_eq!(markdown.matches("| **mean over scenes** |").count(), 2, "{markdown}");
+
+    // The release's reconstruction mode on two frames of one camera, with LPIPS when its weights are here.
+    let weights = parity_dir().join("metrics");
+    let (linear, alexnet) =
+        (weights.join("lpips_alex.safetensors"), weights.join("alexnet_features_torchvision_names.safetensors"));
+    let out = tempfile::tempdir().unwrap();
+    let mut options = EvalOptions::new(vec![fixture()], run_dir.path(), out.path());
+    options.protocol = Protocol::reconstruction(6, 2, vec![1]);
+    options.width = Some(56);
+    let with_lpips = linear.is_file() && alexnet.is_file();
+    if with_lpips {
+        options.lpips = Some(LpipsWeights { linear, alexnet });
+    } else {
+        eprintln!("LPIPS reference weights not found under {}: LPIPS not checked", weights.display());
+    }
+    let report = evaluate(&options, &Device::flex()).unwrap();
+    assert_eq!(report.scenes[0].views.len(), 2);
+    assert_eq!(report.overall.len(), 1);
+    for view in &report.scenes[0].views {
+        assert_eq!((view.camera, view.camera_name.as_str()), (1, "FRONT_LEFT"));
+        assert!(view.frame == 6 || view.frame == 7);
+        if with_lpips {
+            let lpips = view.lpips.expect("LPIPS with weights");
+            assert!(lpips.is_finite() && (0.0..2.0).contains(&lpips), "{lpips}");
+        }
+    }
+    assert_eq!(report.lpips_note.is_none(), with_lpips);
+}
+
+fn error_of(options: &EvalOptions) -> String {
+    evaluate(options, &Device::flex()).map(|_| ()).unwrap_err().to_string()
+}
+
+#[test]
+fn bad_inputs_give_errors_naming_them() {
+    let out = tempfile::tempdir().unwrap();
+    // The scenes are checked before the checkpoint is read, so none is needed here.
+    let checkpoint = out.path().join("no-checkpoint");
+    let options = |scenes: Vec<PathBuf>| EvalOptions::new(scenes, &checkpoint, out.path().join("eval"));
+
+    let missing = out.path().join("no-such-scene");
+    let message = error_of(&options(vec![fixture(), missing.clone()]));
+    assert!(message.contains(&missing.display().to_string()) && message.contains("not found"), "{message}");
+
+    let not_export = out.path().to_path_buf();
+    let message = error_of(&options(vec![not_export]));
+    assert!(message.contains("not a scene export"), "{message}");
+
+    let mut few = options(vec![fixture()]);
+    few.protocol.start = 10;
+    let message = error_of(&few);
+    assert!(message.contains("synth-s0") && message.contains("too few frames"), "{message}");
+    assert!(message.contains("20 frames (0..=19)") && message.contains("10..=29"), "{message}");
+
+    let mut camera = options(vec![fixture()]);
+    camera.protocol.cameras = vec![0, 5];
+    let message = error_of(&camera);
+    assert!(message.contains("synth-s0") && message.contains("no camera 5"), "{message}");
+    assert!(message.contains("[0, 1, 2]"), "{message}");
+
+    let message = error_of(&options(vec![]));
+    assert!(message.contains("--scene"), "{message}");
+
+    // With good scenes the checkpoint is next.
+    let message = error_of(&options(vec![fixture()]));
+    assert!(message.contains("no-checkpoint") && message.contains("does not exist"), "{message}");
+
+    // Arguments the protocol cannot take.
+    let parse = |extra: &[&str]| {
+        let mut argv = vec!["eval", "--scene", "s", "--checkpoint", "c", "--out", "o"];
+        argv.extend_from_slice(extra);
+        Cli::try_parse_from(argv)
+            .map_err(|e| e.to_string())
+            .and_then(|cli| cli.args.options().map_err(|e| e.to_string()))
+    };
+    assert!(parse(&["--protocol", "paper", "--every", "2"]).unwrap_err().contains("--every"));
+    assert!(parse(&["--frames", "5..5"]).unwrap_err().contains("empty range"));
+    assert!(parse(&["--protocol", "weird"]).is_err());
+    let options =
+        parse(&["--protocol", "interpolation", "--every", "3", "--frames", "4..11", "--cameras", "2"]).unwrap();
+    assert_eq!(options.protocol.input_frames(), vec![4, 7, 10]);
+    assert_eq!(options.protocol.cameras, vec![2]);
+}
