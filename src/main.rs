@@ -87,7 +87,8 @@ enum Command {
     /// Reconstruct a driving scene from unposed images with one forward pass: cameras (JSON, COLMAP,
     /// nerfstudio), depth, dynamic and sky maps, Gaussians as PLY (static, sky, dynamic per time) and renders.
     Reconstruct {
-        /// A folder of images (one camera), a folder of per-camera image folders, or a scene export.
+        /// A folder of images (one camera), a folder of per-camera image folders, a glob pattern (quoted:
+        /// `'log/*.jpg'` for one camera, `'log/cam*'` for a folder per camera), or a scene export.
         #[arg(long)]
         images: PathBuf,
         /// A trainer checkpoint folder (or run folder), or a release / VGGT `.pt` / `.safetensors` file.

@@ -3,7 +3,7 @@
 //!
 //! - [`backbone`]: the aggregator (patch embedding and alternating attention) over all frames;
 //! - [`heads`]: the camera head and the dense heads (depth, dynamic, Gaussian) a few frames at a time, as
-//!   [`dggt_reconstruct::forward::forward_chunked`] runs them, with the outputs cast back to f32;
+//!   [`dggt_reconstruct::forward::forward_chunked`] runs them (outputs in f32);
 //! - [`assemble`](dggt_scene::assemble) (called by the runner): the static union faded to the target time, the
 //!   nearest view's dynamic Gaussians and the culling;
 //! - [`rasterise`]: the assembled Gaussians over the sky, as [`dggt_scene::render_target`] composites them.
@@ -13,12 +13,11 @@
 //! heads together (the heads' time is the difference): waiting on the aggregator's outputs before the heads
 //! ran made the heads' outputs NaN on wgpu with burn 0.22.1.
 
-use burn::tensor::{Device, FloatDType, Tensor};
+use burn::tensor::{Device, Tensor};
 use dggt_model::Dggt;
 use dggt_model::aggregator::AggregatorOutput;
-use dggt_model::gaussian_maps::GaussianMaps;
 use dggt_model::sky::SkyGaussians;
-use dggt_reconstruct::forward::Prediction;
+use dggt_reconstruct::forward::{Prediction, heads_chunked};
 use dggt_scene::{AssembledGaussians, AssemblySettings, TargetView, camera_tensors};
 use dggt_splat::{RasterSettings, RenderSettings, RenderTensors, render};
 
@@ -46,44 +45,15 @@ pub fn backbone(model: &Dggt, images: Tensor<5>) -> Result<AggregatorOutput, Ben
     Ok(model.aggregator.forward(images)?)
 }
 
-/// The camera head and the dense heads on `aggregator`'s tokens, the dense heads `chunk` frames at a time;
-/// `images` are the backbone's input (for the Gaussian head's colour skip). Outputs are f32 whatever the
-/// model's float type.
+/// The camera head and the dense heads on `aggregator`'s tokens, the dense heads `chunk` frames at a time
+/// ([`heads_chunked`], the reconstruction's own); `images` are the backbone's input. Outputs are f32.
 pub fn heads(
     model: &Dggt,
     aggregator: AggregatorOutput,
     images: Tensor<5>,
     chunk: usize,
 ) -> Result<Prediction, BenchError> {
-    let frames = images.dims()[1];
-    let chunk = chunk.max(1);
-    let f32 = |t: Tensor<4>| t.cast(FloatDType::F32);
-    let last = aggregator.output_list.last().ok_or_else(|| BenchError::invalid("model", "no aggregator layer"))?;
-    let pose_encoding = model.camera_head.forward(last.clone()).pose_encoding().cast(FloatDType::F32);
-    let (start, grid) = (aggregator.patch_start_idx, aggregator.grid);
-    let (mut depth, mut dynamic, mut gaussian_raw) = (Vec::new(), Vec::new(), Vec::new());
-    for first in (0..frames).step_by(chunk) {
-        let count = chunk.min(frames - first);
-        let pick = |tokens: Tensor<4>| tokens.narrow(1, first, count);
-        let prediction = model.depth_head.predict(|i| pick(aggregator.output_list[i].clone()), start, grid);
-        depth.push(f32(prediction.prediction.narrow(4, 0, 1).squeeze_dim::<4>(4)));
-        if let Some(head) = &model.instance_head {
-            let prediction = head.predict(|i| pick(aggregator.dino_token_list[i].clone()), start, grid);
-            dynamic.push(f32(prediction.prediction.narrow(4, 0, 1).squeeze_dim::<4>(4)));
-        }
-        if let Some(head) = &model.gs_head {
-            let raw = head.forward(|i| pick(aggregator.output_with_dino_tokens(i)), start, grid).raw;
-            let raw = model.apply_color_skip(raw, images.clone().narrow(1, first, count));
-            gaussian_raw.push(raw.cast(FloatDType::F32));
-        }
-    }
-    drop(aggregator);
-    Ok(Prediction {
-        pose_encoding,
-        depth: Tensor::cat(depth, 1),
-        dynamic_logit: (!dynamic.is_empty()).then(|| Tensor::cat(dynamic, 1)),
-        gaussians: (!gaussian_raw.is_empty()).then(|| GaussianMaps::from_raw(Tensor::cat(gaussian_raw, 1))),
-    })
+    Ok(heads_chunked(model, aggregator, images, chunk)?)
 }
 
 /// One rendered target view: `[H, W, 3]` colours (on the host, interleaved, not clamped).

@@ -148,7 +148,7 @@ mod tests {
             let difference: f32 = (ours.clone() - reference).abs().max().into_scalar();
             assert!(difference < 1e-6, "{size:?}: differs by {difference}");
             let grad = ours.sum().backward();
-            let grad = x.grad(&grad).expect("a gradient").into_data().to_vec::<f32>().unwrap();
+            let grad = x.grad(&grad).expect("a gradient").into_data().try_to_vec::<f32>().unwrap();
             // Each output sample's weights sum to one, so the input gradients sum to the output count.
             let (total, expected) = (grad.iter().map(|&g| f64::from(g)).sum::<f64>(), (6 * size[0] * size[1]) as f64);
             assert!((total - expected).abs() < 1e-5 * expected, "{size:?}: {total}");

@@ -7,8 +7,9 @@
 //! maps. The point and semantic heads, unused by DGGT, are not run; the aggregator's tokens are dropped as soon
 //! as the heads are done.
 
-use burn::tensor::Tensor;
+use burn::tensor::{FloatDType, Tensor};
 use dggt_model::Dggt;
+use dggt_model::aggregator::AggregatorOutput;
 use dggt_model::gaussian_maps::GaussianMaps;
 
 use crate::error::ReconstructError;
@@ -29,14 +30,29 @@ pub struct Prediction {
 /// Runs `model` on `images` (`[1, S, 3, H, W]`, RGB in `[0, 1]`) with the dense heads on `chunk` frames at a
 /// time (at least one).
 pub fn forward_chunked(model: &Dggt, images: Tensor<5>, chunk: usize) -> Result<Prediction, ReconstructError> {
-    let [batch, frames, _, _, _] = images.dims();
+    let [batch, ..] = images.dims();
     if batch != 1 {
         return Err(ReconstructError::invalid("images", format!("batch of {batch}, expected 1")));
     }
-    let chunk = chunk.max(1);
     let aggregator = model.aggregator.forward(images.clone())?;
-    let last = aggregator.output_list.last().expect("the aggregator has at least one layer").clone();
-    let pose_encoding = model.camera_head.forward(last).pose_encoding();
+    heads_chunked(model, aggregator, images, chunk)
+}
+
+/// The camera head and the dense heads on the aggregator's tokens, the dense heads `chunk` frames at a time;
+/// `images` are the aggregator's input (the Gaussian head's colour skip reads them). The outputs are `f32`
+/// whatever the model's float type; the tokens are dropped once the heads are done.
+pub fn heads_chunked(
+    model: &Dggt,
+    aggregator: AggregatorOutput,
+    images: Tensor<5>,
+    chunk: usize,
+) -> Result<Prediction, ReconstructError> {
+    let frames = images.dims()[1];
+    let chunk = chunk.max(1);
+    let f32 = |t: Tensor<4>| t.cast(FloatDType::F32);
+    let last =
+        aggregator.output_list.last().ok_or_else(|| ReconstructError::invalid("model", "no aggregator layer"))?;
+    let pose_encoding = model.camera_head.forward(last.clone()).pose_encoding().cast(FloatDType::F32);
     let (start, grid) = (aggregator.patch_start_idx, aggregator.grid);
 
     let (mut depth, mut dynamic, mut gaussian_raw) = (Vec::new(), Vec::new(), Vec::new());
@@ -44,14 +60,15 @@ pub fn forward_chunked(model: &Dggt, images: Tensor<5>, chunk: usize) -> Result<
         let count = chunk.min(frames - first);
         let pick = |tokens: Tensor<4>| tokens.narrow(1, first, count);
         let prediction = model.depth_head.predict(|i| pick(aggregator.output_list[i].clone()), start, grid);
-        depth.push(prediction.prediction.narrow(4, 0, 1).squeeze_dim::<4>(4));
+        depth.push(f32(prediction.prediction.narrow(4, 0, 1).squeeze_dim::<4>(4)));
         if let Some(head) = &model.instance_head {
             let prediction = head.predict(|i| pick(aggregator.dino_token_list[i].clone()), start, grid);
-            dynamic.push(prediction.prediction.narrow(4, 0, 1).squeeze_dim::<4>(4));
+            dynamic.push(f32(prediction.prediction.narrow(4, 0, 1).squeeze_dim::<4>(4)));
         }
         if let Some(head) = &model.gs_head {
             let raw = head.forward(|i| pick(aggregator.output_with_dino_tokens(i)), start, grid).raw;
-            gaussian_raw.push(model.apply_color_skip(raw, images.clone().narrow(1, first, count)));
+            let raw = model.apply_color_skip(raw, images.clone().narrow(1, first, count));
+            gaussian_raw.push(raw.cast(FloatDType::F32));
         }
     }
     drop(aggregator);

@@ -1,6 +1,7 @@
-//! Finding the input views: either a folder of images (one camera), a folder of per-camera folders, or a scene
-//! export / KITTI sequence readable by [`dggt_data::open_scene`] (whose poses then serve as ground truth for
-//! the report, never as input).
+//! Finding the input views: either a folder of images (one camera), a folder of per-camera folders, a glob
+//! pattern (`frames/*.jpg`: the matching images are one camera; `cams/*`: each matching folder is a camera), or
+//! a scene export / KITTI sequence readable by [`dggt_data::open_scene`] (whose poses then serve as ground truth
+//! for the report, never as input).
 //!
 //! Views are ordered frame-major (all cameras of the first frame, then the next frame); view 0 defines the
 //! reconstruction's world frame. Folder inputs are taken as 10 Hz: frame `i` is at `i / 10` s. Every view must
@@ -67,7 +68,15 @@ impl InputSet {
         cameras: Option<Vec<usize>>,
     ) -> Result<Self, ReconstructError> {
         if !root.is_dir() {
-            return Err(ReconstructError::input(root, "not a folder (expected a folder of images or a scene export)"));
+            if is_glob_pattern(root) {
+                let set = Self::from_rig(root, "image glob", rig_from_glob(root)?, frames, cameras)?;
+                set.check_sizes()?;
+                return Ok(set);
+            }
+            return Err(ReconstructError::input(
+                root,
+                "not a folder (expected a folder of images, a glob pattern or a scene export)",
+            ));
         }
         let is_export = root.join("images").is_dir() && root.join("intrinsics").is_dir();
         let is_kitti = root.join("poses.txt").is_file() && root.join("calib.txt").is_file();
@@ -126,23 +135,25 @@ impl InputSet {
         cameras: Option<Vec<usize>>,
     ) -> Result<Self, ReconstructError> {
         let (files, folders) = list(root)?;
-        let mut rig: Vec<(String, Vec<PathBuf>)> = if !files.is_empty() {
+        let rig = if !files.is_empty() {
             if !folders.is_empty() {
                 tracing::warn!("{}: using the images directly in it; its sub-folders are ignored", root.display());
             }
             vec![("cam0".into(), files)]
         } else {
-            folders
-                .iter()
-                .map(|folder| {
-                    let name = folder.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-                    list(folder).map(|(files, _)| (name, files))
-                })
-                .collect::<Result<Vec<_>, _>>()?
-                .into_iter()
-                .filter(|(_, files)| !files.is_empty())
-                .collect()
+            camera_folders(&folders)?
         };
+        Self::from_rig(root, "image folder", rig, frames, cameras)
+    }
+
+    /// The views of a rig given as (camera name, image files in frame order) per camera.
+    fn from_rig(
+        root: &Path,
+        kind: &'static str,
+        mut rig: Vec<(String, Vec<PathBuf>)>,
+        frames: Option<Range<usize>>,
+        cameras: Option<Vec<usize>>,
+    ) -> Result<Self, ReconstructError> {
         if rig.is_empty() {
             return Err(ReconstructError::input(
                 root,
@@ -189,7 +200,7 @@ impl InputSet {
         let size = images::read_size(&views[0].path)?;
         Ok(Self {
             root: root.to_path_buf(),
-            kind: "image folder",
+            kind,
             frames: range.collect(),
             cameras: rig.into_iter().map(|(name, _)| name).collect(),
             views,
@@ -258,6 +269,50 @@ impl InputSet {
 }
 
 /// Image files and sub-folders of `dir`, each sorted by name.
+/// Whether `path` is a glob pattern rather than a path (it has `*`, `?` or `[`).
+fn is_glob_pattern(path: &Path) -> bool {
+    path.to_string_lossy().contains(['*', '?', '['])
+}
+
+/// The rig of a glob pattern: the matching images (sorted) as one camera, or else each matching folder (sorted)
+/// as a camera of its own.
+fn rig_from_glob(pattern: &Path) -> Result<Vec<(String, Vec<PathBuf>)>, ReconstructError> {
+    let text = pattern.to_string_lossy();
+    let matches =
+        glob::glob(&text).map_err(|e| ReconstructError::input(pattern, format!("invalid glob pattern: {e}")))?;
+    let (mut files, mut folders) = (Vec::new(), Vec::new());
+    for entry in matches {
+        let path = entry.map_err(|e| ReconstructError::input(pattern, e.to_string()))?;
+        if path.is_dir() {
+            folders.push(path);
+        } else if is_image(&path) {
+            files.push(path);
+        }
+    }
+    files.sort();
+    folders.sort();
+    if !files.is_empty() {
+        return Ok(vec![("cam0".into(), files)]);
+    }
+    camera_folders(&folders)
+}
+
+/// One camera per folder (named after it) with the images in it, leaving out folders without images.
+fn camera_folders(folders: &[PathBuf]) -> Result<Vec<(String, Vec<PathBuf>)>, ReconstructError> {
+    let cameras = folders
+        .iter()
+        .map(|folder| {
+            let name = folder.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+            list(folder).map(|(files, _)| (name, files))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(cameras.into_iter().filter(|(_, files)| !files.is_empty()).collect())
+}
+
+fn is_image(path: &Path) -> bool {
+    path.extension().and_then(|e| e.to_str()).is_some_and(|e| IMAGE_EXTENSIONS.contains(&e))
+}
+
 fn list(dir: &Path) -> Result<(Vec<PathBuf>, Vec<PathBuf>), ReconstructError> {
     let entries = std::fs::read_dir(dir).map_err(|e| ReconstructError::input(dir, e.to_string()))?;
     let (mut files, mut folders) = (Vec::new(), Vec::new());
@@ -265,7 +320,7 @@ fn list(dir: &Path) -> Result<(Vec<PathBuf>, Vec<PathBuf>), ReconstructError> {
         let path = entry.map_err(|e| ReconstructError::input(dir, e.to_string()))?.path();
         if path.is_dir() {
             folders.push(path);
-        } else if path.extension().and_then(|e| e.to_str()).is_some_and(|e| IMAGE_EXTENSIONS.contains(&e)) {
+        } else if is_image(&path) {
             files.push(path);
         }
     }

@@ -313,3 +313,34 @@ fn bad_inputs_give_errors_naming_the_file() {
     assert!(error.contains("partial.safetensors") && error.contains("camera_head"), "{error}");
     assert!(!out.join("summary.json").exists(), "nothing is written on failure");
 }
+
+#[test]
+fn glob_patterns_choose_images_or_camera_folders() {
+    use dggt_reconstruct::inputs::InputSet;
+    let dir = tempfile::tempdir().unwrap();
+    for (camera, frames) in [("cam_front", 3), ("cam_left", 3), ("notes", 0)] {
+        std::fs::create_dir_all(dir.path().join(camera)).unwrap();
+        for f in 0..frames {
+            image::RgbImage::new(32, 24).save(dir.path().join(camera).join(format!("{f:02}.png"))).unwrap();
+        }
+    }
+    std::fs::write(dir.path().join("cam_front").join("readme.txt"), "not an image").unwrap();
+
+    // Files: one camera, in name order, only images.
+    let set = InputSet::open(&dir.path().join("cam_front/0[12].png"), None, None).unwrap();
+    assert_eq!(set.kind, "image glob");
+    assert_eq!(set.cameras, vec!["cam0".to_string()]);
+    let names: Vec<_> = set.views.iter().map(|v| v.path.file_name().unwrap().to_str().unwrap().to_owned()).collect();
+    assert_eq!(names, ["01.png", "02.png"]);
+
+    // Folders: a camera each, frame-major views.
+    let set = InputSet::open(&dir.path().join("cam_*"), Some(1..3), None).unwrap();
+    assert_eq!(set.cameras, vec!["cam_front".to_string(), "cam_left".to_string()]);
+    assert_eq!(set.views.len(), 4);
+    assert_eq!((set.views[1].frame, set.views[1].camera), (1, 1));
+
+    // Nothing matching is an error naming the pattern.
+    let pattern = dir.path().join("*.jpg");
+    let error = InputSet::open(&pattern, None, None).unwrap_err().to_string();
+    assert!(error.contains("*.jpg") && error.contains("no images"), "{error}");
+}
