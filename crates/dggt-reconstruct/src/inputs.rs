@@ -280,17 +280,8 @@ fn rig_from_glob(pattern: &Path) -> Result<Vec<(String, Vec<PathBuf>)>, Reconstr
     let text = pattern.to_string_lossy();
     let matches =
         glob::glob(&text).map_err(|e| ReconstructError::input(pattern, format!("invalid glob pattern: {e}")))?;
-    let (mut files, mut folders) = (Vec::new(), Vec::new());
-    for entry in matches {
-        let path = entry.map_err(|e| ReconstructError::input(pattern, e.to_string()))?;
-        if path.is_dir() {
-            folders.push(path);
-        } else if is_image(&path) {
-            files.push(path);
-        }
-    }
-    files.sort();
-    folders.sort();
+    let paths = matches.map(|entry| entry.map_err(|e| ReconstructError::input(pattern, e.to_string())));
+    let (files, folders) = images_and_folders(paths)?;
     if !files.is_empty() {
         return Ok(vec![("cam0".into(), files)]);
     }
@@ -313,11 +304,21 @@ fn is_image(path: &Path) -> bool {
     path.extension().and_then(|e| e.to_str()).is_some_and(|e| IMAGE_EXTENSIONS.contains(&e))
 }
 
+/// The images and the folders directly in `dir`, each sorted by name.
 fn list(dir: &Path) -> Result<(Vec<PathBuf>, Vec<PathBuf>), ReconstructError> {
     let entries = std::fs::read_dir(dir).map_err(|e| ReconstructError::input(dir, e.to_string()))?;
+    images_and_folders(
+        entries.map(|entry| entry.map(|e| e.path()).map_err(|e| ReconstructError::input(dir, e.to_string()))),
+    )
+}
+
+/// Splits `paths` into image files and folders (other files are left out), each sorted by name.
+fn images_and_folders(
+    paths: impl Iterator<Item = Result<PathBuf, ReconstructError>>,
+) -> Result<(Vec<PathBuf>, Vec<PathBuf>), ReconstructError> {
     let (mut files, mut folders) = (Vec::new(), Vec::new());
-    for entry in entries {
-        let path = entry.map_err(|e| ReconstructError::input(dir, e.to_string()))?.path();
+    for path in paths {
+        let path = path?;
         if path.is_dir() {
             folders.push(path);
         } else if is_image(&path) {
