@@ -592,7 +592,7 @@ impl Runner<'_> {
 
             let mut renders = Vec::new();
             for (gaussians, target) in assembled.iter().zip(&target_list) {
-                renders.push(stages::rasterise(gaussians, sky.as_ref(), target, size, &settings, &device)?.rgb);
+                renders.push(stages::rasterise(gaussians, sky.as_ref(), target, size, &settings)?.rgb);
             }
             let raster_ms = lap(&mut clock);
 

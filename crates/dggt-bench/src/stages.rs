@@ -13,13 +13,12 @@
 //! heads together (the heads' time is the difference): waiting on the aggregator's outputs before the heads
 //! ran made the heads' outputs NaN on wgpu with burn 0.22.1.
 
-use burn::tensor::{Device, Tensor};
+use burn::tensor::Tensor;
 use dggt_model::Dggt;
 use dggt_model::aggregator::AggregatorOutput;
 use dggt_model::sky::SkyGaussians;
 use dggt_reconstruct::forward::{Prediction, heads_chunked};
-use dggt_scene::{AssembledGaussians, AssemblySettings, TargetView, camera_tensors};
-use dggt_splat::{RasterSettings, RenderSettings, RenderTensors, render};
+use dggt_scene::{AssembledGaussians, AssemblySettings, TargetView, render_assembled};
 
 use crate::error::BenchError;
 
@@ -61,31 +60,17 @@ pub struct Rasterised {
     pub rgb: Vec<f32>,
 }
 
-/// Rasterises assembled Gaussians from `target` and composites them over `sky` (black without):
-/// `rgb = alpha · foreground + (1 - alpha) · sky`, with the rasteriser's planes from `assembly` — the
-/// computation of [`dggt_scene::render_target`] after its assembly step.
+/// Rasterises assembled Gaussians from `target` and composites them over `sky` (black without), exactly as
+/// [`dggt_scene::render_target`] does after its assembly step ([`render_assembled`]).
 pub fn rasterise(
     assembled: &AssembledGaussians,
     sky: Option<&SkyGaussians>,
     target: &TargetView,
     size: dggt_geom::ImageSize,
     assembly: &AssemblySettings,
-    device: &Device,
 ) -> Result<Rasterised, BenchError> {
-    let cameras = camera_tensors(&[target.camera], size, device)?;
-    let raster =
-        RasterSettings { near_plane: assembly.near_plane, far_plane: assembly.far_plane, ..Default::default() };
-    let settings = RenderSettings { raster, background: None };
-    let RenderTensors { colors, alpha, .. } = render(&assembled.gaussians, &cameras, &settings)?;
-    let rgb = match sky {
-        Some(sky) => {
-            let sky_rgb = render(&sky.to_splat(), &cameras, &settings)?.colors;
-            let a = alpha.unsqueeze_dim::<4>(3);
-            a.clone() * colors + a.neg().add_scalar(1.0) * sky_rgb
-        }
-        None => colors,
-    };
-    let rgb = rgb
+    let rgb = render_assembled(assembled, sky, target, size, assembly)?
+        .rgb
         .into_data()
         .convert::<f32>()
         .try_into_vec::<f32>()

@@ -168,7 +168,7 @@ fn split_stages_compute_what_the_pipeline_computes() {
         let expected = render_target(&gaussians, Some(&sky), &target, &settings).expect("pipeline render");
         let assembled = assemble(&gaussians, &target, &settings).expect("assembly");
         let size = gaussians.size;
-        let ours = stages::rasterise(&assembled, Some(&sky), &target, size, &settings, &device).expect("raster");
+        let ours = stages::rasterise(&assembled, Some(&sky), &target, size, &settings).expect("raster");
         assert_eq!(ours.rgb, values(expected.rgb));
     }
 }

@@ -35,15 +35,29 @@ pub fn render_target(
     target: &TargetView,
     assembly: &AssemblySettings,
 ) -> Result<ViewRender, SceneError> {
-    let AssembledGaussians { gaussians, counts } = assemble(pixels, target, assembly)?;
-    let device = pixels.opacity.device();
-    let cameras = camera_tensors(&[target.camera], pixels.size, &device)?;
+    let assembled = assemble(pixels, target, assembly)?;
+    render_assembled(&assembled, sky, target, pixels.size, assembly)
+}
+
+/// Renders Gaussians already assembled for `target` (the second half of [`render_target`]), over `sky` when
+/// given, at `size`.
+pub fn render_assembled(
+    assembled: &AssembledGaussians,
+    sky: Option<&SkyGaussians>,
+    target: &TargetView,
+    size: ImageSize,
+    assembly: &AssemblySettings,
+) -> Result<ViewRender, SceneError> {
+    let AssembledGaussians { gaussians, counts } = assembled;
+    let counts = *counts;
+    let device = gaussians.means.device();
+    let cameras = camera_tensors(&[target.camera], size, &device)?;
     let raster =
         RasterSettings { near_plane: assembly.near_plane, far_plane: assembly.far_plane, ..Default::default() };
     let settings = RenderSettings { raster, background: None };
     let what = || format!("the view of camera {} at t = {}", target.rig_camera, target.time);
     let foreground =
-        render(&gaussians, &cameras, &settings).map_err(|source| SceneError::Render { what: what(), source })?;
+        render(gaussians, &cameras, &settings).map_err(|source| SceneError::Render { what: what(), source })?;
     let RenderTensors { colors, alpha, depth } = foreground;
     let (rgb, sky) = match sky {
         Some(sky) => {
