@@ -8,7 +8,6 @@
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 
-use burn::module::{Module, ModuleMapper, Param};
 use burn::tensor::{Device, FloatDType, Tensor, TensorData};
 use dggt_model::Dggt;
 
@@ -61,14 +60,7 @@ pub fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
     }
 }
 
-/// A copy of `model` with every float parameter cast to `precision`.
+/// A copy of `model` whose network computes in `precision` ([`Dggt::with_float_dtype`]).
 pub fn cast_model(model: &Dggt, precision: Precision) -> Dggt {
-    struct CastFloats(FloatDType);
-    impl ModuleMapper for CastFloats {
-        fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
-            let dtype = self.0;
-            param.map(|tensor| tensor.cast(dtype))
-        }
-    }
-    model.clone().map(&mut CastFloats(precision.dtype()))
+    model.clone().with_float_dtype(precision.dtype())
 }

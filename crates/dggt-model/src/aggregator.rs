@@ -11,10 +11,11 @@
 
 use burn::module::{Module, Param};
 use burn::nn::Initializer;
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{Device, Tensor};
 
 use crate::block::{Block, BlockConfig};
 use crate::config::AggregatorConfig;
+use crate::constant::ConstantSite;
 use crate::dino::{Dino, DinoOutput};
 use crate::error::ModelError;
 use crate::rope::RopeTable;
@@ -102,10 +103,10 @@ impl Aggregator {
         if h % p != 0 || w % p != 0 {
             return Err(ModelError::ImageSize { height: h, width: w, patch: p });
         }
-        let device = images.device();
-        let channel = |v: [f64; 3]| {
-            Tensor::<5>::from_data(TensorData::new(v.map(|x| x as f32).to_vec(), [1, 1, 3, 1, 1]), &device)
-        };
+        // The images enter in the parameters' float type (f32 images drive a network cast to bf16 or f16).
+        let images = images.cast(self.camera_token.val().dtype());
+        let site = ConstantSite::like(&images);
+        let channel = |v: [f64; 3]| site.tensor(v.map(|x| x as f32).to_vec(), [1, 1, 3, 1, 1]);
         let normalised = (images - channel(self.mean)) / channel(self.std);
         let dino = self.patch_embed.forward(normalised.reshape([b * s, 3, h, w]));
         let patches = dino.layers.last().expect("DINO has at least one block").clone();
@@ -116,7 +117,7 @@ impl Aggregator {
         let per_frame = start + num_patches;
         let grid = [h / p, w / p];
         let frame_rope =
-            (self.rope_freq > 0.0).then(|| RopeTable::for_frame(start, grid, self.head_dim, self.rope_freq, &device));
+            (self.rope_freq > 0.0).then(|| RopeTable::for_frame(start, grid, self.head_dim, self.rope_freq, &site));
         let global_rope = frame_rope.as_ref().map(|r| r.repeat_frames(s));
 
         let mut tokens = Tensor::cat(vec![special.clone(), patches.reshape([b, s, num_patches, c])], 2);

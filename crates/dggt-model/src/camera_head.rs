@@ -16,6 +16,7 @@ use burn::tensor::{Device, Tensor};
 
 use crate::block::{Block, BlockConfig};
 use crate::config::{CameraHeadConfig, PoseActivation};
+use crate::constant::ConstantSite;
 use crate::mlp::Mlp;
 
 #[derive(Module, Debug)]
@@ -90,8 +91,7 @@ impl CameraHead {
     pub fn forward(&self, tokens: Tensor<4>) -> CameraHeadOutput {
         let [b, s, _, dim] = tokens.dims();
         let normed = self.token_norm_out(tokens);
-        let device = normed.device();
-        let ones = Tensor::<1>::ones([dim], &device);
+        let ones = ConstantSite::like(&normed).tensor(vec![1.0; dim], [dim]);
         let adaln = layer_norm(normed.clone(), ones, None, self.adaln_eps);
         let target = self.empty_pose_tokens.dims()[2];
 

@@ -10,10 +10,11 @@
 use burn::module::{Module, Param};
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::nn::{Initializer, LayerNorm, LayerNormConfig};
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{Device, Tensor};
 
 use crate::block::{Block, BlockConfig};
 use crate::config::DinoConfig;
+use crate::constant::ConstantSite;
 use crate::resample::{antialiased_bicubic_matrix_2d, sampling_step};
 
 /// The convolutional patch embedding (`patch_embed.proj`).
@@ -95,9 +96,8 @@ impl Dino {
         } else {
             ([rows, cols], [sampling_step(trained, rows, None), sampling_step(trained, cols, None)])
         };
-        let device = pos_embed.device();
         let matrix = antialiased_bicubic_matrix_2d([trained, trained], output, step);
-        let matrix = Tensor::<2>::from_data(TensorData::new(matrix, [rows * cols, trained * trained]), &device);
+        let matrix = ConstantSite::like(&pos_embed).tensor(matrix, [rows * cols, trained * trained]);
         let cls = pos_embed.clone().narrow(1, 0, 1);
         let grid = pos_embed.narrow(1, 1, n - 1).reshape([n - 1, c]);
         let resized = matrix.matmul(grid).unsqueeze::<3>();

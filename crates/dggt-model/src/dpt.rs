@@ -14,9 +14,10 @@ use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
 use burn::nn::{LayerNorm, LayerNormConfig, PaddingConfig2d};
 use burn::tensor::activation::{relu, sigmoid};
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{Device, Tensor};
 
 use crate::config::{DptConfig, DptHeadConfig, HeadActivation};
+use crate::constant::ConstantSite;
 use crate::resample::bilinear_aligned;
 use crate::uv_embed::uv_sincos_embedding;
 
@@ -218,7 +219,7 @@ impl DptHead {
         }
         let [_, c, h, w] = x.dims();
         let embed = uv_sincos_embedding(c, [h, w], image_aspect, POS_EMBED_OMEGA, POS_EMBED_RATIO);
-        let embed = Tensor::<4>::from_data(TensorData::new(embed, [1, c, h, w]), &x.device());
+        let embed = ConstantSite::like(&x).tensor(embed, [1, c, h, w]);
         x + embed
     }
 

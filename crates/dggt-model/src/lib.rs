@@ -27,6 +27,7 @@ pub mod attention;
 pub mod block;
 pub mod camera_head;
 pub mod config;
+pub mod constant;
 pub mod dino;
 pub mod dpt;
 mod error;

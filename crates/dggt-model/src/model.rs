@@ -8,8 +8,8 @@
 
 use std::path::Path;
 
-use burn::module::Module;
-use burn::tensor::{Device, Tensor};
+use burn::module::{Module, ModuleMapper, Param};
+use burn::tensor::{Device, FloatDType, Tensor};
 use dggt_geom::PixelConvention;
 
 use crate::aggregator::{Aggregator, AggregatorOutput};
@@ -111,6 +111,38 @@ impl Dggt {
         })
     }
 
+    /// The network with every float parameter of the aggregator and the heads in `dtype` (f32, f16, bf16).
+    ///
+    /// Its forward pass then computes in `dtype`: images are cast on entry, constants follow the activations
+    /// ([`crate::constant`]), and outputs come out in `dtype` (cast them back before rendering). The sky model
+    /// stays f32: it colours host-projected points from the input images and feeds the f32 rasteriser.
+    pub fn with_float_dtype(self, dtype: FloatDType) -> Self {
+        struct CastFloats(FloatDType);
+        impl ModuleMapper for CastFloats {
+            fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+                let dtype = self.0;
+                // A fresh leaf of the new type, so that gradients land on the parameter itself.
+                param.map(|tensor| {
+                    let trained = tensor.is_require_grad();
+                    let cast = tensor.cast(dtype).detach();
+                    if trained { cast.require_grad() } else { cast }
+                })
+            }
+        }
+        let mut cast = CastFloats(dtype);
+        let head = |head: Option<DptHead>, cast: &mut CastFloats| head.map(|head| head.map(cast));
+        Self {
+            aggregator: self.aggregator.map(&mut cast),
+            camera_head: self.camera_head.map(&mut cast),
+            depth_head: self.depth_head.map(&mut cast),
+            point_head: self.point_head.map(&mut cast),
+            gs_head: head(self.gs_head, &mut cast),
+            instance_head: head(self.instance_head, &mut cast),
+            semantic_head: head(self.semantic_head, &mut cast),
+            ..self
+        }
+    }
+
     /// The checkpoint prefixes this network consumes.
     pub fn built_prefixes(&self) -> Vec<&'static str> {
         let optional = [
@@ -147,8 +179,8 @@ impl Dggt {
         if !self.color_skip {
             return raw;
         }
-        // [B, S, 3, H, W] -> [B, S, H, W, 3] logits.
-        let p = images.permute([0, 1, 3, 4, 2]).clamp(COLOR_SKIP_EPS, 1.0 - COLOR_SKIP_EPS);
+        // [B, S, 3, H, W] -> [B, S, H, W, 3] logits, in the head's float type.
+        let p = images.cast(raw.dtype()).permute([0, 1, 3, 4, 2]).clamp(COLOR_SKIP_EPS, 1.0 - COLOR_SKIP_EPS);
         let logit = (p.clone() / p.neg().add_scalar(1.0)).log();
         let channels = raw.dims()[4];
         Tensor::cat(vec![raw.clone().narrow(4, 0, 3) + logit, raw.narrow(4, 3, channels - 3)], 4)
@@ -167,7 +199,8 @@ impl Dggt {
         let gaussians = self.gs_head.as_ref().map(|head| {
             let dpt = head.forward(|i| aggregator.output_with_dino_tokens(i), start, grid);
             let raw = self.apply_color_skip(dpt.raw.clone(), images.clone());
-            GaussianOutput { maps: GaussianMaps::from_raw(raw), dpt }
+            // Activated in f32 whatever the network's float type: the maps feed the rasteriser.
+            GaussianOutput { maps: GaussianMaps::from_raw(raw.cast(FloatDType::F32)), dpt }
         });
         let instance = self.instance_head.as_ref().map(|head| head.predict(dino_tokens, start, grid));
         let semantic =

@@ -17,6 +17,8 @@
 
 use burn::tensor::{Int, Tensor, TensorData};
 
+use crate::constant::ConstantSite;
+
 /// Keys' cubic convolution kernel with `a = -0.5`, the kernel of PyTorch's antialiased bicubic mode.
 fn keys_cubic(x: f64) -> f64 {
     const A: f64 = -0.5;
@@ -113,7 +115,7 @@ fn bilinear_aligned_axis(x: Tensor<4>, axis: usize, output: usize) -> Tensor<4> 
     let index = |taps: Vec<i64>| Tensor::<1, Int>::from_data(TensorData::new(taps, [output]), &device);
     let mut shape = [1; 4];
     shape[axis] = output;
-    let fraction = Tensor::<1>::from_data(TensorData::new(fraction, [output]), &device).reshape(shape);
+    let fraction = ConstantSite::like(&x).tensor(fraction, [output]).reshape(shape);
     let below = x.clone().select(axis, index(lower));
     let above = x.select(axis, index(upper));
     below.clone() + (above - below) * fraction

@@ -7,7 +7,9 @@
 //! `out = v * cos + rotate_half(v) * sin`, `rotate_half([v1, v2]) = [-v2, v1]`.
 //! The cos/sin tables are computed on the host once per token layout.
 
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::Tensor;
+
+use crate::constant::ConstantSite;
 
 /// cos/sin tables for a fixed token sequence, each `[tokens, head_dim]`.
 #[derive(Debug, Clone)]
@@ -24,7 +26,7 @@ impl RopeTable {
         [rows, cols]: [usize; 2],
         head_dim: usize,
         base: f64,
-        device: &Device,
+        site: &ConstantSite,
     ) -> Self {
         assert!(head_dim.is_multiple_of(4), "2D RoPE needs head_dim divisible by 4, got {head_dim}");
         let positions: Vec<[usize; 2]> = std::iter::repeat_n([0, 0], special_tokens)
@@ -48,8 +50,8 @@ impl RopeTable {
         }
         let shape = [positions.len(), head_dim];
         Self {
-            cos: Tensor::from_data(TensorData::new(cos, shape), device),
-            sin: Tensor::from_data(TensorData::new(sin, shape), device),
+            cos: site.tensor(cos, shape),
+            sin: site.tensor(sin, shape),
         }
     }
 
@@ -80,11 +82,12 @@ impl RopeTable {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use burn::tensor::{Device, TensorData};
 
     #[test]
     fn special_tokens_are_unrotated_and_norm_is_kept() {
         let device = Device::flex();
-        let table = RopeTable::for_frame(2, [2, 3], 8, 100.0, &device);
+        let table = RopeTable::for_frame(2, [2, 3], 8, 100.0, &ConstantSite::f32(&device));
         let values: Vec<f32> = (0..8 * 8).map(|i| (i as f32 * 0.37).sin()).collect();
         let x = Tensor::<4>::from_data(TensorData::new(values, [1, 1, 8, 8]), &device);
         let y = table.apply(x.clone());
@@ -100,7 +103,7 @@ mod tests {
     #[test]
     fn first_frequency_rotates_by_row_and_col() {
         let device = Device::flex();
-        let table = RopeTable::for_frame(0, [1, 2], 8, 100.0, &device);
+        let table = RopeTable::for_frame(0, [1, 2], 8, 100.0, &ConstantSite::f32(&device));
         // Token 1 sits at (y, x) = (1, 2). Unit vector on feature 0 (y half, first frequency).
         let mut v = vec![0.0f32; 16];
         v[8] = 1.0;

@@ -9,7 +9,8 @@
 //!   no-sky views, random mixtures of all of them) through placement, rendering, every loss and the backward
 //!   pass; non-finite depths must be rejected with an error;
 //! - network: the tiny architecture on black, white and grey images, all-sky and sky-free masks, one and 64
-//!   input frames, with its own predicted cameras, through to every parameter's gradient.
+//!   input frames, with its own predicted cameras, through to every parameter's gradient; again with the
+//!   network computing and training in f16 and in bf16 (listed as skipped where the device lacks the type).
 //!
 //! `dggt stress` runs it (`--full` for the larger version); the `stress_suite` test runs the bounded version.
 

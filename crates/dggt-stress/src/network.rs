@@ -1,7 +1,8 @@
 //! Stress cases through the network itself (the tiny architecture, fresh weights): black, white and
 //! one-colour images, all-sky and sky-free masks, a single input frame and 64 input frames, with the camera
 //! head's own (untrained) poses, through rendering, the objective (camera and depth terms included) and the
-//! backward pass to every parameter.
+//! backward pass to every parameter. The model may be cast to f16 or bf16 ([`Dggt::with_float_dtype`]); its
+//! outputs then enter the scene in f32, and the gradients land on the reduced-precision parameters.
 
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::tensor::{Device, Gradients, Tensor};

@@ -9,7 +9,7 @@ use std::fmt::Write as _;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::PathBuf;
 
-use burn::tensor::Device;
+use burn::tensor::{Device, FloatDType};
 use dggt_geom::ImageSize;
 use dggt_model::ModelConfig;
 use dggt_model::sky::SkyModel;
@@ -57,10 +57,22 @@ pub struct CaseOutcome {
     pub panic: Option<String>,
     /// Values checked, per stage in [`Stage::ALL`] order.
     pub checked: Vec<usize>,
+    /// Why the case did not run on this device (a float type it lacks); listed, never counted as a pass.
+    pub skipped: Option<String>,
 }
 
 impl CaseOutcome {
+    /// Ran, and ended as expected with nothing non-finite or broken.
     pub fn passed(&self) -> bool {
+        self.skipped.is_none() && self.ran_clean()
+    }
+
+    /// Did not fail: passed, or skipped.
+    pub fn acceptable(&self) -> bool {
+        self.skipped.is_some() || self.ran_clean()
+    }
+
+    fn ran_clean(&self) -> bool {
         self.panic.is_none()
             && self.findings.is_empty()
             && match self.expect {
@@ -79,12 +91,17 @@ pub struct StressReport {
 }
 
 impl StressReport {
+    /// No case failed (skipped ones are listed in the table).
     pub fn passed(&self) -> bool {
-        self.cases.iter().all(CaseOutcome::passed)
+        self.cases.iter().all(CaseOutcome::acceptable)
     }
 
     pub fn failures(&self) -> impl Iterator<Item = &CaseOutcome> {
-        self.cases.iter().filter(|c| !c.passed())
+        self.cases.iter().filter(|c| !c.acceptable())
+    }
+
+    pub fn skipped(&self) -> impl Iterator<Item = &CaseOutcome> {
+        self.cases.iter().filter(|c| c.skipped.is_some())
     }
 
     /// Non-finite or broken values found at each stage, over all cases.
@@ -101,7 +118,11 @@ impl StressReport {
         let mut out = String::new();
         let _ = writeln!(out, "{:<9} {:<44} {:<8} {:>12}  result", "group", "case", "expect", "values");
         for case in &self.cases {
-            let result = if case.passed() { "pass" } else { "FAIL" };
+            let result = match (&case.skipped, case.passed()) {
+                (Some(reason), _) => format!("skipped: {reason}"),
+                (None, true) => "pass".into(),
+                (None, false) => "FAIL".into(),
+            };
             let expect = match case.expect {
                 Expect::Finite => "finite",
                 Expect::Rejected => "rejected",
@@ -132,7 +153,9 @@ impl StressReport {
         for (stage, count) in self.bad_values_by_stage() {
             let _ = writeln!(out, "  {:<10} {count}", stage.name());
         }
-        let _ = writeln!(out, "{} cases: {} pass, {failed} fail", self.cases.len(), self.cases.len() - failed);
+        let skipped = self.skipped().count();
+        let passed = self.cases.len() - failed - skipped;
+        let _ = writeln!(out, "{} cases: {passed} pass, {failed} fail, {skipped} skipped", self.cases.len());
         out
     }
 }
@@ -170,6 +193,32 @@ fn run_case(case: Case<'_>) -> CaseOutcome {
         findings: probe.into_findings(),
         error,
         panic,
+        skipped: None,
+    }
+}
+
+/// A case that cannot run on this device, and why.
+fn skipped_case(group: &'static str, name: String, reason: String) -> CaseOutcome {
+    tracing::info!("stress case {group} / {name}: skipped ({reason})");
+    CaseOutcome {
+        group,
+        name,
+        expect: Expect::Finite,
+        findings: Vec::new(),
+        error: None,
+        panic: None,
+        checked: vec![0; Stage::ALL.len()],
+        skipped: Some(reason),
+    }
+}
+
+/// `f16`, `bf16`, `f32`.
+fn dtype_name(dtype: FloatDType) -> &'static str {
+    match dtype {
+        FloatDType::F16 => "f16",
+        FloatDType::BF16 => "bf16",
+        FloatDType::F64 => "f64",
+        _ => "f32",
     }
 }
 
@@ -334,18 +383,47 @@ pub fn run_suite(options: &StressOptions, device: &Device) -> Result<StressRepor
         ("a single input frame", normal, 1, |_| {}),
         ("64 input frames", many.0, many.1, |_| {}),
     ];
-    for (index, (name, size, inputs, setup)) in network_cases.into_iter().enumerate() {
-        let (model, objective, render, device) = (&model, &network_objective, &network_render, &device);
-        outcomes.push(run_case(Case {
-            group: "network",
-            name: format!("{name} ({inputs} at {size})"),
-            expect: Expect::Finite,
-            run: Box::new(move |probe| {
-                let mut scenario = Scenario::new(size, inputs, 2, 100 + index as u64);
-                setup(&mut scenario);
-                network::run(probe, &scenario, model, objective, render, device)
-            }),
-        }));
+    // The same network computing in a reduced float type (parameters, activations and constants; the scene
+    // is assembled and rendered in f32), trained in that type: only where the device declares the type.
+    let reduced: Vec<(&str, ImageSize, usize, Setup)> = vec![
+        ("random images", normal, 3, |_| {}),
+        ("black images, all sky", normal, 3, |s| {
+            s.fill_images(0.0);
+            s.fill_sky(1.0);
+        }),
+        ("white images, no sky", normal, 3, |s| {
+            s.fill_images(1.0);
+            s.fill_sky(0.0);
+        }),
+        ("64 input frames", many.0, many.1, |_| {}),
+    ];
+    let precisions = [(FloatDType::F32, network_cases), (FloatDType::F16, reduced.clone()), (FloatDType::BF16, reduced)];
+    for (dtype, cases) in precisions {
+        let suffix = match dtype {
+            FloatDType::F32 => String::new(),
+            other => format!(", {}", dtype_name(other)),
+        };
+        if dtype != FloatDType::F32 && !device.supports_dtype(dtype) {
+            for (name, size, inputs, _) in cases {
+                let reason = format!("the device lacks {}", dtype_name(dtype));
+                outcomes.push(skipped_case("network", format!("{name} ({inputs} at {size}{suffix})"), reason));
+            }
+            continue;
+        }
+        let model = model.clone().with_float_dtype(dtype);
+        for (index, (name, size, inputs, setup)) in cases.into_iter().enumerate() {
+            let (model, objective, render, device) = (&model, &network_objective, &network_render, &device);
+            outcomes.push(run_case(Case {
+                group: "network",
+                name: format!("{name} ({inputs} at {size}{suffix})"),
+                expect: Expect::Finite,
+                run: Box::new(move |probe| {
+                    let mut scenario = Scenario::new(size, inputs, 2, 100 + index as u64);
+                    setup(&mut scenario);
+                    network::run(probe, &scenario, model, objective, render, device)
+                }),
+            }));
+        }
     }
     Ok(StressReport { device: format!("{device:?}"), full: options.full, cases: outcomes })
 }

@@ -25,6 +25,11 @@ fn the_bounded_suite_finds_nothing_non_finite() {
         assert!(report.cases.iter().filter(|c| c.group == group).count() >= 5, "too few {group} cases");
     }
     assert!(report.cases.iter().any(|c| c.expect == Expect::Rejected), "no invalid input is exercised");
+    // flex computes in f16 and bf16: the reduced-precision network cases run, none is skipped.
+    assert_eq!(report.skipped().count(), 0, "{}", report.table());
+    for precision in [", f16)", ", bf16)"] {
+        assert!(report.cases.iter().any(|c| c.name.ends_with(precision)), "no {precision} network case");
+    }
     for (i, stage) in Stage::ALL.iter().enumerate() {
         let checked: usize = report.cases.iter().map(|c| c.checked[i]).sum();
         assert!(checked > 0, "nothing was checked at the {stage} stage");
@@ -40,6 +45,7 @@ fn the_bounded_suite_finds_nothing_non_finite_on_wgpu() {
     let options = StressOptions { full: false, loss_weights: None };
     let device = Device::wgpu(burn::tensor::DeviceKind::default());
     let report = run_suite(&options, &device).expect("the suite runs");
+    println!("{}", report.table());
     assert!(report.passed(), "{}", report.table());
 }
 

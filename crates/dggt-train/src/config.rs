@@ -35,11 +35,20 @@ pub struct ModelSection {
     /// Where Gaussian means are unprojected (`GaussianHeadConfig::unproject_at`): `integer` (the release's
     /// convention, required by its weights) or `centred` (pixel centres, for training from scratch).
     pub unproject_at: PixelConvention,
+    /// Sky Gaussians per side (`SkyConfig::resolution`, `resolution^2` in all) instead of the preset's; only
+    /// for a sky model that starts fresh, since a checkpoint's sky buffers fix their count.
+    pub sky_resolution: Option<usize>,
 }
 
 impl Default for ModelSection {
     fn default() -> Self {
-        Self { preset: "tiny".into(), init_checkpoint: None, color_skip: false, unproject_at: PixelConvention::Integer }
+        Self {
+            preset: "tiny".into(),
+            init_checkpoint: None,
+            color_skip: false,
+            unproject_at: PixelConvention::Integer,
+            sky_resolution: None,
+        }
     }
 }
 
@@ -308,6 +317,9 @@ impl TrainConfig {
             && !(clip > 0.0)
         {
             return Err(format!("optim.clip_grad_norm must be positive, got {clip}"));
+        }
+        if self.model.sky_resolution == Some(0) {
+            return Err("model.sky_resolution must be at least 1".into());
         }
         let modules = [
             "aggregator",

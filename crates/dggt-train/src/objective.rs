@@ -13,7 +13,7 @@
 
 use std::collections::BTreeMap;
 
-use burn::tensor::{Int, Tensor, TensorData};
+use burn::tensor::{FloatDType, Int, Tensor, TensorData};
 use dggt_geom::{PoseEncoding, PosedCamera};
 use dggt_losses::{GramLoss, Lpips, LpipsKind, bce_with_logits, l2, lifespan_l1, opacity_loss, psnr};
 use dggt_model::{Dggt, ExtraHeads};
@@ -233,7 +233,7 @@ impl Forward {
         })?;
         let cameras: Vec<PosedCamera> = match render.cameras {
             CameraSource::GroundTruth => batch.inputs.iter().map(|v| v.camera).collect(),
-            CameraSource::Predicted => decode_cameras(out.camera.pose_encoding(), batch.size)?,
+            CameraSource::Predicted => decode_cameras(out.camera.pose_encoding().cast(FloatDType::F32), batch.size)?,
         };
         let views: Vec<InputView> = batch
             .inputs
@@ -241,8 +241,13 @@ impl Forward {
             .zip(cameras)
             .map(|(truth, camera)| InputView { rig_camera: truth.rig_camera, time: truth.time, camera })
             .collect();
-        let depth = out.depth.prediction.clone().narrow(4, 0, 1).squeeze_dim::<4>(4);
-        let dynamic_logit = out.instance.as_ref().map(|p| p.prediction.clone().narrow(4, 0, 1).squeeze_dim::<4>(4));
+        // The scene is assembled and rendered in f32 whatever float type the network computes in.
+        let depth = out.depth.prediction.clone().narrow(4, 0, 1).squeeze_dim::<4>(4).cast(FloatDType::F32);
+        let dynamic_logit = out
+            .instance
+            .as_ref()
+            .map(|p| p.prediction.clone().narrow(4, 0, 1).squeeze_dim::<4>(4).cast(FloatDType::F32));
+        let encodings = out.camera.encodings.iter().map(|e| e.clone().cast(FloatDType::F32)).collect();
         let means_gradient = match render.means_gradient {
             MeansGradientSetting::Detached => MeansGradient::Detached,
             MeansGradientSetting::Through => MeansGradient::Through,
@@ -264,7 +269,7 @@ impl Forward {
             }
             _ => None,
         };
-        Ok(Self { pixels, sky, depth, dynamic_logit, encodings: out.camera.encodings.clone() })
+        Ok(Self { pixels, sky, depth, dynamic_logit, encodings })
     }
 }
 

@@ -159,6 +159,9 @@ impl Trainer {
                     gs.color_skip = config.model.color_skip;
                     gs.unproject_at = config.model.unproject_at;
                 }
+                if let (Some(sky), Some(resolution)) = (&mut model_config.sky_model, config.model.sky_resolution) {
+                    sky.resolution = resolution;
+                }
                 let model = fresh_model(&model_config, config.model.init_checkpoint.as_deref(), &device)?;
                 let model = freeze(model, &config.optim.frozen)?;
                 let optimizer = Optimizer::new(&config.optim, &model);
