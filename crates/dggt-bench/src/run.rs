@@ -20,7 +20,7 @@ use dggt_geom::{ImageSize, PixelConvention, PosedCamera};
 use dggt_losses::{ImageShape, Lpips, LpipsKind};
 use dggt_model::{Dggt, ModelConfig};
 use dggt_scene::{
-    AssemblySettings, InputView, MeansGradient, PixelGaussians, TargetView, Timeline, assemble, interpolate_camera,
+    AssemblySettings, InputView, TargetView, Timeline, assemble, interpolate_camera,
 };
 use dggt_train::batch::relative_pose;
 use dggt_train::objective::decode_cameras;
@@ -548,18 +548,9 @@ impl Runner<'_> {
                 .zip(&input_cameras)
                 .map(|(&(rig_camera, time, _), &camera)| InputView { rig_camera, time, camera })
                 .collect();
-            let maps = prediction
-                .gaussians
-                .as_ref()
+            let pixels = prediction
+                .pixel_gaussians(views.clone(), model.unproject_at, &timeline)?
                 .ok_or_else(|| BenchError::invalid("network", "no Gaussian head: nothing to render"))?;
-            let pixels = PixelGaussians::new(
-                maps,
-                prediction.depth.clone(),
-                prediction.dynamic_logit.clone(),
-                views.clone(),
-                MeansGradient::Detached,
-                model.unproject_at,
-            )?;
             let sky = sky_model.as_ref().map(|sky| {
                 let [_, s, c, h, w] = images.dims();
                 let cameras: Vec<_> =

@@ -27,7 +27,7 @@ use dggt_reconstruct::forward::forward_chunked;
 use dggt_reconstruct::inputs::{GroundTruth, InputSet};
 use dggt_reconstruct::{Architecture, LoadedNetwork, load_network};
 use dggt_scene::{
-    AssemblySettings, InputView, MeansGradient, PixelGaussians, TargetView, Timeline, interpolate_camera, render_target,
+    AssemblySettings, InputView, TargetView, Timeline, interpolate_camera, render_target,
 };
 use dggt_train::objective::decode_cameras;
 
@@ -363,20 +363,12 @@ fn evaluate_scene(
         .zip(&predicted_cameras)
         .map(|(v, camera)| InputView { rig_camera: v.camera, time: timeline.time(v.frame as f64), camera: *camera })
         .collect();
-    let Some(maps) = &prediction.gaussians else {
+    let Some(pixels) = prediction.pixel_gaussians(views.clone(), network.model.unproject_at, &timeline)? else {
         return Err(EvalError::invalid(
             format!("checkpoint {}", options.checkpoint.display()),
             "the network has no Gaussian head: there is nothing to render",
         ));
     };
-    let pixels = PixelGaussians::new(
-        maps,
-        prediction.depth.clone(),
-        prediction.dynamic_logit.clone(),
-        views.clone(),
-        MeansGradient::Detached,
-        network.model.unproject_at,
-    )?;
     let sky = network.model.sky_model.as_ref().map(|model| {
         let cameras: Vec<_> =
             views.iter().map(|v| (v.camera.world_from_camera.inverse(), v.camera.intrinsics)).collect();

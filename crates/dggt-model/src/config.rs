@@ -210,6 +210,11 @@ pub struct ModelConfig {
     pub semantic_head: Option<DptHeadConfig>,
     #[serde(default)]
     pub sky_model: Option<SkyConfig>,
+    /// This project's motion head (the paper trains one; the release ships none): per-pixel 3D velocity of
+    /// the dynamic Gaussians from the aggregator's frame and global tokens (`dim_in = 2 C`, 3 velocity
+    /// channels and an unused last channel). See [`crate::model::Dggt::motion_head`].
+    #[serde(default)]
+    pub motion_head: Option<DptHeadConfig>,
 }
 
 impl ModelConfig {
@@ -269,6 +274,17 @@ impl ModelConfig {
         let mut config = Self::vggt_1b().with_dggt_heads(300);
         config.depth_head.conf_activation = HeadActivation::Sigmoid;
         config
+    }
+
+    /// Adds the motion head ([`ModelConfig::motion_head`]), linear outputs.
+    pub fn with_motion_head(mut self) -> Self {
+        self.motion_head = Some(DptHeadConfig {
+            dim_in: 2 * self.aggregator.embed_dim,
+            output_dim: 4,
+            activation: HeadActivation::Linear,
+            conf_activation: HeadActivation::Linear,
+        });
+        self
     }
 
     /// Adds DGGT's Gaussian (12 channels), instance (2) and semantic (11) heads and its sky model.
@@ -362,6 +378,7 @@ impl ModelConfig {
             gs_head: None,
             instance_head: None,
             semantic_head: None,
+            motion_head: None,
             sky_model: None,
         }
     }
@@ -406,6 +423,7 @@ impl ModelConfig {
             ("gs_head", self.gs_head.as_ref().map(|h| (h.dim_in, h.output_dim)), 3 * width, 12),
             ("instance_head", self.instance_head.as_ref().map(|h| (h.dim_in, h.output_dim)), width, 2),
             ("semantic_head", self.semantic_head.as_ref().map(|h| (h.dim_in, h.output_dim)), width, 2),
+            ("motion_head", self.motion_head.as_ref().map(|h| (h.dim_in, h.output_dim)), 2 * width, 4),
         ];
         for (name, sizes, dim_in, min_output) in heads {
             if let Some((head_dim_in, output_dim)) = sizes

@@ -18,6 +18,7 @@ use burn::tensor::{Device, Tensor};
 
 use crate::config::{DptConfig, DptHeadConfig, HeadActivation};
 use crate::constant::ConstantSite;
+use crate::leaf::replace_value;
 use crate::resample::bilinear_aligned;
 use crate::uv_embed::uv_sincos_embedding;
 
@@ -211,6 +212,15 @@ impl DptHead {
             pos_embed: common.pos_embed,
             activations: [head.activation, head.conf_activation],
         }
+    }
+
+    /// The head with its last 1x1 convolution zeroed: it predicts exactly zero until trained, while the
+    /// gradients of that convolution are not zero.
+    pub fn with_zero_output(mut self) -> Self {
+        let out = &mut self.scratch.output_conv2.out;
+        out.weight = replace_value(out.weight.clone(), |w| w.zeros_like());
+        out.bias = out.bias.take().map(|b| replace_value(b, |b| b.zeros_like()));
+        self
     }
 
     fn add_pos_embed(&self, x: Tensor<4>, image_aspect: f64) -> Tensor<4> {

@@ -32,6 +32,7 @@ pub mod dino;
 pub mod dpt;
 mod error;
 pub mod gaussian_maps;
+pub mod leaf;
 pub mod lifespan;
 pub mod mlp;
 pub mod model;

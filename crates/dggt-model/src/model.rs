@@ -18,6 +18,7 @@ use crate::config::{DptHeadConfig, HeadActivation, ModelConfig};
 use crate::dpt::{DptHead, DptOutput, DptPrediction};
 use crate::error::ModelError;
 use crate::gaussian_maps::GaussianMaps;
+use crate::leaf::replace_value;
 use crate::sky::SkyModel;
 use crate::weights::{LoadReport, load_checkpoint};
 
@@ -33,6 +34,10 @@ pub struct Dggt {
     pub semantic_head: Option<DptHead>,
     /// Coloured from the input views with predicted cameras, outside [`Dggt::forward`].
     pub sky_model: Option<SkyModel>,
+    /// Velocity of each pixel's Gaussian, in world units per log frame along the axes of the camera that saw
+    /// it (OpenCV: x right, y down, z forward); it moves the dynamic Gaussians to a target time. A fresh head
+    /// predicts zero (every Gaussian held in place, as without the head).
+    pub motion_head: Option<DptHead>,
     /// See [`GaussianHeadConfig::color_skip`](crate::config::GaussianHeadConfig::color_skip).
     #[module(skip)]
     pub color_skip: bool,
@@ -66,6 +71,8 @@ pub struct DggtOutput {
     pub instance: Option<DptPrediction>,
     /// Semantic logits (channels `0..C-1`); DGGT computes but does not use them. `None` when not requested.
     pub semantic: Option<DptPrediction>,
+    /// Channels 0-2 of the prediction are the velocity ([`Dggt::motion_head`]); `None` without the head.
+    pub motion: Option<DptPrediction>,
 }
 
 /// Which of the heads nothing downstream of DGGT reads a forward pass computes: each is a full-resolution DPT
@@ -106,6 +113,10 @@ impl Dggt {
             instance_head: config.instance_head.as_ref().map(|head| DptHead::new(&config.dpt, head, device)),
             semantic_head: config.semantic_head.as_ref().map(|head| DptHead::new(&config.dpt, head, device)),
             sky_model: config.sky_model.as_ref().map(|sky| SkyModel::new(sky, device)),
+            motion_head: config
+                .motion_head
+                .as_ref()
+                .map(|head| DptHead::new(&config.dpt, head, device).with_zero_output()),
             color_skip: config.gs_head.as_ref().is_some_and(|gs| gs.color_skip),
             unproject_at: config.gs_head.as_ref().map_or(PixelConvention::Integer, |gs| gs.unproject_at),
         })
@@ -121,12 +132,7 @@ impl Dggt {
         impl ModuleMapper for CastFloats {
             fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
                 let dtype = self.0;
-                // A fresh leaf of the new type, so that gradients land on the parameter itself.
-                param.map(|tensor| {
-                    let trained = tensor.is_require_grad();
-                    let cast = tensor.cast(dtype).detach();
-                    if trained { cast.require_grad() } else { cast }
-                })
+                replace_value(param, |tensor| tensor.cast(dtype))
             }
         }
         let mut cast = CastFloats(dtype);
@@ -139,6 +145,7 @@ impl Dggt {
             gs_head: head(self.gs_head, &mut cast),
             instance_head: head(self.instance_head, &mut cast),
             semantic_head: head(self.semantic_head, &mut cast),
+            motion_head: head(self.motion_head, &mut cast),
             ..self
         }
     }
@@ -150,6 +157,7 @@ impl Dggt {
             ("instance_head.", self.instance_head.is_some()),
             ("semantic_head.", self.semantic_head.is_some()),
             ("sky_model.", self.sky_model.is_some()),
+            ("motion_head.", self.motion_head.is_some()),
         ];
         ["aggregator.", "camera_head.", "depth_head.", "point_head."]
             .into_iter()
@@ -205,6 +213,7 @@ impl Dggt {
         let instance = self.instance_head.as_ref().map(|head| head.predict(dino_tokens, start, grid));
         let semantic =
             self.semantic_head.as_ref().filter(|_| extra.semantic).map(|head| head.predict(dino_tokens, start, grid));
-        Ok(DggtOutput { aggregator, camera, depth, points, gaussians, instance, semantic })
+        let motion = self.motion_head.as_ref().map(|head| head.predict(frame_global, start, grid));
+        Ok(DggtOutput { aggregator, camera, depth, points, gaussians, instance, semantic, motion })
     }
 }

@@ -3,14 +3,16 @@
 //! The aggregator attends across all frames, so it runs once on the whole sequence; the dense heads work on
 //! each frame independently, so running them on chunks of frames gives the same maps as
 //! [`Dggt::forward`](dggt_model::Dggt::forward) while holding only one chunk's intermediate feature maps at a
-//! time. Only what the reconstruction reads is kept: camera encodings, depth, dynamic logits and the Gaussian
-//! maps. The point and semantic heads, unused by DGGT, are not run; the aggregator's tokens are dropped as soon
+//! time. Only what the reconstruction reads is kept: camera encodings, depth, dynamic logits, the Gaussian
+//! maps and the motion head's velocities. The point and semantic heads, unused by DGGT, are not run; the aggregator's tokens are dropped as soon
 //! as the heads are done.
 
 use burn::tensor::{FloatDType, Tensor};
+use dggt_geom::PixelConvention;
 use dggt_model::Dggt;
 use dggt_model::aggregator::AggregatorOutput;
 use dggt_model::gaussian_maps::GaussianMaps;
+use dggt_scene::{InputView, MeansGradient, PixelGaussians, SceneError, Timeline};
 
 use crate::error::ReconstructError;
 
@@ -25,6 +27,33 @@ pub struct Prediction {
     pub dynamic_logit: Option<Tensor<4>>,
     /// Activated Gaussian maps, when the model has a Gaussian head.
     pub gaussians: Option<GaussianMaps>,
+    /// `[1, S, H, W, 3]` velocities ([`Dggt::motion_head`]), when the model has a motion head.
+    pub velocity: Option<Tensor<5>>,
+}
+
+impl Prediction {
+    /// The per-pixel Gaussians placed with `views` on `timeline` (means detached, as at inference), moving
+    /// with the predicted velocities when the model has a motion head; `None` without a Gaussian head.
+    pub fn pixel_gaussians(
+        &self,
+        views: Vec<InputView>,
+        unproject_at: PixelConvention,
+        timeline: &Timeline,
+    ) -> Result<Option<PixelGaussians>, SceneError> {
+        let Some(maps) = &self.gaussians else { return Ok(None) };
+        let pixels = PixelGaussians::new(
+            maps,
+            self.depth.clone(),
+            self.dynamic_logit.clone(),
+            views,
+            MeansGradient::Detached,
+            unproject_at,
+        )?;
+        match &self.velocity {
+            Some(velocity) => pixels.with_motion(velocity.clone(), timeline.frames_per_time()).map(Some),
+            None => Ok(Some(pixels)),
+        }
+    }
 }
 
 /// Runs `model` on `images` (`[1, S, 3, H, W]`, RGB in `[0, 1]`) with the dense heads on `chunk` frames at a
@@ -55,7 +84,7 @@ pub fn heads_chunked(
     let pose_encoding = model.camera_head.forward(last.clone()).pose_encoding().cast(FloatDType::F32);
     let (start, grid) = (aggregator.patch_start_idx, aggregator.grid);
 
-    let (mut depth, mut dynamic, mut gaussian_raw) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut depth, mut dynamic, mut gaussian_raw, mut velocity) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for first in (0..frames).step_by(chunk) {
         let count = chunk.min(frames - first);
         let pick = |tokens: Tensor<4>| tokens.narrow(1, first, count);
@@ -70,6 +99,10 @@ pub fn heads_chunked(
             let raw = model.apply_color_skip(raw, images.clone().narrow(1, first, count));
             gaussian_raw.push(raw.cast(FloatDType::F32));
         }
+        if let Some(head) = &model.motion_head {
+            let prediction = head.predict(|i| pick(aggregator.output_list[i].clone()), start, grid);
+            velocity.push(prediction.prediction.narrow(4, 0, 3).cast(FloatDType::F32));
+        }
     }
     drop(aggregator);
     Ok(Prediction {
@@ -77,5 +110,6 @@ pub fn heads_chunked(
         depth: Tensor::cat(depth, 1),
         dynamic_logit: (!dynamic.is_empty()).then(|| Tensor::cat(dynamic, 1)),
         gaussians: (!gaussian_raw.is_empty()).then(|| GaussianMaps::from_raw(Tensor::cat(gaussian_raw, 1))),
+        velocity: (!velocity.is_empty()).then(|| Tensor::cat(velocity, 1)),
     })
 }

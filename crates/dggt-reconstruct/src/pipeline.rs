@@ -33,7 +33,7 @@ use dggt_export::nerfstudio::{NerfstudioFrame, write_transforms};
 use dggt_export::ply::{GaussianCloud, write_ply};
 use dggt_geom::{ImageSize, PosedCamera, WorldFromCamera};
 use dggt_scene::{
-    AssemblySettings, InputView, MIN_OPACITY, MeansGradient, PixelGaussians, TargetView, Timeline, interpolate_camera,
+    AssemblySettings, InputView, MIN_OPACITY, PixelGaussians, TargetView, Timeline, interpolate_camera,
     nearest_view, render_target,
 };
 use dggt_train::batch::relative_pose;
@@ -181,17 +181,9 @@ pub fn reconstruct(options: &ReconstructOptions, device: &Device) -> Result<Summ
     let mut counts = GaussianCounts::default();
     let mut renders = Vec::new();
     let mut input_psnr_db = Vec::new();
-    match &prediction.gaussians {
+    match prediction.pixel_gaussians(views.clone(), network.model.unproject_at, &timeline)? {
         None => warnings.push("the network has no Gaussian head: no Gaussians, sky masks or renders".into()),
-        Some(maps) => {
-            let pixels = PixelGaussians::new(
-                maps,
-                prediction.depth.clone(),
-                prediction.dynamic_logit.clone(),
-                views.clone(),
-                MeansGradient::Detached,
-                network.model.unproject_at,
-            )?;
+        Some(pixels) => {
             let sky = network.model.sky_model.as_ref().map(|model| {
                 let [_, s, c, h, w] = batch.dims();
                 let cameras: Vec<_> =
@@ -431,6 +423,8 @@ struct HostPixels {
     opacity: Vec<f32>,
     /// `sigmoid(dynamic logit)`; zeros without an instance head.
     dynamic_probability: Vec<f32>,
+    /// World displacement per unit of scene time, with a motion head.
+    velocity: Option<Vec<[f32; 3]>>,
     per_view: usize,
 }
 
@@ -449,19 +443,25 @@ impl HostPixels {
             opacities: Vec::new(),
             colors: triples(&pixels.colors),
         };
-        Self { cloud, opacity, dynamic_probability, per_view: pixels.per_view() }
+        let velocity = pixels.velocity.as_ref().map(triples);
+        Self { cloud, opacity, dynamic_probability, velocity, per_view: pixels.per_view() }
     }
 
     fn len(&self) -> usize {
         self.opacity.len()
     }
 
-    /// Gaussians from `range` with opacity `opacity(i)`, kept at or above the rasteriser's threshold.
-    fn select(&self, range: Range<usize>, opacity: impl Fn(usize) -> f32, into: &mut GaussianCloud) {
+    /// Gaussians from `range` with opacity `opacity(i)`, kept at or above the rasteriser's threshold, moved
+    /// by their velocity over `elapsed` scene time (when there is one).
+    fn select(&self, range: Range<usize>, opacity: impl Fn(usize) -> f32, elapsed: f32, into: &mut GaussianCloud) {
         for i in range {
             let o = opacity(i);
             if o >= MIN_OPACITY {
-                into.means.push(self.cloud.means[i]);
+                let mean = self.cloud.means[i];
+                into.means.push(match &self.velocity {
+                    Some(velocity) => std::array::from_fn(|k| mean[k] + velocity[i][k] * elapsed),
+                    None => mean,
+                });
                 into.quats_wxyz.push(self.cloud.quats_wxyz[i]);
                 into.scales.push(self.cloud.scales[i]);
                 into.colors.push(self.cloud.colors[i]);
@@ -473,17 +473,19 @@ impl HostPixels {
     /// Every pixel's static part, opacity `o (1 - p_dynamic)`, unfaded.
     fn static_cloud(&self) -> GaussianCloud {
         let mut cloud = GaussianCloud::default();
-        self.select(0..self.len(), |i| self.opacity[i] * (1.0 - self.dynamic_probability[i]), &mut cloud);
+        self.select(0..self.len(), |i| self.opacity[i] * (1.0 - self.dynamic_probability[i]), 0.0, &mut cloud);
         cloud
     }
 
-    /// The dynamic part shown at scene time `time`: each camera's nearest input view, opacity `o p_dynamic`.
+    /// The dynamic part shown at scene time `time`: each camera's nearest input view, opacity `o p_dynamic`,
+    /// moved to `time` with a motion head.
     fn dynamic_cloud(&self, views: &[InputView], cameras: usize, time: f64) -> GaussianCloud {
         let mut cloud = GaussianCloud::default();
         for camera in 0..cameras {
             if let Some(view) = nearest_view(views, camera, time) {
                 let range = view * self.per_view..(view + 1) * self.per_view;
-                self.select(range, |i| self.opacity[i] * self.dynamic_probability[i], &mut cloud);
+                let elapsed = (time - views[view].time) as f32;
+                self.select(range, |i| self.opacity[i] * self.dynamic_probability[i], elapsed, &mut cloud);
             }
         }
         cloud

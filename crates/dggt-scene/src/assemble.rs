@@ -3,7 +3,8 @@
 //! - the **static** union of every input view's Gaussians, opacity `o · (1 - sigmoid(dynamic logit))` faded by
 //!   the lifespan to `t` ([`opacity_at`]);
 //! - the **dynamic** Gaussians of the input view of the target's rig camera nearest to `t`, opacity
-//!   `o · sigmoid(dynamic logit)`, held where they were predicted (the network has no motion head);
+//!   `o · sigmoid(dynamic logit)`, moved to `t` by their predicted velocity when the model has a motion head
+//!   ([`PixelGaussians::with_motion`]), held where they were predicted otherwise;
 //! - culled before the rasteriser sees them: a Gaussian whose opacity at `t` is below the rasteriser's own
 //!   1/255 threshold, or whose conservative screen footprint misses the target image, is dropped.
 //!
@@ -94,12 +95,19 @@ pub fn assemble(
     };
     let faded = opacity_at(static_opacity_all, pixels.lifespan.clone(), pixels.source_time.clone(), target.time);
 
-    // Candidates: every Gaussian as static, the nearest view's as dynamic.
-    let dynamic_range = match &dynamic_opacity_all {
-        Some(_) => nearest_view(&pixels.views, target.rig_camera, target.time)
-            .map(|view| view * per_view..(view + 1) * per_view)
-            .unwrap_or(0..0),
-        None => 0..0,
+    // Candidates: every Gaussian as static, the nearest view's as dynamic, moved over `elapsed` scene time.
+    let nearest = match &dynamic_opacity_all {
+        Some(_) => nearest_view(&pixels.views, target.rig_camera, target.time),
+        None => None,
+    };
+    let dynamic_range = nearest.map_or(0..0, |view| view * per_view..(view + 1) * per_view);
+    let elapsed = nearest.map_or(0.0, |view| (target.time - pixels.views[view].time) as f32);
+    let displaced = |index: usize| -> [f32; 3] {
+        let mean = pixels.host_means[index];
+        match &pixels.host_velocity {
+            Some(velocity) => std::array::from_fn(|k| mean[k] + velocity[index][k] * elapsed),
+            None => mean,
+        }
     };
     let static_values = host_values(faded.clone(), "static opacity")?;
     let dynamic_values = match &dynamic_opacity_all {
@@ -110,20 +118,25 @@ pub fn assemble(
     };
 
     let footprint = Footprint::new(target, pixels.size, settings);
-    let keep = |index: usize, opacity: f32| -> Verdict {
+    let keep = |index: usize, mean: [f32; 3], opacity: f32| -> Verdict {
         if !(opacity >= settings.min_opacity) {
             Verdict::Transparent
-        } else if settings.cull_off_screen
-            && !footprint.on_screen(pixels.host_means[index], pixels.host_max_scale[index])
-        {
+        } else if settings.cull_off_screen && !footprint.on_screen(mean, pixels.host_max_scale[index]) {
             Verdict::OffScreen
         } else {
             Verdict::Keep
         }
     };
-    let static_verdicts: Vec<Verdict> = static_values.par_iter().enumerate().map(|(i, &o)| keep(i, o)).collect();
-    let dynamic_verdicts: Vec<Verdict> =
-        dynamic_values.par_iter().enumerate().map(|(i, &o)| keep(dynamic_range.start + i, o)).collect();
+    let static_verdicts: Vec<Verdict> =
+        static_values.par_iter().enumerate().map(|(i, &o)| keep(i, pixels.host_means[i], o)).collect();
+    let dynamic_verdicts: Vec<Verdict> = dynamic_values
+        .par_iter()
+        .enumerate()
+        .map(|(i, &o)| {
+            let index = dynamic_range.start + i;
+            keep(index, displaced(index), o)
+        })
+        .collect();
 
     let mut counts =
         AssemblyCounts { candidates: static_verdicts.len() + dynamic_verdicts.len(), ..Default::default() };
@@ -147,6 +160,15 @@ pub fn assemble(
     let all: Vec<i64> = static_index.iter().chain(&dynamic_index).copied().collect();
     let all = index_tensor(&all);
     let pick = |tensor: &Tensor<2>| tensor.clone().select(0, all.clone());
+    let means = match &pixels.velocity {
+        Some(velocity) if !dynamic_index.is_empty() && elapsed != 0.0 => {
+            let dynamic = index_tensor(&dynamic_index);
+            let moved = pixels.means.clone().select(0, dynamic.clone())
+                + velocity.clone().select(0, dynamic).mul_scalar(elapsed);
+            Tensor::cat(vec![pixels.means.clone().select(0, index_tensor(&static_index)), moved], 0)
+        }
+        _ => pick(&pixels.means),
+    };
     let mut opacities = vec![faded.select(0, index_tensor(&static_index))];
     if let Some(dynamic) = dynamic_opacity_all
         && !dynamic_index.is_empty()
@@ -163,7 +185,7 @@ pub fn assemble(
     );
     Ok(AssembledGaussians {
         gaussians: GaussianTensors {
-            means: pick(&pixels.means),
+            means,
             quats_wxyz: pick(&pixels.quats_wxyz),
             scales: pick(&pixels.scales),
             opacities: OpacityTensor::Shared(Tensor::cat(opacities, 0)),

@@ -45,7 +45,11 @@ pub struct PixelGaussians {
     pub lifespan: Tensor<1>,
     /// `[M]` scene time of the view each Gaussian came from.
     pub source_time: Tensor<1>,
+    /// `[M, 3]` world displacement per unit of scene time, which moves a dynamic Gaussian to the target time
+    /// ([`PixelGaussians::with_motion`]); `None`: dynamic Gaussians are held where they were predicted.
+    pub velocity: Option<Tensor<2>>,
     pub(crate) host_means: Vec<[f32; 3]>,
+    pub(crate) host_velocity: Option<Vec<[f32; 3]>>,
     pub(crate) host_max_scale: Vec<f32>,
 }
 
@@ -125,10 +129,60 @@ impl PixelGaussians {
             dynamic_logit: dynamic_logit.map(|logit| logit.reshape([count])),
             lifespan: maps.lifespan.clone().reshape([count]),
             source_time: Tensor::from_data(TensorData::new(times, [count]), &device),
+            velocity: None,
             host_means,
+            host_velocity: None,
             host_max_scale,
             views,
         })
+    }
+
+    /// Adds the motion head's prediction: `velocity` `[1, S, H, W, 3]` in world units per log frame along the
+    /// axes of each view's camera (OpenCV), and `frames_per_time` log frames per unit of scene time (the
+    /// inverse of the timeline's rate). Stored rotated to world axes and per unit of scene time, so that a
+    /// dynamic Gaussian from a view at time `s` sits at `mean + velocity · (t - s)` at time `t`.
+    pub fn with_motion(mut self, velocity: Tensor<5>, frames_per_time: f64) -> Result<Self, SceneError> {
+        let [_, frames, height, width, channels] = velocity.dims();
+        let expected = [1, self.views.len(), self.size.height as usize, self.size.width as usize, 3];
+        if velocity.dims() != expected {
+            return Err(SceneError::Shape {
+                tensor: "velocity",
+                expected: format!("{expected:?}"),
+                actual: velocity.dims().to_vec(),
+            });
+        }
+        if !frames_per_time.is_finite() {
+            return Err(SceneError::Invalid {
+                what: "motion",
+                detail: format!("frames per unit of scene time must be finite, got {frames_per_time}"),
+            });
+        }
+        let device = velocity.device();
+        let per_view = height * width;
+        // Row vectors times R^T (element (row, column) = R(column, row)): v_world = R_world_from_camera v_camera.
+        let rotations: Vec<f32> = self
+            .views
+            .iter()
+            .flat_map(|v| {
+                let r = v.camera.world_from_camera.rotation_matrix();
+                (0..3).flat_map(move |row| (0..3).map(move |column| r.col(row)[column] as f32))
+            })
+            .collect();
+        let rotations = Tensor::<3>::from_data(TensorData::new(rotations, [frames, 3, 3]), &device);
+        let world = velocity.reshape([frames, per_view, channels]).matmul(rotations).mul_scalar(frames_per_time as f32);
+        let world = world.reshape([frames * per_view, 3]);
+        let host = host_values(world.clone(), "velocity")?;
+        if let Some(i) = host.iter().position(|v| !v.is_finite()) {
+            return Err(SceneError::NonFinite {
+                tensor: "velocity",
+                value: host[i],
+                view: i / 3 / per_view,
+                pixel: i / 3 % per_view,
+            });
+        }
+        self.host_velocity = Some(host.chunks_exact(3).map(|v| [v[0], v[1], v[2]]).collect());
+        self.velocity = Some(world);
+        Ok(self)
     }
 
     /// Number of Gaussians `M`.

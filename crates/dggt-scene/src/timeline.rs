@@ -49,6 +49,11 @@ impl Timeline {
         Ok(Self { first: first as f64, rate })
     }
 
+    /// Log frames per unit of scene time (zero for a single input frame, whose timeline does not advance).
+    pub fn frames_per_time(&self) -> f64 {
+        if self.rate > 0.0 { 1.0 / self.rate } else { 0.0 }
+    }
+
     /// Scene time of log frame `frame` (fractional frames allowed).
     pub fn time(&self, frame: f64) -> f64 {
         (frame - self.first) * self.rate

@@ -205,3 +205,108 @@ fn gaussians_beyond_the_far_plane_are_dropped_and_draw_nothing() {
     let alpha = host(render_target(&pixels, None, &target, &far).unwrap().alpha);
     assert!(alpha.iter().filter(|a| **a > 0.5).count() > H * W / 2);
 }
+
+/// `[1, S, H, W, 3]` camera-axis velocities: view `v` moves everything along `(1, -0.5, 2) (v + 1)`.
+fn velocity(device: &Device) -> Tensor<5> {
+    let values: Vec<f32> =
+        (0..S).flat_map(|v| (0..H * W).flat_map(move |_| [1.0, -0.5, 2.0].map(|c| c * (v + 1) as f32))).collect();
+    Tensor::from_data(TensorData::new(values, [1, S, H, W, 3]), device)
+}
+
+#[test]
+fn the_motion_head_moves_dynamic_gaussians_to_the_target_time() {
+    let device = Device::flex();
+    let maps = GaussianMaps::from_raw(raw_maps(&device, 0.0));
+    // Views turned by different yaws, so that camera axes differ from world axes.
+    let turned: Vec<InputView> = views()
+        .into_iter()
+        .enumerate()
+        .map(|(i, v)| InputView { camera: camera(i as f64 * 0.3, 0.2 * i as f64 - 0.1), ..v })
+        .collect();
+    let place = |logit: f32| {
+        PixelGaussians::new(
+            &maps,
+            depth(&device),
+            Some(logits(&device, logit)),
+            turned.clone(),
+            MeansGradient::Detached,
+            PixelConvention::Integer,
+        )
+        .unwrap()
+    };
+    let frames_per_time = 6.0;
+    // Everything dynamic; the target at 0.9 takes view 2 (time 1.0) as its nearest, 0.1 of scene time back.
+    let held = place(12.0);
+    let moving = place(12.0).with_motion(velocity(&device), frames_per_time).unwrap();
+    let target = TargetView { rig_camera: 0, time: 0.9, camera: interpolate_camera(&turned, 0, 0.9).unwrap() };
+    let exact = AssemblySettings::exact();
+    let (a, b) = (assemble(&held, &target, &exact).unwrap(), assemble(&moving, &target, &exact).unwrap());
+    let means = |g: &dggt_scene::AssembledGaussians| -> Vec<f32> {
+        g.gaussians.means.clone().into_data().try_into_vec::<f32>().unwrap()
+    };
+    let (held_means, moved_means) = (means(&a), means(&b));
+    // Statics first (every pixel, not moved), then the H W dynamic ones of view 2, moved by
+    // R_world_from_camera (3, -1.5, 6) · 6 frames per unit time · (0.9 - 1.0).
+    let statics = S * H * W * 3;
+    assert_eq!(held_means.len(), moved_means.len());
+    assert_eq!(&held_means[..statics], &moved_means[..statics], "static Gaussians do not move");
+    let rotation = turned[2].camera.world_from_camera.rotation();
+    let expected = rotation * (dggt_geom::glam::DVec3::new(3.0, -1.5, 6.0) * frames_per_time * (0.9 - 1.0));
+    for (h, m) in held_means[statics..].chunks_exact(3).zip(moved_means[statics..].chunks_exact(3)) {
+        for k in 0..3 {
+            assert!(((m[k] - h[k]) as f64 - expected[k]).abs() < 1e-4, "moved by {:?}, expected {expected}", [
+                m[0] - h[0],
+                m[1] - h[1],
+                m[2] - h[2]
+            ]);
+        }
+    }
+    // At an input's own time nothing moves.
+    let at_input = TargetView { rig_camera: 0, time: 1.0, camera: turned[2].camera };
+    let (a, b) = (assemble(&held, &at_input, &exact).unwrap(), assemble(&moving, &at_input, &exact).unwrap());
+    assert_eq!(means(&a), means(&b));
+}
+
+#[test]
+fn velocities_are_trained_by_renders_between_inputs() {
+    let device = Device::flex().autodiff();
+    let maps = GaussianMaps::from_raw(raw_maps(&device, 0.0));
+    let velocity = velocity(&device).mul_scalar(0.01).require_grad();
+    let pixels = PixelGaussians::new(
+        &maps,
+        depth(&device),
+        Some(logits(&device, 12.0)),
+        views(),
+        MeansGradient::Detached,
+        PixelConvention::Integer,
+    )
+    .unwrap()
+    .with_motion(velocity.clone(), 4.0)
+    .unwrap();
+    let target = TargetView { rig_camera: 0, time: 0.3, camera: interpolate_camera(&pixels.views, 0, 0.3).unwrap() };
+    let view = render_target(&pixels, None, &target, &AssemblySettings::default()).unwrap();
+    let grads = view.rgb.powi_scalar(2).sum().backward();
+    let g: Vec<f32> = velocity.grad(&grads).expect("velocity gradient").into_data().try_into_vec().unwrap();
+    assert!(g.iter().all(|v| v.is_finite()));
+    // Only the nearest view's (view 1, time 0.5) velocities move anything.
+    let per_view = H * W * 3;
+    assert!(g[per_view..2 * per_view].iter().any(|v| *v != 0.0), "view 1 gets a gradient");
+    assert!(g[..per_view].iter().chain(&g[2 * per_view..]).all(|v| *v == 0.0), "other views get none");
+}
+
+#[test]
+fn bad_velocities_are_errors() {
+    let device = Device::flex();
+    let maps = GaussianMaps::from_raw(raw_maps(&device, 0.0));
+    let pixels = || {
+        PixelGaussians::new(&maps, depth(&device), None, views(), MeansGradient::Detached, PixelConvention::Integer)
+            .unwrap()
+    };
+    let wrong = Tensor::<5>::zeros([1, S, H, W, 2], &device);
+    let error = pixels().with_motion(wrong, 1.0).unwrap_err().to_string();
+    assert!(error.contains("velocity"), "{error}");
+    let nan = velocity(&device).mul_scalar(f32::NAN);
+    let error = pixels().with_motion(nan, 1.0).unwrap_err().to_string();
+    assert!(error.contains("velocity"), "{error}");
+    assert!(pixels().with_motion(velocity(&device), f64::INFINITY).is_err());
+}

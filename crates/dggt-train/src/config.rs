@@ -38,6 +38,9 @@ pub struct ModelSection {
     /// Sky Gaussians per side (`SkyConfig::resolution`, `resolution^2` in all) instead of the preset's; only
     /// for a sky model that starts fresh, since a checkpoint's sky buffers fix their count.
     pub sky_resolution: Option<usize>,
+    /// Add the motion head (`ModelConfig::motion_head`; not in the release's weights, so it starts fresh from
+    /// predicting zero): dynamic Gaussians are moved to each target time by their predicted velocity.
+    pub motion_head: bool,
 }
 
 impl Default for ModelSection {
@@ -48,6 +51,7 @@ impl Default for ModelSection {
             color_skip: false,
             unproject_at: PixelConvention::Integer,
             sky_resolution: None,
+            motion_head: false,
         }
     }
 }
@@ -330,6 +334,7 @@ impl TrainConfig {
             "instance_head",
             "semantic_head",
             "sky_model",
+            "motion_head",
         ];
         for name in o.frozen.iter().chain(o.groups.keys()) {
             if !modules.contains(&name.as_str()) {

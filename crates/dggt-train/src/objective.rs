@@ -260,6 +260,13 @@ impl Forward {
             means_gradient,
             model.unproject_at,
         )?;
+        let pixels = match &out.motion {
+            Some(motion) => {
+                let velocity = motion.prediction.clone().narrow(4, 0, 3).cast(FloatDType::F32);
+                pixels.with_motion(velocity, batch.timeline.frames_per_time())?
+            }
+            None => pixels,
+        };
         let sky = match (&model.sky_model, render.sky) {
             (Some(sky_model), true) => {
                 let [_, s, c, h, w] = batch.images.dims();

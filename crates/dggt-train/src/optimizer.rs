@@ -27,6 +27,7 @@ pub fn freeze(mut model: Dggt, names: &[String]) -> Result<Dggt, TrainError> {
             "instance_head" => model.instance_head = model.instance_head.map(|m| m.no_grad()),
             "semantic_head" => model.semantic_head = model.semantic_head.map(|m| m.no_grad()),
             "sky_model" => model.sky_model = model.sky_model.map(|m| m.no_grad()),
+            "motion_head" => model.motion_head = model.motion_head.map(|m| m.no_grad()),
             other => {
                 return Err(TrainError::Invalid {
                     what: "optim.frozen".into(),
@@ -50,6 +51,7 @@ fn module_ids(model: &Dggt, name: &str) -> Vec<ParamId> {
         "instance_head" => model.instance_head.visit(&mut ids),
         "semantic_head" => model.semantic_head.visit(&mut ids),
         "sky_model" => model.sky_model.visit(&mut ids),
+        "motion_head" => model.motion_head.visit(&mut ids),
         _ => {}
     }
     ids.0

@@ -162,6 +162,9 @@ impl Trainer {
                 if let (Some(sky), Some(resolution)) = (&mut model_config.sky_model, config.model.sky_resolution) {
                     sky.resolution = resolution;
                 }
+                if config.model.motion_head {
+                    model_config = model_config.with_motion_head();
+                }
                 let model = fresh_model(&model_config, config.model.init_checkpoint.as_deref(), &device)?;
                 let model = freeze(model, &config.optim.frozen)?;
                 let optimizer = Optimizer::new(&config.optim, &model);
