@@ -10,9 +10,10 @@
 //! resolution), its expected depth against the export's lidar depth ([`crate::grid`],
 //! [`crate::metrics`]), and the predicted motion against the export's scene flow.
 //!
-//! Motion: the network has no motion head, so dynamic Gaussians are held where they were predicted and the
-//! predicted motion of every surface point is zero ([`MotionSource::Held`]); its metrics are computed
-//! anyway and labelled. As STORM does, motion is scored at the lidar cells (positive depth; here also not sky
+//! Motion: without a motion head, dynamic Gaussians are held where they were predicted and the predicted
+//! motion of every surface point is zero ([`MotionSource::Held`]); its metrics are computed anyway and
+//! labelled. With a motion head the renders use its velocities, but motion is not scored
+//! ([`MotionSource::MotionHeadUnscored`]). As STORM does, motion is scored at the lidar cells (positive depth; here also not sky
 //! and inside the view) and only for windows where some true flow exceeds [`MOTION_GATE`] (STORM skips
 //! samples without such motion, whose accuracies would be trivially high).
 
@@ -49,6 +50,9 @@ const STAGES: [&str; 5] = ["load", "forward", "assembly", "render", "metrics"];
 pub enum MotionSource {
     /// No motion head: every Gaussian is held in place, so the predicted flow is zero.
     Held,
+    /// A motion head moves the dynamic Gaussians, but its velocities are not rendered at the scored cells, so
+    /// motion is not scored (rather than scored as zero).
+    MotionHeadUnscored,
 }
 
 impl MotionSource {
@@ -56,13 +60,15 @@ impl MotionSource {
     pub fn label(self) -> &'static str {
         match self {
             Self::Held => MOTION_HELD,
+            Self::MotionHeadUnscored => "motion head (its velocities are not rendered at the scored cells: not scored)",
         }
     }
 
-    /// The predicted flow at `points` scored points of one view.
-    pub fn predicted_flow(self, points: usize) -> Vec<[f32; 3]> {
+    /// The predicted flow at `points` scored points of one view; `None` when motion is not scored.
+    pub fn predicted_flow(self, points: usize) -> Option<Vec<[f32; 3]>> {
         match self {
-            Self::Held => vec![[0.0; 3]; points],
+            Self::Held => Some(vec![[0.0; 3]; points]),
+            Self::MotionHeadUnscored => None,
         }
     }
 }
@@ -165,7 +171,8 @@ pub fn evaluate(options: &EvalOptions, device: &Device) -> Result<EvalReport, Ev
         warnings.push("the network has no sky model: renders have a black sky".into());
     }
 
-    let motion = MotionSource::Held;
+    let motion =
+        if network.model.motion_head.is_some() { MotionSource::MotionHeadUnscored } else { MotionSource::Held };
     let mut reports = Vec::new();
     for (root, scene) in options.scenes.iter().zip(&scenes) {
         tracing::info!("evaluating {}", root.display());
@@ -463,8 +470,9 @@ fn evaluate_scene(
                         Err(other) => return Err(other.into()),
                     }
                     if !cells.true_flow.is_empty() {
-                        let predicted = motion.predicted_flow(cells.true_flow.len());
-                        record.motion = Some(scene_flow_metrics(&predicted, &cells.true_flow)?);
+                        if let Some(predicted) = motion.predicted_flow(cells.true_flow.len()) {
+                            record.motion = Some(scene_flow_metrics(&predicted, &cells.true_flow)?);
+                        }
                         let longest = cells
                             .true_flow
                             .iter()
