@@ -175,3 +175,19 @@ fn training_on_varied_synthetic_scenes_stays_finite() {
         }
     }
 }
+
+#[test]
+fn the_motion_head_starts_at_zero_and_is_trained_by_the_renders() {
+    let out = tempfile::tempdir().unwrap();
+    let mut config = small_config(out.path(), 3);
+    config.model.motion_head = true;
+    let mut trainer = Trainer::new(config, vec![Device::flex()], false).unwrap();
+    let output_layer = |trainer: &Trainer| -> Vec<f32> {
+        let head = trainer.model().motion_head.as_ref().expect("a motion head");
+        head.scratch.output_conv2.out.weight.val().into_data().convert::<f32>().try_into_vec::<f32>().unwrap()
+    };
+    assert!(output_layer(&trainer).iter().all(|w| *w == 0.0), "a fresh motion head predicts zero");
+    trainer.run(RunOptions::default()).unwrap();
+    let trained = output_layer(&trainer);
+    assert!(trained.iter().all(|w| w.is_finite()) && trained.iter().any(|w| *w != 0.0), "the motion head trained");
+}
