@@ -16,8 +16,9 @@ use dggt_reconstruct::align::pose_error;
 use dggt_reconstruct::{Architecture, ReconstructOptions, TimeRequest, reconstruct};
 use dggt_train::{RunOptions, TrainConfig, Trainer};
 
-/// Training steps of the checkpoint under test.
+/// Training steps of the checkpoint under test, after the pose warm-up steps.
 const TRAIN_STEPS: u64 = 100;
+const POSE_WARMUP_STEPS: u64 = 300;
 /// Every render at an input time must reach this PSNR against that input (dB). Loose on purpose: short runs
 /// from scratch land between about 16 and 21 dB on average depending on the initial draw, one step about
 /// 14.5 dB; a render from a misplaced camera or with misassigned colours falls far below.
@@ -52,7 +53,8 @@ fn train_config(out: &Path) -> TrainConfig {
     config.optim.lr = 1e-3;
     config.optim.groups.insert("sky_model".into(), 1e-3);
     config.optim.warmup_steps = 2;
-    config.run.steps = TRAIN_STEPS;
+    config.optim.pose_warmup_steps = POSE_WARMUP_STEPS;
+    config.run.steps = POSE_WARMUP_STEPS + TRAIN_STEPS;
     // The camera head learns faster than the shipped configuration lets it, so that a short run predicts
     // usable poses.
     config.loss.camera = 1.0;

@@ -215,6 +215,11 @@ pub struct OptimSection {
     pub clip_grad_norm: Option<f64>,
     /// Samples whose gradients are summed (averaged) per optimiser step.
     pub accumulation: usize,
+    /// The first steps train the camera loss alone (`loss.camera`, against the export's poses): the aggregator
+    /// and camera head run, no dense head and no render, so each costs a fraction of a full step. For training
+    /// from scratch, where the camera head otherwise learns per-frame positions last. Counted in `run.steps`
+    /// and the schedule.
+    pub pose_warmup_steps: u64,
 }
 
 impl Default for OptimSection {
@@ -231,6 +236,7 @@ impl Default for OptimSection {
             min_lr_ratio: 0.0,
             clip_grad_norm: Some(1.0),
             accumulation: 1,
+            pose_warmup_steps: 0,
         }
     }
 }
@@ -324,6 +330,9 @@ impl TrainConfig {
         }
         if self.model.sky_resolution == Some(0) {
             return Err("model.sky_resolution must be at least 1".into());
+        }
+        if o.pose_warmup_steps > 0 && !(self.loss.camera > 0.0) {
+            return Err("optim.pose_warmup_steps trains the camera loss alone: it needs loss.camera > 0".into());
         }
         let modules = [
             "aggregator",

@@ -117,6 +117,26 @@ impl Objective {
         Ok(views)
     }
 
+    /// The weighted camera loss alone, from the aggregator and the camera head (no dense head runs, nothing is
+    /// rendered): the loss of a pose warm-up step (`optim.pose_warmup_steps`).
+    pub fn pose_loss(&self, model: &Dggt, batch: &StepBatch) -> Result<SampleLoss, TrainError> {
+        let aggregator = model.aggregator.forward(batch.images.clone())?;
+        let last = aggregator.output_list.last().ok_or_else(|| TrainError::Invalid {
+            what: "model".into(),
+            detail: "the aggregator has no layer".into(),
+        })?;
+        let camera = model.camera_head.forward(last.clone());
+        let encodings: Vec<Tensor<3>> = camera.encodings.iter().map(|e| e.clone().cast(FloatDType::F32)).collect();
+        let loss = camera_loss(&encodings, batch)?;
+        let terms = BTreeMap::from([("camera", scalar(&loss))]);
+        Ok(SampleLoss {
+            total: loss.mul_scalar(self.weights.camera),
+            terms,
+            target_psnr: f64::NAN,
+            counts: AssemblyCounts::default(),
+        })
+    }
+
     /// The weighted loss of one sample.
     pub fn loss(&self, model: &Dggt, batch: &StepBatch) -> Result<SampleLoss, TrainError> {
         let forward = Forward::run(model, batch, &self.render)?;

@@ -136,6 +136,18 @@ impl Trainer {
         // The scene was opened with only the chosen cameras: they are positions 0.. in it.
         sampler_config.cameras.clear();
         let sampler = Sampler::new(sampler_config, scene.frames.len(), scene.cameras.len())?;
+        let validation = &config.data.validation;
+        if let Some(&frame) = validation.inputs.iter().chain(&validation.targets).find(|&&f| f >= scene.frames.len()) {
+            return Err(TrainError::Invalid {
+                what: "data.validation".into(),
+                detail: format!(
+                    "frame {frame} is outside the {} frames chosen from {} (positions 0..{})",
+                    scene.frames.len(),
+                    config.data.scene.display(),
+                    scene.frames.len()
+                ),
+            });
+        }
         let objective = Objective::new(config.loss.clone(), config.render.clone(), &device)?;
 
         let checkpoints = config.run.out_dir.join("checkpoints");
@@ -290,7 +302,10 @@ impl Trainer {
             let step = self.state.step;
             let samples = (0..accumulation).map(|_| next_sample(&mut stream)).collect::<Result<Vec<_>, _>>()?;
             let mut record = self.train_step(&samples, schedule.factor(step), with_depth)?;
-            if let Some(loss) = record["loss"].as_f64() {
+            let pose_warmup = step < self.config.optim.pose_warmup_steps;
+            if pose_warmup {
+                bar.set_message(format!("pose warm-up: camera loss {:.4}", record["loss"].as_f64().unwrap_or(f64::NAN)));
+            } else if let Some(loss) = record["loss"].as_f64() {
                 let psnr = record["target_psnr"].as_f64().unwrap_or(f64::NAN);
                 summary.first_loss.get_or_insert(loss);
                 summary.first_target_psnr.get_or_insert(psnr);
@@ -307,6 +322,18 @@ impl Trainer {
 
             let done = self.state.step >= last_step
                 || run.time_limit_s.is_some_and(|limit| started.elapsed().as_secs_f64() >= limit);
+            // Saved before validating, so that a failing validation never loses the step's weights.
+            if self.state.step.is_multiple_of(run.checkpoint_every) || done {
+                let dir = checkpoint::save(
+                    &checkpoints,
+                    &self.model,
+                    &self.model_config,
+                    self.optimizer.adamw(),
+                    &self.state,
+                    run.keep_checkpoints,
+                )?;
+                summary.checkpoint = Some(dir);
+            }
             if (run.validate_every > 0 && self.state.step.is_multiple_of(run.validate_every)) || done {
                 let renders = run.out_dir.join("validation").join(format!("step-{:08}", self.state.step));
                 if let Some(validation) = self.validate_into(Some(&renders))? {
@@ -320,17 +347,6 @@ impl Trainer {
                         "ssim": validation.ssim, "views": validation.views, "time_s": elapsed }))?;
                     summary.validation = Some(validation);
                 }
-            }
-            if self.state.step.is_multiple_of(run.checkpoint_every) || done {
-                let dir = checkpoint::save(
-                    &checkpoints,
-                    &self.model,
-                    &self.model_config,
-                    self.optimizer.adamw(),
-                    &self.state,
-                    run.keep_checkpoints,
-                )?;
-                summary.checkpoint = Some(dir);
             }
             if done {
                 break;
@@ -451,7 +467,9 @@ impl Trainer {
                 let started = Instant::now();
                 let batch = StepBatch::new(sample, &self.scene, &self.config.data.preprocess, with_depth, device)?;
                 let prepared = Instant::now();
-                let loss = match self.objective.loss(model, &batch) {
+                let pose_warmup = sample.step < self.config.optim.pose_warmup_steps;
+                let loss = if pose_warmup { self.objective.pose_loss(model, &batch) } else { self.objective.loss(model, &batch) };
+                let loss = match loss {
                     Err(TrainError::Scene(error @ SceneError::NonFinite { .. })) => {
                         tracing::warn!(step = sample.step, %error, "non-finite network output");
                         return Ok(SampleResult::non_finite());

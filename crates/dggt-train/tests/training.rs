@@ -191,3 +191,15 @@ fn the_motion_head_starts_at_zero_and_is_trained_by_the_renders() {
     let trained = output_layer(&trainer);
     assert!(trained.iter().all(|w| w.is_finite()) && trained.iter().any(|w| *w != 0.0), "the motion head trained");
 }
+
+#[test]
+fn validation_frames_outside_the_scene_are_refused_before_training() {
+    let out = tempfile::tempdir().unwrap();
+    let mut config = small_config(out.path(), 3);
+    config.data.frames = Some([0, 12]);
+    config.sampler.window = 12;
+    config.data.validation.inputs = vec![0, 4, 8];
+    config.data.validation.targets = vec![12];
+    let error = Trainer::new(config, vec![Device::flex()], false).err().expect("an error").to_string();
+    assert!(error.contains("data.validation") && error.contains("frame 12"), "{error}");
+}
