@@ -1,4 +1,4 @@
-//! `dggt reconstruct` end to end on the bundled fixture (CPU): a tiny network trained a few steps, then one
+//! `dggt reconstruct` end to end on the bundled fixture (CPU): a tiny network trained briefly, then one
 //! reconstruction from its checkpoint, checked file by file; and the errors bad inputs give.
 
 use std::path::{Path, PathBuf};
@@ -16,21 +16,23 @@ use dggt_reconstruct::align::pose_error;
 use dggt_reconstruct::{Architecture, ReconstructOptions, TimeRequest, reconstruct};
 use dggt_train::{RunOptions, TrainConfig, Trainer};
 
-/// Training steps of the checkpoint under test, after the pose warm-up steps.
+/// Pose warm-up steps (the camera loss alone, about 0.04 s each), then full training steps, of the checkpoint
+/// under test.
+const POSE_WARMUP_STEPS: u64 = 1500;
 const TRAIN_STEPS: u64 = 100;
-const POSE_WARMUP_STEPS: u64 = 300;
 /// Every render at an input time must reach this PSNR against that input (dB). Loose on purpose: short runs
 /// from scratch land between about 16 and 21 dB on average depending on the initial draw, one step about
 /// 14.5 dB; a render from a misplaced camera or with misassigned colours falls far below.
 const PSNR_FLOOR_DB: f64 = 13.0;
-/// Poses, loosely (a network trained this briefly predicts one common offset for every view after the first,
-/// not per-frame positions, so the similarity-aligned centre error is reported, not bounded): the predicted
-/// direction of travel from the first view must agree with the fixture's within this cosine (about 25 degrees;
-/// a flipped or transposed pose convention gives about -1 or 0)...
-const TRAVEL_COSINE_FLOOR: f64 = 0.9;
-/// ...and every view's rotation relative to the first within this many degrees (trained: 2 to 5; one step from
-/// scratch: up to about 8).
-const ROTATION_TOLERANCE_DEG: f64 = 10.0;
+/// Poses after similarity alignment to the fixture's: the RMS camera-centre error as a fraction of the
+/// trajectory's spread (the warm-up alone reaches about 0.12; without the warm-up the network predicts one
+/// common offset for every view after the first, about 0.82)...
+const CENTRE_TOLERANCE_RELATIVE: f64 = 0.35;
+/// ...every view's rotation relative to the first within this many degrees (warmed up: under 1)...
+const ROTATION_TOLERANCE_DEG: f64 = 3.0;
+/// ...and the direction of travel from the first view within this cosine of the fixture's (a flipped or
+/// transposed pose convention gives about -1 or 0).
+const TRAVEL_COSINE_FLOOR: f64 = 0.95;
 
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
@@ -40,7 +42,7 @@ fn fixture() -> PathBuf {
     repo().join("data-fixtures/synth-s0")
 }
 
-/// The tiny overfit configuration at 56 pixels wide, front camera, four inputs, a short run.
+/// The tiny overfit configuration at 56 pixels wide, front camera, four inputs, a pose warm-up and a short run.
 fn train_config(out: &Path) -> TrainConfig {
     let mut config = TrainConfig::load(&repo().join("configs/tiny-overfit.toml")).expect("tiny-overfit.toml loads");
     config.data.scene = fixture();
@@ -48,7 +50,7 @@ fn train_config(out: &Path) -> TrainConfig {
     config.sampler.max_inputs = 4;
     config.render.render_inputs = false;
     // Optimiser and sampling pinned here rather than taken from the shipped file, whose tuning targets long runs.
-    config.data.frames = None;
+    config.data.frames = Some([0, 12]);
     config.sampler.window = 12;
     config.optim.lr = 1e-3;
     config.optim.groups.insert("sky_model".into(), 1e-3);
@@ -75,7 +77,10 @@ fn reconstructs_the_fixture_from_a_trained_checkpoint() {
     let mut trainer = Trainer::new(train_config(run.path()), vec![Device::flex()], false).unwrap();
     let trained = trainer.run(RunOptions::default()).unwrap();
     assert!(trained.checkpoint.is_some(), "the run ends with a checkpoint");
-    eprintln!("trained {TRAIN_STEPS} steps in {:.1} s", started.elapsed().as_secs_f64());
+    eprintln!(
+        "trained {POSE_WARMUP_STEPS} pose warm-up and {TRAIN_STEPS} full steps in {:.1} s",
+        started.elapsed().as_secs_f64()
+    );
 
     // The run folder is accepted (its latest checkpoint is used).
     let out = tempfile::tempdir().unwrap();
@@ -185,6 +190,7 @@ fn reconstructs_the_fixture_from_a_trained_checkpoint() {
     eprintln!("direction of travel: cosine {cosine:.3}");
     assert!(cosine > TRAVEL_COSINE_FLOOR, "direction of travel off: cosine {cosine:.3}");
     assert!(error.rotation_max_deg < ROTATION_TOLERANCE_DEG, "{error:?}");
+    assert!(error.centre_rmse_relative < CENTRE_TOLERANCE_RELATIVE, "{error:?}");
     let reported = summary.pose_error.as_ref().expect("scene exports report pose errors");
     assert!(
         (reported.centre_rmse - error.centre_rmse).abs() < 1e-9
