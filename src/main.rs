@@ -208,17 +208,21 @@ fn train(
         stop_after: None,
     })?;
     let out = &trainer.config().run.out_dir;
-    println!(
-        "trained steps {}..{} in {:.1} s ({} skipped); loss {:.4} -> {:.4}; target PSNR {:.2} -> {:.2} dB",
+    print!(
+        "trained steps {}..{} in {:.1} s ({} skipped)",
         summary.final_step - summary.steps_run,
         summary.final_step,
         summary.elapsed_s,
         summary.skipped_steps,
-        summary.first_loss.unwrap_or(f64::NAN),
-        summary.last_loss.unwrap_or(f64::NAN),
-        summary.first_target_psnr.unwrap_or(f64::NAN),
-        summary.last_target_psnr.unwrap_or(f64::NAN),
     );
+    match (summary.first_loss, summary.last_loss) {
+        (Some(first), Some(last)) => println!(
+            "; loss {first:.4} -> {last:.4}; target PSNR {:.2} -> {:.2} dB",
+            summary.first_target_psnr.unwrap_or(f64::NAN),
+            summary.last_target_psnr.unwrap_or(f64::NAN),
+        ),
+        _ => println!("; no full training step in this run (pose warm-up only, or nothing left to run)"),
+    }
     if let Some(v) = &summary.validation {
         println!("validation: PSNR {:.2} dB, SSIM {:.4} over {} target views", v.psnr, v.ssim, v.views.len());
     }

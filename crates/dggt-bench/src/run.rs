@@ -19,9 +19,7 @@ use dggt_data::{PreparedView, Preprocess, Scene, prepare_view};
 use dggt_geom::{ImageSize, PixelConvention, PosedCamera};
 use dggt_losses::{ImageShape, Lpips, LpipsKind};
 use dggt_model::{Dggt, ModelConfig};
-use dggt_scene::{
-    AssemblySettings, InputView, TargetView, Timeline, assemble, interpolate_camera,
-};
+use dggt_scene::{AssemblySettings, InputView, TargetView, Timeline, assemble, interpolate_camera};
 use dggt_train::batch::relative_pose;
 use dggt_train::objective::decode_cameras;
 

@@ -27,9 +27,7 @@ use dggt_losses::{ImageShape, Lpips, LpipsKind, psnr, ssim};
 use dggt_reconstruct::forward::forward_chunked;
 use dggt_reconstruct::inputs::{GroundTruth, InputSet};
 use dggt_reconstruct::{Architecture, LoadedNetwork, load_network};
-use dggt_scene::{
-    AssemblySettings, InputView, TargetView, Timeline, interpolate_camera, render_target,
-};
+use dggt_scene::{AssemblySettings, InputView, TargetView, Timeline, interpolate_camera, render_target};
 use dggt_train::objective::decode_cameras;
 
 use crate::error::EvalError;

@@ -49,10 +49,7 @@ impl RopeTable {
             }
         }
         let shape = [positions.len(), head_dim];
-        Self {
-            cos: site.tensor(cos, shape),
-            sin: site.tensor(sin, shape),
-        }
+        Self { cos: site.tensor(cos, shape), sin: site.tensor(sin, shape) }
     }
 
     /// The same layout repeated for `frames` frames concatenated into one sequence (global attention).

@@ -33,8 +33,8 @@ use dggt_export::nerfstudio::{NerfstudioFrame, write_transforms};
 use dggt_export::ply::{GaussianCloud, write_ply};
 use dggt_geom::{ImageSize, PosedCamera, WorldFromCamera};
 use dggt_scene::{
-    AssemblySettings, InputView, MIN_OPACITY, PixelGaussians, TargetView, Timeline, interpolate_camera,
-    nearest_view, render_target,
+    AssemblySettings, InputView, MIN_OPACITY, PixelGaussians, TargetView, Timeline, interpolate_camera, nearest_view,
+    render_target,
 };
 use dggt_train::batch::relative_pose;
 use dggt_train::objective::decode_cameras;

@@ -254,11 +254,11 @@ fn the_motion_head_moves_dynamic_gaussians_to_the_target_time() {
     let expected = rotation * (dggt_geom::glam::DVec3::new(3.0, -1.5, 6.0) * frames_per_time * (0.9 - 1.0));
     for (h, m) in held_means[statics..].chunks_exact(3).zip(moved_means[statics..].chunks_exact(3)) {
         for k in 0..3 {
-            assert!(((m[k] - h[k]) as f64 - expected[k]).abs() < 1e-4, "moved by {:?}, expected {expected}", [
-                m[0] - h[0],
-                m[1] - h[1],
-                m[2] - h[2]
-            ]);
+            assert!(
+                ((m[k] - h[k]) as f64 - expected[k]).abs() < 1e-4,
+                "moved by {:?}, expected {expected}",
+                [m[0] - h[0], m[1] - h[1], m[2] - h[2]]
+            );
         }
     }
     // At an input's own time nothing moves.

@@ -397,7 +397,8 @@ pub fn run_suite(options: &StressOptions, device: &Device) -> Result<StressRepor
         }),
         ("64 input frames", many.0, many.1, |_| {}),
     ];
-    let precisions = [(FloatDType::F32, network_cases), (FloatDType::F16, reduced.clone()), (FloatDType::BF16, reduced)];
+    let precisions =
+        [(FloatDType::F32, network_cases), (FloatDType::F16, reduced.clone()), (FloatDType::BF16, reduced)];
     for (dtype, cases) in precisions {
         let suffix = match dtype {
             FloatDType::F32 => String::new(),

@@ -304,7 +304,10 @@ impl Trainer {
             let mut record = self.train_step(&samples, schedule.factor(step), with_depth)?;
             let pose_warmup = step < self.config.optim.pose_warmup_steps;
             if pose_warmup {
-                bar.set_message(format!("pose warm-up: camera loss {:.4}", record["loss"].as_f64().unwrap_or(f64::NAN)));
+                bar.set_message(format!(
+                    "pose warm-up: camera loss {:.4}",
+                    record["loss"].as_f64().unwrap_or(f64::NAN)
+                ));
             } else if let Some(loss) = record["loss"].as_f64() {
                 let psnr = record["target_psnr"].as_f64().unwrap_or(f64::NAN);
                 summary.first_loss.get_or_insert(loss);
@@ -468,7 +471,11 @@ impl Trainer {
                 let batch = StepBatch::new(sample, &self.scene, &self.config.data.preprocess, with_depth, device)?;
                 let prepared = Instant::now();
                 let pose_warmup = sample.step < self.config.optim.pose_warmup_steps;
-                let loss = if pose_warmup { self.objective.pose_loss(model, &batch) } else { self.objective.loss(model, &batch) };
+                let loss = if pose_warmup {
+                    self.objective.pose_loss(model, &batch)
+                } else {
+                    self.objective.loss(model, &batch)
+                };
                 let loss = match loss {
                     Err(TrainError::Scene(error @ SceneError::NonFinite { .. })) => {
                         tracing::warn!(step = sample.step, %error, "non-finite network output");
