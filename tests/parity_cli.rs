@@ -7,6 +7,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+use dggt_model::parity::parity_folder;
 use safetensors::{Dtype, SafeTensors, tensor::TensorView};
 
 fn dggt(args: &[&str]) -> Output {
@@ -14,17 +15,7 @@ fn dggt(args: &[&str]) -> Output {
 }
 
 fn vectors() -> PathBuf {
-    let root = match std::env::var_os("DGGT_PARITY_DIR") {
-        Some(dir) => PathBuf::from(dir),
-        None => PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/parity"),
-    };
-    let dir = root.join("dggt_tiny_s3_56x70");
-    assert!(
-        dir.join("config.json").is_file(),
-        "parity vectors not found at {} (set DGGT_PARITY_DIR to the shared parity folder)",
-        dir.display()
-    );
-    dir
+    parity_folder(Path::new(env!("CARGO_MANIFEST_DIR")), "dggt_tiny_s3_56x70")
 }
 
 fn text(out: &Output) -> (String, String) {

@@ -282,6 +282,27 @@ impl fmt::Display for ParityReport {
     }
 }
 
+/// The shared parity vectors' folder `name` (e.g. `dggt_tiny_s3_56x70`): under `$DGGT_PARITY_DIR` when set,
+/// else under `../shared/parity` of the nearest ancestor of `start` (a crate's manifest folder) that has one.
+/// Panics, naming where it looked, when the folder has no `config.json`: for tests, which need the vectors.
+pub fn parity_folder(start: &Path, name: &str) -> PathBuf {
+    let root = match std::env::var_os("DGGT_PARITY_DIR") {
+        Some(dir) => PathBuf::from(dir),
+        None => start
+            .ancestors()
+            .map(|dir| dir.join("../shared/parity"))
+            .find(|dir| dir.is_dir())
+            .unwrap_or_else(|| start.join("../shared/parity")),
+    };
+    let dir = root.join(name);
+    assert!(
+        dir.join("config.json").is_file(),
+        "parity vectors not found at {} (set DGGT_PARITY_DIR to the shared parity folder)",
+        dir.display()
+    );
+    dir
+}
+
 /// Builds the network of `vectors`, loads `weights`, runs it on the vectors' images on `device` and compares
 /// every reference output.
 pub fn run_parity(vectors: &ParityVectors, weights: &Path, device: &Device) -> Result<ParityReport, ModelError> {

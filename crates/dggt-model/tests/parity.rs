@@ -5,25 +5,15 @@
 //! The folder is read in place (`../../../shared/parity/dggt_tiny_s3_56x70` from this crate), or from
 //! `$DGGT_PARITY_DIR/dggt_tiny_s3_56x70` when that variable names the shared parity folder.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use burn::tensor::Device;
-use dggt_model::parity::{ParityReport, ParityVectors, Status, read_safetensors, run_parity};
+use dggt_model::parity::{ParityReport, ParityVectors, Status, parity_folder, read_safetensors, run_parity};
 use dggt_model::{Dggt, ModelConfig, ModelError};
 
 fn parity_dir() -> PathBuf {
-    let root = match std::env::var_os("DGGT_PARITY_DIR") {
-        Some(dir) => PathBuf::from(dir),
-        None => PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/parity"),
-    };
-    let dir = root.join("dggt_tiny_s3_56x70");
-    assert!(
-        dir.join("config.json").is_file(),
-        "parity vectors not found at {} (set DGGT_PARITY_DIR to the shared parity folder)",
-        dir.display()
-    );
-    dir
+    parity_folder(Path::new(env!("CARGO_MANIFEST_DIR")), "dggt_tiny_s3_56x70")
 }
 
 fn vectors() -> &'static ParityVectors {

@@ -7,24 +7,14 @@
 //! from computing in the type grows with the depth of the network but stays a small multiple of `e`; a constant
 //! left in f32, an overflow or a lost normalisation would either fail to run or miss by far more.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use burn::tensor::{DType, Device, FloatDType, Tensor};
-use dggt_model::parity::ParityVectors;
+use dggt_model::parity::{ParityVectors, parity_folder};
 use dggt_model::{Dggt, DggtOutput};
 
 fn parity_dir() -> PathBuf {
-    let root = match std::env::var_os("DGGT_PARITY_DIR") {
-        Some(dir) => PathBuf::from(dir),
-        None => PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/parity"),
-    };
-    let dir = root.join("dggt_tiny_s3_56x70");
-    assert!(
-        dir.join("config.json").is_file(),
-        "parity vectors not found at {} (set DGGT_PARITY_DIR to the shared parity folder)",
-        dir.display()
-    );
-    dir
+    parity_folder(Path::new(env!("CARGO_MANIFEST_DIR")), "dggt_tiny_s3_56x70")
 }
 
 fn host<const D: usize>(tensor: Tensor<D>) -> Vec<f32> {

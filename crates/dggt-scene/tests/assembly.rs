@@ -69,6 +69,14 @@ fn logits(device: &Device, value: f32) -> Tensor<4> {
     Tensor::full([1, S, H, W], value, device)
 }
 
+/// The Gaussians of `maps` on `views` with the usual depth, dynamic logits of `dynamic_logit` (none when
+/// `None`), means detached, unprojected at integer pixels.
+fn placed(maps: &GaussianMaps, dynamic_logit: Option<f32>, views: Vec<InputView>) -> PixelGaussians {
+    let device = maps.opacity.device();
+    let logits = dynamic_logit.map(|value| logits(&device, value));
+    PixelGaussians::new(maps, depth(&device), logits, views, MeansGradient::Detached, PixelConvention::Integer).unwrap()
+}
+
 fn host(tensor: Tensor<3>) -> Vec<f32> {
     tensor.into_data().try_into_vec::<f32>().unwrap()
 }
@@ -78,15 +86,7 @@ fn culling_keeps_the_render_and_drops_what_cannot_show() {
     let device = Device::flex();
     // Lifespan raw 4 -> gamma 0.25: frames 0.5 apart fade to a tenth or less.
     let maps = GaussianMaps::from_raw(raw_maps(&device, 4.0));
-    let pixels = PixelGaussians::new(
-        &maps,
-        depth(&device),
-        Some(logits(&device, -3.0)),
-        views(),
-        MeansGradient::Detached,
-        PixelConvention::Integer,
-    )
-    .unwrap();
+    let pixels = placed(&maps, Some(-3.0), views());
     // Turned away from the last views: some Gaussians fall off screen.
     let target = TargetView { rig_camera: 0, time: 0.2, camera: camera(0.1, 0.5) };
     let culled = render_target(&pixels, None, &target, &AssemblySettings::default()).unwrap();
@@ -105,23 +105,13 @@ fn dynamic_gaussians_come_from_the_nearest_view_only() {
     let device = Device::flex();
     let maps = GaussianMaps::from_raw(raw_maps(&device, 0.0));
     // Everything dynamic: only the nearest view's Gaussians survive (static opacity ~ 0).
-    let pixels = PixelGaussians::new(
-        &maps,
-        depth(&device),
-        Some(logits(&device, 12.0)),
-        views(),
-        MeansGradient::Detached,
-        PixelConvention::Integer,
-    )
-    .unwrap();
+    let pixels = placed(&maps, Some(12.0), views());
     let target = TargetView { rig_camera: 0, time: 0.9, camera: interpolate_camera(&pixels.views, 0, 0.9).unwrap() };
     let assembled = assemble(&pixels, &target, &AssemblySettings::default()).unwrap();
     assert_eq!(assembled.counts.static_kept, 0, "{:?}", assembled.counts);
     assert!(assembled.counts.dynamic_kept > H * W / 2, "{:?}", assembled.counts);
     // Without a dynamic head everything is static and long-lived (raw lifespan <= 0 -> gamma 1e6).
-    let pixels =
-        PixelGaussians::new(&maps, depth(&device), None, views(), MeansGradient::Detached, PixelConvention::Integer)
-            .unwrap();
+    let pixels = placed(&maps, None, views());
     let assembled = assemble(&pixels, &target, &AssemblySettings::default()).unwrap();
     assert_eq!(assembled.counts.dynamic_kept, 0);
     assert!(assembled.counts.static_kept > S * H * W / 2, "{:?}", assembled.counts);
@@ -272,17 +262,7 @@ fn velocities_are_trained_by_renders_between_inputs() {
     let device = Device::flex().autodiff();
     let maps = GaussianMaps::from_raw(raw_maps(&device, 0.0));
     let velocity = velocity(&device).mul_scalar(0.01).require_grad();
-    let pixels = PixelGaussians::new(
-        &maps,
-        depth(&device),
-        Some(logits(&device, 12.0)),
-        views(),
-        MeansGradient::Detached,
-        PixelConvention::Integer,
-    )
-    .unwrap()
-    .with_motion(velocity.clone(), 4.0)
-    .unwrap();
+    let pixels = placed(&maps, Some(12.0), views()).with_motion(velocity.clone(), 4.0).unwrap();
     let target = TargetView { rig_camera: 0, time: 0.3, camera: interpolate_camera(&pixels.views, 0, 0.3).unwrap() };
     let view = render_target(&pixels, None, &target, &AssemblySettings::default()).unwrap();
     let grads = view.rgb.powi_scalar(2).sum().backward();
@@ -298,10 +278,7 @@ fn velocities_are_trained_by_renders_between_inputs() {
 fn bad_velocities_are_errors() {
     let device = Device::flex();
     let maps = GaussianMaps::from_raw(raw_maps(&device, 0.0));
-    let pixels = || {
-        PixelGaussians::new(&maps, depth(&device), None, views(), MeansGradient::Detached, PixelConvention::Integer)
-            .unwrap()
-    };
+    let pixels = || placed(&maps, None, views());
     let wrong = Tensor::<5>::zeros([1, S, H, W, 2], &device);
     let error = pixels().with_motion(wrong, 1.0).unwrap_err().to_string();
     assert!(error.contains("velocity"), "{error}");

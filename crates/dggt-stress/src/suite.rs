@@ -366,39 +366,53 @@ pub fn run_suite(options: &StressOptions, device: &Device) -> Result<StressRepor
     let small = ImageSize::new(42, 42).map_err(|e| e.to_string())?;
     let many = if options.full { (normal, 64) } else { (small, 64) };
     type Setup = fn(&mut Scenario);
-    let network_cases: Vec<(&str, ImageSize, usize, Setup)> = vec![
-        ("random images", normal, 3, |_| {}),
-        ("black images, all sky", normal, 3, |s| {
-            s.fill_images(0.0);
-            s.fill_sky(1.0);
-        }),
-        ("white images, no sky", normal, 3, |s| {
-            s.fill_images(1.0);
-            s.fill_sky(0.0);
-        }),
-        ("grey images, all dynamic", normal, 3, |s| {
-            s.fill_images(0.5);
-            s.fill_dynamic(1.0);
-        }),
-        ("a single input frame", normal, 1, |_| {}),
-        ("64 input frames", many.0, many.1, |_| {}),
+    // Every case runs in f32; those marked also with the network computing in f16 and in bf16 (parameters,
+    // activations and constants; the scene is assembled and rendered in f32), trained in that type, where the
+    // device declares the type.
+    let network_cases: Vec<(&str, ImageSize, usize, Setup, bool)> = vec![
+        ("random images", normal, 3, |_| {}, true),
+        (
+            "black images, all sky",
+            normal,
+            3,
+            |s| {
+                s.fill_images(0.0);
+                s.fill_sky(1.0);
+            },
+            true,
+        ),
+        (
+            "white images, no sky",
+            normal,
+            3,
+            |s| {
+                s.fill_images(1.0);
+                s.fill_sky(0.0);
+            },
+            true,
+        ),
+        (
+            "grey images, all dynamic",
+            normal,
+            3,
+            |s| {
+                s.fill_images(0.5);
+                s.fill_dynamic(1.0);
+            },
+            false,
+        ),
+        ("a single input frame", normal, 1, |_| {}, false),
+        ("64 input frames", many.0, many.1, |_| {}, true),
     ];
-    // The same network computing in a reduced float type (parameters, activations and constants; the scene
-    // is assembled and rendered in f32), trained in that type: only where the device declares the type.
-    let reduced: Vec<(&str, ImageSize, usize, Setup)> = vec![
-        ("random images", normal, 3, |_| {}),
-        ("black images, all sky", normal, 3, |s| {
-            s.fill_images(0.0);
-            s.fill_sky(1.0);
-        }),
-        ("white images, no sky", normal, 3, |s| {
-            s.fill_images(1.0);
-            s.fill_sky(0.0);
-        }),
-        ("64 input frames", many.0, many.1, |_| {}),
-    ];
+    let cases_in = |reduced: bool| -> Vec<(&str, ImageSize, usize, Setup)> {
+        network_cases
+            .iter()
+            .filter(|case| !reduced || case.4)
+            .map(|&(name, size, inputs, setup, _)| (name, size, inputs, setup))
+            .collect()
+    };
     let precisions =
-        [(FloatDType::F32, network_cases), (FloatDType::F16, reduced.clone()), (FloatDType::BF16, reduced)];
+        [(FloatDType::F32, cases_in(false)), (FloatDType::F16, cases_in(true)), (FloatDType::BF16, cases_in(true))];
     for (dtype, cases) in precisions {
         let suffix = match dtype {
             FloatDType::F32 => String::new(),
