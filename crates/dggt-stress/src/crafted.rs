@@ -1,8 +1,8 @@
 //! Stress cases that bypass the network: hand-made head outputs at the extremes the activations and the
 //! renderer must survive (opacities at 0 and 1, lifespans near 0 and huge, degenerate, huge and anisotropic
 //! scales, zero quaternions, saturated colours, depths at 0 and 1e6, empty and all-dynamic frames, all-sky and
-//! no-sky views), pushed through the Gaussian activations, placement, rendering, every loss and the backward
-//! pass to the hand-made outputs.
+//! no-sky views, moderate, huge and non-finite motion-head velocities), pushed through the Gaussian
+//! activations, placement, rendering, every loss and the backward pass to the hand-made outputs.
 //!
 //! The raw head output is `[1, S, H, W, 12]`: RGB logits (0-2), opacity logit (3), scale pre-softplus (4-6),
 //! rotation `w x y z` before normalisation (7-10), lifespan pre-activation (11), as the Gaussian head emits it.
@@ -17,7 +17,7 @@ use dggt_scene::{InputView, MeansGradient, PixelGaussians};
 use dggt_train::objective::{Forward, Objective};
 
 use crate::pipeline::{probe_gradient, render_and_differentiate};
-use crate::probe::Probe;
+use crate::probe::{Probe, Stage};
 use crate::scenario::{Scenario, Sequence};
 
 /// Channels of the raw Gaussian head output.
@@ -37,6 +37,8 @@ pub struct Prediction {
     pub depth: Vec<f32>,
     /// `[S, H, W]` dynamic logits.
     pub dynamic_logit: Vec<f32>,
+    /// `[S, H, W, 3]` motion-head velocities (world units per log frame, camera axes); `None`: no motion head.
+    pub velocity: Option<Vec<f32>>,
 }
 
 impl Prediction {
@@ -52,7 +54,13 @@ impl Prediction {
             .collect();
         let depth = (0..pixels).map(|_| random.range(2.0, 30.0)).collect();
         let dynamic_logit = (0..pixels).map(|_| random.range(-4.0, 4.0)).collect();
-        Self { raw, depth, dynamic_logit }
+        Self { raw, depth, dynamic_logit, velocity: None }
+    }
+
+    /// Gives the prediction motion-head velocities of `magnitude` in random directions.
+    pub fn set_velocity(&mut self, magnitude: f32, random: &mut Sequence) {
+        let count = self.depth.len() * 3;
+        self.velocity = Some((0..count).map(|_| magnitude * random.range(-1.0, 1.0)).collect());
     }
 
     /// Sets `channels` of every pixel to `value`.
@@ -105,6 +113,15 @@ pub fn run(
         PixelConvention::Integer,
     )
     .map_err(|e| e.to_string())?;
+    let velocity = prediction.velocity.as_ref().map(|values| {
+        Tensor::<5>::from_data(TensorData::new(values.clone(), [1, frames, height, width, 3]), device).require_grad()
+    });
+    let pixels = match &velocity {
+        Some(velocity) => {
+            pixels.with_motion(velocity.clone(), batch.timeline.frames_per_time()).map_err(|e| e.to_string())?
+        }
+        None => pixels,
+    };
     let cameras: Vec<_> =
         batch.inputs.iter().map(|v| (v.camera.world_from_camera.inverse(), v.camera.intrinsics)).collect();
     let images = batch.images.clone().reshape([frames, 3, height, width]);
@@ -114,5 +131,10 @@ pub fn run(
     probe_gradient(probe, &grads, "raw Gaussian head output", &raw);
     probe_gradient(probe, &grads, "depth", &depth);
     probe_gradient(probe, &grads, "dynamic logits", &logit);
+    // Checked where it exists; not required, since velocities that carry every dynamic Gaussian out of view
+    // (or targets at the inputs' own times) rightly leave them without one.
+    if let Some(grad) = velocity.as_ref().and_then(|velocity| velocity.grad(&grads)) {
+        probe.tensor(Stage::Gradients, "grad velocities", &grad);
+    }
     Ok(())
 }

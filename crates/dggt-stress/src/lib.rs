@@ -6,8 +6,9 @@
 //!   huge-index timelines, extreme pose encodings;
 //! - crafted: hand-made head outputs at the extremes (opacities 0 and 1, lifespans near 0 and huge, degenerate,
 //!   huge and anisotropic scales, zero quaternions, depths 0 and 1e6, empty and all-dynamic frames, all-sky and
-//!   no-sky views, random mixtures of all of them) through placement, rendering, every loss and the backward
-//!   pass; non-finite depths must be rejected with an error;
+//!   no-sky views, moderate and huge motion-head velocities, random mixtures of all of them) through placement,
+//!   rendering, every loss and the backward pass; non-finite depths and velocities must be rejected with an
+//!   error;
 //! - network: the tiny architecture on black, white and grey images, all-sky and sky-free masks, one and 64
 //!   input frames, with its own predicted cameras, through to every parameter's gradient; again with the
 //!   network computing and training in f16 and in bf16 (listed as skipped where the device lacks the type).

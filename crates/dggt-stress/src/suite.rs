@@ -271,6 +271,17 @@ fn crafted_extremes() -> Vec<(&'static str, Expect, Edit)> {
             s.fill_images(0.0);
             s.fill_sky(1.0);
         }),
+        ("moderate velocities", Expect::Finite, |_, p, r| p.set_velocity(1.0, r)),
+        ("huge velocities (1e6 per frame)", Expect::Finite, |_, p, r| p.set_velocity(1e6, r)),
+        ("huge velocities, all dynamic", Expect::Finite, |s, p, r| {
+            p.set_velocity(1e6, r);
+            p.dynamic_logit.fill(1e4);
+            s.fill_dynamic(1.0);
+        }),
+        ("NaN velocity", Expect::Rejected, |_, p, r| {
+            p.set_velocity(1.0, r);
+            p.velocity.as_mut().unwrap()[4] = f32::NAN;
+        }),
         ("NaN depth", Expect::Rejected, |_, p, _| p.depth[5] = f32::NAN),
         ("infinite depth", Expect::Rejected, |_, p, _| p.depth[0] = f32::INFINITY),
     ]
