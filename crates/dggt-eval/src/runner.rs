@@ -13,9 +13,9 @@
 //! Motion: without a motion head, dynamic Gaussians are held where they were predicted and the predicted
 //! motion of every surface point is zero ([`MotionSource::Held`]); its metrics are computed anyway and
 //! labelled. With a motion head the renders use its velocities, but motion is not scored
-//! ([`MotionSource::MotionHeadUnscored`]). As STORM does, motion is scored at the lidar cells (positive depth; here also not sky
-//! and inside the view) and only for windows where some true flow exceeds [`MOTION_GATE`] (STORM skips
-//! samples without such motion, whose accuracies would be trivially high).
+//! ([`MotionSource::MotionHeadUnscored`]). As STORM does, motion is scored at the lidar cells (positive
+//! depth; here also not sky and inside the view) and only for windows where some true flow exceeds
+//! [`MOTION_GATE`] (STORM skips samples without such motion, whose accuracies would be trivially high).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;

@@ -42,13 +42,7 @@ fn tiny_checkpoint(run: &Path) {
     config.sampler.window = 8;
     config.render.render_inputs = false;
     config.run.steps = 1;
-    config.run.out_dir = run.to_path_buf();
-    config.run.validate_every = 0;
-    config.run.checkpoint_every = 1000;
-    config.run.time_limit_s = None;
-    config.data.validation.inputs.clear();
-    config.data.validation.targets.clear();
-    let mut trainer = Trainer::new(config, vec![Device::flex()], false).expect("the trainer builds");
+    let mut trainer = Trainer::new(config.unattended(run), vec![Device::flex()], false).expect("the trainer builds");
     let summary = trainer.run(RunOptions::default()).expect("one step trains");
     assert!(summary.checkpoint.is_some(), "the run ends with a checkpoint");
 }

@@ -4,8 +4,8 @@
 //! each frame independently, so running them on chunks of frames gives the same maps as
 //! [`Dggt::forward`](dggt_model::Dggt::forward) while holding only one chunk's intermediate feature maps at a
 //! time. Only what the reconstruction reads is kept: camera encodings, depth, dynamic logits, the Gaussian
-//! maps and the motion head's velocities. The point and semantic heads, unused by DGGT, are not run; the aggregator's tokens are dropped as soon
-//! as the heads are done.
+//! maps and the motion head's velocities. The point and semantic heads, unused by DGGT, are not run; the
+//! aggregator's tokens are dropped as soon as the heads are done.
 
 use burn::tensor::{FloatDType, Tensor};
 use dggt_geom::PixelConvention;

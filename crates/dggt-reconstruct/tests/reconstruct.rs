@@ -61,13 +61,7 @@ fn train_config(out: &Path) -> TrainConfig {
     // usable poses.
     config.loss.camera = 1.0;
     config.optim.groups.insert("camera_head".into(), 1e-2);
-    config.run.out_dir = out.to_path_buf();
-    config.run.validate_every = 0;
-    config.run.checkpoint_every = 1000;
-    config.run.time_limit_s = None;
-    config.data.validation.inputs.clear();
-    config.data.validation.targets.clear();
-    config
+    config.unattended(out)
 }
 
 #[test]

@@ -279,6 +279,18 @@ impl Default for RunSection {
 }
 
 impl TrainConfig {
+    /// The run made unattended, for training driven from code (tests, examples): outputs under `out_dir`, no
+    /// validation, no time limit, a single checkpoint at the end.
+    pub fn unattended(mut self, out_dir: &Path) -> Self {
+        self.run.out_dir = out_dir.to_path_buf();
+        self.run.validate_every = 0;
+        self.run.checkpoint_every = u64::MAX;
+        self.run.time_limit_s = None;
+        self.data.validation.inputs.clear();
+        self.data.validation.targets.clear();
+        self
+    }
+
     /// Reads a TOML file; relative paths in it are resolved against its folder.
     pub fn load(path: &Path) -> Result<Self, TrainError> {
         let text = std::fs::read_to_string(path).map_err(|source| TrainError::Io { path: path.into(), source })?;

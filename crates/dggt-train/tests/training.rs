@@ -21,13 +21,7 @@ fn small_config(out: &Path, steps: u64) -> TrainConfig {
     config.render.render_inputs = false;
     config.optim.warmup_steps = 2;
     config.run.steps = steps;
-    config.run.out_dir = out.to_path_buf();
-    config.run.validate_every = 0;
-    config.run.checkpoint_every = 1000;
-    config.run.time_limit_s = None;
-    config.data.validation.inputs.clear();
-    config.data.validation.targets.clear();
-    config
+    config.unattended(out)
 }
 
 /// Every parameter value, in visiting order.
