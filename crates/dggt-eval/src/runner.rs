@@ -382,7 +382,7 @@ fn evaluate_scene(
     drop(prediction);
     watch.add(ASSEMBLY, started);
 
-    let settings = AssemblySettings::default();
+    let settings = AssemblySettings { dynamic_blend: network.dynamic_blend, ..AssemblySettings::default() };
     let mut records = Vec::new();
     let mut largest_flow = 0.0f64;
     let mut has_depth_flow = false;

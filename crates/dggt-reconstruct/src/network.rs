@@ -16,6 +16,7 @@ use dggt_data::Preprocess;
 use dggt_model::sky::SkyModel;
 use dggt_model::weights::{Coverage, load_checkpoint_with};
 use dggt_model::{Dggt, ModelConfig};
+use dggt_scene::DynamicBlend;
 use dggt_train::{TrainConfig, checkpoint, model_config};
 use serde::Serialize;
 
@@ -58,6 +59,8 @@ pub struct LoadedNetwork {
     pub info: CheckpointInfo,
     /// The preprocessing of a training `.toml` given as `--config`.
     pub preprocess: Option<Preprocess>,
+    /// How targets draw dynamic Gaussians: the training `.toml`'s `render.dynamic_blend`, else the release's.
+    pub dynamic_blend: DynamicBlend,
     pub warnings: Vec<String>,
 }
 
@@ -71,13 +74,15 @@ pub fn load_network(
     if !path.exists() {
         return Err(fail("does not exist".into()));
     }
-    let (config_from_arch, preprocess, arch_name) = match architecture {
+    let (config_from_arch, training, arch_name) = match architecture {
         Some(arch) => {
-            let (config, preprocess, name) = read_architecture(arch)?;
-            (Some(config), preprocess, name)
+            let (config, training, name) = read_architecture(arch)?;
+            (Some(config), training, name)
         }
         None => (None, None, String::new()),
     };
+    let preprocess = training.as_ref().map(|t| t.data.preprocess.clone());
+    let dynamic_blend = training.as_ref().map_or(DynamicBlend::default(), |t| t.render.dynamic_blend);
     let mut warnings = Vec::new();
     if path.is_dir() {
         let dir = trainer_checkpoint_dir(path)?;
@@ -94,7 +99,7 @@ pub fn load_network(
             parameters: burn::module::Module::num_params(&model),
             fresh_modules: Vec::new(),
         };
-        return Ok(LoadedNetwork { model, config, info, preprocess, warnings });
+        return Ok(LoadedNetwork { model, config, info, preprocess, dynamic_blend, warnings });
     }
 
     let (config, arch_name) = match config_from_arch {
@@ -143,7 +148,7 @@ pub fn load_network(
         parameters: burn::module::Module::num_params(&model),
         fresh_modules: fresh,
     };
-    Ok(LoadedNetwork { model, config, info, preprocess, warnings })
+    Ok(LoadedNetwork { model, config, info, preprocess, dynamic_blend, warnings })
 }
 
 /// The checkpoint folder of a `step-N` folder, a run's `checkpoints/` folder or a run folder.
@@ -166,7 +171,8 @@ fn trainer_checkpoint_dir(path: &Path) -> Result<PathBuf, ReconstructError> {
     })
 }
 
-fn read_architecture(arch: &Architecture) -> Result<(ModelConfig, Option<Preprocess>, String), ReconstructError> {
+/// The architecture `arch` names, the training configuration it came from (if a `.toml`), and its name.
+fn read_architecture(arch: &Architecture) -> Result<(ModelConfig, Option<TrainConfig>, String), ReconstructError> {
     match arch {
         Architecture::Preset(name) => Ok((model_config(name)?, None, format!("preset `{name}`"))),
         Architecture::Config(path) if path.extension().is_some_and(|e| e == "toml") => {
@@ -176,7 +182,7 @@ fn read_architecture(arch: &Architecture) -> Result<(ModelConfig, Option<Preproc
                 gs.color_skip = train.model.color_skip;
                 gs.unproject_at = train.model.unproject_at;
             }
-            Ok((config, Some(train.data.preprocess), format!("{}", path.display())))
+            Ok((config, Some(train), format!("{}", path.display())))
         }
         Architecture::Config(path) => {
             let config = ModelConfig::from_parity_json(path).map_err(|e| ReconstructError::Input {

@@ -213,7 +213,7 @@ pub fn reconstruct(options: &ReconstructOptions, device: &Device) -> Result<Summ
             drop(host_pixels);
             stages.done("write gaussians");
 
-            let settings = AssemblySettings::default();
+            let settings = AssemblySettings { dynamic_blend: network.dynamic_blend, ..AssemblySettings::default() };
             let total = inputs.views.len() + times_s.len() * inputs.cameras.len();
             let bar = progress_bar(options.progress, total as u64);
             // Input views re-rendered: the sky masks, the PSNR, and the renders at input times.

@@ -2,9 +2,10 @@
 //!
 //! - the **static** union of every input view's Gaussians, opacity `o · (1 - sigmoid(dynamic logit))` faded by
 //!   the lifespan to `t` ([`opacity_at`]);
-//! - the **dynamic** Gaussians of the input view of the target's rig camera nearest to `t`, opacity
-//!   `o · sigmoid(dynamic logit)`, moved to `t` by their predicted velocity when the model has a motion head
-//!   ([`PixelGaussians::with_motion`]), held where they were predicted otherwise;
+//! - the **dynamic** Gaussians of the input view of the target's rig camera nearest to `t` (or of the two
+//!   views bracketing `t`, cross-faded: [`DynamicBlend`]), opacity `o · sigmoid(dynamic logit)`, moved to `t`
+//!   by their predicted velocity when the model has a motion head ([`PixelGaussians::with_motion`]), held where
+//!   they were predicted otherwise;
 //! - culled before the rasteriser sees them: a Gaussian whose opacity at `t` is below the rasteriser's own
 //!   1/255 threshold, or whose conservative screen footprint misses the target image, is dropped.
 //!
@@ -19,7 +20,7 @@ use rayon::prelude::*;
 
 use crate::error::SceneError;
 use crate::pixels::{PixelGaussians, host_values};
-use crate::timeline::{TargetView, nearest_view};
+use crate::timeline::{DynamicBlend, TargetView, dynamic_sources};
 
 /// The rasteriser's alpha threshold: Gaussians below it never contribute.
 pub const MIN_OPACITY: f32 = 1.0 / 255.0;
@@ -37,18 +38,26 @@ pub struct AssemblySettings {
     /// bounds a scene: a Gaussian pushed beyond it gets no gradient, so depths without supervision cannot
     /// grow without limit.
     pub far_plane: f32,
+    /// Which input views lend their dynamic Gaussians to the target time.
+    pub dynamic_blend: DynamicBlend,
 }
 
 impl Default for AssemblySettings {
     fn default() -> Self {
-        Self { min_opacity: MIN_OPACITY, cull_off_screen: true, near_plane: 0.01, far_plane: 1e10 }
+        Self {
+            min_opacity: MIN_OPACITY,
+            cull_off_screen: true,
+            near_plane: 0.01,
+            far_plane: 1e10,
+            dynamic_blend: DynamicBlend::Nearest,
+        }
     }
 }
 
 impl AssemblySettings {
     /// Every Gaussian reaches the rasteriser.
     pub fn exact() -> Self {
-        Self { min_opacity: 0.0, cull_off_screen: false, near_plane: 0.01, far_plane: 1e10 }
+        Self { min_opacity: 0.0, cull_off_screen: false, ..Self::default() }
     }
 }
 
@@ -95,27 +104,20 @@ pub fn assemble(
     };
     let faded = opacity_at(static_opacity_all, pixels.lifespan.clone(), pixels.source_time.clone(), target.time);
 
-    // Candidates: every Gaussian as static, the nearest view's as dynamic, moved over `elapsed` scene time.
-    let nearest = match &dynamic_opacity_all {
-        Some(_) => nearest_view(&pixels.views, target.rig_camera, target.time),
-        None => None,
-    };
-    let dynamic_range = nearest.map_or(0..0, |view| view * per_view..(view + 1) * per_view);
-    let elapsed = nearest.map_or(0.0, |view| (target.time - pixels.views[view].time) as f32);
-    let displaced = |index: usize| -> [f32; 3] {
-        let mean = pixels.host_means[index];
-        match &pixels.host_velocity {
-            Some(velocity) => std::array::from_fn(|k| mean[k] + velocity[index][k] * elapsed),
-            None => mean,
-        }
+    // Candidates: every Gaussian as static; the dynamic ones of the source views, moved over their `elapsed`
+    // scene time and weighted.
+    let sources: Vec<DynamicSource> = match &dynamic_opacity_all {
+        Some(_) => dynamic_sources(&pixels.views, target.rig_camera, target.time, settings.dynamic_blend)
+            .into_iter()
+            .map(|(view, weight)| DynamicSource {
+                range: view * per_view..(view + 1) * per_view,
+                elapsed: (target.time - pixels.views[view].time) as f32,
+                weight: weight as f32,
+            })
+            .collect(),
+        None => Vec::new(),
     };
     let static_values = host_values(faded.clone(), "static opacity")?;
-    let dynamic_values = match &dynamic_opacity_all {
-        Some(opacity) if !dynamic_range.is_empty() => {
-            host_values(opacity.clone().narrow(0, dynamic_range.start, dynamic_range.len()), "dynamic opacity")?
-        }
-        _ => Vec::new(),
-    };
 
     let footprint = Footprint::new(target, pixels.size, settings);
     let keep = |index: usize, mean: [f32; 3], opacity: f32| -> Verdict {
@@ -129,18 +131,35 @@ pub fn assemble(
     };
     let static_verdicts: Vec<Verdict> =
         static_values.par_iter().enumerate().map(|(i, &o)| keep(i, pixels.host_means[i], o)).collect();
-    let dynamic_verdicts: Vec<Verdict> = dynamic_values
-        .par_iter()
-        .enumerate()
-        .map(|(i, &o)| {
-            let index = dynamic_range.start + i;
-            keep(index, displaced(index), o)
-        })
-        .collect();
+    let mut dynamic_verdicts = Vec::with_capacity(sources.len());
+    if let Some(opacity) = &dynamic_opacity_all {
+        for source in &sources {
+            let values =
+                host_values(opacity.clone().narrow(0, source.range.start, source.range.len()), "dynamic opacity")?;
+            let displaced = |index: usize| -> [f32; 3] {
+                let mean = pixels.host_means[index];
+                match &pixels.host_velocity {
+                    Some(velocity) => std::array::from_fn(|k| mean[k] + velocity[index][k] * source.elapsed),
+                    None => mean,
+                }
+            };
+            let verdicts: Vec<Verdict> = values
+                .par_iter()
+                .enumerate()
+                .map(|(i, &o)| {
+                    let index = source.range.start + i;
+                    keep(index, displaced(index), o * source.weight)
+                })
+                .collect();
+            dynamic_verdicts.push(verdicts);
+        }
+    }
 
-    let mut counts =
-        AssemblyCounts { candidates: static_verdicts.len() + dynamic_verdicts.len(), ..Default::default() };
-    for verdict in static_verdicts.iter().chain(&dynamic_verdicts) {
+    let mut counts = AssemblyCounts {
+        candidates: static_verdicts.len() + dynamic_verdicts.iter().map(Vec::len).sum::<usize>(),
+        ..Default::default()
+    };
+    for verdict in static_verdicts.iter().chain(dynamic_verdicts.iter().flatten()) {
         match verdict {
             Verdict::Transparent => counts.transparent += 1,
             Verdict::OffScreen => counts.off_screen += 1,
@@ -151,29 +170,37 @@ pub fn assemble(
         verdicts.iter().enumerate().filter(|(_, v)| **v == Verdict::Keep).map(|(i, _)| (offset + i) as i64).collect()
     };
     let static_index = kept(&static_verdicts, 0);
-    let dynamic_index = kept(&dynamic_verdicts, dynamic_range.start);
+    let dynamic_indices: Vec<Vec<i64>> =
+        sources.iter().zip(&dynamic_verdicts).map(|(source, verdicts)| kept(verdicts, source.range.start)).collect();
     counts.static_kept = static_index.len();
-    counts.dynamic_kept = dynamic_index.len();
+    counts.dynamic_kept = dynamic_indices.iter().map(Vec::len).sum();
 
     let index_tensor =
         |index: &[i64]| Tensor::<1, Int>::from_data(TensorData::new(index.to_vec(), [index.len()]), &device);
-    let all: Vec<i64> = static_index.iter().chain(&dynamic_index).copied().collect();
+    let all: Vec<i64> = static_index.iter().chain(dynamic_indices.iter().flatten()).copied().collect();
     let all = index_tensor(&all);
     let pick = |tensor: &Tensor<2>| tensor.clone().select(0, all.clone());
+    let moves = pixels.velocity.is_some() && sources.iter().any(|s| s.elapsed != 0.0) && counts.dynamic_kept > 0;
     let means = match &pixels.velocity {
-        Some(velocity) if !dynamic_index.is_empty() && elapsed != 0.0 => {
-            let dynamic = index_tensor(&dynamic_index);
-            let moved = pixels.means.clone().select(0, dynamic.clone())
-                + velocity.clone().select(0, dynamic).mul_scalar(elapsed);
-            Tensor::cat(vec![pixels.means.clone().select(0, index_tensor(&static_index)), moved], 0)
+        Some(velocity) if moves => {
+            let mut parts = vec![pixels.means.clone().select(0, index_tensor(&static_index))];
+            for (source, index) in sources.iter().zip(&dynamic_indices).filter(|(_, index)| !index.is_empty()) {
+                let index = index_tensor(index);
+                parts.push(
+                    pixels.means.clone().select(0, index.clone())
+                        + velocity.clone().select(0, index).mul_scalar(source.elapsed),
+                );
+            }
+            Tensor::cat(parts, 0)
         }
         _ => pick(&pixels.means),
     };
     let mut opacities = vec![faded.select(0, index_tensor(&static_index))];
-    if let Some(dynamic) = dynamic_opacity_all
-        && !dynamic_index.is_empty()
-    {
-        opacities.push(dynamic.select(0, index_tensor(&dynamic_index)));
+    if let Some(dynamic) = dynamic_opacity_all {
+        for (source, index) in sources.iter().zip(&dynamic_indices).filter(|(_, index)| !index.is_empty()) {
+            let picked = dynamic.clone().select(0, index_tensor(index));
+            opacities.push(if source.weight == 1.0 { picked } else { picked.mul_scalar(source.weight) });
+        }
     }
     tracing::debug!(
         time = target.time,
@@ -193,6 +220,16 @@ pub fn assemble(
         },
         counts,
     })
+}
+
+/// One input view lending its dynamic Gaussians to the target.
+struct DynamicSource {
+    /// The view's rows of the per-pixel Gaussians.
+    range: std::ops::Range<usize>,
+    /// Scene time from the view to the target, over which predicted velocities move its Gaussians.
+    elapsed: f32,
+    /// Multiplies the view's dynamic opacities.
+    weight: f32,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

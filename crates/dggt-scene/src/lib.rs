@@ -4,8 +4,8 @@
 //!
 //! 1. [`timeline`]: the input views' rig cameras and scene times; target cameras interpolated from them.
 //! 2. [`pixels`]: the per-pixel Gaussians of every input view, means unprojected from the predicted depth.
-//! 3. [`assemble`]: the static union faded by the lifespan to the target time, the nearest view's dynamic
-//!    Gaussians, and culling of what the rasteriser would skip.
+//! 3. [`assemble`]: the static union faded by the lifespan to the target time, the dynamic Gaussians of the
+//!    view(s) nearest in time, and culling of what the rasteriser would skip.
 //! 4. [`compose`]: rasterising the assembled Gaussians and compositing them over the sky.
 //!
 //! Conventions: cameras are [`PosedCamera`](dggt_geom::PosedCamera)s (world-from-camera poses, OpenCV axes);
@@ -22,4 +22,4 @@ pub use assemble::{AssembledGaussians, AssemblyCounts, AssemblySettings, MIN_OPA
 pub use compose::{ViewRender, camera_tensors, render_assembled, render_target};
 pub use error::SceneError;
 pub use pixels::{MeansGradient, PixelGaussians};
-pub use timeline::{InputView, TargetView, Timeline, interpolate_camera, nearest_view};
+pub use timeline::{DynamicBlend, InputView, TargetView, Timeline, dynamic_sources, interpolate_camera, nearest_view};

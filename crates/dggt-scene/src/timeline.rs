@@ -7,6 +7,7 @@
 //! intrinsics linear) between the two input views of the same rig camera that bracket the target time.
 
 use dggt_geom::PosedCamera;
+use serde::{Deserialize, Serialize};
 
 use crate::error::SceneError;
 
@@ -92,6 +93,39 @@ pub fn nearest_view(views: &[InputView], rig_camera: usize, time: f64) -> Option
         .map(|(i, _)| i)
 }
 
+/// Which input views lend their dynamic Gaussians to a target time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DynamicBlend {
+    /// The view of the target's rig camera nearest in time, at full opacity (the release's choice).
+    #[default]
+    Nearest,
+    /// The two views of the target's rig camera that bracket its time, opacities scaled by linear weights in
+    /// time (`(t1 - t) / (t1 - t0)` for the earlier one): a moving object fades from where the earlier view saw
+    /// it to where the later one did, as the static union fades through the lifespans. A target at an input's
+    /// time, or outside the inputs' span, takes the nearest view alone.
+    CrossFade,
+}
+
+/// The input views (indices into `views`) whose dynamic Gaussians are drawn at `time` for `rig_camera`, each
+/// with the weight its dynamic opacities are multiplied by; empty when the rig camera has no input view.
+pub fn dynamic_sources(views: &[InputView], rig_camera: usize, time: f64, blend: DynamicBlend) -> Vec<(usize, f64)> {
+    let Some(nearest) = nearest_view(views, rig_camera, time) else { return Vec::new() };
+    if blend == DynamicBlend::Nearest || views[nearest].time == time {
+        return vec![(nearest, 1.0)];
+    }
+    let of_camera = || views.iter().enumerate().filter(|(_, v)| v.rig_camera == rig_camera);
+    let before = of_camera().filter(|(_, v)| v.time < time).max_by(|(_, a), (_, b)| a.time.total_cmp(&b.time));
+    let after = of_camera().filter(|(_, v)| v.time > time).min_by(|(_, a), (_, b)| a.time.total_cmp(&b.time));
+    match (before, after) {
+        (Some((i0, v0)), Some((i1, v1))) => {
+            let earlier = (v1.time - time) / (v1.time - v0.time);
+            vec![(i0, earlier), (i1, 1.0 - earlier)]
+        }
+        _ => vec![(nearest, 1.0)],
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -149,5 +183,24 @@ mod tests {
         assert_eq!(nearest_view(&views, 0, 0.51), Some(2));
         assert_eq!(nearest_view(&views, 1, 9.0), Some(1));
         assert_eq!(nearest_view(&views, 3, 0.0), None);
+    }
+
+    #[test]
+    fn cross_fades_weigh_the_bracketing_views_by_time() {
+        let views = [view(0, 0.0, 0.0), view(1, 0.4, 5.0), view(0, 1.0, 2.0), view(0, 2.0, 3.0)];
+        let fade = |camera, time| dynamic_sources(&views, camera, time, DynamicBlend::CrossFade);
+        let weights = fade(0, 0.25);
+        assert_eq!(weights.iter().map(|w| w.0).collect::<Vec<_>>(), [0, 2]);
+        assert!((weights[0].1 - 0.75).abs() < 1e-12 && (weights[1].1 - 0.25).abs() < 1e-12, "{weights:?}");
+        let weights = fade(0, 1.5);
+        assert_eq!(weights.iter().map(|w| w.0).collect::<Vec<_>>(), [2, 3]);
+        assert!((weights[0].1 - 0.5).abs() < 1e-12, "{weights:?}");
+        // At an input's time, outside the span, or with one view of the camera: the nearest alone.
+        assert_eq!(fade(0, 1.0), [(2, 1.0)]);
+        assert_eq!(fade(0, -1.0), [(0, 1.0)]);
+        assert_eq!(fade(0, 7.0), [(3, 1.0)]);
+        assert_eq!(fade(1, 0.0), [(1, 1.0)]);
+        assert!(fade(4, 0.0).is_empty());
+        assert_eq!(dynamic_sources(&views, 0, 0.25, DynamicBlend::Nearest), [(0, 1.0)]);
     }
 }

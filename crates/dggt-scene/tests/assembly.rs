@@ -1,13 +1,16 @@
 //! Scene assembly on small synthetic predictions: culling never changes the render, gradients reach the maps
-//! (and the depth only when asked), dynamic Gaussians appear only near their own time, lifespans fade.
+//! (and the depth only when asked), dynamic Gaussians appear only near their own time (cross-faded between the
+//! two bracketing views when asked), lifespans fade.
 
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_geom::glam::{DQuat, DVec3};
 use dggt_geom::{PinholeIntrinsics, PixelConvention, PosedCamera, WorldFromCamera};
 use dggt_model::gaussian_maps::GaussianMaps;
 use dggt_scene::{
-    AssemblySettings, InputView, MeansGradient, PixelGaussians, TargetView, assemble, interpolate_camera, render_target,
+    AssemblySettings, DynamicBlend, InputView, MeansGradient, PixelGaussians, TargetView, assemble, interpolate_camera,
+    render_target,
 };
+use dggt_splat::OpacityTensor;
 
 const W: usize = 24;
 const H: usize = 16;
@@ -115,6 +118,40 @@ fn dynamic_gaussians_come_from_the_nearest_view_only() {
     let assembled = assemble(&pixels, &target, &AssemblySettings::default()).unwrap();
     assert_eq!(assembled.counts.dynamic_kept, 0);
     assert!(assembled.counts.static_kept > S * H * W / 2, "{:?}", assembled.counts);
+}
+
+#[test]
+fn cross_fades_weigh_the_two_bracketing_views_dynamic_gaussians_by_time() {
+    let device = Device::flex();
+    let maps = GaussianMaps::from_raw(raw_maps(&device, 0.0));
+    let pixels = placed(&maps, Some(12.0), views());
+    let per_view = H * W;
+    let dynamic: Vec<f32> = {
+        let logit = pixels.dynamic_logit.clone().expect("dynamic logits");
+        let opacity = dggt_model::lifespan::dynamic_opacity(pixels.opacity.clone(), logit);
+        opacity.into_data().try_into_vec().unwrap()
+    };
+    let view_sum = |view: usize| dynamic[view * per_view..(view + 1) * per_view].iter().map(|&o| o as f64).sum::<f64>();
+    // Views at times 0, 0.5, 1: time 0.125 lies a quarter of the way from view 0 to view 1.
+    let fade = AssemblySettings { dynamic_blend: DynamicBlend::CrossFade, ..AssemblySettings::exact() };
+    let target = TargetView { rig_camera: 0, time: 0.125, camera: interpolate_camera(&pixels.views, 0, 0.125).unwrap() };
+    let assembled = assemble(&pixels, &target, &fade).unwrap();
+    assert_eq!(assembled.counts.dynamic_kept, 2 * per_view, "{:?}", assembled.counts);
+    let OpacityTensor::Shared(opacities) = assembled.gaussians.opacities else { panic!("shared opacities") };
+    let opacities: Vec<f32> = opacities.into_data().try_into_vec().unwrap();
+    let drawn = |range: std::ops::Range<usize>| opacities[range].iter().map(|&o| o as f64).sum::<f64>();
+    let statics = S * per_view;
+    let (earlier, later) = (drawn(statics..statics + per_view), drawn(statics + per_view..statics + 2 * per_view));
+    assert!((earlier - 0.75 * view_sum(0)).abs() < 1e-3 * earlier, "{earlier} vs 0.75 x {}", view_sum(0));
+    assert!((later - 0.25 * view_sum(1)).abs() < 1e-3 * later, "{later} vs 0.25 x {}", view_sum(1));
+    // At an input's own time only that view's dynamic Gaussians are drawn, at full opacity.
+    let target = TargetView { rig_camera: 0, time: 0.5, camera: interpolate_camera(&pixels.views, 0, 0.5).unwrap() };
+    let assembled = assemble(&pixels, &target, &fade).unwrap();
+    assert_eq!(assembled.counts.dynamic_kept, per_view, "{:?}", assembled.counts);
+    let OpacityTensor::Shared(opacities) = assembled.gaussians.opacities else { panic!("shared opacities") };
+    let opacities: Vec<f32> = opacities.into_data().try_into_vec().unwrap();
+    let own = opacities[statics..].iter().map(|&o| o as f64).sum::<f64>();
+    assert!((own - view_sum(1)).abs() < 1e-3 * own, "{own} vs {}", view_sum(1));
 }
 
 #[test]

@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 
 use dggt_data::{Preprocess, SamplerConfig};
 use dggt_geom::PixelConvention;
+use dggt_scene::DynamicBlend;
 use serde::{Deserialize, Serialize};
 
 use crate::error::TrainError;
@@ -116,6 +117,9 @@ pub struct RenderSection {
     /// Camera-space depth beyond which Gaussians are not drawn (gsplat's far plane). A finite bound keeps
     /// depths that nothing supervises from running away (a scene without sky masks pushes its background out).
     pub far_plane: f64,
+    /// Which input views' dynamic Gaussians a target shows: `nearest` (the release) or `cross_fade` (the two
+    /// bracketing views, opacities weighted by time).
+    pub dynamic_blend: DynamicBlend,
 }
 
 impl Default for RenderSection {
@@ -126,6 +130,7 @@ impl Default for RenderSection {
             render_inputs: true,
             sky: true,
             far_plane: 1e10,
+            dynamic_blend: DynamicBlend::Nearest,
         }
     }
 }
@@ -173,6 +178,9 @@ pub struct LossWeights {
     pub camera: f64,
     /// L1 on log depth against the export's depth maps.
     pub depth: f64,
+    /// L1 of the motion head's velocities against the export's scene flow (`depth_flows_4`), both in the input
+    /// camera's axes and world units per log frame; needs `model.motion_head`.
+    pub flow: f64,
 }
 
 impl Default for LossWeights {
@@ -190,6 +198,7 @@ impl Default for LossWeights {
             gram_backbone: None,
             camera: 0.0,
             depth: 0.0,
+            flow: 0.0,
         }
     }
 }
@@ -363,7 +372,8 @@ impl TrainConfig {
             }
         }
         let l = &self.loss;
-        let weights = [l.rgb_l2, l.lpips, l.opacity_bce, l.dynamic_bce, l.lifespan_l1, l.gram, l.camera, l.depth];
+        let weights =
+            [l.rgb_l2, l.lpips, l.opacity_bce, l.dynamic_bce, l.lifespan_l1, l.gram, l.camera, l.depth, l.flow];
         if weights.iter().any(|w| !(*w >= 0.0 && w.is_finite())) {
             return Err("loss: weights must be finite and >= 0".into());
         }
@@ -374,6 +384,9 @@ impl TrainConfig {
         }
         if !["alex", "vgg"].contains(&l.lpips_net.as_str()) {
             return Err(format!("loss.lpips_net must be `alex` or `vgg`, got `{}`", l.lpips_net));
+        }
+        if l.flow > 0.0 && !self.model.motion_head {
+            return Err("loss.flow supervises the motion head: it needs model.motion_head = true".into());
         }
         if l.gram > 0.0 && l.gram_backbone.is_none() {
             return Err("loss.gram > 0 needs loss.gram_backbone".into());
