@@ -6,7 +6,7 @@
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_geom::{ImageSize, PinholeIntrinsics, PosedCamera, WorldFromCamera};
 use dggt_scene::Timeline;
-use dggt_train::batch::{DepthFlowSamples, StepBatch, ViewTruth};
+use dggt_train::batch::{StepBatch, ViewTruth};
 use glam::{DQuat, DVec3};
 
 /// SplitMix64: the same values on every machine, so a failing case reproduces from its seed.
@@ -149,11 +149,7 @@ impl Scenario {
                 image: Tensor::from_data(TensorData::new(view.image.clone(), [height, width, 3]), device),
                 sky: Some(Tensor::from_data(TensorData::new(view.sky.clone(), [height, width]), device)),
                 dynamic: Some(Tensor::from_data(TensorData::new(view.dynamic.clone(), [height, width]), device)),
-                depth_flow: (with_depth && !pixels.is_empty()).then_some(DepthFlowSamples {
-                    pixels,
-                    depths,
-                    velocities: None,
-                }),
+                depth: (with_depth && !pixels.is_empty()).then_some((pixels, depths)),
             }
         };
         let inputs = self.input_frames.iter().zip(&self.views).map(|(&f, v)| truth(f, v, true)).collect();

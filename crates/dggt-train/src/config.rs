@@ -178,9 +178,6 @@ pub struct LossWeights {
     pub camera: f64,
     /// L1 on log depth against the export's depth maps.
     pub depth: f64,
-    /// L1 of the motion head's velocities against the export's scene flow (`depth_flows_4`), both in the input
-    /// camera's axes and world units per log frame; needs `model.motion_head`.
-    pub flow: f64,
 }
 
 impl Default for LossWeights {
@@ -198,7 +195,6 @@ impl Default for LossWeights {
             gram_backbone: None,
             camera: 0.0,
             depth: 0.0,
-            flow: 0.0,
         }
     }
 }
@@ -372,8 +368,7 @@ impl TrainConfig {
             }
         }
         let l = &self.loss;
-        let weights =
-            [l.rgb_l2, l.lpips, l.opacity_bce, l.dynamic_bce, l.lifespan_l1, l.gram, l.camera, l.depth, l.flow];
+        let weights = [l.rgb_l2, l.lpips, l.opacity_bce, l.dynamic_bce, l.lifespan_l1, l.gram, l.camera, l.depth];
         if weights.iter().any(|w| !(*w >= 0.0 && w.is_finite())) {
             return Err("loss: weights must be finite and >= 0".into());
         }
@@ -384,9 +379,6 @@ impl TrainConfig {
         }
         if !["alex", "vgg"].contains(&l.lpips_net.as_str()) {
             return Err(format!("loss.lpips_net must be `alex` or `vgg`, got `{}`", l.lpips_net));
-        }
-        if l.flow > 0.0 && !self.model.motion_head {
-            return Err("loss.flow supervises the motion head: it needs model.motion_head = true".into());
         }
         if l.gram > 0.0 && l.gram_backbone.is_none() {
             return Err("loss.gram > 0 needs loss.gram_backbone".into());

@@ -9,8 +9,7 @@
 //! - `dynamic_bce`: dynamic logits of the inputs against their dynamic masks;
 //! - `lifespan_l1`: mean `1 / lifespan` over Gaussians predicted static;
 //! - `camera`: L1 of every camera-head iteration's encoding against the ground truth (relative to input 0);
-//! - `depth`: L1 of log depth against the export's depth;
-//! - `flow`: L1 of the motion head's velocities against the export's scene flow.
+//! - `depth`: L1 of log depth against the export's depth.
 
 use std::collections::BTreeMap;
 
@@ -23,7 +22,7 @@ use dggt_scene::{
     render_target,
 };
 
-use crate::batch::{DepthFlowSamples, StepBatch, ViewTruth};
+use crate::batch::{StepBatch, ViewTruth};
 use crate::config::{CameraSource, LossWeights, MeansGradientSetting, RenderSection};
 use crate::error::TrainError;
 
@@ -219,12 +218,6 @@ impl Objective {
         {
             add("depth", w.depth, loss, &mut terms);
         }
-        if w.flow > 0.0
-            && let Some(velocity) = &forward.velocity
-            && let Some(loss) = flow_loss(velocity, batch)?
-        {
-            add("flow", w.flow, loss, &mut terms);
-        }
 
         let mut psnrs = Vec::new();
         let mut counts = AssemblyCounts::default();
@@ -253,8 +246,6 @@ pub struct Forward {
     pub dynamic_logit: Option<Tensor<4>>,
     /// Every camera-head iteration's `[1, S, 9]` encoding.
     pub encodings: Vec<Tensor<3>>,
-    /// `[1, S, H, W, 3]` the motion head's velocities (camera axes, world units per log frame), if it has one.
-    pub velocity: Option<Tensor<5>>,
 }
 
 impl Forward {
@@ -293,9 +284,11 @@ impl Forward {
             means_gradient,
             model.unproject_at,
         )?;
-        let velocity = out.motion.as_ref().map(|m| m.prediction.clone().narrow(4, 0, 3).cast(FloatDType::F32));
-        let pixels = match &velocity {
-            Some(velocity) => pixels.with_motion(velocity.clone(), batch.timeline.frames_per_time())?,
+        let pixels = match &out.motion {
+            Some(motion) => {
+                let velocity = motion.prediction.clone().narrow(4, 0, 3).cast(FloatDType::F32);
+                pixels.with_motion(velocity, batch.timeline.frames_per_time())?
+            }
             None => pixels,
         };
         let sky = match (&model.sky_model, render.sky) {
@@ -307,7 +300,7 @@ impl Forward {
             }
             _ => None,
         };
-        Ok(Self { pixels, sky, depth, dynamic_logit, encodings, velocity })
+        Ok(Self { pixels, sky, depth, dynamic_logit, encodings })
     }
 }
 
@@ -352,9 +345,9 @@ fn depth_loss(depth: &Tensor<4>, batch: &StepBatch) -> Result<Option<Tensor<1>>,
     let [_, frames, h, w] = depth.dims();
     let (mut index, mut values) = (Vec::new(), Vec::new());
     for (frame, view) in batch.inputs.iter().enumerate().take(frames) {
-        if let Some(samples) = &view.depth_flow {
-            index.extend(samples.pixels.iter().map(|&p| p + (frame * h * w) as i64));
-            values.extend(samples.depths.iter().map(|d| d.ln()));
+        if let Some((pixels, depths)) = &view.depth {
+            index.extend(pixels.iter().map(|&p| p + (frame * h * w) as i64));
+            values.extend(depths.iter().map(|d| d.ln()));
         }
     }
     if index.is_empty() {
@@ -364,28 +357,6 @@ fn depth_loss(depth: &Tensor<4>, batch: &StepBatch) -> Result<Option<Tensor<1>>,
     let predicted = depth.clone().reshape([frames * h * w]).clamp_min(1e-6).log();
     let picked = predicted.select(0, Tensor::<1, Int>::from_data(TensorData::new(index, [count]), &device));
     let truth = Tensor::<1>::from_data(TensorData::new(values, [count]), &device);
-    Ok(Some((picked - truth).abs().mean()))
-}
-
-/// L1 of the motion head's velocities against the export's scene flow at the pixels with a measurement (every
-/// component, static surfaces included: they must not move); `None` when no input view has flow.
-fn flow_loss(velocity: &Tensor<5>, batch: &StepBatch) -> Result<Option<Tensor<1>>, TrainError> {
-    let device = velocity.device();
-    let [_, frames, h, w, channels] = velocity.dims();
-    let (mut index, mut values) = (Vec::new(), Vec::<f32>::new());
-    for (frame, view) in batch.inputs.iter().enumerate().take(frames) {
-        if let Some(DepthFlowSamples { pixels, velocities: Some(velocities), .. }) = &view.depth_flow {
-            index.extend(pixels.iter().map(|&p| p + (frame * h * w) as i64));
-            values.extend(velocities.iter().flatten());
-        }
-    }
-    if index.is_empty() {
-        return Ok(None);
-    }
-    let count = index.len();
-    let rows = velocity.clone().reshape([frames * h * w, channels]);
-    let picked = rows.select(0, Tensor::<1, Int>::from_data(TensorData::new(index, [count]), &device));
-    let truth = Tensor::<2>::from_data(TensorData::new(values, [count, 3]), &device);
     Ok(Some((picked - truth).abs().mean()))
 }
 

@@ -296,12 +296,12 @@ impl Trainer {
             checkpoint: None,
         };
         let checkpoints = run.out_dir.join("checkpoints");
-        let with_depth_flow = self.config.loss.depth > 0.0 || self.config.loss.flow > 0.0;
+        let with_depth = self.config.loss.depth > 0.0;
 
         while self.state.step < last_step {
             let step = self.state.step;
             let samples = (0..accumulation).map(|_| next_sample(&mut stream)).collect::<Result<Vec<_>, _>>()?;
-            let mut record = self.train_step(&samples, schedule.factor(step), with_depth_flow)?;
+            let mut record = self.train_step(&samples, schedule.factor(step), with_depth)?;
             let pose_warmup = step < self.config.optim.pose_warmup_steps;
             if pose_warmup {
                 bar.set_message(format!(
@@ -368,11 +368,11 @@ impl Trainer {
         &mut self,
         samples: &[LoadedSample],
         factor: f64,
-        with_depth_flow: bool,
+        with_depth: bool,
     ) -> Result<serde_json::Value, TrainError> {
         let step = self.state.step;
         let started = Instant::now();
-        let outcome = self.accumulate(samples, with_depth_flow)?;
+        let outcome = self.accumulate(samples, with_depth)?;
         let mut record = json!({ "kind": "train", "step": step, "lr_factor": factor });
         match outcome {
             Some(outcome) => {
@@ -412,7 +412,7 @@ impl Trainer {
 
     /// Loss and summed gradients of the samples of one step, spread over the devices; `None` when a loss is
     /// not finite.
-    fn accumulate(&self, samples: &[LoadedSample], with_depth_flow: bool) -> Result<Option<StepOutcome>, TrainError> {
+    fn accumulate(&self, samples: &[LoadedSample], with_depth: bool) -> Result<Option<StepOutcome>, TrainError> {
         let scale = 1.0 / samples.len() as f64;
         let shares: Vec<Vec<&LoadedSample>> = (0..self.devices.len())
             .map(|d| samples.iter().skip(d).step_by(self.devices.len()).collect())
@@ -420,7 +420,7 @@ impl Trainer {
             .collect();
         let master = &self.devices[0];
         let results: Vec<Result<Vec<SampleResult>, TrainError>> = if shares.len() == 1 {
-            vec![self.run_share(&self.model, &shares[0], master, scale, with_depth_flow)]
+            vec![self.run_share(&self.model, &shares[0], master, scale, with_depth)]
         } else {
             std::thread::scope(|scope| {
                 let handles: Vec<_> = shares
@@ -428,7 +428,7 @@ impl Trainer {
                     .zip(&self.devices)
                     .map(|(share, device)| {
                         let model = self.model.clone().fork(device);
-                        scope.spawn(move || self.run_share(&model, share, device, scale, with_depth_flow))
+                        scope.spawn(move || self.run_share(&model, share, device, scale, with_depth))
                     })
                     .collect();
                 handles.into_iter().map(|h| h.join().expect("a training thread panicked")).collect()
@@ -462,13 +462,13 @@ impl Trainer {
         share: &[&LoadedSample],
         device: &Device,
         scale: f64,
-        with_depth_flow: bool,
+        with_depth: bool,
     ) -> Result<Vec<SampleResult>, TrainError> {
         share
             .iter()
             .map(|sample| {
                 let started = Instant::now();
-                let batch = StepBatch::new(sample, &self.scene, &self.config.data.preprocess, with_depth_flow, device)?;
+                let batch = StepBatch::new(sample, &self.scene, &self.config.data.preprocess, with_depth, device)?;
                 let prepared = Instant::now();
                 let pose_warmup = sample.step < self.config.optim.pose_warmup_steps;
                 let loss = if pose_warmup {
@@ -552,7 +552,6 @@ fn weight(weights: &crate::config::LossWeights, name: &str) -> f64 {
         "lifespan_l1" => weights.lifespan_l1,
         "camera" => weights.camera,
         "depth" => weights.depth,
-        "flow" => weights.flow,
         _ => 0.0,
     }
 }

@@ -187,33 +187,6 @@ fn the_motion_head_starts_at_zero_and_is_trained_by_the_renders() {
 }
 
 #[test]
-fn the_flow_loss_teaches_the_motion_head_the_scene_flow() {
-    let out = tempfile::tempdir().unwrap();
-    let mut config = small_config(out.path(), 24);
-    config.model.motion_head = true;
-    config.loss.flow = 1.0;
-    let mut trainer = Trainer::new(config, vec![Device::flex()], false).unwrap();
-    let summary = trainer.run(RunOptions::default()).unwrap();
-    assert_eq!(summary.skipped_steps, 0);
-    let text = std::fs::read_to_string(out.path().join("metrics.jsonl")).unwrap();
-    let flow: Vec<f64> = text
-        .lines()
-        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
-        .filter_map(|r| r["terms"]["flow"].as_f64())
-        .collect();
-    assert_eq!(flow.len(), 24, "every step has a flow term");
-    let mean = |values: &[f64]| values.iter().sum::<f64>() / values.len() as f64;
-    let (start, end) = (mean(&flow[..4]), mean(&flow[20..]));
-    assert!(start > 0.0 && end < 0.7 * start, "flow loss {start} -> {end}");
-
-    // Without a motion head there is nothing for the flow to supervise.
-    let mut config = small_config(out.path(), 1);
-    config.loss.flow = 1.0;
-    let error = Trainer::new(config, vec![Device::flex()], false).err().expect("an error").to_string();
-    assert!(error.contains("loss.flow") && error.contains("motion_head"), "{error}");
-}
-
-#[test]
 fn validation_frames_outside_the_scene_are_refused_before_training() {
     let out = tempfile::tempdir().unwrap();
     let mut config = small_config(out.path(), 3);
