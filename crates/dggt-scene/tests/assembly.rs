@@ -134,7 +134,8 @@ fn cross_fades_weigh_the_two_bracketing_views_dynamic_gaussians_by_time() {
     let view_sum = |view: usize| dynamic[view * per_view..(view + 1) * per_view].iter().map(|&o| o as f64).sum::<f64>();
     // Views at times 0, 0.5, 1: time 0.125 lies a quarter of the way from view 0 to view 1.
     let fade = AssemblySettings { dynamic_blend: DynamicBlend::CrossFade, ..AssemblySettings::exact() };
-    let target = TargetView { rig_camera: 0, time: 0.125, camera: interpolate_camera(&pixels.views, 0, 0.125).unwrap() };
+    let target =
+        TargetView { rig_camera: 0, time: 0.125, camera: interpolate_camera(&pixels.views, 0, 0.125).unwrap() };
     let assembled = assemble(&pixels, &target, &fade).unwrap();
     assert_eq!(assembled.counts.dynamic_kept, 2 * per_view, "{:?}", assembled.counts);
     let OpacityTensor::Shared(opacities) = assembled.gaussians.opacities else { panic!("shared opacities") };
@@ -292,6 +293,24 @@ fn the_motion_head_moves_dynamic_gaussians_to_the_target_time() {
     let at_input = TargetView { rig_camera: 0, time: 1.0, camera: turned[2].camera };
     let (a, b) = (assemble(&held, &at_input, &exact).unwrap(), assemble(&moving, &at_input, &exact).unwrap());
     assert_eq!(means(&a), means(&b));
+
+    // Cross-faded, each of the two bracketing views moves over its own time to the target: view 1 (time 0.5)
+    // forward by 0.4, view 2 (time 1.0) back by 0.1.
+    let fade = AssemblySettings { dynamic_blend: DynamicBlend::CrossFade, ..exact };
+    let (a, b) = (assemble(&held, &target, &fade).unwrap(), assemble(&moving, &target, &fade).unwrap());
+    let (held_means, moved_means) = (means(&a), means(&b));
+    assert_eq!(held_means.len(), statics + 2 * H * W * 3);
+    for (view, elapsed, range) in
+        [(1, 0.4, statics..statics + H * W * 3), (2, -0.1, statics + H * W * 3..held_means.len())]
+    {
+        let rotation = turned[view].camera.world_from_camera.rotation();
+        let camera_velocity = dggt_geom::glam::DVec3::new(1.0, -0.5, 2.0) * (view + 1) as f64;
+        let expected = rotation * (camera_velocity * frames_per_time * elapsed);
+        for (h, m) in held_means[range.clone()].chunks_exact(3).zip(moved_means[range].chunks_exact(3)) {
+            let moved = dggt_geom::glam::DVec3::new((m[0] - h[0]) as f64, (m[1] - h[1]) as f64, (m[2] - h[2]) as f64);
+            assert!((moved - expected).length() < 1e-4, "view {view} moved by {moved}, expected {expected}");
+        }
+    }
 }
 
 #[test]
