@@ -180,11 +180,13 @@ pub fn assemble(
     let all: Vec<i64> = static_index.iter().chain(dynamic_indices.iter().flatten()).copied().collect();
     let all = index_tensor(&all);
     let pick = |tensor: &Tensor<2>| tensor.clone().select(0, all.clone());
-    let moves = pixels.velocity.is_some() && sources.iter().any(|s| s.elapsed != 0.0) && counts.dynamic_kept > 0;
+    // The sources that kept any Gaussian, with their kept rows.
+    let drawn: Vec<(&DynamicSource, &Vec<i64>)> =
+        sources.iter().zip(&dynamic_indices).filter(|(_, index)| !index.is_empty()).collect();
     let means = match &pixels.velocity {
-        Some(velocity) if moves => {
+        Some(velocity) if drawn.iter().any(|(source, _)| source.elapsed != 0.0) => {
             let mut parts = vec![pixels.means.clone().select(0, index_tensor(&static_index))];
-            for (source, index) in sources.iter().zip(&dynamic_indices).filter(|(_, index)| !index.is_empty()) {
+            for &(source, index) in &drawn {
                 let index = index_tensor(index);
                 parts.push(
                     pixels.means.clone().select(0, index.clone())
@@ -197,7 +199,7 @@ pub fn assemble(
     };
     let mut opacities = vec![faded.select(0, index_tensor(&static_index))];
     if let Some(dynamic) = dynamic_opacity_all {
-        for (source, index) in sources.iter().zip(&dynamic_indices).filter(|(_, index)| !index.is_empty()) {
+        for &(source, index) in &drawn {
             let picked = dynamic.clone().select(0, index_tensor(index));
             opacities.push(if source.weight == 1.0 { picked } else { picked.mul_scalar(source.weight) });
         }
