@@ -137,6 +137,12 @@ pub struct DptConfig {
     pub pos_embed: bool,
     pub head_features_2: usize,
     pub layernorm_eps: f64,
+    /// Adds a 3x3 convolution of the input image (RGB in `[0, 1]`) to every head's full-resolution features
+    /// before `output_conv2`: depth, Gaussian and mask edges can then follow image edges, which a map upsampled
+    /// from 14-pixel patch tokens blurs. For models trained from scratch; off in the release (its checkpoints
+    /// have no such layer).
+    #[serde(default)]
+    pub pixel_skip: bool,
 }
 
 /// Activation of a DPT head's prediction or confidence channels.
@@ -356,6 +362,7 @@ impl ModelConfig {
             pos_embed: true,
             head_features_2: 32,
             layernorm_eps: 1e-5,
+            pixel_skip: false,
         };
         let depth_head = DptHeadConfig {
             dim_in,

@@ -5,7 +5,9 @@
 //! 3x3 conv stride 2) -> `layer{i}_rn` 3x3 conv to `features`. Fusion runs coarse to fine (`refinenet4..1`:
 //! residual conv units, bilinear upsampling with align_corners, 1x1 conv), then `output_conv1` halves the
 //! channels, the map is resized bilinearly to the image size, the positional embedding is added again, and
-//! `output_conv2` (3x3 conv, ReLU, 1x1 conv) gives the raw output channels.
+//! `output_conv2` (3x3 conv, ReLU, 1x1 conv) gives the raw output channels. With
+//! [`DptConfig::pixel_skip`] (not in the release) a 3x3 convolution of the input image is added to the map
+//! `output_conv2` reads.
 //!
 //! Release quirk kept here: the residual conv unit applies its first ReLU in place, so its skip connection
 //! adds `relu(x)`, not `x`.
@@ -150,6 +152,8 @@ pub struct DptHead {
     pub projects: Vec<Conv2d>,
     pub resize_layers: ResizeLayers,
     pub scratch: Scratch,
+    /// 3x3 convolution from the input image's RGB to `output_conv2`'s input channels ([`DptConfig::pixel_skip`]).
+    pub pixel_skip: Option<Conv2d>,
     patch_size: usize,
     intermediate_layer_idx: [usize; 4],
     pos_embed: bool,
@@ -207,6 +211,7 @@ impl DptHead {
                     out: conv1x1(common.head_features_2, head.output_dim, device),
                 },
             },
+            pixel_skip: common.pixel_skip.then(|| conv3x3(3, f / 2, true, device)),
             patch_size: common.patch_size,
             intermediate_layer_idx: common.intermediate_layer_idx,
             pos_embed: common.pos_embed,
@@ -223,6 +228,19 @@ impl DptHead {
         self
     }
 
+    /// The head with the bias of raw output `channel` of its last 1x1 convolution set to `value` (a starting
+    /// point for one channel of a fresh head, e.g. the Gaussian head's lifespan).
+    pub fn with_output_bias(mut self, channel: usize, value: f32) -> Self {
+        let out = &mut self.scratch.output_conv2.out;
+        out.bias = out.bias.take().map(|b| {
+            replace_value(b, |b| {
+                let device = b.device();
+                b.slice_assign([channel..channel + 1], Tensor::full([1], value, &device))
+            })
+        });
+        self
+    }
+
     fn add_pos_embed(&self, x: Tensor<4>, image_aspect: f64) -> Tensor<4> {
         if !self.pos_embed {
             return x;
@@ -234,12 +252,14 @@ impl DptHead {
     }
 
     /// `layer(i)`: layer `i`'s `[B, S, P', dim_in]` tokens (only the tapped layers are asked for); patches
-    /// start at `patch_start_idx` and form a `grid = [rows, cols]` grid.
+    /// start at `patch_start_idx` and form a `grid = [rows, cols]` grid. `images`, `[B, S, 3, H, W]` in
+    /// `[0, 1]`, are the frames the tokens come from; only a head with a pixel skip reads them.
     pub fn forward(
         &self,
         layer: impl Fn(usize) -> Tensor<4>,
         patch_start_idx: usize,
         [rows, cols]: [usize; 2],
+        images: &Tensor<5>,
     ) -> DptOutput {
         let (height, width) = (rows * self.patch_size, cols * self.patch_size);
         let aspect = width as f64 / height as f64;
@@ -271,6 +291,13 @@ impl DptHead {
         let fused = sc.output_conv1.forward(x);
 
         let head_in = self.add_pos_embed(bilinear_aligned(fused.clone(), [height, width]), aspect);
+        let head_in = match &self.pixel_skip {
+            Some(conv) => {
+                let pixels = images.clone().cast(head_in.dtype()).reshape([head_in.dims()[0], 3, height, width]);
+                head_in + conv.forward(pixels)
+            }
+            None => head_in,
+        };
         let out = sc.output_conv2.out.forward(relu(sc.output_conv2.hidden.forward(head_in.clone())));
         let [frames, channels, _, _] = out.dims();
         let raw = out.permute([0, 2, 3, 1]).reshape([batch, frames / batch, height, width, channels]);
@@ -285,8 +312,9 @@ impl DptHead {
         layer: impl Fn(usize) -> Tensor<4>,
         patch_start_idx: usize,
         grid: [usize; 2],
+        images: &Tensor<5>,
     ) -> DptPrediction {
-        let dpt = self.forward(layer, patch_start_idx, grid);
+        let dpt = self.forward(layer, patch_start_idx, grid, images);
         let [activation, conf_activation] = self.activations;
         let (prediction, confidence) = activate_head(dpt.raw.clone(), activation, conf_activation);
         DptPrediction { dpt, prediction, confidence }

@@ -202,18 +202,21 @@ impl Dggt {
         let frame_global = |i: usize| aggregator.output_list[i].clone();
         let dino_tokens = |i: usize| aggregator.dino_token_list[i].clone();
         let (start, grid) = (aggregator.patch_start_idx, aggregator.grid);
-        let depth = self.depth_head.predict(frame_global, start, grid);
-        let points = extra.points.then(|| self.point_head.predict(frame_global, start, grid));
+        let depth = self.depth_head.predict(frame_global, start, grid, &images);
+        let points = extra.points.then(|| self.point_head.predict(frame_global, start, grid, &images));
         let gaussians = self.gs_head.as_ref().map(|head| {
-            let dpt = head.forward(|i| aggregator.output_with_dino_tokens(i), start, grid);
+            let dpt = head.forward(|i| aggregator.output_with_dino_tokens(i), start, grid, &images);
             let raw = self.apply_color_skip(dpt.raw.clone(), images.clone());
             // Activated in f32 whatever the network's float type: the maps feed the rasteriser.
             GaussianOutput { maps: GaussianMaps::from_raw(raw.cast(FloatDType::F32)), dpt }
         });
-        let instance = self.instance_head.as_ref().map(|head| head.predict(dino_tokens, start, grid));
-        let semantic =
-            self.semantic_head.as_ref().filter(|_| extra.semantic).map(|head| head.predict(dino_tokens, start, grid));
-        let motion = self.motion_head.as_ref().map(|head| head.predict(frame_global, start, grid));
+        let instance = self.instance_head.as_ref().map(|head| head.predict(dino_tokens, start, grid, &images));
+        let semantic = self
+            .semantic_head
+            .as_ref()
+            .filter(|_| extra.semantic)
+            .map(|head| head.predict(dino_tokens, start, grid, &images));
+        let motion = self.motion_head.as_ref().map(|head| head.predict(frame_global, start, grid, &images));
         Ok(DggtOutput { aggregator, camera, depth, points, gaussians, instance, semantic, motion })
     }
 }

@@ -88,19 +88,21 @@ pub fn heads_chunked(
     for first in (0..frames).step_by(chunk) {
         let count = chunk.min(frames - first);
         let pick = |tokens: Tensor<4>| tokens.narrow(1, first, count);
-        let prediction = model.depth_head.predict(|i| pick(aggregator.output_list[i].clone()), start, grid);
+        let chunk_images = images.clone().narrow(1, first, count);
+        let prediction =
+            model.depth_head.predict(|i| pick(aggregator.output_list[i].clone()), start, grid, &chunk_images);
         depth.push(f32(prediction.prediction.narrow(4, 0, 1).squeeze_dim::<4>(4)));
         if let Some(head) = &model.instance_head {
-            let prediction = head.predict(|i| pick(aggregator.dino_token_list[i].clone()), start, grid);
+            let prediction = head.predict(|i| pick(aggregator.dino_token_list[i].clone()), start, grid, &chunk_images);
             dynamic.push(f32(prediction.prediction.narrow(4, 0, 1).squeeze_dim::<4>(4)));
         }
         if let Some(head) = &model.gs_head {
-            let raw = head.forward(|i| pick(aggregator.output_with_dino_tokens(i)), start, grid).raw;
-            let raw = model.apply_color_skip(raw, images.clone().narrow(1, first, count));
+            let raw = head.forward(|i| pick(aggregator.output_with_dino_tokens(i)), start, grid, &chunk_images).raw;
+            let raw = model.apply_color_skip(raw, chunk_images.clone());
             gaussian_raw.push(raw.cast(FloatDType::F32));
         }
         if let Some(head) = &model.motion_head {
-            let prediction = head.predict(|i| pick(aggregator.output_list[i].clone()), start, grid);
+            let prediction = head.predict(|i| pick(aggregator.output_list[i].clone()), start, grid, &chunk_images);
             velocity.push(prediction.prediction.narrow(4, 0, 3).cast(FloatDType::F32));
         }
     }

@@ -39,9 +39,22 @@ pub struct ModelSection {
     /// Sky Gaussians per side (`SkyConfig::resolution`, `resolution^2` in all) instead of the preset's; only
     /// for a sky model that starts fresh, since a checkpoint's sky buffers fix their count.
     pub sky_resolution: Option<usize>,
+    /// Radius of the sky hemisphere in world units (`SkyConfig::radius`; 50 in the release) for a sky model
+    /// that starts fresh. The sky stays put while the cameras move, so its parallax over a clip of length `L`
+    /// is about `L / radius` radians: a far sky keeps the sky's colours registered across the input views.
+    pub sky_radius: Option<f64>,
     /// Add the motion head (`ModelConfig::motion_head`; not in the release's weights, so it starts fresh from
     /// predicting zero): dynamic Gaussians are moved to each target time by their predicted velocity.
     pub motion_head: bool,
+    /// Starting lifespan `gamma` of a fresh Gaussian head, in the release's frame-time units (inputs lie
+    /// `S / (4 (S - 1))` apart): the lifespan channel's bias starts at `1 / gamma`, so static Gaussians fade
+    /// away from their frame's time from the first step and the lifespan receives gradient. Absent, the bias
+    /// starts near 0 and most lifespans are 1e6 (no fade, no gradient) from the start. A checkpoint's head
+    /// overrides it.
+    pub lifespan_init: Option<f64>,
+    /// Give every DPT head a convolution of the input pixels (`DptConfig::pixel_skip`; not in the release's
+    /// weights, so only for heads that start fresh).
+    pub pixel_skip: bool,
 }
 
 impl Default for ModelSection {
@@ -52,7 +65,10 @@ impl Default for ModelSection {
             color_skip: false,
             unproject_at: PixelConvention::Integer,
             sky_resolution: None,
+            sky_radius: None,
             motion_head: false,
+            lifespan_init: None,
+            pixel_skip: false,
         }
     }
 }
@@ -344,6 +360,12 @@ impl TrainConfig {
             && !(clip > 0.0)
         {
             return Err(format!("optim.clip_grad_norm must be positive, got {clip}"));
+        }
+        if self.model.lifespan_init.is_some_and(|gamma| !(gamma.is_finite() && gamma > 0.0)) {
+            return Err("model.lifespan_init must be a positive, finite lifespan".into());
+        }
+        if self.model.sky_radius.is_some_and(|radius| !(radius.is_finite() && radius > 0.0)) {
+            return Err("model.sky_radius must be a positive, finite distance".into());
         }
         if self.model.sky_resolution == Some(0) {
             return Err("model.sky_resolution must be at least 1".into());
