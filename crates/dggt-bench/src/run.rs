@@ -207,7 +207,7 @@ fn load_network(options: &BenchOptions, device: &Device) -> Result<(Network, Vec
         None => {
             let config = fresh_tiny_config();
             device.seed(options.seed);
-            let model = dggt_train::fresh_model(&config, None, None, device)?;
+            let model = dggt_train::fresh_model(&config, None, device)?;
             let network = Network {
                 patch_size: config.aggregator.patch_size as u32,
                 crop_to_square: true,

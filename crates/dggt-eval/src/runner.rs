@@ -27,7 +27,7 @@ use dggt_losses::{ImageShape, Lpips, LpipsKind, psnr, ssim};
 use dggt_reconstruct::forward::forward_chunked;
 use dggt_reconstruct::inputs::{GroundTruth, InputSet};
 use dggt_reconstruct::{Architecture, LoadedNetwork, load_network};
-use dggt_scene::{AssemblySettings, InputView, TargetView, Timeline, interpolate_camera, render_target};
+use dggt_scene::{InputView, TargetView, Timeline, interpolate_camera, render_target};
 use dggt_train::objective::decode_cameras;
 
 use crate::error::EvalError;
@@ -382,7 +382,7 @@ fn evaluate_scene(
     drop(prediction);
     watch.add(ASSEMBLY, started);
 
-    let settings = AssemblySettings { dynamic_blend: network.dynamic_blend, ..AssemblySettings::default() };
+    let settings = network.assembly;
     let mut records = Vec::new();
     let mut largest_flow = 0.0f64;
     let mut has_depth_flow = false;

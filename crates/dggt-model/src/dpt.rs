@@ -228,19 +228,6 @@ impl DptHead {
         self
     }
 
-    /// The head with the bias of raw output `channel` of its last 1x1 convolution set to `value` (a starting
-    /// point for one channel of a fresh head, e.g. the Gaussian head's lifespan).
-    pub fn with_output_bias(mut self, channel: usize, value: f32) -> Self {
-        let out = &mut self.scratch.output_conv2.out;
-        out.bias = out.bias.take().map(|b| {
-            replace_value(b, |b| {
-                let device = b.device();
-                b.slice_assign([channel..channel + 1], Tensor::full([1], value, &device))
-            })
-        });
-        self
-    }
-
     fn add_pos_embed(&self, x: Tensor<4>, image_aspect: f64) -> Tensor<4> {
         if !self.pos_embed {
             return x;

@@ -9,9 +9,6 @@ use burn::tensor::activation::{relu, sigmoid, softplus};
 /// Number of raw channels the Gaussian head produces.
 pub const GAUSSIAN_CHANNELS: usize = 12;
 
-/// The raw channel the lifespan is activated from (the head's last, "confidence" channel).
-pub const LIFESPAN_CHANNEL: usize = 11;
-
 /// Activated maps, all over `[B, S, H, W, ..]`.
 #[derive(Debug, Clone)]
 pub struct GaussianMaps {
@@ -38,7 +35,7 @@ impl GaussianMaps {
         // The release divides by max(|q|, 1e-12). Clamping the squared norm before the square root gives the
         // same values and a zero (not NaN) gradient for an all-zero quaternion, where sqrt's derivative is infinite.
         let norm = rotation.clone().powi_scalar(2).sum_dim(4).clamp_min(1e-24).sqrt();
-        let lifespan_raw = channels(LIFESPAN_CHANNEL, 1).squeeze_dim::<4>(4);
+        let lifespan_raw = channels(11, 1).squeeze_dim::<4>(4);
         Self {
             rgb: sigmoid(channels(0, 3)),
             opacity: sigmoid(channels(3, 1)).squeeze_dim::<4>(4),

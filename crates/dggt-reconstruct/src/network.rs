@@ -16,7 +16,7 @@ use dggt_data::Preprocess;
 use dggt_model::sky::SkyModel;
 use dggt_model::weights::{Coverage, load_checkpoint_with};
 use dggt_model::{Dggt, ModelConfig};
-use dggt_scene::DynamicBlend;
+use dggt_scene::AssemblySettings;
 use dggt_train::{TrainConfig, checkpoint, model_config};
 use serde::Serialize;
 
@@ -59,8 +59,9 @@ pub struct LoadedNetwork {
     pub info: CheckpointInfo,
     /// The preprocessing of a training `.toml` given as `--config`.
     pub preprocess: Option<Preprocess>,
-    /// How targets draw dynamic Gaussians: the training `.toml`'s `render.dynamic_blend`, else the release's.
-    pub dynamic_blend: DynamicBlend,
+    /// How targets are assembled and rasterised: as the training `.toml` given as `--config` rendered them
+    /// (its `render` section: dynamic blend, `eps2d`, far plane), else as the release does.
+    pub assembly: AssemblySettings,
     pub warnings: Vec<String>,
 }
 
@@ -82,7 +83,7 @@ pub fn load_network(
         None => (None, None, String::new()),
     };
     let preprocess = training.as_ref().map(|t| t.data.preprocess.clone());
-    let dynamic_blend = training.as_ref().map_or(DynamicBlend::default(), |t| t.render.dynamic_blend);
+    let assembly = training.as_ref().map_or(AssemblySettings::default(), |t| t.render.assembly());
     let mut warnings = Vec::new();
     if path.is_dir() {
         let dir = trainer_checkpoint_dir(path)?;
@@ -99,7 +100,7 @@ pub fn load_network(
             parameters: burn::module::Module::num_params(&model),
             fresh_modules: Vec::new(),
         };
-        return Ok(LoadedNetwork { model, config, info, preprocess, dynamic_blend, warnings });
+        return Ok(LoadedNetwork { model, config, info, preprocess, assembly, warnings });
     }
 
     let (config, arch_name) = match config_from_arch {
@@ -148,7 +149,7 @@ pub fn load_network(
         parameters: burn::module::Module::num_params(&model),
         fresh_modules: fresh,
     };
-    Ok(LoadedNetwork { model, config, info, preprocess, dynamic_blend, warnings })
+    Ok(LoadedNetwork { model, config, info, preprocess, assembly, warnings })
 }
 
 /// The checkpoint folder of a `step-N` folder, a run's `checkpoints/` folder or a run folder.

@@ -33,8 +33,7 @@ use dggt_export::nerfstudio::{NerfstudioFrame, write_transforms};
 use dggt_export::ply::{GaussianCloud, write_ply};
 use dggt_geom::{ImageSize, PosedCamera, WorldFromCamera};
 use dggt_scene::{
-    AssemblySettings, InputView, MIN_OPACITY, PixelGaussians, TargetView, Timeline, interpolate_camera, nearest_view,
-    render_target,
+    InputView, MIN_OPACITY, PixelGaussians, TargetView, Timeline, interpolate_camera, nearest_view, render_target,
 };
 use dggt_train::batch::relative_pose;
 use dggt_train::objective::decode_cameras;
@@ -213,7 +212,7 @@ pub fn reconstruct(options: &ReconstructOptions, device: &Device) -> Result<Summ
             drop(host_pixels);
             stages.done("write gaussians");
 
-            let settings = AssemblySettings { dynamic_blend: network.dynamic_blend, ..AssemblySettings::default() };
+            let settings = network.assembly;
             let total = inputs.views.len() + times_s.len() * inputs.cameras.len();
             let bar = progress_bar(options.progress, total as u64);
             // Input views re-rendered: the sky masks, the PSNR, and the renders at input times.

@@ -15,7 +15,7 @@
 
 use burn::tensor::{Int, Tensor, TensorData};
 use dggt_model::lifespan::{dynamic_opacity, opacity_at, static_opacity};
-use dggt_splat::{GaussianTensors, OpacityTensor};
+use dggt_splat::{GaussianTensors, OpacityTensor, RasterSettings};
 use rayon::prelude::*;
 
 use crate::error::SceneError;
@@ -40,6 +40,9 @@ pub struct AssemblySettings {
     pub far_plane: f32,
     /// Which input views lend their dynamic Gaussians to the target time.
     pub dynamic_blend: DynamicBlend,
+    /// Variance in pixels² added to each projected covariance's diagonal (the rasteriser's `eps2d`; 0.3 in the
+    /// release): a low-pass floor under every footprint.
+    pub eps2d: f32,
 }
 
 impl Default for AssemblySettings {
@@ -50,6 +53,7 @@ impl Default for AssemblySettings {
             near_plane: 0.01,
             far_plane: 1e10,
             dynamic_blend: DynamicBlend::Nearest,
+            eps2d: RasterSettings::default().eps2d,
         }
     }
 }

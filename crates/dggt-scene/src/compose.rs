@@ -52,8 +52,12 @@ pub fn render_assembled(
     let counts = *counts;
     let device = gaussians.means.device();
     let cameras = camera_tensors(&[target.camera], size, &device)?;
-    let raster =
-        RasterSettings { near_plane: assembly.near_plane, far_plane: assembly.far_plane, ..Default::default() };
+    let raster = RasterSettings {
+        near_plane: assembly.near_plane,
+        far_plane: assembly.far_plane,
+        eps2d: assembly.eps2d,
+        ..Default::default()
+    };
     let settings = RenderSettings { raster, background: None };
     let what = || format!("the view of camera {} at t = {}", target.rig_camera, target.time);
     let foreground =

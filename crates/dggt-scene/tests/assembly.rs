@@ -1,6 +1,6 @@
 //! Scene assembly on small synthetic predictions: culling never changes the render, gradients reach the maps
 //! (and the depth only when asked), dynamic Gaussians appear only near their own time (cross-faded between the
-//! two bracketing views when asked), lifespans fade.
+//! two bracketing views when asked), lifespans fade, `eps2d` spreads every footprint.
 
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_geom::glam::{DQuat, DVec3};
@@ -232,6 +232,34 @@ fn gaussians_beyond_the_far_plane_are_dropped_and_draw_nothing() {
     );
     let alpha = host(render_target(&pixels, None, &target, &far).unwrap().alpha);
     assert!(alpha.iter().filter(|a| **a > 0.5).count() > H * W / 2);
+}
+
+#[test]
+fn eps2d_sets_how_far_each_footprint_spreads() {
+    let device = Device::flex();
+    // Tiny scales and short lifespans (gamma 0.25): at view 0's own time and camera, its Gaussians sit on the
+    // pixel centres and the other views' have faded below the rasteriser's threshold.
+    let maps = GaussianMaps::from_raw(raw_maps(&device, 4.0));
+    let pixels =
+        PixelGaussians::new(&maps, depth(&device), None, views(), MeansGradient::Detached, PixelConvention::Centred)
+            .unwrap();
+    let target = TargetView { rig_camera: 0, time: 0.0, camera: views()[0].camera };
+    let own: Vec<f32> = {
+        let opacity = host(maps.opacity.clone().narrow(1, 0, 1).reshape([H, W, 1]));
+        let rgb = host(maps.rgb.clone().narrow(1, 0, 1).reshape([H, W, 3]));
+        rgb.iter().enumerate().map(|(i, c)| c * opacity[i / 3]).collect()
+    };
+    let mean_error = |eps2d: f32| {
+        let settings = AssemblySettings { eps2d, ..AssemblySettings::default() };
+        let rgb = host(render_target(&pixels, None, &target, &settings).unwrap().rgb);
+        rgb.iter().zip(&own).map(|(a, b)| (a - b).abs()).sum::<f32>() / own.len() as f32
+    };
+    // The release's 0.3 px² spreads a fifth of each Gaussian's alpha onto its neighbours' centres; 0.03 px²
+    // keeps each pixel to its own Gaussian.
+    let (release, sharp) = (mean_error(0.3), mean_error(0.03));
+    assert!(sharp < 1e-3, "with eps2d 0.03 each pixel shows its own Gaussian: mean error {sharp}");
+    assert!(release > 0.02, "with eps2d 0.3 the neighbours blend in: mean error {release}");
+    assert_eq!(AssemblySettings::default().eps2d, 0.3, "the release's low-pass variance is the default");
 }
 
 /// `[1, S, H, W, 3]` camera-axis velocities: view `v` moves everything along `(1, -0.5, 2) (v + 1)`.

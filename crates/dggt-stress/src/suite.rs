@@ -365,7 +365,7 @@ pub fn run_suite(options: &StressOptions, device: &Device) -> Result<StressRepor
     }
 
     device.seed(0);
-    let model = fresh_model(&config, None, None, &device).map_err(|e| e.to_string())?;
+    let model = fresh_model(&config, None, &device).map_err(|e| e.to_string())?;
     let network_render = RenderSection {
         cameras: CameraSource::Predicted,
         means_gradient: MeansGradientSetting::Through,

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use dggt_data::{Preprocess, SamplerConfig};
 use dggt_geom::PixelConvention;
-use dggt_scene::DynamicBlend;
+use dggt_scene::{AssemblySettings, DynamicBlend};
 use serde::{Deserialize, Serialize};
 
 use crate::error::TrainError;
@@ -39,19 +39,9 @@ pub struct ModelSection {
     /// Sky Gaussians per side (`SkyConfig::resolution`, `resolution^2` in all) instead of the preset's; only
     /// for a sky model that starts fresh, since a checkpoint's sky buffers fix their count.
     pub sky_resolution: Option<usize>,
-    /// Radius of the sky hemisphere in world units (`SkyConfig::radius`; 50 in the release) for a sky model
-    /// that starts fresh. The sky stays put while the cameras move, so its parallax over a clip of length `L`
-    /// is about `L / radius` radians: a far sky keeps the sky's colours registered across the input views.
-    pub sky_radius: Option<f64>,
     /// Add the motion head (`ModelConfig::motion_head`; not in the release's weights, so it starts fresh from
     /// predicting zero): dynamic Gaussians are moved to each target time by their predicted velocity.
     pub motion_head: bool,
-    /// Starting lifespan `gamma` of a fresh Gaussian head, in the release's frame-time units (inputs lie
-    /// `S / (4 (S - 1))` apart): the lifespan channel's bias starts at `1 / gamma`, so static Gaussians fade
-    /// away from their frame's time from the first step and the lifespan receives gradient. Absent, the bias
-    /// starts near 0 and most lifespans are 1e6 (no fade, no gradient) from the start. A checkpoint's head
-    /// overrides it.
-    pub lifespan_init: Option<f64>,
     /// Give every DPT head a convolution of the input pixels (`DptConfig::pixel_skip`; not in the release's
     /// weights, so only for heads that start fresh).
     pub pixel_skip: bool,
@@ -65,9 +55,7 @@ impl Default for ModelSection {
             color_skip: false,
             unproject_at: PixelConvention::Integer,
             sky_resolution: None,
-            sky_radius: None,
             motion_head: false,
-            lifespan_init: None,
             pixel_skip: false,
         }
     }
@@ -136,6 +124,22 @@ pub struct RenderSection {
     /// Which input views' dynamic Gaussians a target shows: `nearest` (the release) or `cross_fade` (the two
     /// bracketing views, opacities weighted by time).
     pub dynamic_blend: DynamicBlend,
+    /// The rasteriser's low-pass variance in pixels² (`eps2d`; 0.3 in the release, whose weights assume it).
+    /// A model trained from scratch renders sharper with a smaller one.
+    pub eps2d: f64,
+}
+
+impl RenderSection {
+    /// How targets are assembled and rasterised under these settings (training, and the reconstructions and
+    /// evaluations of a model trained with them).
+    pub fn assembly(&self) -> AssemblySettings {
+        AssemblySettings {
+            far_plane: self.far_plane as f32,
+            dynamic_blend: self.dynamic_blend,
+            eps2d: self.eps2d as f32,
+            ..AssemblySettings::default()
+        }
+    }
 }
 
 impl Default for RenderSection {
@@ -147,6 +151,7 @@ impl Default for RenderSection {
             sky: true,
             far_plane: 1e10,
             dynamic_blend: DynamicBlend::Nearest,
+            eps2d: 0.3,
         }
     }
 }
@@ -361,12 +366,6 @@ impl TrainConfig {
         {
             return Err(format!("optim.clip_grad_norm must be positive, got {clip}"));
         }
-        if self.model.lifespan_init.is_some_and(|gamma| !(gamma.is_finite() && gamma > 0.0)) {
-            return Err("model.lifespan_init must be a positive, finite lifespan".into());
-        }
-        if self.model.sky_radius.is_some_and(|radius| !(radius.is_finite() && radius > 0.0)) {
-            return Err("model.sky_radius must be a positive, finite distance".into());
-        }
         if self.model.sky_resolution == Some(0) {
             return Err("model.sky_resolution must be at least 1".into());
         }
@@ -404,6 +403,10 @@ impl TrainConfig {
         }
         if l.gram > 0.0 && l.gram_backbone.is_none() {
             return Err("loss.gram > 0 needs loss.gram_backbone".into());
+        }
+        if !(self.render.eps2d.is_finite() && self.render.eps2d > 0.0) {
+            // Zero leaves flat Gaussians seen edge-on with a singular footprint.
+            return Err(format!("render.eps2d must be a positive, finite variance, got {}", self.render.eps2d));
         }
         if !(self.render.far_plane > 0.01) {
             return Err(format!("render.far_plane must exceed the near plane 0.01, got {}", self.render.far_plane));

@@ -74,11 +74,7 @@ impl Objective {
             Some(path) if weights.gram > 0.0 => Some(GramLoss::load(path, device)?),
             _ => None,
         };
-        let assembly = AssemblySettings {
-            far_plane: render.far_plane as f32,
-            dynamic_blend: render.dynamic_blend,
-            ..AssemblySettings::default()
-        };
+        let assembly = render.assembly();
         Ok(Self { weights, render, assembly, lpips, gram })
     }
 

@@ -18,7 +18,6 @@ use burn::module::{Module, ModuleVisitor, Param};
 use burn::optim::{GradientsAccumulator, GradientsParams};
 use burn::tensor::{Device, Tensor};
 use dggt_data::{LoadedSample, LoaderOptions, Prefetcher, Sampler, Scene, TrainingSample, open_scene, training_stream};
-use dggt_model::gaussian_maps::LIFESPAN_CHANNEL;
 use dggt_model::sky::SkyModel;
 use dggt_model::weights::{Coverage, load_checkpoint_with};
 use dggt_model::{Dggt, ModelConfig};
@@ -49,19 +48,11 @@ pub fn model_config(preset: &str) -> Result<ModelConfig, TrainError> {
 }
 
 /// A fresh network: random layers, the sky model's fixed buffers, then the starting checkpoint when given.
-pub fn fresh_model(
-    config: &ModelConfig,
-    lifespan_init: Option<f64>,
-    init: Option<&Path>,
-    device: &Device,
-) -> Result<Dggt, TrainError> {
+pub fn fresh_model(config: &ModelConfig, init: Option<&Path>, device: &Device) -> Result<Dggt, TrainError> {
     let mut model = Dggt::new(config, device)?;
     materialise(&model);
     if let Some(sky) = &config.sky_model {
         model.sky_model = Some(SkyModel::initialised(sky, device));
-    }
-    if let Some(gamma) = lifespan_init {
-        model.gs_head = model.gs_head.map(|head| head.with_output_bias(LIFESPAN_CHANNEL, (1.0 / gamma) as f32));
     }
     if let Some(path) = init {
         let report = load_checkpoint_with(&mut model, path, Coverage::Partial)?;
@@ -180,20 +171,14 @@ impl Trainer {
                     gs.color_skip = config.model.color_skip;
                     gs.unproject_at = config.model.unproject_at;
                 }
-                if let Some(sky) = &mut model_config.sky_model {
-                    sky.resolution = config.model.sky_resolution.unwrap_or(sky.resolution);
-                    sky.radius = config.model.sky_radius.unwrap_or(sky.radius);
+                if let (Some(sky), Some(resolution)) = (&mut model_config.sky_model, config.model.sky_resolution) {
+                    sky.resolution = resolution;
                 }
                 model_config.dpt.pixel_skip = config.model.pixel_skip;
                 if config.model.motion_head {
                     model_config = model_config.with_motion_head();
                 }
-                let model = fresh_model(
-                    &model_config,
-                    config.model.lifespan_init,
-                    config.model.init_checkpoint.as_deref(),
-                    &device,
-                )?;
+                let model = fresh_model(&model_config, config.model.init_checkpoint.as_deref(), &device)?;
                 let model = freeze(model, &config.optim.frozen)?;
                 let optimizer = Optimizer::new(&config.optim, &model);
                 let state = RunState { step: 0, seed: config.run.seed, skipped_steps: 0, elapsed_s: 0.0 };

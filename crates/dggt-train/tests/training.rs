@@ -118,6 +118,15 @@ fn shipped_configurations_parse_and_validate() {
     std::fs::write(bad.path(), "[optim]\nlearning_rate = 1.0\n").unwrap();
     let error = TrainConfig::load(bad.path()).unwrap_err().to_string();
     assert!(error.contains("learning_rate"), "{error}");
+    let overfit = std::fs::read_to_string(dir.join("tiny-overfit.toml")).unwrap();
+    assert!(overfit.contains("\neps2d = "), "the overfit configuration sets render.eps2d");
+    let zero_eps2d: String = overfit
+        .lines()
+        .map(|l| if l.starts_with("eps2d = ") { "eps2d = 0.0\n".into() } else { format!("{l}\n") })
+        .collect();
+    std::fs::write(bad.path(), zero_eps2d).unwrap();
+    let error = TrainConfig::load(bad.path()).unwrap_err().to_string();
+    assert!(error.contains("render.eps2d"), "{error}");
 }
 
 #[test]
