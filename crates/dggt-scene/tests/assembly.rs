@@ -80,6 +80,12 @@ fn placed(maps: &GaussianMaps, dynamic_logit: Option<f32>, views: Vec<InputView>
     PixelGaussians::new(maps, depth(&device), logits, views, MeansGradient::Detached, PixelConvention::Integer).unwrap()
 }
 
+/// The Gaussians of `maps` on `views()`, all static, means detached, unprojected at pixel centres.
+fn static_at_pixel_centres(maps: &GaussianMaps) -> PixelGaussians {
+    let device = maps.opacity.device();
+    PixelGaussians::new(maps, depth(&device), None, views(), MeansGradient::Detached, PixelConvention::Centred).unwrap()
+}
+
 fn host(tensor: Tensor<3>) -> Vec<f32> {
     tensor.into_data().try_into_vec::<f32>().unwrap()
 }
@@ -214,9 +220,7 @@ fn bad_inputs_are_errors() {
 fn gaussians_beyond_the_far_plane_are_dropped_and_draw_nothing() {
     let device = Device::flex();
     let maps = GaussianMaps::from_raw(raw_maps(&device, 0.0));
-    let pixels =
-        PixelGaussians::new(&maps, depth(&device), None, views(), MeansGradient::Detached, PixelConvention::Centred)
-            .unwrap();
+    let pixels = static_at_pixel_centres(&maps);
     let target = TargetView { rig_camera: 0, time: 0.5, camera: views()[1].camera };
     // Every depth lies in [4, 5) in front of cameras a few decimetres apart.
     let near = AssemblySettings { far_plane: 3.0, ..AssemblySettings::default() };
@@ -240,9 +244,7 @@ fn eps2d_sets_how_far_each_footprint_spreads() {
     // Tiny scales and short lifespans (gamma 0.25): at view 0's own time and camera, its Gaussians sit on the
     // pixel centres and the other views' have faded below the rasteriser's threshold.
     let maps = GaussianMaps::from_raw(raw_maps(&device, 4.0));
-    let pixels =
-        PixelGaussians::new(&maps, depth(&device), None, views(), MeansGradient::Detached, PixelConvention::Centred)
-            .unwrap();
+    let pixels = static_at_pixel_centres(&maps);
     let target = TargetView { rig_camera: 0, time: 0.0, camera: views()[0].camera };
     let own: Vec<f32> = {
         let opacity = host(maps.opacity.clone().narrow(1, 0, 1).reshape([H, W, 1]));
