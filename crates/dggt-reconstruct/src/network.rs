@@ -178,12 +178,7 @@ fn read_architecture(arch: &Architecture) -> Result<(ModelConfig, Option<TrainCo
         Architecture::Preset(name) => Ok((model_config(name)?, None, format!("preset `{name}`"))),
         Architecture::Config(path) if path.extension().is_some_and(|e| e == "toml") => {
             let train = TrainConfig::load(path)?;
-            let mut config = model_config(&train.model.preset)?;
-            if let Some(gs) = &mut config.gs_head {
-                gs.color_skip = train.model.color_skip;
-                gs.unproject_at = train.model.unproject_at;
-            }
-            Ok((config, Some(train), format!("{}", path.display())))
+            Ok((train.model.architecture()?, Some(train), format!("{}", path.display())))
         }
         Architecture::Config(path) => {
             let config = ModelConfig::from_parity_json(path).map_err(|e| ReconstructError::Input {

@@ -27,7 +27,7 @@ use serde_json::json;
 
 use crate::batch::StepBatch;
 use crate::checkpoint::{self, RunState};
-use crate::config::TrainConfig;
+use crate::config::{ModelSection, TrainConfig};
 use crate::error::TrainError;
 use crate::objective::Objective;
 use crate::optimizer::{Optimizer, freeze};
@@ -44,6 +44,23 @@ pub fn model_config(preset: &str) -> Result<ModelConfig, TrainError> {
             what: "model.preset".into(),
             detail: format!("unknown preset `{other}` (tiny, vggt_1b, dggt)"),
         }),
+    }
+}
+
+impl ModelSection {
+    /// The network this section describes: the preset with the section's changes (colour skip, unprojection,
+    /// sky resolution, pixel skip, motion head).
+    pub fn architecture(&self) -> Result<ModelConfig, TrainError> {
+        let mut config = model_config(&self.preset)?;
+        if let Some(gs) = &mut config.gs_head {
+            gs.color_skip = self.color_skip;
+            gs.unproject_at = self.unproject_at;
+        }
+        if let (Some(sky), Some(resolution)) = (&mut config.sky_model, self.sky_resolution) {
+            sky.resolution = resolution;
+        }
+        config.dpt.pixel_skip = self.pixel_skip;
+        Ok(if self.motion_head { config.with_motion_head() } else { config })
     }
 }
 
@@ -166,18 +183,7 @@ impl Trainer {
             }
             None => {
                 device.seed(config.run.seed);
-                let mut model_config = model_config(&config.model.preset)?;
-                if let Some(gs) = &mut model_config.gs_head {
-                    gs.color_skip = config.model.color_skip;
-                    gs.unproject_at = config.model.unproject_at;
-                }
-                if let (Some(sky), Some(resolution)) = (&mut model_config.sky_model, config.model.sky_resolution) {
-                    sky.resolution = resolution;
-                }
-                model_config.dpt.pixel_skip = config.model.pixel_skip;
-                if config.model.motion_head {
-                    model_config = model_config.with_motion_head();
-                }
+                let model_config = config.model.architecture()?;
                 let model = fresh_model(&model_config, config.model.init_checkpoint.as_deref(), &device)?;
                 let model = freeze(model, &config.optim.frozen)?;
                 let optimizer = Optimizer::new(&config.optim, &model);

@@ -1,7 +1,8 @@
 //! The trainer end to end on the bundled fixture (CPU): a few dozen steps reduce the loss and raise the target
 //! PSNR; a run interrupted and resumed ends with the same weights as the uninterrupted one; a non-finite loss
 //! skips the step and leaves the weights untouched; two devices sharing the accumulated samples train like
-//! one; training on freshly generated synthetic scenes stays finite; the shipped configurations parse and validate.
+//! one; training on freshly generated synthetic scenes stays finite; the shipped configurations parse and validate;
+//! a configuration's model section describes the network the trainer builds.
 
 use std::path::{Path, PathBuf};
 
@@ -205,4 +206,15 @@ fn validation_frames_outside_the_scene_are_refused_before_training() {
     config.data.validation.targets = vec![12];
     let error = Trainer::new(config, vec![Device::flex()], false).err().expect("an error").to_string();
     assert!(error.contains("data.validation") && error.contains("frame 12"), "{error}");
+}
+
+#[test]
+fn the_model_section_describes_the_network_the_trainer_builds() {
+    let out = tempfile::tempdir().unwrap();
+    let config = small_config(out.path(), 1);
+    let architecture = config.model.architecture().unwrap();
+    assert!(architecture.dpt.pixel_skip, "the overfit configuration turns the pixel skip on");
+    assert_eq!(architecture.sky_model.as_ref().map(|sky| sky.resolution), config.model.sky_resolution);
+    let trainer = Trainer::new(config, vec![Device::flex()], false).unwrap();
+    assert_eq!(trainer.model_config(), &architecture, "what `--config` gives reconstruct and eval");
 }
