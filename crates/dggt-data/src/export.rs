@@ -89,7 +89,16 @@ pub fn read_export(root: &Path, options: &ExportOptions) -> Result<Scene> {
     }
     let lidar = frames.iter().map(|frame| Some(layout.lidar(frame.index)).filter(|p| p.is_file())).collect();
     let name = root.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    Ok(Scene { name, root: root.to_owned(), source: SceneSource::Export, cameras, frames, views, lidar })
+    Ok(Scene {
+        name,
+        root: root.to_owned(),
+        source: SceneSource::Export,
+        cameras,
+        frames,
+        views,
+        lidar,
+        world_from_log: anchor.relabel(),
+    })
 }
 
 fn read_rigid<To, From>(path: &Path) -> Result<Rigid<To, From>> {

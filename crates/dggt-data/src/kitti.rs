@@ -79,6 +79,7 @@ pub fn read_kitti_odometry(root: &Path, frames: Option<Range<usize>>) -> Result<
         lidar: vec![None; scene_frames.len()],
         frames: scene_frames,
         views,
+        world_from_log: anchor.relabel(),
     })
 }
 

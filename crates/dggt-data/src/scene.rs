@@ -7,7 +7,7 @@
 
 use std::path::PathBuf;
 
-use dggt_geom::{EgoFromCamera, ImageSize, PinholeIntrinsics, WorldFromCamera, WorldFromEgo};
+use dggt_geom::{EgoFromCamera, ImageSize, PinholeIntrinsics, WorldFromCamera, WorldFromEgo, WorldFromLogWorld};
 
 /// Where a scene came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -79,9 +79,18 @@ pub struct Scene {
     pub views: Vec<View>,
     /// Lidar sweep per frame (`lidar/{t:03}.bin`), when present.
     pub lidar: Vec<Option<PathBuf>>,
+    /// The log's world frame (its ego poses and exported scene flow) in the scene's world, which is anchored at
+    /// the first chosen frame.
+    pub world_from_log: WorldFromLogWorld,
 }
 
 impl Scene {
+    /// Seconds between consecutive log frames (from the chosen frames' timestamps); `None` with one frame.
+    pub fn seconds_per_frame(&self) -> Option<f64> {
+        let (first, last) = (self.frames.first()?, self.frames.last()?);
+        (last.index > first.index).then(|| (last.timestamp - first.timestamp) / (last.index - first.index) as f64)
+    }
+
     /// The view of frame position `frame` and camera position `camera`.
     pub fn view(&self, frame: usize, camera: usize) -> &View {
         &self.views[frame * self.cameras.len() + camera]

@@ -12,8 +12,8 @@
 //!
 //! Motion: without a motion head, dynamic Gaussians are held where they were predicted and the predicted
 //! motion of every surface point is zero ([`MotionSource::Held`]); its metrics are computed anyway and
-//! labelled. With a motion head the renders use its velocities, but motion is not scored
-//! ([`MotionSource::MotionHeadUnscored`]). As STORM does, motion is scored at the lidar cells (positive
+//! labelled. With predicted velocities (a motion head, or the Gaussian head's velocity channels) the renders
+//! use them, but motion is not scored ([`MotionSource::PredictedUnscored`]). As STORM does, motion is scored at the lidar cells (positive
 //! depth; here also not sky and inside the view) and only for windows where some true flow exceeds
 //! [`MOTION_GATE`] (STORM skips samples without such motion, whose accuracies would be trivially high).
 
@@ -48,9 +48,9 @@ const STAGES: [&str; 5] = ["load", "forward", "assembly", "render", "metrics"];
 pub enum MotionSource {
     /// No motion head: every Gaussian is held in place, so the predicted flow is zero.
     Held,
-    /// A motion head moves the dynamic Gaussians, but its velocities are not rendered at the scored cells, so
+    /// Predicted velocities move the dynamic Gaussians, but they are not rendered at the scored cells, so
     /// motion is not scored (rather than scored as zero).
-    MotionHeadUnscored,
+    PredictedUnscored,
 }
 
 impl MotionSource {
@@ -58,7 +58,7 @@ impl MotionSource {
     pub fn label(self) -> &'static str {
         match self {
             Self::Held => MOTION_HELD,
-            Self::MotionHeadUnscored => "motion head (its velocities are not rendered at the scored cells: not scored)",
+            Self::PredictedUnscored => "predicted velocities (not rendered at the scored cells: not scored)",
         }
     }
 
@@ -66,7 +66,7 @@ impl MotionSource {
     pub fn predicted_flow(self, points: usize) -> Option<Vec<[f32; 3]>> {
         match self {
             Self::Held => Some(vec![[0.0; 3]; points]),
-            Self::MotionHeadUnscored => None,
+            Self::PredictedUnscored => None,
         }
     }
 }
@@ -169,8 +169,7 @@ pub fn evaluate(options: &EvalOptions, device: &Device) -> Result<EvalReport, Ev
         warnings.push("the network has no sky model: renders have a black sky".into());
     }
 
-    let motion =
-        if network.model.motion_head.is_some() { MotionSource::MotionHeadUnscored } else { MotionSource::Held };
+    let motion = if network.config.predicts_motion() { MotionSource::PredictedUnscored } else { MotionSource::Held };
     let mut reports = Vec::new();
     for (root, scene) in options.scenes.iter().zip(&scenes) {
         tracing::info!("evaluating {}", root.display());

@@ -13,6 +13,11 @@ pub trait Frame {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct World;
 
+/// A log's own world frame, where its ego poses (and an export's scene flow) are expressed, before the scene
+/// re-anchors them at its first chosen frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LogWorld;
+
 /// The ego vehicle's body frame: x forward, y left, z up (Waymo vehicle convention).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Ego;
@@ -27,6 +32,9 @@ pub struct WaymoCamera;
 
 impl Frame for World {
     const NAME: &'static str = "world";
+}
+impl Frame for LogWorld {
+    const NAME: &'static str = "log world";
 }
 impl Frame for Ego {
     const NAME: &'static str = "ego (forward-left-up)";

@@ -25,12 +25,12 @@ mod rigid;
 mod unproject;
 
 pub use error::GeomError;
-pub use frames::{Camera, Ego, WaymoCamera, World};
+pub use frames::{Camera, Ego, LogWorld, WaymoCamera, World};
 pub use interpolate::{PosedCamera, interpolate_intrinsics, interpolate_rigid};
 pub use intrinsics::{ImageSize, PinholeIntrinsics, PixelConvention};
 pub use pose_encoding::PoseEncoding;
 pub use quaternion::{QuatWxyz, QuatXyzw, slerp};
-pub use rigid::{CameraFromWorld, EgoFromCamera, Rigid, WorldFromCamera, WorldFromEgo};
+pub use rigid::{CameraFromWorld, EgoFromCamera, Rigid, WorldFromCamera, WorldFromEgo, WorldFromLogWorld};
 pub use unproject::unproject_depth_map;
 
 /// Re-exported so that callers use the same glam version as this crate.

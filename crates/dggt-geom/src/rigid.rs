@@ -7,7 +7,7 @@ use std::ops::Mul;
 use glam::{DMat3, DMat4, DQuat, DVec3};
 
 use crate::GeomError;
-use crate::frames::{Camera, Ego, Frame, World};
+use crate::frames::{Camera, Ego, Frame, LogWorld, World};
 
 /// Largest deviation of `RᵀR` from the identity accepted when reading a rotation matrix. Text exports carry
 /// 6-9 significant digits; anything worse than this is a corrupt or non-rigid matrix, not rounding.
@@ -32,6 +32,8 @@ pub type WorldFromCamera = Rigid<World, Camera>;
 pub type EgoFromCamera = Rigid<Ego, Camera>;
 /// The vehicle's pose in the world.
 pub type WorldFromEgo = Rigid<World, Ego>;
+/// The log's world in the scene's world (the inverse of the anchoring ego pose).
+pub type WorldFromLogWorld = Rigid<World, LogWorld>;
 
 impl<To, From> Clone for Rigid<To, From> {
     fn clone(&self) -> Self {

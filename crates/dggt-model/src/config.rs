@@ -9,6 +9,7 @@ use dggt_geom::PixelConvention;
 use serde::{Deserialize, Serialize};
 
 use crate::error::ModelError;
+use crate::gaussian_maps::GAUSSIAN_CHANNELS;
 
 /// ImageNet normalisation the aggregator applies to `[0, 1]` RGB input.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -184,6 +185,11 @@ pub struct GaussianHeadConfig {
     /// own view), or at pixel centres, where the rasteriser samples (for models trained from scratch).
     #[serde(default = "release_unprojection")]
     pub unproject_at: PixelConvention,
+    /// Three more output channels, 12-14: each pixel's 3D velocity in world units per log frame along its
+    /// view's camera axes (OpenCV), the motion of the dynamic Gaussians from a head that runs anyway (where
+    /// [`ModelConfig::motion_head`] adds a whole DPT head). Not in the release; they start at zero.
+    #[serde(default)]
+    pub velocity: bool,
 }
 
 fn release_unprojection() -> PixelConvention {
@@ -293,6 +299,20 @@ impl ModelConfig {
         self
     }
 
+    /// Whether the network predicts velocities: a motion head, or a Gaussian head with velocity channels.
+    pub fn predicts_motion(&self) -> bool {
+        self.motion_head.is_some() || self.gs_head.as_ref().is_some_and(|gs| gs.velocity)
+    }
+
+    /// Gives the Gaussian head its velocity channels ([`GaussianHeadConfig::velocity`]); unchanged without one.
+    pub fn with_gaussian_velocity(mut self) -> Self {
+        if let Some(gs) = &mut self.gs_head {
+            gs.velocity = true;
+            gs.output_dim = GAUSSIAN_CHANNELS + 3;
+        }
+        self
+    }
+
     /// Adds DGGT's Gaussian (12 channels), instance (2) and semantic (11) heads and its sky model.
     fn with_dggt_heads(mut self, sky_resolution: usize) -> Self {
         let c = self.aggregator.embed_dim;
@@ -304,9 +324,10 @@ impl ModelConfig {
         };
         self.gs_head = Some(GaussianHeadConfig {
             dim_in: 3 * c,
-            output_dim: 12,
+            output_dim: GAUSSIAN_CHANNELS,
             color_skip: false,
             unproject_at: release_unprojection(),
+            velocity: false,
         });
         self.instance_head = Some(dino_head(2));
         self.semantic_head = Some(dino_head(11));
@@ -441,6 +462,16 @@ impl ModelConfig {
                      least {min_output} outputs for aggregator width {width}"
                 ));
             }
+        }
+        if let Some(gs) = &self.gs_head
+            && gs.velocity
+            && gs.output_dim != GAUSSIAN_CHANNELS + 3
+        {
+            return fail(format!(
+                "gs_head with velocity channels has output_dim {}, expected {}",
+                gs.output_dim,
+                GAUSSIAN_CHANNELS + 3
+            ));
         }
         if !self.dpt.features.is_multiple_of(2) || (self.dpt.pos_embed && !(self.dpt.features / 2).is_multiple_of(4)) {
             return fail(format!("DPT features {} must be a multiple of 8", self.dpt.features));

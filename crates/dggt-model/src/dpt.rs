@@ -221,10 +221,27 @@ impl DptHead {
 
     /// The head with its last 1x1 convolution zeroed: it predicts exactly zero until trained, while the
     /// gradients of that convolution are not zero.
-    pub fn with_zero_output(mut self) -> Self {
+    pub fn with_zero_output(self) -> Self {
+        let channels = self.scratch.output_conv2.out.weight.dims()[0];
+        self.with_zero_channels(0..channels)
+    }
+
+    /// The head with the rows of its last 1x1 convolution that produce output `channels` zeroed: those
+    /// channels read exactly zero until trained; the others are untouched.
+    pub fn with_zero_channels(mut self, channels: std::ops::Range<usize>) -> Self {
+        let zero_rows = |w: Tensor<4>| {
+            let [_, inputs, kh, kw] = w.dims();
+            let zeros = Tensor::zeros([channels.len(), inputs, kh, kw], &w.device());
+            w.slice_assign([channels.clone(), 0..inputs, 0..kh, 0..kw], zeros)
+        };
         let out = &mut self.scratch.output_conv2.out;
-        out.weight = replace_value(out.weight.clone(), |w| w.zeros_like());
-        out.bias = out.bias.take().map(|b| replace_value(b, |b| b.zeros_like()));
+        out.weight = replace_value(out.weight.clone(), zero_rows);
+        out.bias = out.bias.take().map(|b| {
+            replace_value(b, |b| {
+                let zeros = Tensor::zeros([channels.len()], &b.device());
+                b.slice_assign([channels.clone()], zeros)
+            })
+        });
         self
     }
 

@@ -1,7 +1,8 @@
 //! Per-pixel Gaussian parameters from the Gaussian head's 12 raw channels, activated as the release does:
 //! colour `sigmoid` [0:3], opacity `sigmoid` [3], scale `0.1 * softplus` [4:7] (linear scales), rotation
 //! L2-normalised [7:11] (read as wxyz by the rasteriser), and the lifespan `gamma = 1 / (relu(x) + 1e-6)`
-//! from channel 11 (exactly 1e6 wherever `x <= 0`).
+//! from channel 11 (exactly 1e6 wherever `x <= 0`). A head with velocity channels
+//! ([`crate::config::GaussianHeadConfig::velocity`]) has three more, 12-14, read linearly.
 
 use burn::tensor::Tensor;
 use burn::tensor::activation::{relu, sigmoid, softplus};
@@ -24,12 +25,19 @@ pub struct GaussianMaps {
     pub lifespan_raw: Tensor<4>,
     /// `[B, S, H, W]` lifespan `gamma` (`gs_conf` in the release).
     pub lifespan: Tensor<4>,
+    /// `[B, S, H, W, 3]` velocity in world units per log frame along each view's camera axes (OpenCV), from a
+    /// head with velocity channels.
+    pub velocity: Option<Tensor<5>>,
 }
 
 impl GaussianMaps {
-    /// Activates a raw `[B, S, H, W, 12]` head output.
+    /// Activates a raw `[B, S, H, W, 12]` head output (`[.., 15]` with velocity channels).
     pub fn from_raw(raw: Tensor<5>) -> Self {
-        assert_eq!(raw.dims()[4], GAUSSIAN_CHANNELS, "the Gaussian head has {GAUSSIAN_CHANNELS} channels");
+        let channels_in = raw.dims()[4];
+        assert!(
+            channels_in == GAUSSIAN_CHANNELS || channels_in == GAUSSIAN_CHANNELS + 3,
+            "the Gaussian head has {GAUSSIAN_CHANNELS} channels, or three more for velocity; got {channels_in}"
+        );
         let channels = |start: usize, count: usize| raw.clone().narrow(4, start, count);
         let rotation = channels(7, 4);
         // The release divides by max(|q|, 1e-12). Clamping the squared norm before the square root gives the
@@ -43,6 +51,7 @@ impl GaussianMaps {
             rotation: rotation / norm,
             lifespan: relu(lifespan_raw.clone()).add_scalar(1e-6).recip(),
             lifespan_raw,
+            velocity: (channels_in > GAUSSIAN_CHANNELS).then(|| channels(GAUSSIAN_CHANNELS, 3)),
         }
     }
 

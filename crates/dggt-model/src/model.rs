@@ -17,7 +17,7 @@ use crate::camera_head::{CameraHead, CameraHeadOutput};
 use crate::config::{DptHeadConfig, HeadActivation, ModelConfig};
 use crate::dpt::{DptHead, DptOutput, DptPrediction};
 use crate::error::ModelError;
-use crate::gaussian_maps::GaussianMaps;
+use crate::gaussian_maps::{GAUSSIAN_CHANNELS, GaussianMaps};
 use crate::leaf::replace_value;
 use crate::sky::SkyModel;
 use crate::weights::{LoadReport, load_checkpoint};
@@ -75,6 +75,18 @@ pub struct DggtOutput {
     pub motion: Option<DptPrediction>,
 }
 
+impl DggtOutput {
+    /// `[B, S, H, W, 3]` f32 velocities of the dynamic Gaussians, in world units per log frame along each
+    /// view's camera axes: the motion head's, else the Gaussian head's velocity channels; `None` with neither.
+    pub fn velocity(&self) -> Option<Tensor<5>> {
+        match (&self.motion, &self.gaussians) {
+            (Some(motion), _) => Some(motion.prediction.clone().narrow(4, 0, 3).cast(FloatDType::F32)),
+            (None, Some(gaussians)) => gaussians.maps.velocity.clone(),
+            (None, None) => None,
+        }
+    }
+}
+
 /// Which of the heads nothing downstream of DGGT reads a forward pass computes: each is a full-resolution DPT
 /// head, so training and reconstruction skip them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -108,7 +120,8 @@ impl Dggt {
                     activation: HeadActivation::Linear,
                     conf_activation: HeadActivation::Linear,
                 };
-                DptHead::new(&config.dpt, &head, device)
+                let dpt = DptHead::new(&config.dpt, &head, device);
+                if gs.velocity { dpt.with_zero_channels(GAUSSIAN_CHANNELS..gs.output_dim) } else { dpt }
             }),
             instance_head: config.instance_head.as_ref().map(|head| DptHead::new(&config.dpt, head, device)),
             semantic_head: config.semantic_head.as_ref().map(|head| DptHead::new(&config.dpt, head, device)),

@@ -27,7 +27,8 @@ pub struct Prediction {
     pub dynamic_logit: Option<Tensor<4>>,
     /// Activated Gaussian maps, when the model has a Gaussian head.
     pub gaussians: Option<GaussianMaps>,
-    /// `[1, S, H, W, 3]` velocities ([`Dggt::motion_head`]), when the model has a motion head.
+    /// `[1, S, H, W, 3]` velocities ([`Dggt::motion_head`], else the Gaussian head's velocity channels), when
+    /// the model predicts motion.
     pub velocity: Option<Tensor<5>>,
 }
 
@@ -107,11 +108,17 @@ pub fn heads_chunked(
         }
     }
     drop(aggregator);
+    let gaussians = (!gaussian_raw.is_empty()).then(|| GaussianMaps::from_raw(Tensor::cat(gaussian_raw, 1)));
+    // The motion head's velocities, else the Gaussian head's velocity channels.
+    let velocity = match velocity.is_empty() {
+        false => Some(Tensor::cat(velocity, 1)),
+        true => gaussians.as_ref().and_then(|maps| maps.velocity.clone()),
+    };
     Ok(Prediction {
         pose_encoding,
         depth: Tensor::cat(depth, 1),
         dynamic_logit: (!dynamic.is_empty()).then(|| Tensor::cat(dynamic, 1)),
-        gaussians: (!gaussian_raw.is_empty()).then(|| GaussianMaps::from_raw(Tensor::cat(gaussian_raw, 1))),
-        velocity: (!velocity.is_empty()).then(|| Tensor::cat(velocity, 1)),
+        gaussians,
+        velocity,
     })
 }

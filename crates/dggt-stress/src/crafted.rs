@@ -126,7 +126,14 @@ pub fn run(
         batch.inputs.iter().map(|v| (v.camera.world_from_camera.inverse(), v.camera.intrinsics)).collect();
     let images = batch.images.clone().reshape([frames, 3, height, width]);
     let sky = Some(sky_model.gaussians(images, &cameras));
-    let forward = Forward { pixels, sky, depth: depth.clone(), dynamic_logit: Some(logit.clone()), encodings: vec![] };
+    let forward = Forward {
+        pixels,
+        sky,
+        depth: depth.clone(),
+        dynamic_logit: Some(logit.clone()),
+        encodings: vec![],
+        velocity: velocity.clone(),
+    };
     let grads = render_and_differentiate(probe, objective, forward, &batch)?;
     probe_gradient(probe, &grads, "raw Gaussian head output", &raw);
     probe_gradient(probe, &grads, "depth", &depth);

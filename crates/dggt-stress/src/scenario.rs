@@ -6,7 +6,7 @@
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_geom::{ImageSize, PinholeIntrinsics, PosedCamera, WorldFromCamera};
 use dggt_scene::Timeline;
-use dggt_train::batch::{StepBatch, ViewTruth};
+use dggt_train::batch::{DepthFlowSamples, StepBatch, ViewTruth};
 use glam::{DQuat, DVec3};
 
 /// SplitMix64: the same values on every machine, so a failing case reproduces from its seed.
@@ -141,6 +141,7 @@ impl Scenario {
             let pixels: Vec<i64> =
                 (0..width * height).filter(|&p| p % 7 == 0 && view.sky[p] < 0.5).map(|p| p as i64).collect();
             let depths: Vec<f32> = (0..pixels.len()).map(|i| [1e-4, 1e4].get(i).copied().unwrap_or(10.0)).collect();
+            let moving = vec![false; pixels.len()];
             ViewTruth {
                 frame,
                 rig_camera: 0,
@@ -149,7 +150,12 @@ impl Scenario {
                 image: Tensor::from_data(TensorData::new(view.image.clone(), [height, width, 3]), device),
                 sky: Some(Tensor::from_data(TensorData::new(view.sky.clone(), [height, width]), device)),
                 dynamic: Some(Tensor::from_data(TensorData::new(view.dynamic.clone(), [height, width]), device)),
-                depth: (with_depth && !pixels.is_empty()).then_some((pixels, depths)),
+                depth_flow: (with_depth && !pixels.is_empty()).then_some(DepthFlowSamples {
+                    pixels,
+                    depths,
+                    velocities: None,
+                    moving,
+                }),
             }
         };
         let inputs = self.input_frames.iter().zip(&self.views).map(|(&f, v)| truth(f, v, true)).collect();

@@ -1,5 +1,5 @@
 //! One training sample as tensors: the input images for the network, and per view the ground truth the losses
-//! compare with (image, masks, the export's camera, depth where the export has it).
+//! compare with (image, masks, the export's camera, depth and scene flow where the export has them).
 //!
 //! Ground-truth cameras are re-expressed in the frame of the first input view (`world' = camera of input 0`),
 //! the frame the camera head predicts in, so they can stand in for predicted cameras and supervise them.
@@ -27,9 +27,27 @@ pub struct ViewTruth {
     pub sky: Option<Tensor<2>>,
     /// `[H, W]` 1 where dynamic.
     pub dynamic: Option<Tensor<2>>,
-    /// Pixels (row-major indices of the preprocessed image) with a measured depth, and the depths.
-    pub depth: Option<(Vec<i64>, Vec<f32>)>,
+    /// The export's depth and scene flow where it measured them.
+    pub depth_flow: Option<DepthFlowSamples>,
 }
+
+/// The export's quarter-resolution depth-and-flow cells of one view, at the pixels of the preprocessed image
+/// their centres land on (cells without a depth, such as sky, are left out).
+#[derive(Debug, Clone, PartialEq)]
+pub struct DepthFlowSamples {
+    /// Row-major indices into the preprocessed image.
+    pub pixels: Vec<i64>,
+    /// z-depths in world units.
+    pub depths: Vec<f32>,
+    /// Scene flow in the view's camera axes (OpenCV) and world units per log frame, the motion head's units;
+    /// `None` when the scene has a single frame and so no frame interval.
+    pub velocities: Option<Vec<[f32; 3]>>,
+    /// Whether each cell moves faster than [`MOVING_SPEED`].
+    pub moving: Vec<bool>,
+}
+
+/// Speed, in the export's units per second, above which a cell counts as moving (the dynamic masks' 1 m/s).
+pub const MOVING_SPEED: f32 = 1.0;
 
 /// A sample ready for a training step.
 #[derive(Debug, Clone)]
@@ -44,12 +62,13 @@ pub struct StepBatch {
 }
 
 impl StepBatch {
-    /// Moves a decoded sample to `device`. `with_depth` reads the export's depth maps of the input views.
+    /// Moves a decoded sample to `device`. `with_depth_flow` reads the export's depth-and-flow maps of the input
+    /// views.
     pub fn new(
         sample: &LoadedSample,
         scene: &Scene,
         preprocess: &Preprocess,
-        with_depth: bool,
+        with_depth_flow: bool,
         device: &Device,
     ) -> Result<Self, TrainError> {
         let first = sample.inputs.first().ok_or_else(|| TrainError::Invalid {
@@ -77,10 +96,10 @@ impl StepBatch {
                 image: hwc_image(view, device),
                 sky: view.sky_mask.as_ref().map(|m| mask_tensor(&m.data, size, device)),
                 dynamic: view.dynamic_mask.as_ref().map(|m| mask_tensor(&m.data, size, device)),
-                depth: if depth { depth_samples(scene, preprocess, view)? } else { None },
+                depth_flow: if depth { depth_flow_samples(scene, preprocess, view)? } else { None },
             })
         };
-        let inputs = sample.inputs.iter().map(|v| truth(v, with_depth)).collect::<Result<Vec<_>, _>>()?;
+        let inputs = sample.inputs.iter().map(|v| truth(v, with_depth_flow)).collect::<Result<Vec<_>, _>>()?;
         let targets = sample.targets.iter().map(|v| truth(v, false)).collect::<Result<Vec<_>, _>>()?;
         let (h, w) = (size.height as usize, size.width as usize);
         let planar: Vec<f32> = sample.inputs.iter().flat_map(|v| v.image.data.iter().copied()).collect();
@@ -104,14 +123,16 @@ fn mask_tensor(mask: &[u8], size: ImageSize, device: &Device) -> Tensor<2> {
     Tensor::from_data(TensorData::new(values, [size.height as usize, size.width as usize]), device)
 }
 
-/// The export's quarter-resolution depth of `view`, mapped to pixels of the preprocessed image: a cell's
-/// centre `(4 col + 2, 4 row + 2)` (continuous coordinates of the original image) lands at the scaled position
-/// less the rows cropped from the top. `None` when the export has no depth for the view.
-fn depth_samples(
+/// The export's quarter-resolution depth and flow of `view`, mapped to pixels of the preprocessed image: a
+/// cell's centre `(4 col + 2, 4 row + 2)` (continuous coordinates of the original image) lands at the scaled
+/// position less the rows cropped from the top. The flow (the log world's axes, world units per second) is
+/// rotated into the view's camera axes and scaled to one log frame. `None` when the export has no map for the
+/// view.
+fn depth_flow_samples(
     scene: &Scene,
     preprocess: &Preprocess,
     view: &PreparedView,
-) -> Result<Option<(Vec<i64>, Vec<f32>)>, TrainError> {
+) -> Result<Option<DepthFlowSamples>, TrainError> {
     let Some(path) = &scene.view(view.frame, view.camera).files.depth_flow else { return Ok(None) };
     let original = scene.cameras[view.camera].size;
     let map = DepthFlowMap::read(path, original)?;
@@ -119,7 +140,9 @@ fn depth_samples(
     let sx = plan.resized.width as f64 / original.width as f64;
     let sy = plan.resized.height as f64 / original.height as f64;
     let (w, h) = (plan.output.width as i64, plan.output.height as i64);
-    let (mut pixels, mut depths) = (Vec::new(), Vec::new());
+    let camera_from_log = view.world_from_camera.inverse().rotation_matrix() * scene.world_from_log.rotation_matrix();
+    let seconds_per_frame = scene.seconds_per_frame();
+    let (mut pixels, mut depths, mut velocities, mut moving) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for (i, &d) in map.depth.iter().enumerate() {
         if !(d > 0.0) {
             continue;
@@ -130,7 +153,74 @@ fn depth_samples(
         if (0..w).contains(&x) && (0..h).contains(&y) {
             pixels.push(y * w + x);
             depths.push(d);
+            let [fx, fy, fz] = map.flow[i].map(f64::from);
+            let velocity = camera_from_log * dggt_geom::glam::DVec3::new(fx, fy, fz) * seconds_per_frame.unwrap_or(0.0);
+            velocities.push(velocity.to_array().map(|v| v as f32));
+            moving.push(map.flow[i].iter().map(|v| v * v).sum::<f32>().sqrt() > MOVING_SPEED);
         }
     }
-    Ok(Some((pixels, depths)))
+    Ok(Some(DepthFlowSamples { pixels, depths, velocities: seconds_per_frame.map(|_| velocities), moving }))
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::PathBuf;
+
+    use dggt_data::{open_scene, prepare_view};
+    use dggt_geom::glam::{DVec2, DVec3};
+
+    use super::*;
+
+    /// Relative depth mismatch, per moving cell of `frame`, between where the cell's surface point lands one
+    /// frame later (moved by `velocity_gain` times its converted flow) and the next frame's measured depth
+    /// there.
+    fn landing_errors(scene: &Scene, preprocess: &Preprocess, frame: usize, velocity_gain: f64) -> Vec<f64> {
+        let [now, next] = [frame, frame + 1].map(|f| prepare_view(scene, f, 0, preprocess).unwrap());
+        let [here, there] = [&now, &next].map(|v| depth_flow_samples(scene, preprocess, v).unwrap().unwrap());
+        let width = now.image.size.width as i64;
+        let pixel = |index: i64| DVec2::new((index % width) as f64 + 0.5, (index / width) as f64 + 0.5);
+        let velocities = here.velocities.as_ref().expect("a frame interval");
+        let mut errors = Vec::new();
+        for ((&index, &depth), velocity) in here.pixels.iter().zip(&here.depths).zip(velocities) {
+            let velocity = DVec3::from_array(velocity.map(f64::from));
+            // Faster than 1 m/s at 10 Hz.
+            if velocity.length() < 0.1 {
+                continue;
+            }
+            let moved = now.intrinsics.unproject(pixel(index), depth as f64) + velocity * velocity_gain;
+            let in_next =
+                next.world_from_camera.inverse().transform_point(now.world_from_camera.transform_point(moved));
+            let Some(landing) = next.intrinsics.project(in_next) else { continue };
+            let nearest = there
+                .pixels
+                .iter()
+                .enumerate()
+                .min_by(|(_, a), (_, b)| pixel(**a).distance(landing).total_cmp(&pixel(**b).distance(landing)))
+                .filter(|(_, p)| pixel(**p).distance(landing) < 3.0);
+            if let Some((i, _)) = nearest {
+                errors.push((there.depths[i] as f64 - in_next.z).abs() / in_next.z);
+            }
+        }
+        errors
+    }
+
+    fn median(mut values: Vec<f64>) -> f64 {
+        values.sort_by(f64::total_cmp);
+        values[values.len() / 2]
+    }
+
+    #[test]
+    fn converted_flow_carries_moving_surfaces_to_the_next_frame() {
+        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../data-fixtures/synth-s0");
+        let scene = open_scene(&root, Some(2..14), Some(vec![0])).unwrap();
+        let preprocess = Preprocess { target_width: 168, patch_size: 14, crop_to_square: true };
+        let (mut moved, mut held) = (Vec::new(), Vec::new());
+        for frame in [0, 4, 8] {
+            moved.extend(landing_errors(&scene, &preprocess, frame, 1.0));
+            held.extend(landing_errors(&scene, &preprocess, frame, 0.0));
+        }
+        assert!(moved.len() > 30, "{} moving cells", moved.len());
+        let (moved, held) = (median(moved), median(held));
+        assert!(moved < 0.03 && held > 3.0 * moved, "median depth mismatch {moved} moved, {held} held");
+    }
 }

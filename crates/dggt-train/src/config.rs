@@ -42,6 +42,9 @@ pub struct ModelSection {
     /// Add the motion head (`ModelConfig::motion_head`; not in the release's weights, so it starts fresh from
     /// predicting zero): dynamic Gaussians are moved to each target time by their predicted velocity.
     pub motion_head: bool,
+    /// Give the Gaussian head velocity channels (`GaussianHeadConfig::velocity`; not in the release's weights,
+    /// so they start at zero): the motion of the dynamic Gaussians for three output channels instead of a head.
+    pub gaussian_velocity: bool,
     /// Give every DPT head a convolution of the input pixels (`DptConfig::pixel_skip`; not in the release's
     /// weights, so only for heads that start fresh).
     pub pixel_skip: bool,
@@ -56,6 +59,7 @@ impl Default for ModelSection {
             unproject_at: PixelConvention::Integer,
             sky_resolution: None,
             motion_head: false,
+            gaussian_velocity: false,
             pixel_skip: false,
         }
     }
@@ -199,6 +203,10 @@ pub struct LossWeights {
     pub camera: f64,
     /// L1 on log depth against the export's depth maps.
     pub depth: f64,
+    /// L1 of the predicted velocities against the export's scene flow (`depth_flows_4`), both in the input
+    /// camera's axes and world units per log frame, the mean over moving cells plus the mean over still ones;
+    /// needs `model.motion_head` or `model.gaussian_velocity`.
+    pub flow: f64,
 }
 
 impl Default for LossWeights {
@@ -216,6 +224,7 @@ impl Default for LossWeights {
             gram_backbone: None,
             camera: 0.0,
             depth: 0.0,
+            flow: 0.0,
         }
     }
 }
@@ -369,6 +378,9 @@ impl TrainConfig {
         if self.model.sky_resolution == Some(0) {
             return Err("model.sky_resolution must be at least 1".into());
         }
+        if self.model.motion_head && self.model.gaussian_velocity {
+            return Err("model.motion_head and model.gaussian_velocity both predict the velocities: choose one".into());
+        }
         if o.pose_warmup_steps > 0 && !(self.loss.camera > 0.0) {
             return Err("optim.pose_warmup_steps trains the camera loss alone: it needs loss.camera > 0".into());
         }
@@ -389,7 +401,8 @@ impl TrainConfig {
             }
         }
         let l = &self.loss;
-        let weights = [l.rgb_l2, l.lpips, l.opacity_bce, l.dynamic_bce, l.lifespan_l1, l.gram, l.camera, l.depth];
+        let weights =
+            [l.rgb_l2, l.lpips, l.opacity_bce, l.dynamic_bce, l.lifespan_l1, l.gram, l.camera, l.depth, l.flow];
         if weights.iter().any(|w| !(*w >= 0.0 && w.is_finite())) {
             return Err("loss: weights must be finite and >= 0".into());
         }
@@ -400,6 +413,11 @@ impl TrainConfig {
         }
         if !["alex", "vgg"].contains(&l.lpips_net.as_str()) {
             return Err(format!("loss.lpips_net must be `alex` or `vgg`, got `{}`", l.lpips_net));
+        }
+        if l.flow > 0.0 && !(self.model.motion_head || self.model.gaussian_velocity) {
+            return Err("loss.flow supervises predicted velocities: it needs model.motion_head or \
+                        model.gaussian_velocity"
+                .into());
         }
         if l.gram > 0.0 && l.gram_backbone.is_none() {
             return Err("loss.gram > 0 needs loss.gram_backbone".into());

@@ -9,7 +9,9 @@
 //! - `dynamic_bce`: dynamic logits of the inputs against their dynamic masks;
 //! - `lifespan_l1`: mean `1 / lifespan` over Gaussians predicted static;
 //! - `camera`: L1 of every camera-head iteration's encoding against the ground truth (relative to input 0);
-//! - `depth`: L1 of log depth against the export's depth.
+//! - `depth`: L1 of log depth against the export's depth;
+//! - `flow`: L1 of the predicted velocities against the export's scene flow, moving and still cells weighed
+//!   equally.
 
 use std::collections::BTreeMap;
 
@@ -22,7 +24,7 @@ use dggt_scene::{
     render_target,
 };
 
-use crate::batch::{StepBatch, ViewTruth};
+use crate::batch::{DepthFlowSamples, StepBatch, ViewTruth};
 use crate::config::{CameraSource, LossWeights, MeansGradientSetting, RenderSection};
 use crate::error::TrainError;
 
@@ -214,6 +216,12 @@ impl Objective {
         {
             add("depth", w.depth, loss, &mut terms);
         }
+        if w.flow > 0.0
+            && let Some(velocity) = &forward.velocity
+            && let Some(loss) = flow_loss(velocity, batch)?
+        {
+            add("flow", w.flow, loss, &mut terms);
+        }
 
         let mut psnrs = Vec::new();
         let mut counts = AssemblyCounts::default();
@@ -242,6 +250,8 @@ pub struct Forward {
     pub dynamic_logit: Option<Tensor<4>>,
     /// Every camera-head iteration's `[1, S, 9]` encoding.
     pub encodings: Vec<Tensor<3>>,
+    /// `[1, S, H, W, 3]` the motion head's velocities (camera axes, world units per log frame), if it has one.
+    pub velocity: Option<Tensor<5>>,
 }
 
 impl Forward {
@@ -280,11 +290,9 @@ impl Forward {
             means_gradient,
             model.unproject_at,
         )?;
-        let pixels = match &out.motion {
-            Some(motion) => {
-                let velocity = motion.prediction.clone().narrow(4, 0, 3).cast(FloatDType::F32);
-                pixels.with_motion(velocity, batch.timeline.frames_per_time())?
-            }
+        let velocity = out.velocity();
+        let pixels = match &velocity {
+            Some(velocity) => pixels.with_motion(velocity.clone(), batch.timeline.frames_per_time())?,
             None => pixels,
         };
         let sky = match (&model.sky_model, render.sky) {
@@ -296,7 +304,7 @@ impl Forward {
             }
             _ => None,
         };
-        Ok(Self { pixels, sky, depth, dynamic_logit, encodings })
+        Ok(Self { pixels, sky, depth, dynamic_logit, encodings, velocity })
     }
 }
 
@@ -341,9 +349,9 @@ fn depth_loss(depth: &Tensor<4>, batch: &StepBatch) -> Result<Option<Tensor<1>>,
     let [_, frames, h, w] = depth.dims();
     let (mut index, mut values) = (Vec::new(), Vec::new());
     for (frame, view) in batch.inputs.iter().enumerate().take(frames) {
-        if let Some((pixels, depths)) = &view.depth {
-            index.extend(pixels.iter().map(|&p| p + (frame * h * w) as i64));
-            values.extend(depths.iter().map(|d| d.ln()));
+        if let Some(samples) = &view.depth_flow {
+            index.extend(samples.pixels.iter().map(|&p| p + (frame * h * w) as i64));
+            values.extend(samples.depths.iter().map(|d| d.ln()));
         }
     }
     if index.is_empty() {
@@ -356,10 +364,106 @@ fn depth_loss(depth: &Tensor<4>, batch: &StepBatch) -> Result<Option<Tensor<1>>,
     Ok(Some((picked - truth).abs().mean()))
 }
 
+/// L1 of the predicted velocities against the export's scene flow at the cells with a measurement: the mean
+/// over moving cells plus the mean over still ones, so that the few moving cells of a street weigh as much as
+/// its static surfaces (which must not move); `None` when no input view has flow.
+fn flow_loss(velocity: &Tensor<5>, batch: &StepBatch) -> Result<Option<Tensor<1>>, TrainError> {
+    let device = velocity.device();
+    let [_, frames, h, w, channels] = velocity.dims();
+    let (mut index, mut values, mut moving) = (Vec::new(), Vec::<f32>::new(), Vec::new());
+    for (frame, view) in batch.inputs.iter().enumerate().take(frames) {
+        if let Some(samples @ DepthFlowSamples { velocities: Some(velocities), .. }) = &view.depth_flow {
+            index.extend(samples.pixels.iter().map(|&p| p + (frame * h * w) as i64));
+            values.extend(velocities.iter().flatten());
+            moving.extend(&samples.moving);
+        }
+    }
+    if index.is_empty() {
+        return Ok(None);
+    }
+    let count = index.len();
+    let moving_count = moving.iter().filter(|&&m| m).count();
+    // Each cell's share of the loss, per velocity component.
+    let share = |m: bool| {
+        let group = if m { moving_count } else { count - moving_count };
+        1.0 / (group * channels) as f32
+    };
+    let shares: Vec<f32> = moving.iter().map(|&m| share(m)).collect();
+    let rows = velocity.clone().reshape([frames * h * w, channels]);
+    let picked = rows.select(0, Tensor::<1, Int>::from_data(TensorData::new(index, [count]), &device));
+    let truth = Tensor::<2>::from_data(TensorData::new(values, [count, channels]), &device);
+    let shares = Tensor::<2>::from_data(TensorData::new(shares, [count, 1]), &device);
+    Ok(Some(((picked - truth).abs() * shares).sum()))
+}
+
 fn host<const D: usize>(tensor: Tensor<D>) -> Vec<f32> {
     tensor.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default()
 }
 
 fn scalar(tensor: &Tensor<1>) -> f64 {
     host(tensor.clone()).first().copied().map(f64::from).unwrap_or(f64::NAN)
+}
+
+#[cfg(test)]
+mod tests {
+    use burn::tensor::Device;
+    use dggt_geom::{ImageSize, PinholeIntrinsics, PosedCamera, WorldFromCamera};
+    use dggt_scene::Timeline;
+
+    use super::*;
+
+    /// A one-view batch of a 2x2 image whose flow samples are `cells`: (pixel, velocity, moving).
+    fn batch_with_flow(cells: &[(i64, [f32; 3], bool)], device: &Device) -> StepBatch {
+        let view = ViewTruth {
+            frame: 0,
+            rig_camera: 0,
+            time: 0.0,
+            camera: PosedCamera {
+                world_from_camera: WorldFromCamera::IDENTITY,
+                intrinsics: PinholeIntrinsics::new(2.0, 2.0, 1.0, 1.0).unwrap(),
+            },
+            image: Tensor::zeros([2, 2, 3], device),
+            sky: None,
+            dynamic: None,
+            depth_flow: Some(DepthFlowSamples {
+                pixels: cells.iter().map(|c| c.0).collect(),
+                depths: vec![1.0; cells.len()],
+                velocities: Some(cells.iter().map(|c| c.1).collect()),
+                moving: cells.iter().map(|c| c.2).collect(),
+            }),
+        };
+        StepBatch {
+            step: 0,
+            images: Tensor::zeros([1, 1, 3, 2, 2], device),
+            size: ImageSize::new(2, 2).unwrap(),
+            timeline: Timeline::new(&[0]).unwrap(),
+            inputs: vec![view],
+            targets: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn the_flow_loss_weighs_moving_and_still_cells_equally() {
+        let device = Device::flex();
+        // One moving cell (pixel 0) among three still ones.
+        let batch = batch_with_flow(
+            &[(0, [0.6, 0.0, -0.3], true), (1, [0.0; 3], false), (2, [0.0; 3], false), (3, [0.0; 3], false)],
+            &device,
+        );
+        let loss = |velocity: [[f32; 3]; 4]| {
+            let values: Vec<f32> = velocity.iter().flatten().copied().collect();
+            let velocity = Tensor::<5>::from_data(TensorData::new(values, [1, 1, 2, 2, 3]), &device);
+            scalar(&flow_loss(&velocity, &batch).unwrap().expect("flow samples"))
+        };
+        assert!(loss([[0.6, 0.0, -0.3], [0.0; 3], [0.0; 3], [0.0; 3]]).abs() < 1e-7, "exact flow costs nothing");
+        // Predicting no motion costs the moving cell's mean error, 0.3, undiluted by the still cells.
+        assert!((loss([[0.0; 3]; 4]) - 0.3).abs() < 1e-6);
+        // Moving every still cell by 0.3 per component costs as much as missing the moving cell.
+        let drift = [0.3; 3];
+        assert!((loss([[0.6, 0.0, -0.3], drift, drift, drift]) - 0.3).abs() < 1e-6);
+
+        let without = StepBatch { inputs: vec![ViewTruth { depth_flow: None, ..batch.inputs[0].clone() }], ..batch };
+        let velocity = Tensor::<5>::zeros([1, 1, 2, 2, 3], &device);
+        assert!(flow_loss(&velocity, &without).unwrap().is_none(), "no flow, no term");
+    }
 }

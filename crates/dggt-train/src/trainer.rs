@@ -49,7 +49,7 @@ pub fn model_config(preset: &str) -> Result<ModelConfig, TrainError> {
 
 impl ModelSection {
     /// The network this section describes: the preset with the section's changes (colour skip, unprojection,
-    /// sky resolution, pixel skip, motion head).
+    /// sky resolution, pixel skip, motion head or Gaussian velocity).
     pub fn architecture(&self) -> Result<ModelConfig, TrainError> {
         let mut config = model_config(&self.preset)?;
         if let Some(gs) = &mut config.gs_head {
@@ -60,7 +60,8 @@ impl ModelSection {
             sky.resolution = resolution;
         }
         config.dpt.pixel_skip = self.pixel_skip;
-        Ok(if self.motion_head { config.with_motion_head() } else { config })
+        let config = if self.motion_head { config.with_motion_head() } else { config };
+        Ok(if self.gaussian_velocity { config.with_gaussian_velocity() } else { config })
     }
 }
 
@@ -137,9 +138,10 @@ pub struct Trainer {
 }
 
 impl Trainer {
-    /// Builds a run on `devices` (at least one); resumes from the newest checkpoint in the output folder when
-    /// `resume` is set and one exists.
+    /// Builds a run of a validated `config` on `devices` (at least one); resumes from the newest checkpoint in
+    /// the output folder when `resume` is set and one exists.
     pub fn new(config: TrainConfig, devices: Vec<Device>, resume: bool) -> Result<Self, TrainError> {
+        config.validate().map_err(|detail| TrainError::Invalid { what: "training configuration".into(), detail })?;
         let plain_device = devices.first().cloned().ok_or_else(|| TrainError::Invalid {
             what: "devices".into(),
             detail: "training needs at least one device".into(),
@@ -303,12 +305,12 @@ impl Trainer {
             checkpoint: None,
         };
         let checkpoints = run.out_dir.join("checkpoints");
-        let with_depth = self.config.loss.depth > 0.0;
+        let with_depth_flow = self.config.loss.depth > 0.0 || self.config.loss.flow > 0.0;
 
         while self.state.step < last_step {
             let step = self.state.step;
             let samples = (0..accumulation).map(|_| next_sample(&mut stream)).collect::<Result<Vec<_>, _>>()?;
-            let mut record = self.train_step(&samples, schedule.factor(step), with_depth)?;
+            let mut record = self.train_step(&samples, schedule.factor(step), with_depth_flow)?;
             let pose_warmup = step < self.config.optim.pose_warmup_steps;
             if pose_warmup {
                 bar.set_message(format!(
@@ -375,11 +377,11 @@ impl Trainer {
         &mut self,
         samples: &[LoadedSample],
         factor: f64,
-        with_depth: bool,
+        with_depth_flow: bool,
     ) -> Result<serde_json::Value, TrainError> {
         let step = self.state.step;
         let started = Instant::now();
-        let outcome = self.accumulate(samples, with_depth)?;
+        let outcome = self.accumulate(samples, with_depth_flow)?;
         let mut record = json!({ "kind": "train", "step": step, "lr_factor": factor });
         match outcome {
             Some(outcome) => {
@@ -419,7 +421,7 @@ impl Trainer {
 
     /// Loss and summed gradients of the samples of one step, spread over the devices; `None` when a loss is
     /// not finite.
-    fn accumulate(&self, samples: &[LoadedSample], with_depth: bool) -> Result<Option<StepOutcome>, TrainError> {
+    fn accumulate(&self, samples: &[LoadedSample], with_depth_flow: bool) -> Result<Option<StepOutcome>, TrainError> {
         let scale = 1.0 / samples.len() as f64;
         let shares: Vec<Vec<&LoadedSample>> = (0..self.devices.len())
             .map(|d| samples.iter().skip(d).step_by(self.devices.len()).collect())
@@ -427,7 +429,7 @@ impl Trainer {
             .collect();
         let master = &self.devices[0];
         let results: Vec<Result<Vec<SampleResult>, TrainError>> = if shares.len() == 1 {
-            vec![self.run_share(&self.model, &shares[0], master, scale, with_depth)]
+            vec![self.run_share(&self.model, &shares[0], master, scale, with_depth_flow)]
         } else {
             std::thread::scope(|scope| {
                 let handles: Vec<_> = shares
@@ -435,7 +437,7 @@ impl Trainer {
                     .zip(&self.devices)
                     .map(|(share, device)| {
                         let model = self.model.clone().fork(device);
-                        scope.spawn(move || self.run_share(&model, share, device, scale, with_depth))
+                        scope.spawn(move || self.run_share(&model, share, device, scale, with_depth_flow))
                     })
                     .collect();
                 handles.into_iter().map(|h| h.join().expect("a training thread panicked")).collect()
@@ -469,13 +471,13 @@ impl Trainer {
         share: &[&LoadedSample],
         device: &Device,
         scale: f64,
-        with_depth: bool,
+        with_depth_flow: bool,
     ) -> Result<Vec<SampleResult>, TrainError> {
         share
             .iter()
             .map(|sample| {
                 let started = Instant::now();
-                let batch = StepBatch::new(sample, &self.scene, &self.config.data.preprocess, with_depth, device)?;
+                let batch = StepBatch::new(sample, &self.scene, &self.config.data.preprocess, with_depth_flow, device)?;
                 let prepared = Instant::now();
                 let pose_warmup = sample.step < self.config.optim.pose_warmup_steps;
                 let loss = if pose_warmup {
@@ -559,6 +561,7 @@ fn weight(weights: &crate::config::LossWeights, name: &str) -> f64 {
         "lifespan_l1" => weights.lifespan_l1,
         "camera" => weights.camera,
         "depth" => weights.depth,
+        "flow" => weights.flow,
         _ => 0.0,
     }
 }

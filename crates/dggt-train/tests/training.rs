@@ -197,6 +197,36 @@ fn the_motion_head_starts_at_zero_and_is_trained_by_the_renders() {
 }
 
 #[test]
+fn the_flow_loss_teaches_the_gaussian_head_the_scene_flow() {
+    let out = tempfile::tempdir().unwrap();
+    // The velocity rows start at zero, so the shared features only start to separate moving from still cells
+    // once those rows have grown: the term stays near its zero-velocity level for the first few dozen steps.
+    let steps = 100;
+    let mut config = small_config(out.path(), steps);
+    config.model.gaussian_velocity = true;
+    config.loss.flow = 1.0;
+    let mut trainer = Trainer::new(config, vec![Device::flex()], false).unwrap();
+    let summary = trainer.run(RunOptions::default()).unwrap();
+    assert_eq!(summary.skipped_steps, 0);
+    let text = std::fs::read_to_string(out.path().join("metrics.jsonl")).unwrap();
+    let flow: Vec<f64> = text
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+        .filter_map(|r| r["terms"]["flow"].as_f64())
+        .collect();
+    assert_eq!(flow.len(), steps as usize, "every step has a flow term");
+    let mean = |values: &[f64]| values.iter().sum::<f64>() / values.len() as f64;
+    let (start, end) = (mean(&flow[..5]), mean(&flow[flow.len() - 5..]));
+    assert!(start > 0.0 && end < 0.75 * start, "flow loss {start} -> {end}");
+
+    // Without predicted velocities there is nothing for the flow to supervise.
+    let mut config = small_config(out.path(), 1);
+    config.loss.flow = 1.0;
+    let error = Trainer::new(config, vec![Device::flex()], false).err().expect("an error").to_string();
+    assert!(error.contains("loss.flow") && error.contains("gaussian_velocity"), "{error}");
+}
+
+#[test]
 fn validation_frames_outside_the_scene_are_refused_before_training() {
     let out = tempfile::tempdir().unwrap();
     let mut config = small_config(out.path(), 3);
