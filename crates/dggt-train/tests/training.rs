@@ -205,6 +205,7 @@ fn the_flow_loss_teaches_the_gaussian_head_the_scene_flow() {
     let mut config = small_config(out.path(), steps);
     config.model.gaussian_velocity = true;
     config.loss.flow = 1.0;
+    config.sampler.targets_per_input = 2;
     let mut trainer = Trainer::new(config, vec![Device::flex()], false).unwrap();
     let summary = trainer.run(RunOptions::default()).unwrap();
     assert_eq!(summary.skipped_steps, 0);
@@ -217,7 +218,7 @@ fn the_flow_loss_teaches_the_gaussian_head_the_scene_flow() {
     assert_eq!(flow.len(), steps as usize, "every step has a flow term");
     let mean = |values: &[f64]| values.iter().sum::<f64>() / values.len() as f64;
     let (start, end) = (mean(&flow[..5]), mean(&flow[flow.len() - 5..]));
-    assert!(start > 0.0 && end < 0.75 * start, "flow loss {start} -> {end}");
+    assert!(start > 0.0 && end < 0.8 * start, "flow loss {start} -> {end}");
 
     // Without predicted velocities there is nothing for the flow to supervise.
     let mut config = small_config(out.path(), 1);
