@@ -10,12 +10,13 @@
 //! resolution), its expected depth against the export's lidar depth ([`crate::grid`],
 //! [`crate::metrics`]), and the predicted motion against the export's scene flow.
 //!
-//! Motion: without a motion head, dynamic Gaussians are held where they were predicted and the predicted
-//! motion of every surface point is zero ([`MotionSource::Held`]); its metrics are computed anyway and
-//! labelled. With predicted velocities (a motion head, or the Gaussian head's velocity channels) the renders
-//! use them, but motion is not scored ([`MotionSource::PredictedUnscored`]). As STORM does, motion is scored at the lidar cells (positive
-//! depth; here also not sky and inside the view) and only for windows where some true flow exceeds
-//! [`MOTION_GATE`] (STORM skips samples without such motion, whose accuracies would be trivially high).
+//! Motion: without predicted velocities, dynamic Gaussians are held where they were predicted and the
+//! predicted motion of every surface point is zero ([`MotionSource::Held`]); its metrics are computed anyway
+//! and labelled. With predicted velocities (a motion head, or the Gaussian head's velocity channels) the
+//! renders use them, but motion is not scored ([`MotionSource::PredictedUnscored`]). As STORM does, motion is
+//! scored at the lidar cells (positive depth; here also not sky and inside the view) and only for windows
+//! where some true flow exceeds [`MOTION_GATE`] (STORM skips samples without such motion, whose accuracies
+//! would be trivially high).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
