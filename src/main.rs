@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
-use dggt_model::parity::{ParityVectors, run_parity};
+use dggt_infer::parity::{ParityVectors, run_parity};
 use tracing_subscriber::EnvFilter;
 
 use crate::backend::DeviceChoice;
@@ -100,7 +100,7 @@ enum Command {
         config: Option<PathBuf>,
         /// Architecture preset of a `.pt` / `.safetensors` checkpoint: tiny, vggt_1b, dggt [default: dggt].
         #[arg(long)]
-        preset: Option<String>,
+        preset: Option<dggt_model::Preset>,
         /// Only these cameras (positions of the per-camera folders, or export camera ids).
         #[arg(long, value_delimiter = ',')]
         cameras: Option<Vec<usize>>,
@@ -187,7 +187,8 @@ fn train(
     }
     config.validate().map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
     let devices = config.run.devices.iter().map(|d| backend::parse_device(d)).collect::<Result<Vec<_>>>()?;
-    let mut trainer = dggt_train::Trainer::new(config, devices, resume)?;
+    let start = if resume { dggt_train::Start::Resume } else { dggt_train::Start::Fresh };
+    let mut trainer = dggt_train::Trainer::new(config, devices, start)?;
     let params = burn::module::Module::num_params(trainer.model());
     tracing::info!(
         "{} parameters, starting at step {} of {}",
@@ -333,8 +334,8 @@ fn main() -> Result<()> {
         } => {
             let mut options = dggt_reconstruct::ReconstructOptions::new(images, checkpoint, out);
             options.architecture = match (config, preset) {
-                (Some(path), _) => Some(dggt_reconstruct::Architecture::Config(path)),
-                (None, Some(name)) => Some(dggt_reconstruct::Architecture::Preset(name)),
+                (Some(path), _) => Some(dggt_infer::Architecture::Config(path)),
+                (None, Some(preset)) => Some(dggt_infer::Architecture::Preset(preset)),
                 (None, None) => None,
             };
             options.cameras = cameras;

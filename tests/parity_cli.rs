@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use dggt_model::parity::parity_folder;
+use dggt_infer::parity::parity_folder;
 use safetensors::{Dtype, SafeTensors, tensor::TensorView};
 
 fn dggt(args: &[&str]) -> Output {

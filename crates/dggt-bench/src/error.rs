@@ -17,9 +17,7 @@ pub enum BenchError {
     #[error(transparent)]
     Splat(#[from] dggt_splat::SplatError),
     #[error(transparent)]
-    Train(#[from] dggt_train::TrainError),
-    #[error(transparent)]
-    Reconstruct(#[from] dggt_reconstruct::ReconstructError),
+    Infer(#[from] dggt_infer::InferError),
     #[error(transparent)]
     Metric(#[from] dggt_losses::LossError),
 }

@@ -17,11 +17,10 @@ use std::time::Instant;
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_data::{PreparedView, Preprocess, Scene, prepare_view};
 use dggt_geom::{ImageSize, PixelConvention, PosedCamera};
+use dggt_infer::{InputCameras, Scene4d, SceneOptions, SkyChoice, ViewSlot, fresh_model, input_views, load_network};
 use dggt_losses::{ImageShape, Lpips, LpipsKind};
 use dggt_model::{Dggt, ModelConfig};
-use dggt_scene::{AssemblySettings, InputView, TargetView, Timeline, assemble, interpolate_camera};
-use dggt_train::batch::relative_pose;
-use dggt_train::objective::decode_cameras;
+use dggt_scene::{AssemblyCounts, AssemblySettings, TargetView, Timeline};
 
 use crate::error::BenchError;
 use crate::frames::{FramePlan, plan_frames};
@@ -190,10 +189,10 @@ struct Network {
     trained: bool,
 }
 
-fn load_network(options: &BenchOptions, device: &Device) -> Result<(Network, Vec<String>), BenchError> {
+fn network(options: &BenchOptions, device: &Device) -> Result<(Network, Vec<String>), BenchError> {
     match &options.checkpoint {
         Some(path) => {
-            let loaded = dggt_reconstruct::load_network(path, None, device)?;
+            let loaded = load_network(path, None, device)?;
             let preprocess = loaded.preprocess.unwrap_or_default();
             let network = Network {
                 patch_size: loaded.config.aggregator.patch_size as u32,
@@ -207,7 +206,7 @@ fn load_network(options: &BenchOptions, device: &Device) -> Result<(Network, Vec
         None => {
             let config = fresh_tiny_config();
             device.seed(options.seed);
-            let model = dggt_train::fresh_model(&config, None, device)?;
+            let model = fresh_model(&config, None, device)?;
             let network = Network {
                 patch_size: config.aggregator.patch_size as u32,
                 crop_to_square: true,
@@ -294,7 +293,7 @@ pub fn run_bench(options: &BenchOptions, device: &Device) -> Result<BenchReport,
     }
     let scene = dggt_data::open_scene(&options.scene, None, Some(options.cameras.clone()))?;
     let plan = plan_frames(scene.frames.len(), options.targets.as_deref())?;
-    let (network, mut notes) = load_network(options, device)?;
+    let (network, mut notes) = network(options, device)?;
     let configurations = options.sweep.configurations();
     let patch = network.patch_size;
     if let Some(bad) = configurations.iter().map(|c| c.knobs.width).find(|w| !w.is_multiple_of(patch)) {
@@ -473,6 +472,41 @@ impl Runner<'_> {
 
     /// Measures one configuration with the given input frames.
     fn run(&mut self, knobs: &Knobs, inputs: &[usize], targets: &[TargetImages]) -> Result<RowRun, BenchError> {
+        let setup = self.prepare(knobs, inputs, targets)?;
+        let model = self.model(knobs.precision).clone();
+        let mut samples: Vec<[f64; 4]> = Vec::new();
+        let mut last = None;
+        for repetition in 0..self.options.warmup + self.options.repeat {
+            let (times, outputs) = self.repetition(&model, &setup)?;
+            if repetition >= self.options.warmup {
+                samples.push(times);
+            }
+            last = Some(outputs);
+        }
+        let last = last.ok_or_else(|| BenchError::invalid("--repeat", "no run"))?;
+        let median_of = |k: usize| median(samples.iter().map(|s| s[k]).collect());
+        let times = StageTimes {
+            backbone_ms: median_of(0),
+            heads_ms: median_of(1),
+            assembly_ms: median_of(2),
+            raster_ms: median_of(3),
+            total_ms: median(samples.iter().map(|s| s.iter().sum()).collect()),
+        };
+        let views = last.counts.len().max(1) as f64;
+        Ok(RowRun {
+            size: setup.size,
+            input_frames: inputs.to_vec(),
+            times,
+            gaussians_kept: last.counts.iter().map(|c| c.kept() as f64).sum::<f64>() / views,
+            gaussian_candidates: last.counts.iter().map(|c| c.candidates as f64).sum::<f64>() / views,
+            sky_gaussians: last.sky_gaussians,
+            renders: last.renders.into_iter().map(|r| r.into_iter().map(|v| v.clamp(0.0, 1.0)).collect()).collect(),
+        })
+    }
+
+    /// The inputs of one configuration: images, input and target slots, the export's cameras (relative to the
+    /// first input view), and how the scene is built.
+    fn prepare(&mut self, knobs: &Knobs, inputs: &[usize], targets: &[TargetImages]) -> Result<RowSetup, BenchError> {
         let cameras = self.scene.cameras.len();
         let mut input_views = Vec::new();
         for &frame in inputs {
@@ -487,134 +521,122 @@ impl Runner<'_> {
         let size = input_views[0].image.size;
         let (h, w) = (size.height as usize, size.width as usize);
         let planar: Vec<f32> = input_views.iter().flat_map(|v| v.image.data.iter().copied()).collect();
-        let device = self.device.clone();
         // f32 images: the network casts its input to its own float type.
-        let images = Tensor::<5>::from_data(TensorData::new(planar, [1, input_views.len(), 3, h, w]), &device);
+        let images = Tensor::<5>::from_data(TensorData::new(planar, [1, input_views.len(), 3, h, w]), self.device);
 
         let frame_index = |position: usize| self.scene.frames[position].index;
         let timeline = Timeline::new(&inputs.iter().map(|&f| frame_index(f)).collect::<Vec<_>>())?;
         let reference_pose = input_views[0].world_from_camera;
-        let truth_camera = |view: &PreparedView| PosedCamera {
-            world_from_camera: relative_pose(&reference_pose, &view.world_from_camera),
-            intrinsics: view.intrinsics,
+        let truth = |view: &PreparedView| {
+            let slot = ViewSlot { rig_camera: view.camera, time: timeline.time(frame_index(view.frame) as f64) };
+            let camera = PosedCamera {
+                world_from_camera: view.world_from_camera.relative_to(&reference_pose),
+                intrinsics: view.intrinsics,
+            };
+            (slot, camera)
         };
-        let input_truth: Vec<(usize, f64, PosedCamera)> = input_views
-            .iter()
-            .map(|v| (v.camera, timeline.time(frame_index(v.frame) as f64), truth_camera(v)))
-            .collect();
-        let target_truth: Vec<(usize, f64, PosedCamera)> = target_views
-            .iter()
-            .map(|v| (v.camera, timeline.time(frame_index(v.frame) as f64), truth_camera(v)))
-            .collect();
-        let settings = match knobs.culling {
+        let (input_slots, input_cameras) = input_views.iter().map(truth).unzip();
+        let target_truth = target_views.iter().map(truth).collect();
+        let assembly = match knobs.culling {
             Culling::Off => AssemblySettings::exact(),
             Culling::MinOpacity(min_opacity) => AssemblySettings { min_opacity, ..AssemblySettings::default() },
         };
-        let poses = self.options.poses;
-        let chunk = self.options.chunk_frames;
-        let sky_model = if knobs.sky { self.network.model.sky_model.clone() } else { None };
-        let model = self.model(knobs.precision).clone();
-
-        let mut samples: Vec<[f64; 4]> = Vec::new();
-        let mut last = None;
-        for repetition in 0..self.options.warmup + self.options.repeat {
-            let mut clock = Instant::now();
-            let lap = |clock: &mut Instant| -> f64 {
-                let ms = clock.elapsed().as_secs_f64() * 1e3;
-                *clock = Instant::now();
-                ms
-            };
-            let aggregator = stages::backbone(&model, images.clone())?;
-            let prediction = stages::heads(&model, aggregator, images.clone(), chunk)?;
-            settle(&prediction.pose_encoding)?;
-            settle(&prediction.depth)?;
-            if let Some(dynamic) = &prediction.dynamic_logit {
-                settle(dynamic)?;
-            }
-            if let Some(maps) = &prediction.gaussians {
-                settle(&maps.opacity)?;
-                settle(&maps.rgb)?;
-            }
-            let forward_ms = lap(&mut clock);
-
-            let input_cameras: Vec<PosedCamera> = match poses {
-                PoseSource::Truth => input_truth.iter().map(|t| t.2).collect(),
-                PoseSource::Predicted => decode_cameras(prediction.pose_encoding.clone(), size)?,
-            };
-            let views: Vec<InputView> = input_truth
-                .iter()
-                .zip(&input_cameras)
-                .map(|(&(rig_camera, time, _), &camera)| InputView { rig_camera, time, camera })
-                .collect();
-            let pixels = prediction
-                .pixel_gaussians(views.clone(), model.unproject_at, &timeline)?
-                .ok_or_else(|| BenchError::invalid("network", "no Gaussian head: nothing to render"))?;
-            let sky = sky_model.as_ref().map(|sky| {
-                let [_, s, c, h, w] = images.dims();
-                let cameras: Vec<_> =
-                    input_cameras.iter().map(|c| (c.world_from_camera.inverse(), c.intrinsics)).collect();
-                sky.gaussians(images.clone().reshape([s, c, h, w]), &cameras)
-            });
-            let mut target_list = Vec::new();
-            for &(rig_camera, time, camera) in &target_truth {
-                let camera = match poses {
-                    PoseSource::Truth => camera,
-                    PoseSource::Predicted => interpolate_camera(&views, rig_camera, time)?,
-                };
-                target_list.push(TargetView { rig_camera, time, camera });
-            }
-            let assembled =
-                target_list.iter().map(|target| assemble(&pixels, target, &settings)).collect::<Result<Vec<_>, _>>()?;
-            for gaussians in &assembled {
-                settle(&gaussians.gaussians.means)?;
-                settle(&gaussians.gaussians.colors)?;
-            }
-            let assembly_ms = lap(&mut clock);
-
-            let mut renders = Vec::new();
-            for (gaussians, target) in assembled.iter().zip(&target_list) {
-                renders.push(stages::rasterise(gaussians, sky.as_ref(), target, size, &settings)?.rgb);
-            }
-            let raster_ms = lap(&mut clock);
-
-            // The backbone alone, settled, for its time; the heads' time is the forward pass's less it. (Reading
-            // the aggregator's outputs back before the heads run made the heads' outputs NaN on wgpu with burn
-            // 0.22.1, so the forward pass above runs without a wait between the two.)
-            let aggregator = stages::backbone(&model, images.clone())?;
-            if let (Some(frame_global), Some(dino)) = (aggregator.output_list.last(), aggregator.dino_token_list.last())
-            {
-                settle(frame_global)?;
-                settle(dino)?;
-            }
-            drop(aggregator);
-            let backbone_ms = lap(&mut clock);
-            let heads_ms = (forward_ms - backbone_ms).max(0.0);
-            if repetition >= self.options.warmup {
-                samples.push([backbone_ms, heads_ms, assembly_ms, raster_ms]);
-            }
-            last =
-                Some((assembled.iter().map(|a| a.counts).collect::<Vec<_>>(), sky.map(|s| s.means.dims()[0]), renders));
-        }
-        let (counts, sky_gaussians, renders) = last.ok_or_else(|| BenchError::invalid("--repeat", "no run"))?;
-        let median_of = |k: usize| median(samples.iter().map(|s| s[k]).collect());
-        let times = StageTimes {
-            backbone_ms: median_of(0),
-            heads_ms: median_of(1),
-            assembly_ms: median_of(2),
-            raster_ms: median_of(3),
-            total_ms: median(samples.iter().map(|s| s.iter().sum()).collect()),
-        };
-        let views = counts.len().max(1) as f64;
-        Ok(RowRun {
-            size,
-            input_frames: inputs.to_vec(),
-            times,
-            gaussians_kept: counts.iter().map(|c| c.kept() as f64).sum::<f64>() / views,
-            gaussian_candidates: counts.iter().map(|c| c.candidates as f64).sum::<f64>() / views,
-            sky_gaussians: sky_gaussians.unwrap_or(0),
-            renders: renders.into_iter().map(|r| r.into_iter().map(|v| v.clamp(0.0, 1.0)).collect()).collect(),
-        })
+        let sky = if knobs.sky { SkyChoice::Render } else { SkyChoice::Skip };
+        let scene_options = SceneOptions { sky, assembly, ..SceneOptions::default() };
+        Ok(RowSetup { images, size, timeline, input_slots, input_cameras, target_truth, scene_options })
     }
+
+    /// One timed run of the whole reconstruction: `[backbone, heads, assembly, raster]` milliseconds, and what it
+    /// rendered.
+    fn repetition(&self, model: &Dggt, setup: &RowSetup) -> Result<([f64; 4], RepetitionOutputs), BenchError> {
+        let mut clock = Instant::now();
+        let lap = |clock: &mut Instant| -> f64 {
+            let ms = clock.elapsed().as_secs_f64() * 1e3;
+            *clock = Instant::now();
+            ms
+        };
+        let images = &setup.images;
+        let aggregator = stages::backbone(model, images.clone())?;
+        let prediction = stages::heads(model, aggregator, images.clone(), self.options.chunk_frames)?;
+        settle(&prediction.pose_encoding())?;
+        settle(&prediction.depth)?;
+        if let Some(dynamic) = &prediction.dynamic_logit {
+            settle(dynamic)?;
+        }
+        if let Some(maps) = &prediction.gaussians {
+            settle(&maps.opacity)?;
+            settle(&maps.rgb)?;
+        }
+        let forward_ms = lap(&mut clock);
+
+        let cameras = match self.options.poses {
+            PoseSource::Truth => InputCameras::Given(setup.input_cameras.clone()),
+            PoseSource::Predicted => InputCameras::Predicted,
+        };
+        let views = input_views(&prediction, &setup.input_slots, cameras, setup.size)?;
+        let scene = Scene4d::build(model, &prediction, images, views, &setup.timeline, &setup.scene_options)?
+            .ok_or_else(|| BenchError::invalid("network", "no Gaussian head: nothing to render"))?;
+        let mut targets = Vec::new();
+        for &(slot, camera) in &setup.target_truth {
+            let camera = match self.options.poses {
+                PoseSource::Truth => camera,
+                PoseSource::Predicted => scene.camera_at(slot.rig_camera, slot.time)?,
+            };
+            targets.push(TargetView { rig_camera: slot.rig_camera, time: slot.time, camera });
+        }
+        let assembled = targets.iter().map(|target| scene.assemble(target)).collect::<Result<Vec<_>, _>>()?;
+        for gaussians in &assembled {
+            settle(&gaussians.gaussians.means)?;
+            settle(&gaussians.gaussians.colors)?;
+        }
+        let assembly_ms = lap(&mut clock);
+
+        let mut renders = Vec::new();
+        for (gaussians, target) in assembled.iter().zip(&targets) {
+            renders.push(stages::rasterise(&scene, gaussians, target)?.rgb);
+        }
+        let raster_ms = lap(&mut clock);
+
+        // The backbone alone, settled, for its time; the heads' time is the forward pass's less it. (Reading
+        // the aggregator's outputs back before the heads run made the heads' outputs NaN on wgpu with burn
+        // 0.22.1, so the forward pass above runs without a wait between the two.)
+        let aggregator = stages::backbone(model, images.clone())?;
+        if let (Some(frame_global), Some(dino)) = (aggregator.output_list.last(), aggregator.dino_token_list.last()) {
+            settle(frame_global)?;
+            settle(dino)?;
+        }
+        drop(aggregator);
+        let backbone_ms = lap(&mut clock);
+        let heads_ms = (forward_ms - backbone_ms).max(0.0);
+        let outputs = RepetitionOutputs {
+            counts: assembled.iter().map(|a| a.counts).collect(),
+            sky_gaussians: scene.sky.as_ref().map_or(0, |s| s.means.dims()[0]),
+            renders,
+        };
+        Ok(([backbone_ms, heads_ms, assembly_ms, raster_ms], outputs))
+    }
+}
+
+/// The fixed inputs of one configuration's repetitions.
+struct RowSetup {
+    /// `[1, S, 3, H, W]` f32.
+    images: Tensor<5>,
+    size: ImageSize,
+    timeline: Timeline,
+    input_slots: Vec<ViewSlot>,
+    /// The export's cameras of the inputs, relative to the first input view.
+    input_cameras: Vec<PosedCamera>,
+    /// The targets' slots and export cameras.
+    target_truth: Vec<(ViewSlot, PosedCamera)>,
+    scene_options: SceneOptions,
+}
+
+/// What one repetition rendered.
+struct RepetitionOutputs {
+    counts: Vec<AssemblyCounts>,
+    sky_gaussians: usize,
+    /// Per target view, `[H, W, 3]` (not clamped).
+    renders: Vec<Vec<f32>>,
 }
 
 /// The median (the mean of the middle two for an even count); NaN for none.

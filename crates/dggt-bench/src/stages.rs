@@ -3,10 +3,10 @@
 //!
 //! - [`backbone`]: the aggregator (patch embedding and alternating attention) over all frames;
 //! - [`heads`]: the camera head and the dense heads (depth, dynamic, Gaussian) a few frames at a time, as
-//!   [`dggt_reconstruct::forward::forward_chunked`] runs them (outputs in f32);
-//! - [`assemble`](dggt_scene::assemble) (called by the runner): the static union faded to the target time, the
-//!   nearest view's dynamic Gaussians and the culling;
-//! - [`rasterise`]: the assembled Gaussians over the sky, as [`dggt_scene::render_target`] composites them.
+//!   [`dggt_infer::forward_chunked`] runs them (outputs in f32);
+//! - [`Scene4d::assemble`] (called by the runner): the static union faded to the target time, the nearest
+//!   view's dynamic Gaussians and the culling;
+//! - [`rasterise`]: the assembled Gaussians over the sky, as [`Scene4d::render`] composites them.
 //!
 //! A device may run work asynchronously (the GPU backends), so [`settle`] blocks until a stage's outputs are
 //! computed before its clock stops. The runner times the backbone in a run of its own and the backbone and
@@ -14,11 +14,10 @@
 //! ran made the heads' outputs NaN on wgpu with burn 0.22.1.
 
 use burn::tensor::Tensor;
+use dggt_infer::{Prediction, Scene4d, heads_chunked};
 use dggt_model::Dggt;
 use dggt_model::aggregator::AggregatorOutput;
-use dggt_model::sky::SkyGaussians;
-use dggt_reconstruct::forward::{Prediction, heads_chunked};
-use dggt_scene::{AssembledGaussians, AssemblySettings, TargetView, render_assembled};
+use dggt_scene::{AssembledGaussians, TargetView};
 
 use crate::error::BenchError;
 
@@ -60,16 +59,15 @@ pub struct Rasterised {
     pub rgb: Vec<f32>,
 }
 
-/// Rasterises assembled Gaussians from `target` and composites them over `sky` (black without), exactly as
-/// [`dggt_scene::render_target`] does after its assembly step ([`render_assembled`]).
+/// Rasterises Gaussians `scene` assembled for `target` and composites them over its sky (black without),
+/// exactly as [`Scene4d::render`] does after its assembly step.
 pub fn rasterise(
+    scene: &Scene4d,
     assembled: &AssembledGaussians,
-    sky: Option<&SkyGaussians>,
     target: &TargetView,
-    size: dggt_geom::ImageSize,
-    assembly: &AssemblySettings,
 ) -> Result<Rasterised, BenchError> {
-    let rgb = render_assembled(assembled, sky, target, size, assembly)?
+    let rgb = scene
+        .render_assembled(assembled, target)?
         .rgb
         .into_data()
         .convert::<f32>()

@@ -12,7 +12,8 @@ use dggt_bench::report::CSV_HEADER;
 use dggt_bench::run::fresh_tiny_config;
 use dggt_bench::{BenchOptions, RowOutcome, run_bench, stages, write_outputs};
 use dggt_geom::{PinholeIntrinsics, PosedCamera, WorldFromCamera};
-use dggt_scene::{AssemblySettings, InputView, MeansGradient, PixelGaussians, TargetView, assemble, render_target};
+use dggt_infer::Scene4d;
+use dggt_scene::{AssemblySettings, InputView, MeansGradient, PixelGaussians, TargetView, render_target};
 
 fn fixture() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../data-fixtures/synth-s0")
@@ -86,9 +87,19 @@ fn bounded_sweep_writes_table_and_plot() {
         .iter()
         .find(|r| r.configuration().knobs.precision == Precision::Bf16)
         .expect("the bf16 configuration has a row");
-    if let RowOutcome::Skipped { reason, .. } = bf16 {
-        assert!(!reason.is_empty());
-        assert!(report.notes.iter().any(|n| n.contains("bf16") && n.contains(reason.as_str())));
+    // The device's declared types decide: a device that declares bf16 measures the row, one that does not
+    // skips it with the reason in the notes.
+    let declares_bf16 = device.supports_dtype(Precision::Bf16.dtype());
+    match (bf16, declares_bf16) {
+        (RowOutcome::Measured(row), true) => assert!(row.vs_exact.psnr_db > 10.0, "bf16 renders: {:?}", row.vs_exact),
+        (RowOutcome::Skipped { reason, .. }, false) => {
+            assert!(reason.contains("does not support bf16"), "{reason}");
+            assert!(report.notes.iter().any(|n| n.contains("bf16") && n.contains(reason.as_str())));
+        }
+        (RowOutcome::Measured(_), false) => panic!("bf16 was measured on a device that does not declare it"),
+        (RowOutcome::Skipped { reason, .. }, true) => {
+            panic!("the device declares bf16 but the row was skipped: {reason}")
+        }
     }
     assert!(report.notes.iter().any(|n| n.contains("no diffusion refiner")));
 
@@ -119,15 +130,15 @@ fn bounded_sweep_writes_table_and_plot() {
 fn split_stages_compute_what_the_pipeline_computes() {
     let device = Device::flex();
     device.seed(7);
-    let model = dggt_train::fresh_model(&fresh_tiny_config(), None, &device).expect("a fresh tiny model");
+    let model = dggt_infer::fresh_model(&fresh_tiny_config(), None, &device).expect("a fresh tiny model");
     let (frames, height, width) = (2, 28, 42);
     let pixels: Vec<f32> = (0..frames * 3 * height * width).map(|i| ((i * 37 % 101) as f32) / 100.0).collect();
     let images = Tensor::<5>::from_data(TensorData::new(pixels, [1, frames, 3, height, width]), &device);
 
-    let pipeline = dggt_reconstruct::forward::forward_chunked(&model, images.clone(), 1).expect("pipeline forward");
+    let pipeline = dggt_infer::forward_chunked(&model, images.clone(), 1).expect("pipeline forward");
     let aggregator = stages::backbone(&model, images.clone()).expect("backbone");
     let split = stages::heads(&model, aggregator, images.clone(), 1).expect("heads");
-    assert_eq!(values(split.pose_encoding.clone()), values(pipeline.pose_encoding.clone()));
+    assert_eq!(values(split.pose_encoding()), values(pipeline.pose_encoding()));
     assert_eq!(values(split.depth.clone()), values(pipeline.depth.clone()));
     assert_eq!(
         values(split.dynamic_logit.clone().expect("dynamic")),
@@ -166,9 +177,9 @@ fn split_stages_compute_what_the_pipeline_computes() {
     let target = TargetView { rig_camera: 0, time: 0.1, camera: views[0].camera };
     for settings in [AssemblySettings::default(), AssemblySettings::exact()] {
         let expected = render_target(&gaussians, Some(&sky), &target, &settings).expect("pipeline render");
-        let assembled = assemble(&gaussians, &target, &settings).expect("assembly");
-        let size = gaussians.size;
-        let ours = stages::rasterise(&assembled, Some(&sky), &target, size, &settings).expect("raster");
+        let scene = Scene4d { pixels: gaussians.clone(), sky: Some(sky.clone()), assembly: settings };
+        let assembled = scene.assemble(&target).expect("assembly");
+        let ours = stages::rasterise(&scene, &assembled, &target).expect("raster");
         assert_eq!(ours.rgb, values(expected.rgb));
     }
 }

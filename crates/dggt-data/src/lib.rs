@@ -10,6 +10,7 @@
 //!   [`loader`] streams decoded training samples through it.
 //! - [`summary`]: what `dggt inspect` reports about a scene.
 //! - [`text`], [`npy`], [`images`], [`io`]: untrusted-input readers and atomic writers.
+//! - [`random`]: the seeded generator (SplitMix64) of the sampler, the stress suite, and test and bench scenes.
 //!
 //! Every reader returns a [`DataError`] naming the file and what was expected; nothing here panics on bad input.
 
@@ -26,6 +27,7 @@ pub mod npy;
 mod open;
 pub mod prefetch;
 pub mod preprocess;
+pub mod random;
 pub mod sampler;
 pub mod scene;
 pub mod summary;

@@ -31,6 +31,7 @@ use rand::{Rng, RngExt, SeedableRng};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{DataError, Result};
+use crate::random::{GOLDEN_GAMMA, splitmix64};
 
 /// How training steps draw their frames and cameras. Missing fields take their defaults.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -184,9 +185,6 @@ fn fill_with_distinct<R: Rng + ?Sized>(into: &mut Vec<usize>, wanted: usize, fro
     into.extend(index::sample(rng, from.len(), count).into_iter().map(|i| from[i]));
 }
 
-/// SplitMix64's increment, `2^64 / φ`.
-const GOLDEN_GAMMA: u64 = 0x9e37_79b9_7f4a_7c15;
-
 /// The generator of one training step. Its initial state is an injective function of `(seed, step)` (the first
 /// two words are bijections of `seed` and of `step`), so no two `(seed, step)` pairs start from the same state.
 fn step_rng(seed: u64, step: u64) -> Xoshiro256PlusPlus {
@@ -196,14 +194,6 @@ fn step_rng(seed: u64, step: u64) -> Xoshiro256PlusPlus {
         chunk.copy_from_slice(&word.to_le_bytes());
     }
     Xoshiro256PlusPlus::from_seed(state)
-}
-
-/// SplitMix64's output function: a bijection of `u64` that scatters nearby inputs across the whole range.
-fn splitmix64(x: u64) -> u64 {
-    let mut z = x.wrapping_add(GOLDEN_GAMMA);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
 }
 
 #[cfg(test)]

@@ -7,7 +7,8 @@ use std::ops::Range;
 use std::path::PathBuf;
 
 use burn::tensor::Device;
-use dggt_reconstruct::Architecture;
+use dggt_infer::Architecture;
+use dggt_model::Preset;
 
 use crate::error::EvalError;
 use crate::protocol::{DEFAULT_CAMERAS, DEFAULT_WINDOW, PAPER_EVERY, Protocol};
@@ -38,7 +39,7 @@ pub struct EvalArgs {
     pub config: Option<PathBuf>,
     /// Architecture preset of a `.pt` / `.safetensors` checkpoint: tiny, vggt_1b, dggt [default: dggt].
     #[arg(long)]
-    pub preset: Option<String>,
+    pub preset: Option<Preset>,
     #[arg(long, value_enum, default_value = "paper")]
     pub protocol: ProtocolChoice,
     /// Input stride of the interpolation protocol [default: 5].
@@ -110,7 +111,7 @@ impl EvalArgs {
         options.protocol = self.protocol()?;
         options.architecture = match (&self.config, &self.preset) {
             (Some(path), _) => Some(Architecture::Config(path.clone())),
-            (None, Some(name)) => Some(Architecture::Preset(name.clone())),
+            (None, Some(preset)) => Some(Architecture::Preset(*preset)),
             (None, None) => None,
         };
         options.width = self.width;

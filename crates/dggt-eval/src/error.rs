@@ -13,13 +13,11 @@ pub enum EvalError {
     #[error("scene {}: {source}", path.display())]
     InScene { path: PathBuf, source: Box<EvalError> },
     #[error("{0}")]
-    Reconstruct(#[from] dggt_reconstruct::ReconstructError),
+    Infer(#[from] dggt_infer::InferError),
     #[error("{0}")]
     Data(#[from] dggt_data::DataError),
     #[error("{0}")]
     Scene3d(#[from] dggt_scene::SceneError),
-    #[error("{0}")]
-    Train(#[from] dggt_train::TrainError),
     #[error("{0}")]
     Loss(#[from] dggt_losses::LossError),
     #[error("{0}")]

@@ -12,7 +12,7 @@
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
-use dggt_reconstruct::CheckpointInfo;
+use dggt_infer::CheckpointInfo;
 use serde::Serialize;
 
 use crate::metrics::{FlowMetrics, mean_present};

@@ -24,12 +24,12 @@ use std::time::Instant;
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_data::{DepthFlowMap, PlanarImage, Preprocess, Scene, images, open_scene, prepare_view};
 use dggt_geom::ImageSize;
+use dggt_infer::{
+    Architecture, GroundTruth, InputCameras, InputSet, LoadedNetwork, Scene4d, SceneOptions, ViewSlot, forward_chunked,
+    input_views, load_network,
+};
 use dggt_losses::{ImageShape, Lpips, LpipsKind, psnr, ssim};
-use dggt_reconstruct::forward::forward_chunked;
-use dggt_reconstruct::inputs::{GroundTruth, InputSet};
-use dggt_reconstruct::{Architecture, LoadedNetwork, load_network};
-use dggt_scene::{InputView, TargetView, Timeline, interpolate_camera, render_target};
-use dggt_train::objective::decode_cameras;
+use dggt_scene::{TargetView, Timeline};
 
 use crate::error::EvalError;
 use crate::grid::{CellMapping, cell_has_sky};
@@ -174,8 +174,8 @@ pub fn evaluate(options: &EvalOptions, device: &Device) -> Result<EvalReport, Ev
     let mut reports = Vec::new();
     for (root, scene) in options.scenes.iter().zip(&scenes) {
         tracing::info!("evaluating {}", root.display());
-        let report = evaluate_scene(root, scene, options, &network, preprocess, lpips.as_ref(), motion, device)
-            .map_err(|e| e.in_scene(root))?;
+        let context = SceneContext { options, network: &network, preprocess, lpips: lpips.as_ref(), motion, device };
+        let report = evaluate_scene(root, scene, &context).map_err(|e| e.in_scene(root))?;
         for stage in &report.stages {
             if let Some(i) = STAGES.iter().position(|s| *s == stage.stage) {
                 total.seconds[i] += stage.seconds;
@@ -327,186 +327,234 @@ fn collect_cells(
     cells
 }
 
-#[allow(clippy::too_many_arguments)]
-fn evaluate_scene(
-    root: &Path,
-    scene: &Scene,
-    options: &EvalOptions,
-    network: &LoadedNetwork,
+/// What every scene of an evaluation is evaluated with.
+struct SceneContext<'a> {
+    options: &'a EvalOptions,
+    network: &'a LoadedNetwork,
     preprocess: Preprocess,
-    lpips: Option<&Lpips>,
+    lpips: Option<&'a Lpips>,
     motion: MotionSource,
-    device: &Device,
-) -> Result<SceneReport, EvalError> {
-    let protocol = &options.protocol;
+    device: &'a Device,
+}
+
+/// One scene's forward pass: its inputs, their network size and the scene to render.
+struct ForwardScene {
+    inputs: InputSet,
+    size: ImageSize,
+    mapping: CellMapping,
+    timeline: Timeline,
+    scene: Scene4d,
+}
+
+/// Whether the scene's scored cells carry depth and flow, and the longest true flow among them.
+#[derive(Debug, Default)]
+struct FlowSeen {
+    has_depth_flow: bool,
+    largest_flow: f64,
+}
+
+fn evaluate_scene(root: &Path, scene: &Scene, context: &SceneContext<'_>) -> Result<SceneReport, EvalError> {
+    let protocol = &context.options.protocol;
     let mut watch = Stopwatch::default();
-    let mut notes = Vec::new();
-
-    let started = Instant::now();
-    let input_frames = protocol.input_frames();
-    let window = InputSet::open(root, Some(protocol.window()), Some(protocol.cameras.clone()))?;
-    let inputs = restrict_inputs(window, &input_frames);
-    let (input_images, size) = inputs.load(&preprocess)?;
-    let plan = preprocess.plan(inputs.size)?;
-    let mapping = CellMapping::new(&plan);
-    let cameras_count = inputs.cameras.len();
-    let data: Vec<f32> = input_images.iter().flat_map(|i| i.data.iter().copied()).collect();
-    let (h, w) = (size.height as usize, size.width as usize);
-    let batch = Tensor::<5>::from_data(TensorData::new(data, [1, input_images.len(), 3, h, w]), device);
-    watch.add(LOAD, started);
-
-    let started = Instant::now();
-    let prediction = forward_chunked(&network.model, batch.clone(), options.chunk_frames)?;
-    let predicted_cameras = decode_cameras(prediction.pose_encoding.clone(), size)?;
-    watch.add(FORWARD, started);
-
-    let started = Instant::now();
-    let timeline = Timeline::new(&inputs.frames)?;
-    let views: Vec<InputView> = inputs
-        .views
-        .iter()
-        .zip(&predicted_cameras)
-        .map(|(v, camera)| InputView { rig_camera: v.camera, time: timeline.time(v.frame as f64), camera: *camera })
-        .collect();
-    let Some(pixels) = prediction.pixel_gaussians(views.clone(), network.model.unproject_at, &timeline)? else {
-        return Err(EvalError::invalid(
-            format!("checkpoint {}", options.checkpoint.display()),
-            "the network has no Gaussian head: there is nothing to render",
-        ));
-    };
-    let sky = network.model.sky_model.as_ref().map(|model| {
-        let cameras: Vec<_> =
-            views.iter().map(|v| (v.camera.world_from_camera.inverse(), v.camera.intrinsics)).collect();
-        model.gaussians(batch.clone().reshape([input_images.len(), 3, h, w]), &cameras)
-    });
-    drop(prediction);
-    watch.add(ASSEMBLY, started);
-
-    let settings = network.assembly;
+    let forward = forward_scene(root, context, &mut watch)?;
     let mut records = Vec::new();
-    let mut largest_flow = 0.0f64;
-    let mut has_depth_flow = false;
+    let mut seen = FlowSeen::default();
     for (frame, split) in protocol.targets() {
         let frame_position = scene
             .frames
             .iter()
             .position(|f| f.index == frame)
             .ok_or_else(|| EvalError::scene(root, format!("frame {frame} is missing")))?;
-        let time = timeline.time(frame as f64);
-        for (camera_position, &camera_id) in protocol.cameras.iter().enumerate() {
+        for camera_position in 0..protocol.cameras.len() {
             let started = Instant::now();
-            let camera = match inputs.frames.iter().position(|&f| f == frame) {
-                Some(input_position) => views[input_position * cameras_count + camera_position].camera,
-                None => interpolate_camera(&views, camera_position, time)?,
-            };
-            let target = TargetView { rig_camera: camera_position, time, camera };
-            let render = render_target(&pixels, sky.as_ref(), &target, &settings)?;
+            let target = target_view(&forward, frame, camera_position)?;
+            let render = forward.scene.render(&target)?;
             let rgb: Vec<f32> = host(render.rgb, "rendered colours")?.into_iter().map(|v| v.clamp(0.0, 1.0)).collect();
             let depth = host(render.depth, "rendered depth")?;
             watch.add(RENDER, started);
 
             let started = Instant::now();
-            let view = prepare_view(scene, frame_position, camera_position, &preprocess)?;
-            let truth = interleaved(&view.image);
-            let image_psnr = psnr(&rgb, &truth)?;
-            let image_ssim = ssim(&rgb, &truth, ImageShape::new(h, w, 3))?.value;
-            let image_lpips = match lpips {
-                Some(lpips) => {
-                    let as_tensor =
-                        |values: Vec<f32>| Tensor::<4>::from_data(TensorData::new(values, [1, h, w, 3]), device);
-                    let value = lpips.eval(as_tensor(rgb), as_tensor(truth))?;
-                    Some(f64::from(host(value, "LPIPS")?[0]))
-                }
-                None => None,
-            };
-            let files = &scene.view(frame_position, camera_position).files;
-            let original = scene.cameras[camera_position].size;
-            let mut record = ViewRecord {
-                frame,
-                camera: camera_id,
-                camera_name: scene.cameras[camera_position].name.clone(),
-                split,
-                scene_time: time,
-                psnr: image_psnr,
-                ssim: image_ssim,
-                lpips: image_lpips,
-                d_rmse: None,
-                depth_scale: None,
-                depth_shift: None,
-                depth_cells: 0,
-                depth_note: None,
-                motion: None,
-            };
-            match &files.depth_flow {
-                None => record.depth_note = Some("the export has no depth_flows_4 map for this view".into()),
-                Some(path) => {
-                    has_depth_flow = true;
-                    let map = DepthFlowMap::read(path, original)?;
-                    let sky_mask = match &files.sky_mask {
-                        Some(path) => {
-                            let mask = images::read_gray(path)?;
-                            images::expect_size(
-                                path,
-                                ImageSize { width: mask.width(), height: mask.height() },
-                                original,
-                            )?;
-                            Some(mask.into_raw())
-                        }
-                        None => None,
-                    };
-                    let cells = collect_cells(&map, sky_mask.as_deref(), original, &mapping, &depth);
-                    record.depth_cells = cells.true_depth.len();
-                    match aligned_depth_rmse(&cells.predicted_depth, &cells.true_depth) {
-                        Ok(alignment) => {
-                            record.d_rmse = Some(alignment.rmse);
-                            record.depth_scale = Some(alignment.scale);
-                            record.depth_shift = Some(alignment.shift);
-                        }
-                        Err(MetricError::Empty { .. }) => {
-                            record.depth_note = Some("no lidar cell outside the sky inside the view".into())
-                        }
-                        Err(other) => return Err(other.into()),
-                    }
-                    if !cells.true_flow.is_empty() {
-                        if let Some(predicted) = motion.predicted_flow(cells.true_flow.len()) {
-                            record.motion = Some(scene_flow_metrics(&predicted, &cells.true_flow)?);
-                        }
-                        let longest = cells
-                            .true_flow
-                            .iter()
-                            .map(|f| f.iter().map(|c| f64::from(*c).powi(2)).sum::<f64>().sqrt())
-                            .fold(0.0, f64::max);
-                        largest_flow = largest_flow.max(longest);
-                    }
-                }
-            }
-            records.push(record);
+            let view = ScoredView { frame, frame_position, camera_position, split, time: target.time };
+            records.push(score_view(scene, &forward, context, &view, &rgb, &depth, &mut seen)?);
             watch.add(METRICS, started);
         }
     }
-    if !has_depth_flow {
+    let mut notes = Vec::new();
+    if !seen.has_depth_flow {
         notes.push("the export has no depth_flows_4: no D-RMSE or motion metrics".into());
-    } else if largest_flow <= MOTION_GATE {
+    } else if seen.largest_flow <= MOTION_GATE {
         for record in &mut records {
             record.motion = None;
         }
         notes.push(format!(
-            "no true scene flow above {MOTION_GATE} at the scored cells (largest {largest_flow:.3}): motion metrics \
-             not evaluated"
+            "no true scene flow above {MOTION_GATE} at the scored cells (largest {:.3}): motion metrics not evaluated",
+            seen.largest_flow
         ));
     }
-    if sky.is_none() {
+    if forward.scene.sky.is_none() {
         notes.push("no sky model: the sky renders black".into());
     }
     let splits = protocol.splits().into_iter().map(|split| summarise_views(&records, split)).collect();
     Ok(SceneReport {
         path: root.to_path_buf(),
         name: root.file_name().map_or_else(|| root.display().to_string(), |n| n.to_string_lossy().into_owned()),
-        input_frames,
-        network_size: [size.width, size.height],
+        input_frames: protocol.input_frames(),
+        network_size: [forward.size.width, forward.size.height],
         views: records,
         splits,
         stages: watch.list(),
         notes,
     })
+}
+
+/// Loads the protocol's input views of `root`, runs the network and builds the scene (timed as load, forward
+/// and assembly).
+fn forward_scene(root: &Path, context: &SceneContext<'_>, watch: &mut Stopwatch) -> Result<ForwardScene, EvalError> {
+    let (protocol, network) = (&context.options.protocol, context.network);
+    let started = Instant::now();
+    let window = InputSet::open(root, Some(protocol.window()), Some(protocol.cameras.clone()))?;
+    let inputs = restrict_inputs(window, &protocol.input_frames());
+    let (input_images, size) = inputs.load(&context.preprocess)?;
+    let mapping = CellMapping::new(&context.preprocess.plan(inputs.size)?);
+    let data: Vec<f32> = input_images.iter().flat_map(|i| i.data.iter().copied()).collect();
+    let (h, w) = (size.height as usize, size.width as usize);
+    let batch = Tensor::<5>::from_data(TensorData::new(data, [1, input_images.len(), 3, h, w]), context.device);
+    watch.add(LOAD, started);
+
+    let started = Instant::now();
+    let prediction = forward_chunked(&network.model, batch.clone(), context.options.chunk_frames)?;
+    let timeline = Timeline::new(&inputs.frames)?;
+    let slots: Vec<ViewSlot> =
+        inputs.views.iter().map(|v| ViewSlot { rig_camera: v.camera, time: timeline.time(v.frame as f64) }).collect();
+    let views = input_views(&prediction, &slots, InputCameras::Predicted, size)?;
+    watch.add(FORWARD, started);
+
+    let started = Instant::now();
+    let scene_options = SceneOptions { assembly: network.assembly, ..SceneOptions::default() };
+    let scene =
+        Scene4d::build(&network.model, &prediction, &batch, views, &timeline, &scene_options)?.ok_or_else(|| {
+            EvalError::invalid(
+                format!("checkpoint {}", context.options.checkpoint.display()),
+                "the network has no Gaussian head: there is nothing to render",
+            )
+        })?;
+    drop(prediction);
+    watch.add(ASSEMBLY, started);
+    Ok(ForwardScene { inputs, size, mapping, timeline, scene })
+}
+
+/// The view of the protocol's camera `camera_position` at log frame `frame`: an input view from its own
+/// predicted camera, any other from the camera interpolated between the rig camera's inputs.
+fn target_view(forward: &ForwardScene, frame: usize, camera_position: usize) -> Result<TargetView, EvalError> {
+    let time = forward.timeline.time(frame as f64);
+    let cameras = forward.inputs.cameras.len();
+    let camera = match forward.inputs.frames.iter().position(|&f| f == frame) {
+        Some(input_position) => forward.scene.views()[input_position * cameras + camera_position].camera,
+        None => forward.scene.camera_at(camera_position, time)?,
+    };
+    Ok(TargetView { rig_camera: camera_position, time, camera })
+}
+
+/// Which view a render is scored as.
+struct ScoredView {
+    frame: usize,
+    frame_position: usize,
+    camera_position: usize,
+    split: crate::protocol::Split,
+    time: f64,
+}
+
+/// Scores one rendered view (`rgb` `[H, W, 3]` clamped, `depth` `[H, W]`) against the export: PSNR, SSIM,
+/// LPIPS, and at the lidar cells D-RMSE and scene flow.
+fn score_view(
+    scene: &Scene,
+    forward: &ForwardScene,
+    context: &SceneContext<'_>,
+    view: &ScoredView,
+    rgb: &[f32],
+    depth: &[f32],
+    seen: &mut FlowSeen,
+) -> Result<ViewRecord, EvalError> {
+    let (h, w) = (forward.size.height as usize, forward.size.width as usize);
+    let prepared = prepare_view(scene, view.frame_position, view.camera_position, &context.preprocess)?;
+    let truth = interleaved(&prepared.image);
+    let image_lpips = match context.lpips {
+        Some(lpips) => {
+            let as_tensor =
+                |values: Vec<f32>| Tensor::<4>::from_data(TensorData::new(values, [1, h, w, 3]), context.device);
+            let value = lpips.eval(as_tensor(rgb.to_vec()), as_tensor(truth.clone()))?;
+            Some(f64::from(host(value, "LPIPS")?[0]))
+        }
+        None => None,
+    };
+    let camera = &scene.cameras[view.camera_position];
+    let mut record = ViewRecord {
+        frame: view.frame,
+        camera: context.options.protocol.cameras[view.camera_position],
+        camera_name: camera.name.clone(),
+        split: view.split,
+        scene_time: view.time,
+        psnr: psnr(rgb, &truth)?,
+        ssim: ssim(rgb, &truth, ImageShape::new(h, w, 3))?.value,
+        lpips: image_lpips,
+        d_rmse: None,
+        depth_scale: None,
+        depth_shift: None,
+        depth_cells: 0,
+        depth_note: None,
+        motion: None,
+    };
+    let files = &scene.view(view.frame_position, view.camera_position).files;
+    match &files.depth_flow {
+        None => record.depth_note = Some("the export has no depth_flows_4 map for this view".into()),
+        Some(path) => {
+            seen.has_depth_flow = true;
+            let map = DepthFlowMap::read(path, camera.size)?;
+            let sky_mask = read_sky_mask(files.sky_mask.as_deref(), camera.size)?;
+            let cells = collect_cells(&map, sky_mask.as_deref(), camera.size, &forward.mapping, depth);
+            score_cells(&mut record, &cells, context.motion, seen)?;
+        }
+    }
+    Ok(record)
+}
+
+/// The export's sky mask of a view at its original size, if it has one.
+fn read_sky_mask(path: Option<&Path>, original: ImageSize) -> Result<Option<Vec<u8>>, EvalError> {
+    let Some(path) = path else { return Ok(None) };
+    let mask = images::read_gray(path)?;
+    images::expect_size(path, ImageSize { width: mask.width(), height: mask.height() }, original)?;
+    Ok(Some(mask.into_raw()))
+}
+
+/// D-RMSE and the scene-flow metrics of `cells` into `record`.
+fn score_cells(
+    record: &mut ViewRecord,
+    cells: &Cells,
+    motion: MotionSource,
+    seen: &mut FlowSeen,
+) -> Result<(), EvalError> {
+    record.depth_cells = cells.true_depth.len();
+    match aligned_depth_rmse(&cells.predicted_depth, &cells.true_depth) {
+        Ok(alignment) => {
+            record.d_rmse = Some(alignment.rmse);
+            record.depth_scale = Some(alignment.scale);
+            record.depth_shift = Some(alignment.shift);
+        }
+        Err(MetricError::Empty { .. }) => {
+            record.depth_note = Some("no lidar cell outside the sky inside the view".into())
+        }
+        Err(other) => return Err(other.into()),
+    }
+    if !cells.true_flow.is_empty() {
+        if let Some(predicted) = motion.predicted_flow(cells.true_flow.len()) {
+            record.motion = Some(scene_flow_metrics(&predicted, &cells.true_flow)?);
+        }
+        let longest = cells
+            .true_flow
+            .iter()
+            .map(|f| f.iter().map(|c| f64::from(*c).powi(2)).sum::<f64>().sqrt())
+            .fold(0.0, f64::max);
+        seen.largest_flow = seen.largest_flow.max(longest);
+    }
+    Ok(())
 }

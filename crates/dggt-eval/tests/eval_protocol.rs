@@ -10,7 +10,7 @@ use burn::tensor::Device;
 use clap::Parser;
 use dggt_eval::cli::{EvalArgs, run};
 use dggt_eval::{EvalOptions, LpipsWeights, MOTION_HELD, Protocol, evaluate};
-use dggt_train::{RunOptions, TrainConfig, Trainer};
+use dggt_train::{RunOptions, Start, TrainConfig, Trainer};
 use serde_json::Value;
 
 #[derive(Parser)]
@@ -42,7 +42,8 @@ fn tiny_checkpoint(run: &Path) {
     config.sampler.window = 8;
     config.render.render_inputs = false;
     config.run.steps = 1;
-    let mut trainer = Trainer::new(config.unattended(run), vec![Device::flex()], false).expect("the trainer builds");
+    let mut trainer =
+        Trainer::new(config.unattended(run), vec![Device::flex()], Start::Fresh).expect("the trainer builds");
     let summary = trainer.run(RunOptions::default()).expect("one step trains");
     assert!(summary.checkpoint.is_some(), "the run ends with a checkpoint");
 }
@@ -144,32 +145,33 @@ fn paper_protocol_scores_every_view_of_the_fixture() {
     assert_eq!(markdown.matches("| synth-s0 |").count(), 2, "{markdown}");
     assert_eq!(markdown.matches("| **mean over scenes** |").count(), 2, "{markdown}");
 
-    // The release's reconstruction mode on two frames of one camera, with LPIPS when its weights are here.
+    // The release's reconstruction mode on two frames of one camera, with LPIPS from the shared weights.
     let weights = parity_dir().join("metrics");
     let (linear, alexnet) =
         (weights.join("lpips_alex.safetensors"), weights.join("alexnet_features_torchvision_names.safetensors"));
+    for file in [&linear, &alexnet] {
+        assert!(
+            file.is_file(),
+            "{} not found: the LPIPS check needs the shared metrics vectors (set DGGT_PARITY_DIR to the shared \
+             parity folder)",
+            file.display()
+        );
+    }
     let out = tempfile::tempdir().unwrap();
     let mut options = EvalOptions::new(vec![fixture()], run_dir.path(), out.path());
     options.protocol = Protocol::reconstruction(6, 2, vec![1]);
     options.width = Some(56);
-    let with_lpips = linear.is_file() && alexnet.is_file();
-    if with_lpips {
-        options.lpips = Some(LpipsWeights { linear, alexnet });
-    } else {
-        eprintln!("LPIPS reference weights not found under {}: LPIPS not checked", weights.display());
-    }
+    options.lpips = Some(LpipsWeights { linear, alexnet });
     let report = evaluate(&options, &Device::flex()).unwrap();
     assert_eq!(report.scenes[0].views.len(), 2);
     assert_eq!(report.overall.len(), 1);
     for view in &report.scenes[0].views {
         assert_eq!((view.camera, view.camera_name.as_str()), (1, "FRONT_LEFT"));
         assert!(view.frame == 6 || view.frame == 7);
-        if with_lpips {
-            let lpips = view.lpips.expect("LPIPS with weights");
-            assert!(lpips.is_finite() && (0.0..2.0).contains(&lpips), "{lpips}");
-        }
+        let lpips = view.lpips.expect("LPIPS with weights");
+        assert!(lpips.is_finite() && (0.0..2.0).contains(&lpips), "{lpips}");
     }
-    assert_eq!(report.lpips_note.is_none(), with_lpips);
+    assert!(report.lpips_note.is_none(), "{:?}", report.lpips_note);
 }
 
 fn error_of(options: &EvalOptions) -> String {

@@ -10,6 +10,9 @@ pub enum ExportError {
     Malformed { path: PathBuf, expected: String, found: String },
     #[error("{}: {detail}", path.display())]
     Invalid { path: PathBuf, detail: String },
+    /// Writing a file (the error names it).
+    #[error(transparent)]
+    Write(#[from] dggt_data::DataError),
 }
 
 impl ExportError {

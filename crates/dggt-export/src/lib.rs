@@ -22,16 +22,9 @@ pub mod ply;
 
 pub use error::ExportError;
 
-/// Writes `bytes` to `path` through a temporary file in the same folder and a rename, creating the folder.
+/// Writes `bytes` to `path` atomically, creating the folder ([`dggt_data::io::write_atomically`]).
 pub(crate) fn write_file(path: &std::path::Path, bytes: &[u8]) -> Result<(), ExportError> {
-    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent).map_err(|e| ExportError::io(parent, e))?;
-    }
-    let mut temporary = path.as_os_str().to_owned();
-    temporary.push(".partial");
-    let temporary = std::path::PathBuf::from(temporary);
-    std::fs::write(&temporary, bytes).map_err(|e| ExportError::io(&temporary, e))?;
-    std::fs::rename(&temporary, path).map_err(|e| ExportError::io(path, e))
+    Ok(dggt_data::io::write_atomically(path, bytes)?)
 }
 
 pub(crate) fn read_file(path: &std::path::Path) -> Result<Vec<u8>, ExportError> {

@@ -190,6 +190,14 @@ impl<To, From> Rigid<To, From> {
     }
 }
 
+impl WorldFromCamera {
+    /// This pose expressed in the camera frame of `reference` (`reference⁻¹ · self`), relabelled as a world: the
+    /// world of a prediction is its first input camera, so ground-truth poses are compared in that frame.
+    pub fn relative_to(&self, reference: &WorldFromCamera) -> WorldFromCamera {
+        (reference.inverse() * *self).relabel()
+    }
+}
+
 impl<A, B, C> Mul<Rigid<B, C>> for Rigid<A, B> {
     type Output = Rigid<A, C>;
 

@@ -63,8 +63,9 @@ impl LpipsNet {
     }
 }
 
-/// Which backbone to load.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// Which backbone to load (`alex` or `vgg` in configurations).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum LpipsKind {
     Alex,
     Vgg,

@@ -69,7 +69,7 @@ fn check_directions<const D: usize>(name: &str, f: &dyn Fn(Tensor<D>) -> Tensor<
     assert!(analytic.iter().all(|g| g.is_finite()), "{name}: non-finite gradient");
     let mut rng = Rng::new(7);
     let mut directions = vec![("gradient".to_string(), analytic.clone())];
-    directions.extend((0..random).map(|d| (format!("random {d}"), rng.normal_vec(x.values.len(), 1.0))));
+    directions.extend((0..random).map(|d| (format!("random {d}"), rng.normals(x.values.len(), 1.0))));
     for (i, (label, u)) in directions.into_iter().enumerate() {
         let largest = u.iter().fold(0.0f32, |m, v| m.max(v.abs()));
         let u: Vec<f32> = u.iter().map(|v| v / largest).collect();
@@ -99,7 +99,7 @@ const RANDOM_DIRECTION_RTOL: f64 = 1e-2;
 fn random(shape: &[usize], low: f32, high: f32, seed: u64) -> Host {
     let mut rng = Rng::new(seed);
     let n = shape.iter().product();
-    Host::new(shape.to_vec(), (0..n).map(|_| low + (high - low) * rng.uniform()).collect())
+    Host::new(shape.to_vec(), (0..n).map(|_| low + (high - low) * rng.unit()).collect())
 }
 
 #[test]

@@ -33,7 +33,7 @@ fn scalar(t: Tensor<1>) -> f64 {
 
 fn check(name: &str, f: &dyn Fn(Tensor<4>) -> Tensor<1>, shape: [usize; 4], seed: u64) {
     let mut rng = Rng::new(seed);
-    let x: Vec<f64> = (0..shape.iter().product()).map(|_| rng.uniform() as f64).collect();
+    let x: Vec<f64> = (0..shape.iter().product()).map(|_| rng.unit() as f64).collect();
     let input = tensor(&x, shape).require_grad();
     let loss = f(input.clone());
     assert_eq!(loss.dtype(), burn::tensor::DType::F64, "{name} runs in f64");
@@ -62,7 +62,7 @@ fn lpips_alex_gradient_in_f64() {
     write_safetensors(&path, &synthetic_weights(&ALEXNET_CONVS, Some(&ALEXNET_TAP_CHANNELS), 61));
     let lpips = Lpips::load(LpipsKind::Alex, &path, &path, &device()).unwrap();
     let mut rng = Rng::new(62);
-    let target: Vec<f64> = (0..32 * 32 * 3).map(|_| rng.uniform() as f64).collect();
+    let target: Vec<f64> = (0..32 * 32 * 3).map(|_| rng.unit() as f64).collect();
     check("lpips alex", &|x| lpips.eval(x, tensor(&target, [1, 32, 32, 3])).unwrap().sum(), [1, 32, 32, 3], 63);
 }
 
@@ -74,7 +74,7 @@ fn gram_gradient_in_f64() {
     write_safetensors(&path, &synthetic_weights(&stage4, None, 64));
     let gram = GramLoss::load(&path, &device()).unwrap();
     let mut rng = Rng::new(65);
-    let target: Vec<f64> = (0..16 * 16 * 3).map(|_| rng.uniform() as f64).collect();
+    let target: Vec<f64> = (0..16 * 16 * 3).map(|_| rng.unit() as f64).collect();
     check("gram", &|x| gram.forward(x, tensor(&target, [1, 16, 16, 3])).unwrap().value.sum(), [1, 16, 16, 3], 66);
 }
 
@@ -85,7 +85,7 @@ fn lpips_vgg_gradient_in_f64() {
     write_safetensors(&path, &synthetic_weights(&VGG16_CONVS, Some(&VGG16_TAP_CHANNELS), 67));
     let lpips = Lpips::load(LpipsKind::Vgg, &path, &path, &device()).unwrap();
     let mut rng = Rng::new(68);
-    let target: Vec<f64> = (0..16 * 16 * 3).map(|_| rng.uniform() as f64).collect();
+    let target: Vec<f64> = (0..16 * 16 * 3).map(|_| rng.unit() as f64).collect();
     let f = |x| lpips.forward(x, tensor(&target, [1, 16, 16, 3]), LpipsInput::Unscaled).unwrap().value.sum();
     check("lpips vgg", &f, [1, 16, 16, 3], 69);
 }

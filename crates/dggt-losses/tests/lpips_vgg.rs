@@ -25,7 +25,7 @@ fn setup(dir: &std::path::Path) -> (Lpips, Vgg16, Vec<Vec<f32>>) {
 
 fn images(seed: u64, shape: [usize; 4]) -> Host {
     let mut rng = Rng::new(seed);
-    Host::new(shape.to_vec(), rng.uniform_vec(shape.iter().product()))
+    Host::new(shape.to_vec(), rng.ranges(shape.iter().product(), 0.0, 1.0))
 }
 
 /// LPIPS from the taps, on the host after the network: per tap and pixel, unit-normalise over channels,

@@ -89,7 +89,7 @@ fn lpips_of_identical_images_is_zero_with_finite_gradient() {
     let dir = tempfile::tempdir().unwrap();
     for (name, lpips, size) in lpips_nets(dir.path()) {
         let mut rng = Rng::new(33);
-        let image = Host::new(vec![2, size, size, 3], rng.uniform_vec(2 * size * size * 3));
+        let image = Host::new(vec![2, size, size, 3], rng.ranges(2 * size * size * 3, 0.0, 1.0));
         for input in [LpipsInput::ZeroOne, LpipsInput::Unscaled] {
             let (loss, grad) = loss_and_grad(image.tensor::<4>(&device()), |x| {
                 lpips.forward(x, image.tensor(&device()), input).unwrap().value.sum()

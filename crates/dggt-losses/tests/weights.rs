@@ -100,8 +100,8 @@ fn lpips_names_and_lins_aliases_load_the_same_network() {
     let la = Lpips::load(LpipsKind::Alex, &a, &a, &device()).unwrap();
     let lb = Lpips::load(LpipsKind::Alex, &b, &b, &device()).unwrap();
     let mut rng = common::Rng::new(45);
-    let img0 = Host::new(vec![1, 40, 36, 3], rng.uniform_vec(40 * 36 * 3));
-    let img1 = Host::new(vec![1, 40, 36, 3], rng.uniform_vec(40 * 36 * 3));
+    let img0 = Host::new(vec![1, 40, 36, 3], rng.ranges(40 * 36 * 3, 0.0, 1.0));
+    let img1 = Host::new(vec![1, 40, 36, 3], rng.ranges(40 * 36 * 3, 0.0, 1.0));
     let va = values(la.eval(img0.tensor(&device()), img1.tensor(&device())).unwrap());
     let vb = values(lb.eval(img0.tensor(&device()), img1.tensor(&device())).unwrap());
     assert_eq!(va, vb);
@@ -142,8 +142,8 @@ fn pth_files_load_like_safetensors() {
     let from_pth = Lpips::load(LpipsKind::Alex, &backbone_pth, &linear_pth, &device).unwrap();
     let from_safetensors = Lpips::load(LpipsKind::Alex, &all, &all, &device).unwrap();
     let mut rng = common::Rng::new(48);
-    let img0 = Host::new(vec![2, 33, 35, 3], rng.uniform_vec(2 * 33 * 35 * 3));
-    let img1 = Host::new(vec![2, 33, 35, 3], rng.uniform_vec(2 * 33 * 35 * 3));
+    let img0 = Host::new(vec![2, 33, 35, 3], rng.ranges(2 * 33 * 35 * 3, 0.0, 1.0));
+    let img1 = Host::new(vec![2, 33, 35, 3], rng.ranges(2 * 33 * 35 * 3, 0.0, 1.0));
     let a = values(from_pth.eval(img0.tensor(&device), img1.tensor(&device)).unwrap());
     let b = values(from_safetensors.eval(img0.tensor(&device), img1.tensor(&device)).unwrap());
     assert_eq!(a, b);

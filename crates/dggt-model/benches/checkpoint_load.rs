@@ -20,6 +20,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use burn::tensor::Device;
+use dggt_data::random::SplitMix64;
 use dggt_model::weights::{ParameterInfo, load_checkpoint, module_path, parameters};
 use dggt_model::{Dggt, ModelConfig};
 
@@ -102,7 +103,7 @@ fn write_checkpoint(path: &Path, tensors: &[ReleaseTensor], header: &[u8]) -> st
     let mut out = BufWriter::with_capacity(CHUNK_VALUES * BYTES_PER_VALUE, File::create(path)?);
     out.write_all(&(header.len() as u64).to_le_bytes())?;
     out.write_all(header)?;
-    let mut state = 0x2545_f491_4f6c_dd1d_u64;
+    let mut random = SplitMix64::new(0x2545_f491_4f6c_dd1d);
     let mut chunk = Vec::with_capacity(CHUNK_VALUES * BYTES_PER_VALUE);
     for tensor in tensors {
         let mut left = tensor.values();
@@ -110,13 +111,7 @@ fn write_checkpoint(path: &Path, tensors: &[ReleaseTensor], header: &[u8]) -> st
             let count = left.min(CHUNK_VALUES);
             chunk.clear();
             for _ in 0..count {
-                state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
-                let mut z = state;
-                z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-                z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-                z ^= z >> 31;
-                let unit = (z >> 40) as f32 / (1u64 << 24) as f32;
-                chunk.extend_from_slice(&((unit - 0.5) * 0.1).to_le_bytes());
+                chunk.extend_from_slice(&((random.unit() - 0.5) * 0.1).to_le_bytes());
             }
             out.write_all(&chunk)?;
             left -= count;

@@ -204,6 +204,56 @@ pub struct SkyConfig {
     pub radius: f64,
 }
 
+/// A named architecture: the tiny parity model, VGGT-1B, or the released DGGT network.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Preset {
+    #[serde(rename = "tiny")]
+    Tiny,
+    #[serde(rename = "vggt_1b")]
+    Vggt1b,
+    #[serde(rename = "dggt")]
+    Dggt,
+}
+
+impl Preset {
+    pub const ALL: [Self; 3] = [Self::Tiny, Self::Vggt1b, Self::Dggt];
+
+    /// The name used in configurations and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Tiny => "tiny",
+            Self::Vggt1b => "vggt_1b",
+            Self::Dggt => "dggt",
+        }
+    }
+
+    /// The preset's network.
+    pub fn config(self) -> ModelConfig {
+        match self {
+            Self::Tiny => ModelConfig::tiny(),
+            Self::Vggt1b => ModelConfig::vggt_1b(),
+            Self::Dggt => ModelConfig::dggt(),
+        }
+    }
+}
+
+impl std::fmt::Display for Preset {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Preset {
+    type Err = ModelError;
+
+    fn from_str(name: &str) -> Result<Self, ModelError> {
+        Self::ALL.into_iter().find(|p| p.name() == name).ok_or_else(|| {
+            let known: Vec<&str> = Self::ALL.iter().map(|p| p.name()).collect();
+            ModelError::Config(format!("unknown preset `{name}` (known: {})", known.join(", ")))
+        })
+    }
+}
+
 /// The whole network. The point head is VGGT's; the Gaussian, instance (dynamic) and semantic heads exist
 /// in DGGT only.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

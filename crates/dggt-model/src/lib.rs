@@ -13,10 +13,10 @@
 //!   lists (`tests/checkpoint_keys.rs`).
 //!
 //! - [`sky`]: the sky model's Gaussians and their colours sampled from the input views;
-//! - [`lifespan`]: frame times, the static/dynamic opacity split and the lifespan decay;
-//! - [`scene_render`]: the release's inference render (static and dynamic Gaussians over the sky), with
-//!   `dggt-splat`;
-//! - [`parity`]: running a folder of reference vectors and comparing every output (`dggt parity`).
+//! - [`lifespan`]: frame times, the static/dynamic opacity split and the lifespan decay.
+//!
+//! The network stops at its maps: placing and rendering Gaussians is `dggt-scene`'s, and running a folder of
+//! reference vectors against the release (`dggt parity`) is `dggt-infer`'s.
 //!
 //! Not built: the tracker head (never run by DGGT).
 //!
@@ -36,14 +36,12 @@ pub mod leaf;
 pub mod lifespan;
 pub mod mlp;
 pub mod model;
-pub mod parity;
 pub mod resample;
 pub mod rope;
-pub mod scene_render;
 pub mod sky;
 pub mod uv_embed;
 pub mod weights;
 
-pub use config::ModelConfig;
+pub use config::{ModelConfig, Preset};
 pub use error::ModelError;
 pub use model::{Dggt, DggtOutput, ExtraHeads, GaussianOutput};

@@ -16,7 +16,6 @@ use burn::nn::{Initializer, Linear, LinearConfig};
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_geom::{CameraFromWorld, ImageSize, PinholeIntrinsics};
-use dggt_splat::{GaussianTensors, OpacityTensor};
 
 use crate::config::SkyConfig;
 
@@ -248,19 +247,6 @@ fn sample_bilinear_zeros(image: &[f32], [height, width]: [usize; 2], [gx, gy]: [
         }
     }
     out
-}
-
-impl SkyGaussians {
-    /// The kept sky Gaussians as the rasteriser takes them.
-    pub fn to_splat(&self) -> GaussianTensors {
-        GaussianTensors {
-            means: self.means.clone(),
-            quats_wxyz: self.quats.clone(),
-            scales: self.scales.clone(),
-            opacities: OpacityTensor::Shared(self.opacities.clone()),
-            colors: self.colors.clone(),
-        }
-    }
 }
 
 /// `count` points of a Fibonacci lattice on the upper hemisphere (`y` in `[-1, 0]`: up is `-y` in OpenCV axes)

@@ -6,8 +6,6 @@ use std::path::PathBuf;
 pub enum ReconstructError {
     #[error("{}: {detail}", path.display())]
     Input { path: PathBuf, detail: String },
-    #[error("checkpoint {}: {detail}", path.display())]
-    Checkpoint { path: PathBuf, detail: String },
     #[error("{what}: {detail}")]
     Invalid { what: String, detail: String },
     #[error("{0}")]
@@ -17,7 +15,7 @@ pub enum ReconstructError {
     #[error("{0}")]
     Scene(#[from] dggt_scene::SceneError),
     #[error("{0}")]
-    Train(#[from] dggt_train::TrainError),
+    Infer(#[from] dggt_infer::InferError),
     #[error("{0}")]
     Export(#[from] dggt_export::ExportError),
     #[error("{0}")]

@@ -23,7 +23,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use burn::tensor::{Device, Tensor, TensorData};
-use dggt_data::PlanarImage;
+use dggt_data::{PlanarImage, Preprocess};
 use dggt_export::cameras_json::{CameraRecord, Convention, write_cameras_json};
 use dggt_export::colmap::{ColmapCamera, ColmapImage, write_colmap};
 use dggt_export::depth::{scale_for, write_depth_npy, write_depth_png16};
@@ -32,18 +32,14 @@ use dggt_export::masks::{write_binary_png, write_probability_png};
 use dggt_export::nerfstudio::{NerfstudioFrame, write_transforms};
 use dggt_export::ply::{GaussianCloud, write_ply};
 use dggt_geom::{ImageSize, PosedCamera, WorldFromCamera};
-use dggt_scene::{
-    InputView, MIN_OPACITY, PixelGaussians, TargetView, Timeline, interpolate_camera, nearest_view, render_target,
+use dggt_infer::{
+    InputCameras, InputSet, LoadedNetwork, Scene4d, SceneOptions, ViewSlot, forward_chunked, input_views, load_network,
 };
-use dggt_train::batch::relative_pose;
-use dggt_train::objective::decode_cameras;
+use dggt_scene::{AssemblyCounts, InputView, MIN_OPACITY, PixelGaussians, TargetView, Timeline, nearest_view};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::align::pose_error;
 use crate::error::ReconstructError;
-use crate::forward::forward_chunked;
-use crate::inputs::InputSet;
-use crate::network::{Architecture, load_network};
 use crate::summary::{GaussianCounts, RenderRecord, StageTime, Summary, peak_memory_mib};
 
 /// Which times to render (and export dynamic Gaussians at).
@@ -65,7 +61,7 @@ pub struct ReconstructOptions {
     pub images: PathBuf,
     pub checkpoint: PathBuf,
     /// Architecture of `.pt` / `.safetensors` checkpoints (default: the `dggt` preset).
-    pub architecture: Option<Architecture>,
+    pub architecture: Option<dggt_infer::Architecture>,
     /// Camera positions (folders) or ids (exports).
     pub cameras: Option<Vec<usize>>,
     /// Frame positions (folders) or indices (exports), end exclusive.
@@ -136,11 +132,7 @@ pub fn reconstruct(options: &ReconstructOptions, device: &Device) -> Result<Summ
     }
     stages.done("load checkpoint");
 
-    let mut preprocess = network.preprocess.unwrap_or_default();
-    if let Some(width) = options.width {
-        preprocess.target_width = width;
-    }
-    preprocess.patch_size = network.config.aggregator.patch_size as u32;
+    let preprocess = preprocess_for(&network, options.width);
     let (images, size) = inputs.load(&preprocess)?;
     let times_s = requested_times(&inputs, &options.times)?;
     tracing::info!(
@@ -155,7 +147,14 @@ pub fn reconstruct(options: &ReconstructOptions, device: &Device) -> Result<Summ
 
     let batch = images_tensor(&images, size, device);
     let prediction = forward_chunked(&network.model, batch.clone(), options.chunk_frames)?;
-    let cameras = decode_cameras(prediction.pose_encoding.clone(), size)?;
+    let timeline = Timeline::new(&inputs.frames)?;
+    let slots: Vec<ViewSlot> = inputs
+        .views
+        .iter()
+        .map(|v| ViewSlot { rig_camera: v.camera, time: timeline.time(inputs.frame_at(v.time_s)) })
+        .collect();
+    let views = input_views(&prediction, &slots, InputCameras::Predicted, size)?;
+    let cameras: Vec<PosedCamera> = views.iter().map(|v| v.camera).collect();
     stages.done("forward");
 
     std::fs::create_dir_all(&options.out).map_err(|e| ReconstructError::input(&options.out, e.to_string()))?;
@@ -169,106 +168,28 @@ pub fn reconstruct(options: &ReconstructOptions, device: &Device) -> Result<Summ
     }
     stages.done("write cameras and maps");
 
-    let timeline = Timeline::new(&inputs.frames)?;
-    let scene_time = |time_s: f64| timeline.time(inputs.frame_at(time_s));
-    let views: Vec<InputView> = inputs
-        .views
-        .iter()
-        .zip(&cameras)
-        .map(|(v, camera)| InputView { rig_camera: v.camera, time: scene_time(v.time_s), camera: *camera })
-        .collect();
-    let mut counts = GaussianCounts::default();
-    let mut renders = Vec::new();
-    let mut input_psnr_db = Vec::new();
-    match prediction.pixel_gaussians(views.clone(), network.model.unproject_at, &timeline)? {
-        None => warnings.push("the network has no Gaussian head: no Gaussians, sky masks or renders".into()),
-        Some(pixels) => {
-            let sky = network.model.sky_model.as_ref().map(|model| {
-                let [_, s, c, h, w] = batch.dims();
-                let cameras: Vec<_> =
-                    views.iter().map(|v| (v.camera.world_from_camera.inverse(), v.camera.intrinsics)).collect();
-                model.gaussians(batch.clone().reshape([s, c, h, w]), &cameras)
-            });
-            drop(prediction);
-            stages.done("gaussians");
-
-            let host_pixels = HostPixels::new(&pixels);
-            counts.per_pixel = host_pixels.len();
-            let statics = host_pixels.static_cloud();
-            counts.static_kept = statics.len();
-            write_ply(&written.path("gaussians/static.ply"), &statics)?;
-            drop(statics);
-            let sky_cloud = sky.as_ref().map(sky_cloud).unwrap_or_default();
-            counts.sky_kept = sky_cloud.len();
-            write_ply(&written.path("gaussians/sky.ply"), &sky_cloud)?;
-            if sky.is_none() {
-                warnings.push("the network has no sky model: sky.ply is empty and renders have a black sky".into());
-            }
-            for (k, &time_s) in times_s.iter().enumerate() {
-                let cloud = host_pixels.dynamic_cloud(&views, inputs.cameras.len(), scene_time(time_s));
-                counts.dynamic_kept.push(cloud.len());
-                write_ply(&written.path(&format!("gaussians/dynamic_t{k:04}.ply")), &cloud)?;
-            }
-            drop(host_pixels);
-            stages.done("write gaussians");
-
-            let settings = network.assembly;
-            let total = inputs.views.len() + times_s.len() * inputs.cameras.len();
-            let bar = progress_bar(options.progress, total as u64);
-            // Input views re-rendered: the sky masks, the PSNR, and the renders at input times.
-            let mut at_inputs: HashMap<(usize, u64), (Vec<f32>, dggt_scene::AssemblyCounts)> = HashMap::new();
-            for (i, view) in inputs.views.iter().enumerate() {
-                let target = TargetView { rig_camera: view.camera, time: views[i].time, camera: views[i].camera };
-                let render = render_target(&pixels, sky.as_ref(), &target, &settings)?;
-                let rgb = host(render.rgb);
-                let alpha = host(render.alpha);
-                let sky_mask: Vec<bool> = alpha.iter().map(|&a| a < 0.5).collect();
-                write_binary_png(&written.path(&format!("sky/{}.png", view.name)), size, &sky_mask)?;
-                input_psnr_db.push(psnr(&rgb, &interleaved(&images[i])));
-                at_inputs.insert((view.camera, view.time_s.to_bits()), (rgb, render.counts));
-                bar.inc(1);
-            }
-            let input_times = inputs.input_times();
-            for (k, &time_s) in times_s.iter().enumerate() {
-                for camera in 0..inputs.cameras.len() {
-                    let file = format!("renders/t{k:04}_cam{camera}.png");
-                    let (rgb, assembly) = match at_inputs.get(&(camera, time_s.to_bits())) {
-                        Some((rgb, assembly)) => (rgb.clone(), *assembly),
-                        None => {
-                            let t = scene_time(time_s);
-                            let target = TargetView {
-                                rig_camera: camera,
-                                time: t,
-                                camera: interpolate_camera(&views, camera, t)?,
-                            };
-                            let render = render_target(&pixels, sky.as_ref(), &target, &settings)?;
-                            (host(render.rgb), render.counts)
-                        }
-                    };
-                    write_rgb_png(&written.path(&file), size, &rgb)?;
-                    renders.push(RenderRecord {
-                        file,
-                        camera,
-                        time_s,
-                        at_input: input_times.contains(&time_s),
-                        candidates: assembly.candidates,
-                        transparent: assembly.transparent,
-                        off_screen: assembly.off_screen,
-                        static_kept: assembly.static_kept,
-                        dynamic_kept: assembly.dynamic_kept,
-                    });
-                    bar.inc(1);
-                }
-            }
-            bar.finish_and_clear();
-            stages.done("render");
+    let scene_options = SceneOptions { assembly: network.assembly, ..SceneOptions::default() };
+    let scene = Scene4d::build(&network.model, &prediction, &batch, views, &timeline, &scene_options)?;
+    drop(prediction);
+    let (counts, renders, input_psnr_db) = match scene {
+        None => {
+            warnings.push("the network has no Gaussian head: no Gaussians, sky masks or renders".into());
+            (GaussianCounts::default(), Vec::new(), Vec::new())
         }
-    }
+        Some(scene) => {
+            stages.done("gaussians");
+            let request = RenderRequest { inputs: &inputs, images: &images, times_s: &times_s, timeline, size };
+            let counts = write_gaussians(&mut written, &scene, &request, &mut warnings)?;
+            stages.done("write gaussians");
+            let (renders, input_psnr_db) = render_views(&mut written, &scene, &request, options.progress)?;
+            stages.done("render");
+            (counts, renders, input_psnr_db)
+        }
+    };
 
     let pose_error = inputs.ground_truth.as_ref().and_then(|truth| {
         let reference = truth.world_from_camera[0];
-        let truth: Vec<WorldFromCamera> =
-            truth.world_from_camera.iter().map(|p| relative_pose(&reference, p)).collect();
+        let truth: Vec<WorldFromCamera> = truth.world_from_camera.iter().map(|p| p.relative_to(&reference)).collect();
         let predicted: Vec<WorldFromCamera> = cameras.iter().map(|c| c.world_from_camera).collect();
         pose_error(&predicted, &truth)
     });
@@ -297,6 +218,120 @@ pub fn reconstruct(options: &ReconstructOptions, device: &Device) -> Result<Summ
     let text = serde_json::to_string_pretty(&summary).expect("summaries serialise");
     std::fs::write(&path, text).map_err(|e| ReconstructError::input(&path, e.to_string()))?;
     Ok(summary)
+}
+
+/// The preprocessing of the network's training configuration (or the default), at `width` when given.
+fn preprocess_for(network: &LoadedNetwork, width: Option<u32>) -> Preprocess {
+    let mut preprocess = network.preprocess.clone().unwrap_or_default();
+    if let Some(width) = width {
+        preprocess.target_width = width;
+    }
+    preprocess.patch_size = network.config.aggregator.patch_size as u32;
+    preprocess
+}
+
+/// What the Gaussians are exported and the views rendered for.
+struct RenderRequest<'a> {
+    inputs: &'a InputSet,
+    /// The inputs as the network saw them.
+    images: &'a [PlanarImage],
+    times_s: &'a [f64],
+    timeline: Timeline,
+    size: ImageSize,
+}
+
+impl RenderRequest<'_> {
+    /// The scene time of `time_s` seconds since the first chosen frame.
+    fn scene_time(&self, time_s: f64) -> f64 {
+        self.timeline.time(self.inputs.frame_at(time_s))
+    }
+}
+
+/// Writes the static, sky and per-time dynamic Gaussians as PLY; returns their counts.
+fn write_gaussians(
+    written: &mut Written,
+    scene: &Scene4d,
+    request: &RenderRequest<'_>,
+    warnings: &mut Vec<String>,
+) -> Result<GaussianCounts, ReconstructError> {
+    let mut counts = GaussianCounts::default();
+    let host_pixels = HostPixels::new(&scene.pixels);
+    counts.per_pixel = host_pixels.len();
+    let statics = host_pixels.static_cloud();
+    counts.static_kept = statics.len();
+    write_ply(&written.path("gaussians/static.ply"), &statics)?;
+    drop(statics);
+    let sky_cloud = scene.sky.as_ref().map(sky_cloud).unwrap_or_default();
+    counts.sky_kept = sky_cloud.len();
+    write_ply(&written.path("gaussians/sky.ply"), &sky_cloud)?;
+    if scene.sky.is_none() {
+        warnings.push("the network has no sky model: sky.ply is empty and renders have a black sky".into());
+    }
+    for (k, &time_s) in request.times_s.iter().enumerate() {
+        let cloud = host_pixels.dynamic_cloud(scene.views(), request.inputs.cameras.len(), request.scene_time(time_s));
+        counts.dynamic_kept.push(cloud.len());
+        write_ply(&written.path(&format!("gaussians/dynamic_t{k:04}.ply")), &cloud)?;
+    }
+    Ok(counts)
+}
+
+/// Re-renders the input views (sky masks, PSNR) and renders every camera at every requested time; returns the
+/// render records and the input views' PSNR.
+fn render_views(
+    written: &mut Written,
+    scene: &Scene4d,
+    request: &RenderRequest<'_>,
+    progress: bool,
+) -> Result<(Vec<RenderRecord>, Vec<f64>), ReconstructError> {
+    let (inputs, size) = (request.inputs, request.size);
+    let views = scene.views();
+    let total = inputs.views.len() + request.times_s.len() * inputs.cameras.len();
+    let bar = progress_bar(progress, total as u64);
+    // Input views re-rendered: the sky masks, the PSNR, and the renders at input times.
+    let mut at_inputs: HashMap<(usize, u64), (Vec<f32>, AssemblyCounts)> = HashMap::new();
+    let mut input_psnr_db = Vec::new();
+    for (i, view) in inputs.views.iter().enumerate() {
+        let target = TargetView { rig_camera: view.camera, time: views[i].time, camera: views[i].camera };
+        let render = scene.render(&target)?;
+        let rgb = host(render.rgb);
+        let alpha = host(render.alpha);
+        let sky_mask: Vec<bool> = alpha.iter().map(|&a| a < 0.5).collect();
+        write_binary_png(&written.path(&format!("sky/{}.png", view.name)), size, &sky_mask)?;
+        input_psnr_db.push(psnr(&rgb, &interleaved(&request.images[i])));
+        at_inputs.insert((view.camera, view.time_s.to_bits()), (rgb, render.counts));
+        bar.inc(1);
+    }
+    let input_times = inputs.input_times();
+    let mut renders = Vec::new();
+    for (k, &time_s) in request.times_s.iter().enumerate() {
+        for camera in 0..inputs.cameras.len() {
+            let file = format!("renders/t{k:04}_cam{camera}.png");
+            let (rgb, assembly) = match at_inputs.get(&(camera, time_s.to_bits())) {
+                Some((rgb, assembly)) => (rgb.clone(), *assembly),
+                None => {
+                    let time = request.scene_time(time_s);
+                    let target = TargetView { rig_camera: camera, time, camera: scene.camera_at(camera, time)? };
+                    let render = scene.render(&target)?;
+                    (host(render.rgb), render.counts)
+                }
+            };
+            write_rgb_png(&written.path(&file), size, &rgb)?;
+            renders.push(RenderRecord {
+                file,
+                camera,
+                time_s,
+                at_input: input_times.contains(&time_s),
+                candidates: assembly.candidates,
+                transparent: assembly.transparent,
+                off_screen: assembly.off_screen,
+                static_kept: assembly.static_kept,
+                dynamic_kept: assembly.dynamic_kept,
+            });
+            bar.inc(1);
+        }
+    }
+    bar.finish_and_clear();
+    Ok((renders, input_psnr_db))
 }
 
 /// The requested times in seconds, ascending as given.

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use serde::Serialize;
 
 use crate::align::PoseError;
-use crate::network::CheckpointInfo;
+use dggt_infer::CheckpointInfo;
 
 /// Seconds spent in one stage.
 #[derive(Debug, Clone, PartialEq, Serialize)]

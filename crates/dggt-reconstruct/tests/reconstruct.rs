@@ -12,9 +12,10 @@ use dggt_export::images::read_rgb_png;
 use dggt_export::masks::read_mask_png;
 use dggt_export::nerfstudio::read_transforms;
 use dggt_export::ply::{INRIA_PROPERTIES, read_ply};
+use dggt_infer::Architecture;
 use dggt_reconstruct::align::pose_error;
-use dggt_reconstruct::{Architecture, ReconstructOptions, TimeRequest, reconstruct};
-use dggt_train::{RunOptions, TrainConfig, Trainer};
+use dggt_reconstruct::{ReconstructOptions, TimeRequest, reconstruct};
+use dggt_train::{RunOptions, Start, TrainConfig, Trainer};
 
 /// Pose warm-up steps (the camera loss alone, about 0.04 s each), then full training steps, of the checkpoint
 /// under test.
@@ -68,7 +69,7 @@ fn train_config(out: &Path) -> TrainConfig {
 fn reconstructs_the_fixture_from_a_trained_checkpoint() {
     let started = Instant::now();
     let run = tempfile::tempdir().unwrap();
-    let mut trainer = Trainer::new(train_config(run.path()), vec![Device::flex()], false).unwrap();
+    let mut trainer = Trainer::new(train_config(run.path()), vec![Device::flex()], Start::Fresh).unwrap();
     let trained = trainer.run(RunOptions::default()).unwrap();
     assert!(trained.checkpoint.is_some(), "the run ends with a checkpoint");
     eprintln!(
@@ -166,11 +167,8 @@ fn reconstructs_the_fixture_from_a_trained_checkpoint() {
 
     // Poses against the fixture's ground truth, relative to the first view, after similarity alignment.
     let scene = dggt_data::open_scene(&fixture(), Some(0..8), Some(vec![0])).unwrap();
-    let truth: Vec<_> = (0..8)
-        .map(|f| {
-            dggt_train::batch::relative_pose(&scene.view(0, 0).world_from_camera, &scene.view(f, 0).world_from_camera)
-        })
-        .collect();
+    let truth: Vec<_> =
+        (0..8).map(|f| scene.view(f, 0).world_from_camera.relative_to(&scene.view(0, 0).world_from_camera)).collect();
     let predicted: Vec<_> = records.iter().map(|r| r.world_from_camera).collect();
     let error = pose_error(&predicted, &truth).expect("distinct camera centres");
     eprintln!("{error:?}");
@@ -257,7 +255,7 @@ fn bad_inputs_give_errors_naming_the_file() {
         options.cameras = Some(vec![0]);
         options.frames = Some(0..2);
         options.width = Some(56);
-        options.architecture = Some(Architecture::Preset("tiny".into()));
+        options.architecture = Some(Architecture::Preset(dggt_model::Preset::Tiny));
         options
     };
     let garbage = dir.path().join("garbage.pt");
@@ -318,7 +316,7 @@ fn bad_inputs_give_errors_naming_the_file() {
 
 #[test]
 fn glob_patterns_choose_images_or_camera_folders() {
-    use dggt_reconstruct::inputs::InputSet;
+    use dggt_infer::InputSet;
     let dir = tempfile::tempdir().unwrap();
     for (camera, frames) in [("cam_front", 3), ("cam_left", 3), ("notes", 0)] {
         std::fs::create_dir_all(dir.path().join(camera)).unwrap();

@@ -1,13 +1,16 @@
 //! Rendering one target view: its assembled Gaussians as the foreground, composited over the sky Gaussians
 //! rendered from the same camera: `rgb = alpha · foreground + (1 - alpha) · sky` (black without a sky model).
 //!
-//! The release's inference additionally min-max normalises the sky over all views (`dggt_model::scene_render`);
-//! a trained model of this project composites the sky as rendered, in training and inference alike.
+//! The release's inference additionally min-max normalises the sky over all views before [`composite`]
+//! (`dggt_infer::release`); a trained model of this project composites the sky as rendered, in training and
+//! inference alike.
 
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_geom::{CameraFromWorld, ImageSize, PinholeIntrinsics, PosedCamera};
 use dggt_model::sky::SkyGaussians;
-use dggt_splat::{CameraTensors, RasterSettings, RenderSettings, RenderTensors, render};
+use dggt_splat::{
+    CameraTensors, GaussianTensors, OpacityTensor, RasterSettings, RenderSettings, RenderTensors, render,
+};
 
 use crate::assemble::{AssembledGaussians, AssemblyCounts, AssemblySettings, assemble};
 use crate::error::SceneError;
@@ -65,16 +68,33 @@ pub fn render_assembled(
     let RenderTensors { colors, alpha, depth } = foreground;
     let (rgb, sky) = match sky {
         Some(sky) => {
-            let sky_rgb = render(&sky.to_splat(), &cameras, &settings)
+            let sky_rgb = render(&sky_splats(sky), &cameras, &settings)
                 .map_err(|source| SceneError::Render { what: format!("the sky of {}", what()), source })?
                 .colors;
-            let a = alpha.clone().unsqueeze_dim::<4>(3);
-            (a.clone() * colors + a.neg().add_scalar(1.0) * sky_rgb.clone(), Some(sky_rgb))
+            (composite(alpha.clone(), colors, sky_rgb.clone()), Some(sky_rgb))
         }
         None => (colors, None),
     };
     let squeeze3 = |t: Tensor<4>| t.squeeze_dim::<3>(0);
     Ok(ViewRender { rgb: squeeze3(rgb), alpha, depth, sky: sky.map(squeeze3), counts })
+}
+
+/// `[V, H, W, 3]` foreground colours over the background: `alpha · foreground + (1 - alpha) · background`, with
+/// `alpha` `[V, H, W]` the foreground's opacity.
+pub fn composite(alpha: Tensor<3>, foreground: Tensor<4>, background: Tensor<4>) -> Tensor<4> {
+    let a = alpha.unsqueeze_dim::<4>(3);
+    a.clone() * foreground + a.neg().add_scalar(1.0) * background
+}
+
+/// The kept sky Gaussians as the rasteriser takes them.
+pub fn sky_splats(sky: &SkyGaussians) -> GaussianTensors {
+    GaussianTensors {
+        means: sky.means.clone(),
+        quats_wxyz: sky.quats.clone(),
+        scales: sky.scales.clone(),
+        opacities: OpacityTensor::Shared(sky.opacities.clone()),
+        colors: sky.colors.clone(),
+    }
 }
 
 /// Cameras as the rasteriser takes them: world-to-camera `[V, 4, 4]` and pinhole `K` `[V, 3, 3]`.

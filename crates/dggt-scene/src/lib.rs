@@ -19,7 +19,7 @@ pub mod pixels;
 pub mod timeline;
 
 pub use assemble::{AssembledGaussians, AssemblyCounts, AssemblySettings, MIN_OPACITY, assemble};
-pub use compose::{ViewRender, camera_tensors, render_assembled, render_target};
+pub use compose::{ViewRender, camera_tensors, composite, render_assembled, render_target, sky_splats};
 pub use error::SceneError;
 pub use pixels::{MeansGradient, PixelGaussians};
 pub use timeline::{DynamicBlend, InputView, TargetView, Timeline, dynamic_sources, interpolate_camera, nearest_view};

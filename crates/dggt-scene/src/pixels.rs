@@ -15,7 +15,8 @@ use crate::error::SceneError;
 use crate::timeline::InputView;
 
 /// Whether gradients reach the depth through the Gaussian means.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum MeansGradient {
     /// As the release trains: the means are constants.
     #[default]

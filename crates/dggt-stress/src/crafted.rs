@@ -11,14 +11,16 @@ use std::ops::Range;
 
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_geom::PixelConvention;
+use dggt_infer::Scene4d;
 use dggt_model::gaussian_maps::GaussianMaps;
 use dggt_model::sky::SkyModel;
+use dggt_objective::{Forward, Objective};
 use dggt_scene::{InputView, MeansGradient, PixelGaussians};
-use dggt_train::objective::{Forward, Objective};
 
 use crate::pipeline::{probe_gradient, render_and_differentiate};
 use crate::probe::{Probe, Stage};
-use crate::scenario::{Scenario, Sequence};
+use crate::scenario::Scenario;
+use dggt_data::random::SplitMix64;
 
 /// Channels of the raw Gaussian head output.
 pub const RAW_CHANNELS: usize = 12;
@@ -45,7 +47,7 @@ impl Prediction {
     /// Moderate random values: what a network might output.
     pub fn random(scenario: &Scenario, seed: u64) -> Self {
         let pixels = scenario.input_frames.len() * scenario.size.area();
-        let mut random = Sequence::new(seed);
+        let mut random = SplitMix64::new(seed);
         let raw = (0..pixels * RAW_CHANNELS)
             .map(|i| match i % RAW_CHANNELS {
                 3 => random.range(-1.0, 3.0),
@@ -58,7 +60,7 @@ impl Prediction {
     }
 
     /// Gives the prediction motion-head velocities of `magnitude` in random directions.
-    pub fn set_velocity(&mut self, magnitude: f32, random: &mut Sequence) {
+    pub fn set_velocity(&mut self, magnitude: f32, random: &mut SplitMix64) {
         let count = self.depth.len() * 3;
         self.velocity = Some((0..count).map(|_| magnitude * random.range(-1.0, 1.0)).collect());
     }
@@ -71,7 +73,7 @@ impl Prediction {
     }
 
     /// Sets `channels` of every pixel to values drawn from `choices`.
-    pub fn scatter_channels(&mut self, channels: Range<usize>, choices: &[f32], random: &mut Sequence) {
+    pub fn scatter_channels(&mut self, channels: Range<usize>, choices: &[f32], random: &mut SplitMix64) {
         for pixel in self.raw.chunks_exact_mut(RAW_CHANNELS) {
             for value in &mut pixel[channels.clone()] {
                 *value = random.pick(choices);
@@ -126,9 +128,9 @@ pub fn run(
         batch.inputs.iter().map(|v| (v.camera.world_from_camera.inverse(), v.camera.intrinsics)).collect();
     let images = batch.images.clone().reshape([frames, 3, height, width]);
     let sky = Some(sky_model.gaussians(images, &cameras));
+    let scene = Scene4d { pixels, sky, assembly: objective.render.assembly() };
     let forward = Forward {
-        pixels,
-        sky,
+        scene,
         depth: depth.clone(),
         dynamic_logit: Some(logit.clone()),
         encodings: vec![],

@@ -6,9 +6,9 @@
 
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::tensor::{Device, Gradients, Tensor};
+use dggt_infer::RenderSection;
 use dggt_model::Dggt;
-use dggt_train::config::RenderSection;
-use dggt_train::objective::{Forward, Objective};
+use dggt_objective::{Forward, Objective};
 
 use crate::pipeline::render_and_differentiate;
 use crate::probe::{Probe, Stage};

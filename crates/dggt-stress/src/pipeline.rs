@@ -2,14 +2,13 @@
 //! compute the training objective and its gradients, probing each stage's tensors on the way.
 
 use burn::tensor::{Gradients, Tensor};
-use dggt_train::batch::StepBatch;
-use dggt_train::objective::{Forward, Objective};
+use dggt_objective::{Forward, Objective, StepBatch};
 
 use crate::probe::{Probe, Stage};
 
 /// Probes the per-pixel and sky Gaussians of `forward`.
 pub(crate) fn probe_gaussians(probe: &mut Probe, forward: &Forward) {
-    let pixels = &forward.pixels;
+    let pixels = forward.pixels();
     for (name, tensor) in [
         ("pixels.means", &pixels.means),
         ("pixels.quats_wxyz", &pixels.quats_wxyz),
@@ -23,7 +22,7 @@ pub(crate) fn probe_gaussians(probe: &mut Probe, forward: &Forward) {
     if let Some(logit) = &pixels.dynamic_logit {
         probe.tensor(Stage::Gaussians, "pixels.dynamic_logit", logit);
     }
-    if let Some(sky) = &forward.sky {
+    if let Some(sky) = &forward.scene.sky {
         for (name, tensor) in [
             ("sky.colors", &sky.colors),
             ("sky.means", &sky.means),
@@ -52,7 +51,7 @@ pub(crate) fn render_and_differentiate(
     }
     let loss = objective.loss_of(forward, batch).map_err(|e| e.to_string())?;
     for (term, value) in &loss.terms {
-        probe.values(Stage::Losses, term, [*value]);
+        probe.values(Stage::Losses, term.name(), [*value]);
     }
     probe.tensor(Stage::Losses, "total", &loss.total);
     Ok(loss.total.backward())

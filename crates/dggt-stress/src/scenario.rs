@@ -4,39 +4,11 @@
 //! world-from-camera, OpenCV axes).
 
 use burn::tensor::{Device, Tensor, TensorData};
+use dggt_data::random::SplitMix64;
 use dggt_geom::{ImageSize, PinholeIntrinsics, PosedCamera, WorldFromCamera};
+use dggt_objective::{DepthFlowSamples, StepBatch, ViewTruth};
 use dggt_scene::Timeline;
-use dggt_train::batch::{DepthFlowSamples, StepBatch, ViewTruth};
 use glam::{DQuat, DVec3};
-
-/// SplitMix64: the same values on every machine, so a failing case reproduces from its seed.
-#[derive(Debug, Clone)]
-pub struct Sequence(u64);
-
-impl Sequence {
-    pub fn new(seed: u64) -> Self {
-        Self(seed)
-    }
-
-    /// Uniform in `[0, 1)`.
-    pub fn unit(&mut self) -> f32 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
-    }
-
-    /// Uniform in `[low, high)`.
-    pub fn range(&mut self, low: f32, high: f32) -> f32 {
-        low + (high - low) * self.unit()
-    }
-
-    /// One of `choices`, uniformly.
-    pub fn pick<T: Copy>(&mut self, choices: &[T]) -> T {
-        choices[((self.unit() * choices.len() as f32) as usize).min(choices.len() - 1)]
-    }
-}
 
 /// What every view of the scenario shows, on the host.
 #[derive(Debug, Clone)]
@@ -75,7 +47,7 @@ impl Scenario {
         } else {
             (0..targets).map(|i| 1 + (i * (last - 1)) / targets.max(1)).collect()
         };
-        let mut random = Sequence::new(seed);
+        let mut random = SplitMix64::new(seed);
         let (width, height) = (size.width as usize, size.height as usize);
         let views = (0..input_frames.len() + target_frames.len())
             .map(|_| {

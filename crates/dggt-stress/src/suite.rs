@@ -11,18 +11,19 @@ use std::path::PathBuf;
 
 use burn::tensor::{Device, FloatDType};
 use dggt_geom::ImageSize;
+use dggt_infer::{CameraSource, RenderSection, fresh_model};
 use dggt_model::ModelConfig;
 use dggt_model::sky::SkyModel;
-use dggt_train::config::{CameraSource, LossWeights, MeansGradientSetting, RenderSection};
-use dggt_train::fresh_model;
-use dggt_train::objective::Objective;
+use dggt_objective::{LossWeights, Objective};
+use dggt_scene::MeansGradient;
 use serde::Serialize;
 
 use crate::crafted::{self, LIFESPAN, OPACITY, Prediction, RGB, ROTATION, SCALE};
 use crate::geometry;
 use crate::network;
 use crate::probe::{Finding, Probe, Stage};
-use crate::scenario::{Scenario, Sequence};
+use crate::scenario::Scenario;
+use dggt_data::random::SplitMix64;
 
 /// How a case must end.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -223,7 +224,7 @@ fn dtype_name(dtype: FloatDType) -> &'static str {
 }
 
 /// An edit of a hand-made prediction (and of the scenario's masks) that makes one extreme.
-type Edit = fn(&mut Scenario, &mut Prediction, &mut Sequence);
+type Edit = fn(&mut Scenario, &mut Prediction, &mut SplitMix64);
 
 /// The hand-made extremes: name, expectation, edit.
 fn crafted_extremes() -> Vec<(&'static str, Expect, Edit)> {
@@ -288,7 +289,7 @@ fn crafted_extremes() -> Vec<(&'static str, Expect, Edit)> {
 }
 
 /// Every channel, depth, logit and mask drawn from extremes at random.
-fn mixed_extremes(scenario: &mut Scenario, prediction: &mut Prediction, random: &mut Sequence) {
+fn mixed_extremes(scenario: &mut Scenario, prediction: &mut Prediction, random: &mut SplitMix64) {
     let extremes = [-1e4, -30.0, 0.0, 30.0, 1e4];
     prediction.scatter_channels(0..crafted::RAW_CHANNELS, &extremes, random);
     prediction.depth.iter_mut().for_each(|d| *d = random.pick(&[0.0, 1e-6, 1.0, 1e6]));
@@ -337,7 +338,7 @@ pub fn run_suite(options: &StressOptions, device: &Device) -> Result<StressRepor
     let sky_model = SkyModel::initialised(&sky_config, &device);
     let crafted_render = RenderSection {
         cameras: CameraSource::GroundTruth,
-        means_gradient: MeansGradientSetting::Through,
+        means_gradient: MeansGradient::Through,
         ..RenderSection::default()
     };
     let crafted_objective =
@@ -358,7 +359,7 @@ pub fn run_suite(options: &StressOptions, device: &Device) -> Result<StressRepor
             run: Box::new(move |probe| {
                 let mut scenario = Scenario::new(size, inputs, 2, index as u64);
                 let mut prediction = Prediction::random(&scenario, index as u64);
-                edit(&mut scenario, &mut prediction, &mut Sequence::new(1000 + index as u64));
+                edit(&mut scenario, &mut prediction, &mut SplitMix64::new(1000 + index as u64));
                 crafted::run(probe, &scenario, &prediction, objective, sky_model, device)
             }),
         }));
@@ -368,7 +369,7 @@ pub fn run_suite(options: &StressOptions, device: &Device) -> Result<StressRepor
     let model = fresh_model(&config, None, &device).map_err(|e| e.to_string())?;
     let network_render = RenderSection {
         cameras: CameraSource::Predicted,
-        means_gradient: MeansGradientSetting::Through,
+        means_gradient: MeansGradient::Through,
         ..RenderSection::default()
     };
     let network_objective =

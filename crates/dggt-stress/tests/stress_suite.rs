@@ -6,18 +6,27 @@ use std::path::PathBuf;
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_stress::{Expect, Probe, Stage, StressOptions, run_suite};
 
-/// The shared metrics vectors (LPIPS-Alex and VGG-16 weights), when present.
-fn loss_weights() -> Option<PathBuf> {
+/// The shared metrics vectors (LPIPS-Alex and VGG-16 weights): the LPIPS and Gram terms are part of the suite,
+/// so a missing folder fails the test, naming where it looked.
+fn loss_weights() -> PathBuf {
     let root = std::env::var_os("DGGT_PARITY_DIR")
         .map(PathBuf::from)
         .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/parity"));
     let dir = root.join("metrics");
-    dir.join("lpips_alex.safetensors").is_file().then_some(dir)
+    for file in ["lpips_alex.safetensors", "vgg16_features.safetensors"] {
+        assert!(
+            dir.join(file).is_file(),
+            "{} not found: the stress suite's LPIPS and Gram terms need the shared metrics vectors (set \
+             DGGT_PARITY_DIR to the shared parity folder)",
+            dir.join(file).display()
+        );
+    }
+    dir
 }
 
 #[test]
 fn the_bounded_suite_finds_nothing_non_finite() {
-    let options = StressOptions { full: false, loss_weights: loss_weights() };
+    let options = StressOptions { full: false, loss_weights: Some(loss_weights()) };
     let report = run_suite(&options, &Device::flex()).expect("the suite runs");
     println!("{}", report.table());
     assert!(report.passed(), "{}", report.table());

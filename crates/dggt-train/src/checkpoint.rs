@@ -1,5 +1,9 @@
 //! Checkpoints: everything a run needs to continue exactly as if it had not stopped.
 //!
+//! The network's half (its weights, its configuration and the `latest` pointer) is read by
+//! [`dggt_infer::checkpoint`], which inference shares; this module adds the optimiser and run state and writes
+//! all of it.
+//!
 //! A checkpoint is a folder `checkpoints/step-NNNNNNNN/` holding the network (`model.bpk`, burnpack, parameter
 //! ids included so the optimiser state stays attached), the AdamW state (`optimizer.bpk`), the network's
 //! configuration (`model.json`) and the run state (`state.json`: the next step, seed and counters). The
@@ -12,9 +16,11 @@ use std::path::{Path, PathBuf};
 
 use burn::module::Module;
 use burn::optim::ModuleOptimizer;
-use burn::store::ModuleRecord;
 use burn::tensor::Bytes;
 use dggt_data::io::write_atomically;
+pub use dggt_infer::checkpoint::{
+    LATEST, MODEL_CONFIG_FILE, MODEL_FILE, STATE_FILE, latest, load_model, read_model_config,
+};
 use dggt_model::{Dggt, ModelConfig};
 use serde::{Deserialize, Serialize};
 
@@ -32,7 +38,8 @@ pub struct RunState {
     pub elapsed_s: f64,
 }
 
-const LATEST: &str = "latest";
+/// The optimiser's state in a checkpoint folder.
+const OPTIMIZER_FILE: &str = "optimizer.bpk";
 
 fn checkpoint_error(path: &Path, detail: impl ToString) -> TrainError {
     TrainError::Checkpoint { path: path.to_path_buf(), detail: detail.to_string() }
@@ -53,11 +60,11 @@ pub fn save(
         write_atomically(&dir.join(file), bytes).map_err(|e| checkpoint_error(&dir.join(file), e))
     };
     let model_bytes = model.clone().into_record().into_bytes().map_err(|e| checkpoint_error(&dir, format!("{e:?}")))?;
-    write("model.bpk", &model_bytes)?;
+    write(MODEL_FILE, &model_bytes)?;
     let optim_bytes = optimizer.into_bytes().map_err(|e| checkpoint_error(&dir, format!("{e:?}")))?;
-    write("optimizer.bpk", &optim_bytes)?;
-    write("model.json", serde_json::to_string_pretty(config).expect("configs serialise").as_bytes())?;
-    write("state.json", serde_json::to_string_pretty(state).expect("states serialise").as_bytes())?;
+    write(OPTIMIZER_FILE, &optim_bytes)?;
+    write(MODEL_CONFIG_FILE, serde_json::to_string_pretty(config).expect("configs serialise").as_bytes())?;
+    write(STATE_FILE, serde_json::to_string_pretty(state).expect("states serialise").as_bytes())?;
     write_atomically(&root.join(LATEST), name.as_bytes()).map_err(|e| checkpoint_error(&root.join(LATEST), e))?;
     prune(root, keep.max(1))?;
     Ok(dir)
@@ -77,20 +84,6 @@ fn prune(root: &Path, keep: usize) -> Result<(), TrainError> {
     Ok(())
 }
 
-/// The checkpoint `latest` points to under `root`, if any.
-pub fn latest(root: &Path) -> Result<Option<PathBuf>, TrainError> {
-    let pointer = root.join(LATEST);
-    if !pointer.exists() {
-        return Ok(None);
-    }
-    let name = fs::read_to_string(&pointer).map_err(|e| checkpoint_error(&pointer, e))?;
-    let dir = root.join(name.trim());
-    if !dir.join("state.json").is_file() {
-        return Err(checkpoint_error(&dir, "`latest` points to a folder without state.json"));
-    }
-    Ok(Some(dir))
-}
-
 /// A loaded checkpoint.
 pub struct Loaded {
     pub model: Dggt,
@@ -103,29 +96,15 @@ fn read(path: &Path) -> Result<Vec<u8>, TrainError> {
     fs::read(path).map_err(|e| checkpoint_error(path, e))
 }
 
-/// The network configuration stored in a checkpoint folder.
-pub fn read_model_config(dir: &Path) -> Result<ModelConfig, TrainError> {
-    let path = dir.join("model.json");
-    serde_json::from_slice(&read(&path)?).map_err(|e| checkpoint_error(&path, e))
-}
-
-/// Loads the network of a checkpoint folder into `model` (built from the stored configuration).
-pub fn load_model(dir: &Path, model: Dggt) -> Result<Dggt, TrainError> {
-    let path = dir.join("model.bpk");
-    let record = ModuleRecord::from_bytes(Bytes::from_bytes_vec(read(&path)?))
-        .map_err(|e| checkpoint_error(&path, format!("{e:?}")))?;
-    model.try_load_record(record).map_err(|e| checkpoint_error(&path, format!("does not fit the network: {e:?}")))
-}
-
 /// Loads everything; `model` and `optimizer` are fresh ones built from the stored configuration.
 pub fn load(dir: &Path, model: Dggt, optimizer: ModuleOptimizer) -> Result<Loaded, TrainError> {
     let config = read_model_config(dir)?;
     let model = load_model(dir, model)?;
-    let path = dir.join("optimizer.bpk");
+    let path = dir.join(OPTIMIZER_FILE);
     let optimizer = optimizer
         .from_bytes(Bytes::from_bytes_vec(read(&path)?))
         .map_err(|e| checkpoint_error(&path, format!("{e:?}")))?;
-    let path = dir.join("state.json");
+    let path = dir.join(STATE_FILE);
     let state: RunState = serde_json::from_slice(&read(&path)?).map_err(|e| checkpoint_error(&path, e))?;
     Ok(Loaded { model, config, optimizer, state })
 }

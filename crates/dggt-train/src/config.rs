@@ -4,8 +4,9 @@
 use std::path::{Path, PathBuf};
 
 use dggt_data::{Preprocess, SamplerConfig};
-use dggt_geom::PixelConvention;
-use dggt_scene::{AssemblySettings, DynamicBlend};
+pub use dggt_infer::{CameraSource, ModelSection, RenderSection};
+use dggt_objective::LossTerm;
+pub use dggt_objective::LossWeights;
 use serde::{Deserialize, Serialize};
 
 use crate::error::TrainError;
@@ -20,49 +21,6 @@ pub struct TrainConfig {
     pub loss: LossWeights,
     pub optim: OptimSection,
     pub run: RunSection,
-}
-
-/// Which network, and where its starting weights come from.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct ModelSection {
-    /// `tiny`, `vggt_1b` or `dggt` (the released architecture).
-    pub preset: String,
-    /// Starting weights with the release's key names (`.pt`, `.pth`, `.safetensors`): a VGGT-1B checkpoint
-    /// (the Gaussian heads then start fresh) or the DGGT release. `None` starts from random weights.
-    pub init_checkpoint: Option<PathBuf>,
-    /// Turn on the Gaussian head's colour skip (`GaussianHeadConfig::color_skip`; off in the release).
-    pub color_skip: bool,
-    /// Where Gaussian means are unprojected (`GaussianHeadConfig::unproject_at`): `integer` (the release's
-    /// convention, required by its weights) or `centred` (pixel centres, for training from scratch).
-    pub unproject_at: PixelConvention,
-    /// Sky Gaussians per side (`SkyConfig::resolution`, `resolution^2` in all) instead of the preset's; only
-    /// for a sky model that starts fresh, since a checkpoint's sky buffers fix their count.
-    pub sky_resolution: Option<usize>,
-    /// Add the motion head (`ModelConfig::motion_head`; not in the release's weights, so it starts fresh from
-    /// predicting zero): dynamic Gaussians are moved to each target time by their predicted velocity.
-    pub motion_head: bool,
-    /// Give the Gaussian head velocity channels (`GaussianHeadConfig::velocity`; not in the release's weights,
-    /// so they start at zero): the motion of the dynamic Gaussians for three output channels instead of a head.
-    pub gaussian_velocity: bool,
-    /// Give every DPT head a convolution of the input pixels (`DptConfig::pixel_skip`; not in the release's
-    /// weights, so only for heads that start fresh).
-    pub pixel_skip: bool,
-}
-
-impl Default for ModelSection {
-    fn default() -> Self {
-        Self {
-            preset: "tiny".into(),
-            init_checkpoint: None,
-            color_skip: false,
-            unproject_at: PixelConvention::Integer,
-            sky_resolution: None,
-            motion_head: false,
-            gaussian_velocity: false,
-            pixel_skip: false,
-        }
-    }
 }
 
 /// The training scene and how its views are prepared.
@@ -105,127 +63,6 @@ pub struct ValidationSection {
 impl Default for ValidationSection {
     fn default() -> Self {
         Self { inputs: vec![0, 5, 10, 15], targets: vec![2, 7, 12] }
-    }
-}
-
-/// Where the rendered Gaussians are placed and from which cameras they are rendered.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct RenderSection {
-    /// `predicted`: the camera head's poses (world = first input camera), as at inference. `ground_truth`:
-    /// the export's poses expressed in the first input camera's frame (training from scratch, before the
-    /// camera head is useful).
-    pub cameras: CameraSource,
-    /// Whether the rendering losses reach the depth through the Gaussian means (the release detaches them).
-    pub means_gradient: MeansGradientSetting,
-    /// Also re-render the input views (the release trains on those only; the paper adds 2N targets).
-    pub render_inputs: bool,
-    /// Render the sky model as the background.
-    pub sky: bool,
-    /// Camera-space depth beyond which Gaussians are not drawn (gsplat's far plane). A finite bound keeps
-    /// depths that nothing supervises from running away (a scene without sky masks pushes its background out).
-    pub far_plane: f64,
-    /// Which input views' dynamic Gaussians a target shows: `nearest` (the release) or `cross_fade` (the two
-    /// bracketing views, opacities weighted by time).
-    pub dynamic_blend: DynamicBlend,
-    /// The rasteriser's low-pass variance in pixels² (`eps2d`; 0.3 in the release, whose weights assume it).
-    /// A model trained from scratch renders sharper with a smaller one.
-    pub eps2d: f64,
-}
-
-impl RenderSection {
-    /// How targets are assembled and rasterised under these settings (training, and the reconstructions and
-    /// evaluations of a model trained with them).
-    pub fn assembly(&self) -> AssemblySettings {
-        AssemblySettings {
-            far_plane: self.far_plane as f32,
-            dynamic_blend: self.dynamic_blend,
-            eps2d: self.eps2d as f32,
-            ..AssemblySettings::default()
-        }
-    }
-}
-
-impl Default for RenderSection {
-    fn default() -> Self {
-        Self {
-            cameras: CameraSource::Predicted,
-            means_gradient: MeansGradientSetting::Detached,
-            render_inputs: true,
-            sky: true,
-            far_plane: 1e10,
-            dynamic_blend: DynamicBlend::Nearest,
-            eps2d: 0.3,
-        }
-    }
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum CameraSource {
-    Predicted,
-    GroundTruth,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum MeansGradientSetting {
-    Detached,
-    Through,
-}
-
-/// Weight of every loss term (0 turns a term off). Defaults follow the paper's terms with the release's
-/// weights: L2 + LPIPS 0.05 + opacity BCE + dynamic BCE 0.05 + lifespan 0.01.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct LossWeights {
-    /// Mean squared error of the rendered colours.
-    pub rgb_l2: f64,
-    /// LPIPS (needs `lpips_weights`).
-    pub lpips: f64,
-    /// `alex` or `vgg`.
-    pub lpips_net: String,
-    /// The lpips package's linear layers (`alex.pth`/`vgg.pth` or safetensors).
-    pub lpips_weights: Option<PathBuf>,
-    /// The torchvision backbone (`features.N.*`), `.pth` or safetensors.
-    pub lpips_backbone: Option<PathBuf>,
-    /// Rendered alpha against 1 - sky mask (binary cross-entropy).
-    pub opacity_bce: f64,
-    /// Dynamic logits against the dynamic masks of the inputs (binary cross-entropy from logits).
-    pub dynamic_bce: f64,
-    /// Mean `1 / lifespan` over the static Gaussians.
-    pub lifespan_l1: f64,
-    /// Gram matrices of VGG-16 features (needs `gram_backbone`).
-    pub gram: f64,
-    pub gram_backbone: Option<PathBuf>,
-    /// Supervision from the export's ground truth, for training from scratch: L1 on the pose encodings of
-    /// every camera-head iteration against the poses relative to the first input.
-    pub camera: f64,
-    /// L1 on log depth against the export's depth maps.
-    pub depth: f64,
-    /// L1 of the predicted velocities against the export's scene flow (`depth_flows_4`), both in the input
-    /// camera's axes and world units per log frame, the mean over moving cells plus the mean over still ones;
-    /// needs `model.motion_head` or `model.gaussian_velocity`.
-    pub flow: f64,
-}
-
-impl Default for LossWeights {
-    fn default() -> Self {
-        Self {
-            rgb_l2: 1.0,
-            lpips: 0.05,
-            lpips_net: "alex".into(),
-            lpips_weights: None,
-            lpips_backbone: None,
-            opacity_bce: 0.1,
-            dynamic_bce: 0.05,
-            lifespan_l1: 0.01,
-            gram: 0.0,
-            gram_backbone: None,
-            camera: 0.0,
-            depth: 0.0,
-            flow: 0.0,
-        }
     }
 }
 
@@ -333,7 +170,7 @@ impl TrainConfig {
             toml::from_str(&text).map_err(|e| TrainError::Config { path: path.into(), detail: e.to_string() })?;
         let base = path.parent().unwrap_or(Path::new("."));
         config.resolve_paths(base);
-        config.validate().map_err(|detail| TrainError::Config { path: path.into(), detail })?;
+        config.validate().map_err(|e| TrainError::Config { path: path.into(), detail: e.to_string() })?;
         Ok(config)
     }
 
@@ -359,82 +196,113 @@ impl TrainConfig {
     }
 
     /// Checks values that no type can: positive counts, known names, weights that need files have them.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), TrainError> {
+        self.validate_optim()?;
+        self.validate_model()?;
+        self.validate_loss()?;
+        self.validate_render_and_run()
+    }
+
+    fn validate_optim(&self) -> Result<(), TrainError> {
         let o = &self.optim;
         if !(o.lr > 0.0 && o.lr.is_finite()) || o.groups.values().any(|lr| !(*lr >= 0.0 && lr.is_finite())) {
-            return Err("optim: learning rates must be finite, lr > 0, group rates >= 0".into());
+            return Err(setting("optim", "learning rates must be finite, lr > 0, group rates >= 0"));
         }
         if o.accumulation == 0 || self.run.steps == 0 || self.run.checkpoint_every == 0 {
-            return Err("optim.accumulation, run.steps and run.checkpoint_every must be at least 1".into());
+            return Err(setting("optim.accumulation, run.steps and run.checkpoint_every", "must be at least 1"));
         }
         if !(0.0..=1.0).contains(&o.min_lr_ratio) {
-            return Err(format!("optim.min_lr_ratio must lie in [0, 1], got {}", o.min_lr_ratio));
+            return Err(setting("optim.min_lr_ratio", format!("must lie in [0, 1], got {}", o.min_lr_ratio)));
         }
         if let Some(clip) = o.clip_grad_norm
             && !(clip > 0.0)
         {
-            return Err(format!("optim.clip_grad_norm must be positive, got {clip}"));
-        }
-        if self.model.sky_resolution == Some(0) {
-            return Err("model.sky_resolution must be at least 1".into());
-        }
-        if self.model.motion_head && self.model.gaussian_velocity {
-            return Err("model.motion_head and model.gaussian_velocity both predict the velocities: choose one".into());
+            return Err(setting("optim.clip_grad_norm", format!("must be positive, got {clip}")));
         }
         if o.pose_warmup_steps > 0 && !(self.loss.camera > 0.0) {
-            return Err("optim.pose_warmup_steps trains the camera loss alone: it needs loss.camera > 0".into());
+            return Err(setting("optim.pose_warmup_steps", "trains the camera loss alone: it needs loss.camera > 0"));
         }
-        let modules = [
-            "aggregator",
-            "camera_head",
-            "depth_head",
-            "point_head",
-            "gs_head",
-            "instance_head",
-            "semantic_head",
-            "sky_model",
-            "motion_head",
-        ];
         for name in o.frozen.iter().chain(o.groups.keys()) {
-            if !modules.contains(&name.as_str()) {
-                return Err(format!("optim: unknown module `{name}` (known: {modules:?})"));
+            if !MODULES.contains(&name.as_str()) {
+                return Err(setting("optim", format!("unknown module `{name}` (known: {MODULES:?})")));
             }
-        }
-        let l = &self.loss;
-        let weights =
-            [l.rgb_l2, l.lpips, l.opacity_bce, l.dynamic_bce, l.lifespan_l1, l.gram, l.camera, l.depth, l.flow];
-        if weights.iter().any(|w| !(*w >= 0.0 && w.is_finite())) {
-            return Err("loss: weights must be finite and >= 0".into());
-        }
-        if l.lpips > 0.0 && (l.lpips_weights.is_none() || l.lpips_backbone.is_none()) {
-            return Err(
-                "loss.lpips > 0 needs loss.lpips_weights and loss.lpips_backbone (or set loss.lpips = 0)".into()
-            );
-        }
-        if !["alex", "vgg"].contains(&l.lpips_net.as_str()) {
-            return Err(format!("loss.lpips_net must be `alex` or `vgg`, got `{}`", l.lpips_net));
-        }
-        if l.flow > 0.0 && !(self.model.motion_head || self.model.gaussian_velocity) {
-            return Err("loss.flow supervises predicted velocities: it needs model.motion_head or \
-                        model.gaussian_velocity"
-                .into());
-        }
-        if l.gram > 0.0 && l.gram_backbone.is_none() {
-            return Err("loss.gram > 0 needs loss.gram_backbone".into());
-        }
-        if !(self.render.eps2d.is_finite() && self.render.eps2d > 0.0) {
-            // Zero leaves flat Gaussians seen edge-on with a singular footprint.
-            return Err(format!("render.eps2d must be a positive, finite variance, got {}", self.render.eps2d));
-        }
-        if !(self.render.far_plane > 0.01) {
-            return Err(format!("render.far_plane must exceed the near plane 0.01, got {}", self.render.far_plane));
-        }
-        if self.run.devices.is_empty() {
-            return Err("run.devices must name at least one device".into());
-        }
-        if self.data.validation.inputs.is_empty() != self.data.validation.targets.is_empty() {
-            return Err("data.validation: give both inputs and targets, or neither".into());
         }
         Ok(())
     }
+
+    fn validate_model(&self) -> Result<(), TrainError> {
+        if self.model.sky_resolution == Some(0) {
+            return Err(setting("model.sky_resolution", "must be at least 1"));
+        }
+        if self.model.motion_head && self.model.gaussian_velocity {
+            return Err(setting(
+                "model.motion_head and model.gaussian_velocity",
+                "both predict the velocities: choose one",
+            ));
+        }
+        Ok(())
+    }
+
+    fn validate_loss(&self) -> Result<(), TrainError> {
+        let l = &self.loss;
+        if let Some(term) = LossTerm::ALL.into_iter().find(|t| !(t.weight(l) >= 0.0 && t.weight(l).is_finite())) {
+            return Err(setting("loss", format!("weights must be finite and >= 0 (loss.{term} is not)")));
+        }
+        if l.lpips > 0.0 && (l.lpips_weights.is_none() || l.lpips_backbone.is_none()) {
+            return Err(setting(
+                "loss.lpips",
+                "> 0 needs loss.lpips_weights and loss.lpips_backbone (or set loss.lpips = 0)",
+            ));
+        }
+        if l.flow > 0.0 && !(self.model.motion_head || self.model.gaussian_velocity) {
+            return Err(setting(
+                "loss.flow",
+                "supervises predicted velocities: it needs model.motion_head or model.gaussian_velocity",
+            ));
+        }
+        if l.gram > 0.0 && l.gram_backbone.is_none() {
+            return Err(setting("loss.gram", "> 0 needs loss.gram_backbone"));
+        }
+        Ok(())
+    }
+
+    fn validate_render_and_run(&self) -> Result<(), TrainError> {
+        if !(self.render.eps2d.is_finite() && self.render.eps2d > 0.0) {
+            // Zero leaves flat Gaussians seen edge-on with a singular footprint.
+            return Err(setting(
+                "render.eps2d",
+                format!("must be a positive, finite variance, got {}", self.render.eps2d),
+            ));
+        }
+        if !(self.render.far_plane > 0.01) {
+            return Err(setting(
+                "render.far_plane",
+                format!("must exceed the near plane 0.01, got {}", self.render.far_plane),
+            ));
+        }
+        if self.run.devices.is_empty() {
+            return Err(setting("run.devices", "must name at least one device"));
+        }
+        if self.data.validation.inputs.is_empty() != self.data.validation.targets.is_empty() {
+            return Err(setting("data.validation", "give both inputs and targets, or neither"));
+        }
+        Ok(())
+    }
+}
+
+/// The network's top-level modules, which `optim.frozen` and `optim.groups` name.
+const MODULES: [&str; 9] = [
+    "aggregator",
+    "camera_head",
+    "depth_head",
+    "point_head",
+    "gs_head",
+    "instance_head",
+    "semantic_head",
+    "sky_model",
+    "motion_head",
+];
+
+fn setting(setting: &'static str, detail: impl Into<String>) -> TrainError {
+    TrainError::Setting { setting, detail: detail.into() }
 }

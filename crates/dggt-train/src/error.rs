@@ -24,4 +24,11 @@ pub enum TrainError {
     Geom(#[from] dggt_geom::GeomError),
     #[error("{what}: {detail}")]
     Invalid { what: String, detail: String },
+    /// A configuration value out of its range, or settings that contradict each other.
+    #[error("{setting}: {detail}")]
+    Setting { setting: &'static str, detail: String },
+    #[error("{0}")]
+    Infer(#[from] dggt_infer::InferError),
+    #[error("{0}")]
+    Objective(#[from] dggt_objective::ObjectiveError),
 }

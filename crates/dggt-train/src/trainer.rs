@@ -14,89 +14,23 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
-use burn::module::{Module, ModuleVisitor, Param};
+use burn::module::Module;
 use burn::optim::{GradientsAccumulator, GradientsParams};
-use burn::tensor::{Device, Tensor};
+use burn::tensor::Device;
 use dggt_data::{LoadedSample, LoaderOptions, Prefetcher, Sampler, Scene, TrainingSample, open_scene, training_stream};
-use dggt_model::sky::SkyModel;
-use dggt_model::weights::{Coverage, load_checkpoint_with};
+use dggt_infer::fresh_model;
 use dggt_model::{Dggt, ModelConfig};
-use dggt_scene::SceneError;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde_json::json;
 
-use crate::batch::StepBatch;
+use dggt_objective::{LossTerm, Objective, StepBatch};
+
 use crate::checkpoint::{self, RunState};
-use crate::config::{ModelSection, TrainConfig};
+use crate::config::TrainConfig;
 use crate::error::TrainError;
-use crate::objective::Objective;
 use crate::optimizer::{Optimizer, freeze};
 use crate::schedule::WarmupCosine;
 use crate::validate::{Validation, validate, validation_sample};
-
-/// The network configuration of a preset name.
-pub fn model_config(preset: &str) -> Result<ModelConfig, TrainError> {
-    match preset {
-        "tiny" => Ok(ModelConfig::tiny()),
-        "vggt_1b" => Ok(ModelConfig::vggt_1b()),
-        "dggt" => Ok(ModelConfig::dggt()),
-        other => Err(TrainError::Invalid {
-            what: "model.preset".into(),
-            detail: format!("unknown preset `{other}` (tiny, vggt_1b, dggt)"),
-        }),
-    }
-}
-
-impl ModelSection {
-    /// The network this section describes: the preset with the section's changes (colour skip, unprojection,
-    /// sky resolution, pixel skip, motion head or Gaussian velocity).
-    pub fn architecture(&self) -> Result<ModelConfig, TrainError> {
-        let mut config = model_config(&self.preset)?;
-        if let Some(gs) = &mut config.gs_head {
-            gs.color_skip = self.color_skip;
-            gs.unproject_at = self.unproject_at;
-        }
-        if let (Some(sky), Some(resolution)) = (&mut config.sky_model, self.sky_resolution) {
-            sky.resolution = resolution;
-        }
-        config.dpt.pixel_skip = self.pixel_skip;
-        let config = if self.motion_head { config.with_motion_head() } else { config };
-        Ok(if self.gaussian_velocity { config.with_gaussian_velocity() } else { config })
-    }
-}
-
-/// A fresh network: random layers, the sky model's fixed buffers, then the starting checkpoint when given.
-pub fn fresh_model(config: &ModelConfig, init: Option<&Path>, device: &Device) -> Result<Dggt, TrainError> {
-    let mut model = Dggt::new(config, device)?;
-    materialise(&model);
-    if let Some(sky) = &config.sky_model {
-        model.sky_model = Some(SkyModel::initialised(sky, device));
-    }
-    if let Some(path) = init {
-        let report = load_checkpoint_with(&mut model, path, Coverage::Partial)?;
-        tracing::info!(
-            checkpoint = %path.display(),
-            applied = report.applied.len(),
-            missing = report.missing.len(),
-            unused = report.unused.len(),
-            "starting weights loaded (parameters the checkpoint lacks start fresh)"
-        );
-    }
-    Ok(model)
-}
-
-/// Initialises every lazily created parameter now, in visiting order, so that the starting weights depend on
-/// the seed alone and not on which thread or operation first reads a parameter (data-parallel threads would
-/// otherwise draw them in a racy order).
-fn materialise(model: &Dggt) {
-    struct Touch;
-    impl ModuleVisitor for Touch {
-        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-            let _ = param.val();
-        }
-    }
-    model.visit(&mut Touch);
-}
 
 /// How a run ended.
 #[derive(Debug, Clone, PartialEq)]
@@ -122,6 +56,16 @@ pub struct RunOptions {
     pub stop_after: Option<u64>,
 }
 
+/// How a run starts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Start {
+    /// From the configured starting weights (or random ones), at step 0.
+    Fresh,
+    /// From the newest checkpoint in the output folder when there is one, exactly where it stopped; fresh
+    /// otherwise.
+    Resume,
+}
+
 pub struct Trainer {
     config: TrainConfig,
     model_config: ModelConfig,
@@ -138,10 +82,9 @@ pub struct Trainer {
 }
 
 impl Trainer {
-    /// Builds a run of a validated `config` on `devices` (at least one); resumes from the newest checkpoint in
-    /// the output folder when `resume` is set and one exists.
-    pub fn new(config: TrainConfig, devices: Vec<Device>, resume: bool) -> Result<Self, TrainError> {
-        config.validate().map_err(|detail| TrainError::Invalid { what: "training configuration".into(), detail })?;
+    /// Builds a run of `config` (validated here) on `devices` (at least one), started as `start` says.
+    pub fn new(config: TrainConfig, devices: Vec<Device>, start: Start) -> Result<Self, TrainError> {
+        config.validate()?;
         let plain_device = devices.first().cloned().ok_or_else(|| TrainError::Invalid {
             what: "devices".into(),
             detail: "training needs at least one device".into(),
@@ -170,7 +113,10 @@ impl Trainer {
         let objective = Objective::new(config.loss.clone(), config.render.clone(), &device)?;
 
         let checkpoints = config.run.out_dir.join("checkpoints");
-        let resume_from = if resume { checkpoint::latest(&checkpoints)? } else { None };
+        let resume_from = match start {
+            Start::Resume => checkpoint::latest(&checkpoints)?,
+            Start::Fresh => None,
+        };
         let (model, model_config, optimizer, state) = match resume_from {
             Some(dir) => {
                 let model_config = checkpoint::read_model_config(&dir)?;
@@ -185,7 +131,7 @@ impl Trainer {
             }
             None => {
                 device.seed(config.run.seed);
-                let model_config = config.model.architecture()?;
+                let model_config = config.model.architecture();
                 let model = fresh_model(&model_config, config.model.init_checkpoint.as_deref(), &device)?;
                 let model = freeze(model, &config.optim.frozen)?;
                 let optimizer = Optimizer::new(&config.optim, &model);
@@ -455,7 +401,7 @@ impl Trainer {
                 target_psnr += result.target_psnr * scale;
                 kept += result.kept;
                 for (name, value) in result.terms {
-                    *terms.entry(name.to_string()).or_default() += value * scale;
+                    *terms.entry(name.name().to_string()).or_default() += value * scale;
                 }
                 for (name, value) in result.stages {
                     *stages.entry(name.to_string()).or_default() += value;
@@ -486,14 +432,14 @@ impl Trainer {
                     self.objective.loss(model, &batch)
                 };
                 let loss = match loss {
-                    Err(TrainError::Scene(error @ SceneError::NonFinite { .. })) => {
+                    Err(error) if error.is_non_finite_output() => {
                         tracing::warn!(step = sample.step, %error, "non-finite network output");
                         return Ok(SampleResult::non_finite());
                     }
                     other => other?,
                 };
                 let evaluated = Instant::now();
-                let value = loss.terms.iter().fold(0.0, |sum, (name, v)| sum + v * weight(&self.config.loss, name));
+                let value = loss.terms.iter().fold(0.0, |sum, (term, v)| sum + v * term.weight(&self.config.loss));
                 let grads = if value.is_finite() {
                     let gradients = loss.total.mul_scalar(scale).backward();
                     Some(GradientsParams::from_grads(gradients, model))
@@ -522,7 +468,7 @@ impl Trainer {
 struct SampleResult {
     grads: Option<GradientsParams>,
     loss: f64,
-    terms: std::collections::BTreeMap<&'static str, f64>,
+    terms: std::collections::BTreeMap<LossTerm, f64>,
     target_psnr: f64,
     kept: usize,
     stages: [(&'static str, f64); 3],
@@ -549,21 +495,6 @@ struct StepOutcome {
     target_psnr: f64,
     kept: usize,
     stages: std::collections::BTreeMap<String, f64>,
-}
-
-fn weight(weights: &crate::config::LossWeights, name: &str) -> f64 {
-    match name {
-        "rgb_l2" => weights.rgb_l2,
-        "lpips" => weights.lpips,
-        "gram" => weights.gram,
-        "opacity_bce" => weights.opacity_bce,
-        "dynamic_bce" => weights.dynamic_bce,
-        "lifespan_l1" => weights.lifespan_l1,
-        "camera" => weights.camera,
-        "depth" => weights.depth,
-        "flow" => weights.flow,
-        _ => 0.0,
-    }
 }
 
 fn next_sample(stream: &mut Prefetcher<LoadedSample>) -> Result<LoadedSample, TrainError> {

@@ -9,11 +9,10 @@ use burn::tensor::{Device, Tensor};
 use dggt_data::{Preprocess, Scene, TrainingSample, load_sample};
 use dggt_losses::image_metrics;
 use dggt_model::Dggt;
+use dggt_objective::{Objective, StepBatch};
 use serde::Serialize;
 
-use crate::batch::StepBatch;
 use crate::error::TrainError;
-use crate::objective::Objective;
 
 /// Scores of one validation pass.
 #[derive(Debug, Clone, PartialEq, Serialize)]

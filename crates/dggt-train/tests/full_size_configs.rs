@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::tensor::{Device, Tensor};
-use dggt_train::{TrainConfig, Trainer};
+use dggt_train::{Start, TrainConfig, Trainer};
 
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
@@ -68,7 +68,7 @@ fn parameters_by_module(trainer: &Trainer) -> HashMap<String, Vec<f32>> {
 fn stand_in(config: &str, init: PathBuf, out: &Path) -> TrainConfig {
     let mut config = TrainConfig::load(&repo().join("configs").join(config)).unwrap();
     let lpips = parity_dir().join("metrics/lpips_alex.safetensors");
-    config.model.preset = "tiny".into();
+    config.model.preset = dggt_model::Preset::Tiny;
     config.model.init_checkpoint = Some(init);
     config.data.scene = repo().join("data-fixtures/synth-s0");
     config.data.preprocess.target_width = 56;
@@ -88,7 +88,7 @@ fn one_step_trains_only_the_unfrozen_parts(config: TrainConfig) {
     let frozen = config.optim.frozen.clone();
     assert_eq!(frozen, ["aggregator", "camera_head", "depth_head"], "the release's frozen parts");
     assert!(config.loss.lpips > 0.0, "LPIPS is part of the release's loss");
-    let mut trainer = Trainer::new(config, vec![Device::flex()], false).unwrap();
+    let mut trainer = Trainer::new(config, vec![Device::flex()], Start::Fresh).unwrap();
     let validation = trainer.validate().unwrap().expect("the configuration validates");
     assert!(validation.psnr.is_finite() && validation.views.len() == 3, "{validation:?}");
     let before = parameters_by_module(&trainer);

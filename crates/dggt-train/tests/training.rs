@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::tensor::{Device, Tensor};
-use dggt_train::{RunOptions, TrainConfig, Trainer};
+use dggt_train::{RunOptions, Start, TrainConfig, Trainer};
 
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
@@ -41,7 +41,7 @@ fn weights(trainer: &Trainer) -> Vec<f32> {
 #[test]
 fn a_few_dozen_steps_reduce_the_loss_and_raise_target_psnr() {
     let out = tempfile::tempdir().unwrap();
-    let mut trainer = Trainer::new(small_config(out.path(), 30), vec![Device::flex()], false).unwrap();
+    let mut trainer = Trainer::new(small_config(out.path(), 30), vec![Device::flex()], Start::Fresh).unwrap();
     let summary = trainer.run(RunOptions::default()).unwrap();
     assert_eq!(summary.steps_run, 30);
     assert_eq!(summary.skipped_steps, 0);
@@ -60,16 +60,16 @@ fn a_few_dozen_steps_reduce_the_loss_and_raise_target_psnr() {
 #[test]
 fn an_interrupted_run_resumes_exactly() {
     let straight = tempfile::tempdir().unwrap();
-    let mut trainer = Trainer::new(small_config(straight.path(), 4), vec![Device::flex()], false).unwrap();
+    let mut trainer = Trainer::new(small_config(straight.path(), 4), vec![Device::flex()], Start::Fresh).unwrap();
     trainer.run(RunOptions::default()).unwrap();
     let expected = weights(&trainer);
 
     let split = tempfile::tempdir().unwrap();
-    let mut first = Trainer::new(small_config(split.path(), 4), vec![Device::flex()], false).unwrap();
+    let mut first = Trainer::new(small_config(split.path(), 4), vec![Device::flex()], Start::Fresh).unwrap();
     let summary = first.run(RunOptions { progress: false, stop_after: Some(2) }).unwrap();
     assert_eq!(summary.final_step, 2);
     drop(first);
-    let mut resumed = Trainer::new(small_config(split.path(), 4), vec![Device::flex()], true).unwrap();
+    let mut resumed = Trainer::new(small_config(split.path(), 4), vec![Device::flex()], Start::Resume).unwrap();
     assert_eq!(resumed.state().step, 2);
     resumed.run(RunOptions::default()).unwrap();
     let actual = weights(&resumed);
@@ -81,7 +81,7 @@ fn an_interrupted_run_resumes_exactly() {
 #[test]
 fn a_non_finite_loss_skips_the_step_and_keeps_the_weights() {
     let out = tempfile::tempdir().unwrap();
-    let mut trainer = Trainer::new(small_config(out.path(), 3), vec![Device::flex()], false).unwrap();
+    let mut trainer = Trainer::new(small_config(out.path(), 3), vec![Device::flex()], Start::Fresh).unwrap();
     let before = weights(&trainer);
     let mut sample = trainer.sample(0).unwrap();
     sample.targets[0].image.data[5] = f32::NAN;
@@ -136,7 +136,7 @@ fn two_devices_train_like_one_with_the_same_accumulated_samples() {
         let out = tempfile::tempdir().unwrap();
         let mut config = small_config(out.path(), 2);
         config.optim.accumulation = 2;
-        let mut trainer = Trainer::new(config, devices, false).unwrap();
+        let mut trainer = Trainer::new(config, devices, Start::Fresh).unwrap();
         let summary = trainer.run(RunOptions::default()).unwrap();
         assert_eq!((summary.steps_run, summary.skipped_steps), (2, 0));
         weights(&trainer)
@@ -146,7 +146,7 @@ fn two_devices_train_like_one_with_the_same_accumulated_samples() {
     assert_eq!(single.len(), split.len());
     let initial = {
         let out = tempfile::tempdir().unwrap();
-        weights(&Trainer::new(small_config(out.path(), 2), vec![Device::flex()], false).unwrap())
+        weights(&Trainer::new(small_config(out.path(), 2), vec![Device::flex()], Start::Fresh).unwrap())
     };
     let moved = initial.iter().zip(&single).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
     let worst = single.iter().zip(&split).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
@@ -167,7 +167,7 @@ fn training_on_varied_synthetic_scenes_stays_finite() {
         config.data.scene = scene;
         config.data.frames = None;
         config.sampler.window = 8;
-        let mut trainer = Trainer::new(config, vec![Device::flex()], false).unwrap();
+        let mut trainer = Trainer::new(config, vec![Device::flex()], Start::Fresh).unwrap();
         let summary = trainer.run(RunOptions::default()).unwrap();
         assert_eq!((summary.steps_run, summary.skipped_steps), (20, 0), "seed {seed}");
         let text = std::fs::read_to_string(dir.path().join("run/metrics.jsonl")).unwrap();
@@ -185,7 +185,7 @@ fn the_motion_head_starts_at_zero_and_is_trained_by_the_renders() {
     let out = tempfile::tempdir().unwrap();
     let mut config = small_config(out.path(), 3);
     config.model.motion_head = true;
-    let mut trainer = Trainer::new(config, vec![Device::flex()], false).unwrap();
+    let mut trainer = Trainer::new(config, vec![Device::flex()], Start::Fresh).unwrap();
     let output_layer = |trainer: &Trainer| -> Vec<f32> {
         let head = trainer.model().motion_head.as_ref().expect("a motion head");
         head.scratch.output_conv2.out.weight.val().into_data().convert::<f32>().try_into_vec::<f32>().unwrap()
@@ -206,7 +206,7 @@ fn the_flow_loss_teaches_the_gaussian_head_the_scene_flow() {
     config.model.gaussian_velocity = true;
     config.loss.flow = 1.0;
     config.sampler.targets_per_input = 2;
-    let mut trainer = Trainer::new(config, vec![Device::flex()], false).unwrap();
+    let mut trainer = Trainer::new(config, vec![Device::flex()], Start::Fresh).unwrap();
     let summary = trainer.run(RunOptions::default()).unwrap();
     assert_eq!(summary.skipped_steps, 0);
     let text = std::fs::read_to_string(out.path().join("metrics.jsonl")).unwrap();
@@ -223,7 +223,7 @@ fn the_flow_loss_teaches_the_gaussian_head_the_scene_flow() {
     // Without predicted velocities there is nothing for the flow to supervise.
     let mut config = small_config(out.path(), 1);
     config.loss.flow = 1.0;
-    let error = Trainer::new(config, vec![Device::flex()], false).err().expect("an error").to_string();
+    let error = Trainer::new(config, vec![Device::flex()], Start::Fresh).err().expect("an error").to_string();
     assert!(error.contains("loss.flow") && error.contains("gaussian_velocity"), "{error}");
 }
 
@@ -235,7 +235,7 @@ fn validation_frames_outside_the_scene_are_refused_before_training() {
     config.sampler.window = 12;
     config.data.validation.inputs = vec![0, 4, 8];
     config.data.validation.targets = vec![12];
-    let error = Trainer::new(config, vec![Device::flex()], false).err().expect("an error").to_string();
+    let error = Trainer::new(config, vec![Device::flex()], Start::Fresh).err().expect("an error").to_string();
     assert!(error.contains("data.validation") && error.contains("frame 12"), "{error}");
 }
 
@@ -243,9 +243,9 @@ fn validation_frames_outside_the_scene_are_refused_before_training() {
 fn the_model_section_describes_the_network_the_trainer_builds() {
     let out = tempfile::tempdir().unwrap();
     let config = small_config(out.path(), 1);
-    let architecture = config.model.architecture().unwrap();
+    let architecture = config.model.architecture();
     assert!(architecture.dpt.pixel_skip, "the overfit configuration turns the pixel skip on");
     assert_eq!(architecture.sky_model.as_ref().map(|sky| sky.resolution), config.model.sky_resolution);
-    let trainer = Trainer::new(config, vec![Device::flex()], false).unwrap();
+    let trainer = Trainer::new(config, vec![Device::flex()], Start::Fresh).unwrap();
     assert_eq!(trainer.model_config(), &architecture, "what `--config` gives reconstruct and eval");
 }

@@ -106,42 +106,8 @@ pub fn nchw_to_nhwc(host: &Host) -> Host {
     Host::new(vec![n, h, w, c], out)
 }
 
-/// A small deterministic generator (SplitMix64).
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Self {
-        Self(seed)
-    }
-
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1).
-    pub fn uniform(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-    }
-
-    /// Standard normal (Box-Muller).
-    pub fn normal(&mut self) -> f32 {
-        let u1 = (self.uniform() as f64).max(1e-12);
-        let u2 = self.uniform() as f64;
-        ((-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()) as f32
-    }
-
-    pub fn uniform_vec(&mut self, n: usize) -> Vec<f32> {
-        (0..n).map(|_| self.uniform()).collect()
-    }
-
-    pub fn normal_vec(&mut self, n: usize, std: f32) -> Vec<f32> {
-        (0..n).map(|_| self.normal() * std).collect()
-    }
-}
+/// The seeded generator of the test inputs.
+pub use dggt_data::random::SplitMix64 as Rng;
 
 /// Relative error `|a - b| / max(|b|, floor)`.
 pub fn rel_err(a: f64, b: f64, floor: f64) -> f64 {
@@ -168,13 +134,13 @@ pub fn synthetic_weights(
     for spec in specs {
         let fan_in = spec.in_channels * spec.kernel * spec.kernel;
         let shape = vec![spec.out_channels, spec.in_channels, spec.kernel, spec.kernel];
-        let weight = rng.normal_vec(shape.iter().product(), (2.0 / fan_in as f32).sqrt());
+        let weight = rng.normals(shape.iter().product(), (2.0 / fan_in as f32).sqrt());
         tensors.push((format!("features.{}.weight", spec.index), Host::new(shape, weight)));
-        let bias = rng.normal_vec(spec.out_channels, 0.05);
+        let bias = rng.normals(spec.out_channels, 0.05);
         tensors.push((format!("features.{}.bias", spec.index), Host::new(vec![spec.out_channels], bias)));
     }
     for (k, &c) in lin_channels.unwrap_or(&[]).iter().enumerate() {
-        let weight: Vec<f32> = (0..c).map(|_| rng.uniform() * 2.0 / c as f32).collect();
+        let weight: Vec<f32> = (0..c).map(|_| rng.unit() * 2.0 / c as f32).collect();
         tensors.push((format!("lin{k}.model.1.weight"), Host::new(vec![1, c, 1, 1], weight)));
     }
     tensors

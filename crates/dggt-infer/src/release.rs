@@ -5,15 +5,16 @@
 //! composited over the sky.
 //!
 //! Gaussians are one per pixel: means from the unprojected depth, rotations as `w x y z`, linear scales,
-//! post-sigmoid colours. Everything after the masks is a tensor expression, so gradients reach the maps.
+//! post-sigmoid colours. Everything after the masks is a tensor expression, so gradients reach the maps. The
+//! compositing is `dggt-scene`'s ([`composite`]); only the sky's normalisation is the release's own.
 
-use burn::tensor::{Device, Int, Tensor, TensorData};
-use dggt_geom::{CameraFromWorld, ImageSize, PinholeIntrinsics};
+use burn::tensor::{Int, Tensor, TensorData};
+use dggt_geom::{CameraFromWorld, ImageSize, PinholeIntrinsics, PosedCamera};
+use dggt_model::gaussian_maps::GaussianMaps;
+use dggt_model::lifespan::{dynamic_opacity, frame_times, opacity_at, static_opacity};
+use dggt_model::sky::SkyGaussians;
+use dggt_scene::{camera_tensors, composite, sky_splats};
 use dggt_splat::{CameraTensors, GaussianTensors, OpacityTensor, RenderSettings, RenderTensors, render};
-
-use crate::gaussian_maps::GaussianMaps;
-use crate::lifespan::{dynamic_opacity, frame_times, opacity_at, static_opacity};
-use crate::sky::SkyGaussians;
 
 /// Added to the sky's range in the min-max normalisation.
 const MINMAX_EPS: f32 = 1e-8;
@@ -117,7 +118,7 @@ pub fn render_scene(inputs: &SceneInputs<'_>, size: ImageSize) -> Result<SceneRe
             )),
             colors: pick(&colors),
         };
-        let cameras = camera_tensors(&inputs.cameras[frame..=frame], size, &device);
+        let cameras = cameras_of(&inputs.cameras[frame..=frame], size, &device)?;
         renders.push(render(&gaussians, &cameras, &settings).map_err(|e| format!("rendering frame {frame}: {e}"))?);
     }
     let foreground = RenderTensors {
@@ -126,15 +127,14 @@ pub fn render_scene(inputs: &SceneInputs<'_>, size: ImageSize) -> Result<SceneRe
         depth: Tensor::cat(renders.iter().map(|r| r.depth.clone()).collect(), 0),
     };
 
-    let sky_gaussians = inputs.sky.to_splat();
-    let cameras = camera_tensors(inputs.cameras, size, &device);
+    let sky_gaussians = sky_splats(inputs.sky);
+    let cameras = cameras_of(inputs.cameras, size, &device)?;
     let sky_raw = render(&sky_gaussians, &cameras, &settings).map_err(|e| format!("rendering the sky: {e}"))?.colors;
     // Inference only: one min and max over every frame and channel.
     let low = sky_raw.clone().min().reshape([1, 1, 1, 1]);
     let high = sky_raw.clone().max().reshape([1, 1, 1, 1]);
     let sky_minmax = (sky_raw.clone() - low.clone()) / (high - low).add_scalar(MINMAX_EPS);
-    let alpha = foreground.alpha.clone().unsqueeze_dim::<4>(3);
-    let final_rgb = alpha.clone() * foreground.colors.clone() + alpha.neg().add_scalar(1.0) * sky_minmax.clone();
+    let final_rgb = composite(foreground.alpha.clone(), foreground.colors.clone(), sky_minmax.clone());
 
     Ok(SceneRender {
         static_mask: mask,
@@ -147,14 +147,18 @@ pub fn render_scene(inputs: &SceneInputs<'_>, size: ImageSize) -> Result<SceneRe
     })
 }
 
-/// The cameras as `f32` tensors.
-fn camera_tensors(cameras: &[(CameraFromWorld, PinholeIntrinsics)], size: ImageSize, device: &Device) -> CameraTensors {
-    let views = cameras.len();
-    let viewmats: Vec<f32> = cameras.iter().flat_map(|(c, _)| c.to_rows()).flatten().map(|v| v as f32).collect();
-    let intrinsics: Vec<f32> = cameras.iter().flat_map(|(_, k)| k.to_rows_f32()).flatten().collect();
-    CameraTensors {
-        world_to_camera: Tensor::from_data(TensorData::new(viewmats, [views, 4, 4]), device),
-        intrinsics: Tensor::from_data(TensorData::new(intrinsics, [views, 3, 3]), device),
-        size,
-    }
+/// The cameras as the rasteriser takes them.
+fn cameras_of(
+    cameras: &[(CameraFromWorld, PinholeIntrinsics)],
+    size: ImageSize,
+    device: &burn::tensor::Device,
+) -> Result<CameraTensors, String> {
+    let posed: Vec<PosedCamera> = cameras
+        .iter()
+        .map(|(camera_from_world, intrinsics)| PosedCamera {
+            world_from_camera: camera_from_world.inverse(),
+            intrinsics: *intrinsics,
+        })
+        .collect();
+    camera_tensors(&posed, size, device).map_err(|e| e.to_string())
 }

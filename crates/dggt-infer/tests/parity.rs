@@ -1,6 +1,6 @@
 //! Parity with the release: the tiny model of `shared/parity/dggt_tiny_s3_56x70`, built from its
 //! `config.json`, loaded from its weights and run on its inputs, reproduces every reference output, renders
-//! included ([`dggt_model::parity`] does the comparing).
+//! included ([`dggt_infer::parity`] does the comparing).
 //!
 //! The folder is read in place (`../../../shared/parity/dggt_tiny_s3_56x70` from this crate), or from
 //! `$DGGT_PARITY_DIR/dggt_tiny_s3_56x70` when that variable names the shared parity folder.
@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use burn::tensor::Device;
-use dggt_model::parity::{ParityReport, ParityVectors, Status, parity_folder, read_safetensors, run_parity};
+use dggt_infer::parity::{ParityReport, ParityVectors, Status, parity_folder, read_safetensors, run_parity};
 use dggt_model::{Dggt, ModelConfig, ModelError};
 
 fn parity_dir() -> PathBuf {

@@ -11,28 +11,29 @@
 
 use std::path::{Path, PathBuf};
 
-use burn::tensor::Device;
+use burn::module::{Module, ModuleVisitor, Param};
+use burn::tensor::{Device, Tensor};
 use dggt_data::Preprocess;
 use dggt_model::sky::SkyModel;
-use dggt_model::weights::{Coverage, load_checkpoint_with};
-use dggt_model::{Dggt, ModelConfig};
+use dggt_model::weights::{Coverage, LoadReport, load_checkpoint_with};
+use dggt_model::{Dggt, ModelConfig, Preset};
 use dggt_scene::AssemblySettings;
-use dggt_train::{TrainConfig, checkpoint, model_config};
 use serde::Serialize;
 
-use crate::error::ReconstructError;
+use crate::checkpoint;
+use crate::error::InferError;
+use crate::settings::TrainedSettings;
 
 /// Where the architecture of a release-format checkpoint comes from.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Architecture {
     /// A model `config.json` (the parity-vector layout) or a training configuration `.toml`.
     Config(PathBuf),
-    /// `tiny`, `vggt_1b` or `dggt`.
-    Preset(String),
+    Preset(Preset),
 }
 
 /// The default architecture of release-format checkpoints.
-pub const DEFAULT_PRESET: &str = "dggt";
+pub const DEFAULT_PRESET: Preset = Preset::Dggt;
 
 /// Modules without which nothing can be reconstructed.
 const CORE_MODULES: [&str; 3] = ["aggregator", "camera_head", "depth_head"];
@@ -70,23 +71,23 @@ pub fn load_network(
     path: &Path,
     architecture: Option<&Architecture>,
     device: &Device,
-) -> Result<LoadedNetwork, ReconstructError> {
-    let fail = |detail: String| ReconstructError::Checkpoint { path: path.to_path_buf(), detail };
+) -> Result<LoadedNetwork, InferError> {
+    let fail = |detail: String| InferError::Checkpoint { path: path.to_path_buf(), detail };
     if !path.exists() {
         return Err(fail("does not exist".into()));
     }
-    let (config_from_arch, training, arch_name) = match architecture {
+    let (config_from_arch, trained, arch_name) = match architecture {
         Some(arch) => {
-            let (config, training, name) = read_architecture(arch)?;
-            (Some(config), training, name)
+            let (config, trained, name) = read_architecture(arch)?;
+            (Some(config), trained, name)
         }
         None => (None, None, String::new()),
     };
-    let preprocess = training.as_ref().map(|t| t.data.preprocess.clone());
-    let assembly = training.as_ref().map_or(AssemblySettings::default(), |t| t.render.assembly());
+    let preprocess = trained.as_ref().map(|t| t.preprocess().clone());
+    let assembly = trained.as_ref().map_or(AssemblySettings::default(), |t| t.render.assembly());
     let mut warnings = Vec::new();
     if path.is_dir() {
-        let dir = trainer_checkpoint_dir(path)?;
+        let dir = checkpoint::checkpoint_dir(path)?;
         let config = checkpoint::read_model_config(&dir)?;
         if config_from_arch.as_ref().is_some_and(|c| c != &config) {
             warnings
@@ -96,8 +97,8 @@ pub fn load_network(
         let info = CheckpointInfo {
             path: dir.clone(),
             format: "trainer".into(),
-            architecture: format!("{}", dir.join("model.json").display()),
-            parameters: burn::module::Module::num_params(&model),
+            architecture: format!("{}", dir.join(checkpoint::MODEL_CONFIG_FILE).display()),
+            parameters: model.num_params(),
             fresh_modules: Vec::new(),
         };
         return Ok(LoadedNetwork { model, config, info, preprocess, assembly, warnings });
@@ -105,7 +106,7 @@ pub fn load_network(
 
     let (config, arch_name) = match config_from_arch {
         Some(config) => (config, arch_name),
-        None => (model_config(DEFAULT_PRESET)?, format!("preset `{DEFAULT_PRESET}`")),
+        None => (DEFAULT_PRESET.config(), format!("preset `{DEFAULT_PRESET}`")),
     };
     let mut model = Dggt::new(&config, device)?;
     if let Some(sky) = &config.sky_model {
@@ -115,10 +116,26 @@ pub fn load_network(
         dggt_model::ModelError::WeightsFile { message, .. } => fail(format!("cannot be read: {message}")),
         other => fail(format!("does not fit the architecture of {arch_name}: {other}")),
     })?;
+    let fresh = check_release_coverage(&report, &arch_name, &mut warnings).map_err(fail)?;
+    let info = CheckpointInfo {
+        path: path.to_path_buf(),
+        format: "release".into(),
+        architecture: arch_name,
+        parameters: model.num_params(),
+        fresh_modules: fresh,
+    };
+    Ok(LoadedNetwork { model, config, info, preprocess, assembly, warnings })
+}
+
+/// The top-level modules a release-format load left fresh; an error when it matched nothing or left the core
+/// without weights, a warning when the scene modules are untrained.
+fn check_release_coverage(
+    report: &LoadReport,
+    arch_name: &str,
+    warnings: &mut Vec<String>,
+) -> Result<Vec<String>, String> {
     if report.applied.is_empty() {
-        return Err(fail(format!(
-            "no tensor in it matches the network of {arch_name} (not a DGGT or VGGT checkpoint?)"
-        )));
+        return Err(format!("no tensor in it matches the network of {arch_name} (not a DGGT or VGGT checkpoint?)"));
     }
     let mut fresh: Vec<String> = report.missing.iter().map(|p| p.split('.').next().unwrap_or(p).to_string()).collect();
     fresh.sort();
@@ -126,11 +143,11 @@ pub fn load_network(
     let missing_core: Vec<&String> = fresh.iter().filter(|m| CORE_MODULES.contains(&m.as_str())).collect();
     if !missing_core.is_empty() {
         let examples: Vec<&String> = report.missing.iter().take(3).collect();
-        return Err(fail(format!(
+        return Err(format!(
             "lacks weights of {missing_core:?} that the architecture of {arch_name} needs ({} tensors missing, e.g. \
              {examples:?})",
             report.missing.len()
-        )));
+        ));
     }
     let untrained: Vec<&String> = fresh.iter().filter(|m| SCENE_MODULES.contains(&m.as_str())).collect();
     if !untrained.is_empty() {
@@ -142,50 +159,57 @@ pub fn load_network(
     if !report.unused.is_empty() {
         tracing::debug!(count = report.unused.len(), "checkpoint tensors not used by this architecture");
     }
-    let info = CheckpointInfo {
-        path: path.to_path_buf(),
-        format: "release".into(),
-        architecture: arch_name,
-        parameters: burn::module::Module::num_params(&model),
-        fresh_modules: fresh,
-    };
-    Ok(LoadedNetwork { model, config, info, preprocess, assembly, warnings })
+    Ok(fresh)
 }
 
-/// The checkpoint folder of a `step-N` folder, a run's `checkpoints/` folder or a run folder.
-fn trainer_checkpoint_dir(path: &Path) -> Result<PathBuf, ReconstructError> {
-    if path.join("model.json").is_file() {
-        return Ok(path.to_path_buf());
-    }
-    for root in [path.to_path_buf(), path.join("checkpoints")] {
-        if root.join("latest").is_file()
-            && let Some(dir) = checkpoint::latest(&root)?
-        {
-            return Ok(dir);
-        }
-    }
-    Err(ReconstructError::Checkpoint {
-        path: path.to_path_buf(),
-        detail: "a folder without model.json or a `latest` checkpoint pointer (expected a trainer checkpoint \
-                 folder, a run folder, or a .pt/.safetensors file)"
-            .into(),
-    })
-}
-
-/// The architecture `arch` names, the training configuration it came from (if a `.toml`), and its name.
-fn read_architecture(arch: &Architecture) -> Result<(ModelConfig, Option<TrainConfig>, String), ReconstructError> {
+/// The architecture `arch` names, the training settings it came from (if a `.toml`), and its name.
+fn read_architecture(arch: &Architecture) -> Result<(ModelConfig, Option<TrainedSettings>, String), InferError> {
     match arch {
-        Architecture::Preset(name) => Ok((model_config(name)?, None, format!("preset `{name}`"))),
+        Architecture::Preset(preset) => Ok((preset.config(), None, format!("preset `{preset}`"))),
         Architecture::Config(path) if path.extension().is_some_and(|e| e == "toml") => {
-            let train = TrainConfig::load(path)?;
-            Ok((train.model.architecture()?, Some(train), format!("{}", path.display())))
+            let trained = TrainedSettings::load(path)?;
+            Ok((trained.model.architecture(), Some(trained), format!("{}", path.display())))
         }
         Architecture::Config(path) => {
-            let config = ModelConfig::from_parity_json(path).map_err(|e| ReconstructError::Input {
+            let config = ModelConfig::from_parity_json(path).map_err(|e| InferError::Input {
                 path: path.clone(),
                 detail: format!("not a model configuration: {e}"),
             })?;
             Ok((config, None, format!("{}", path.display())))
         }
     }
+}
+
+/// A fresh network: random layers, the sky model's fixed buffers, then the starting checkpoint when given
+/// (the release's key names; the tensors it lacks keep their fresh values).
+pub fn fresh_model(config: &ModelConfig, init: Option<&Path>, device: &Device) -> Result<Dggt, InferError> {
+    let mut model = Dggt::new(config, device)?;
+    materialise(&model);
+    if let Some(sky) = &config.sky_model {
+        model.sky_model = Some(SkyModel::initialised(sky, device));
+    }
+    if let Some(path) = init {
+        let report = load_checkpoint_with(&mut model, path, Coverage::Partial)?;
+        tracing::info!(
+            checkpoint = %path.display(),
+            applied = report.applied.len(),
+            missing = report.missing.len(),
+            unused = report.unused.len(),
+            "starting weights loaded (parameters the checkpoint lacks start fresh)"
+        );
+    }
+    Ok(model)
+}
+
+/// Initialises every lazily created parameter now, in visiting order, so that the starting weights depend on
+/// the seed alone and not on which thread or operation first reads a parameter (data-parallel threads would
+/// otherwise draw them in a racy order).
+fn materialise(model: &Dggt) {
+    struct Touch;
+    impl ModuleVisitor for Touch {
+        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+            let _ = param.val();
+        }
+    }
+    model.visit(&mut Touch);
 }

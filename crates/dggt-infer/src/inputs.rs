@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use dggt_data::{PlanarImage, Preprocess, images};
 use dggt_geom::{ImageSize, PinholeIntrinsics, WorldFromCamera};
 
-use crate::error::ReconstructError;
+use crate::error::InferError;
 
 /// Frame rate assumed for folders of images.
 pub const FOLDER_FRAME_RATE_HZ: f64 = 10.0;
@@ -62,18 +62,14 @@ pub struct InputSet {
 impl InputSet {
     /// Opens `root`, keeping frame positions `frames` and camera positions (folders) or ids (exports)
     /// `cameras` when given.
-    pub fn open(
-        root: &Path,
-        frames: Option<Range<usize>>,
-        cameras: Option<Vec<usize>>,
-    ) -> Result<Self, ReconstructError> {
+    pub fn open(root: &Path, frames: Option<Range<usize>>, cameras: Option<Vec<usize>>) -> Result<Self, InferError> {
         if !root.is_dir() {
             if is_glob_pattern(root) {
                 let set = Self::from_rig(root, "image glob", rig_from_glob(root)?, frames, cameras)?;
                 set.check_sizes()?;
                 return Ok(set);
             }
-            return Err(ReconstructError::input(
+            return Err(InferError::input(
                 root,
                 "not a folder (expected a folder of images, a glob pattern or a scene export)",
             ));
@@ -89,14 +85,10 @@ impl InputSet {
         Ok(set)
     }
 
-    fn open_scene(
-        root: &Path,
-        frames: Option<Range<usize>>,
-        cameras: Option<Vec<usize>>,
-    ) -> Result<Self, ReconstructError> {
+    fn open_scene(root: &Path, frames: Option<Range<usize>>, cameras: Option<Vec<usize>>) -> Result<Self, InferError> {
         let scene = dggt_data::open_scene(root, frames, cameras)?;
         if scene.views.is_empty() {
-            return Err(ReconstructError::input(root, "no views in the chosen frames and cameras"));
+            return Err(InferError::input(root, "no views in the chosen frames and cameras"));
         }
         let mut views = Vec::new();
         let mut truth = GroundTruth { world_from_camera: Vec::new(), intrinsics: Vec::new() };
@@ -129,11 +121,7 @@ impl InputSet {
         })
     }
 
-    fn open_folder(
-        root: &Path,
-        frames: Option<Range<usize>>,
-        cameras: Option<Vec<usize>>,
-    ) -> Result<Self, ReconstructError> {
+    fn open_folder(root: &Path, frames: Option<Range<usize>>, cameras: Option<Vec<usize>>) -> Result<Self, InferError> {
         let (files, folders) = list(root)?;
         let rig = if !files.is_empty() {
             if !folders.is_empty() {
@@ -153,9 +141,9 @@ impl InputSet {
         mut rig: Vec<(String, Vec<PathBuf>)>,
         frames: Option<Range<usize>>,
         cameras: Option<Vec<usize>>,
-    ) -> Result<Self, ReconstructError> {
+    ) -> Result<Self, InferError> {
         if rig.is_empty() {
-            return Err(ReconstructError::input(
+            return Err(InferError::input(
                 root,
                 "no images found (expected .jpg/.png files, or one folder of them per camera)",
             ));
@@ -164,7 +152,7 @@ impl InputSet {
             let mut picked = Vec::new();
             for &c in &chosen {
                 let camera = rig.get(c).ok_or_else(|| {
-                    ReconstructError::input(root, format!("camera {c} requested but the folder has {}", rig.len()))
+                    InferError::input(root, format!("camera {c} requested but the folder has {}", rig.len()))
                 })?;
                 picked.push(camera.clone());
             }
@@ -172,7 +160,7 @@ impl InputSet {
         }
         let count = rig[0].1.len();
         if let Some((name, files)) = rig.iter().find(|(_, files)| files.len() != count) {
-            return Err(ReconstructError::input(
+            return Err(InferError::input(
                 root.join(name),
                 format!(
                     "{} images, but camera {} has {count}: every camera needs one image per frame",
@@ -183,7 +171,7 @@ impl InputSet {
         }
         let range = frames.unwrap_or(0..count);
         if range.end > count || range.is_empty() {
-            return Err(ReconstructError::input(root, format!("frames {range:?} requested but there are {count}")));
+            return Err(InferError::input(root, format!("frames {range:?} requested but there are {count}")));
         }
         let mut views = Vec::new();
         for frame in range.clone() {
@@ -209,12 +197,12 @@ impl InputSet {
         })
     }
 
-    fn check_sizes(&self) -> Result<(), ReconstructError> {
+    fn check_sizes(&self) -> Result<(), InferError> {
         let first = &self.views[0].path;
         for view in &self.views[1..] {
             let size = images::read_size(&view.path)?;
             if size != self.size {
-                return Err(ReconstructError::input(
+                return Err(InferError::input(
                     &view.path,
                     format!(
                         "image is {size} but {} is {}: all inputs must have one size (choose cameras of one \
@@ -229,16 +217,16 @@ impl InputSet {
     }
 
     /// Decodes and preprocesses every view; returns the images and the network-resolution size.
-    pub fn load(&self, preprocess: &Preprocess) -> Result<(Vec<PlanarImage>, ImageSize), ReconstructError> {
+    pub fn load(&self, preprocess: &Preprocess) -> Result<(Vec<PlanarImage>, ImageSize), InferError> {
         let plan = preprocess.plan(self.size)?;
         let images = self
             .views
             .iter()
             .map(|view| {
                 let rgb = images::read_rgb(&view.path)?;
-                plan.image(&rgb).map_err(|e| ReconstructError::input(&view.path, e.to_string()))
+                plan.image(&rgb).map_err(|e| InferError::input(&view.path, e.to_string()))
             })
-            .collect::<Result<Vec<_>, ReconstructError>>()?;
+            .collect::<Result<Vec<_>, InferError>>()?;
         Ok((images, plan.output))
     }
 
@@ -276,11 +264,10 @@ fn is_glob_pattern(path: &Path) -> bool {
 
 /// The rig of a glob pattern: the matching images (sorted) as one camera, or else each matching folder (sorted)
 /// as a camera of its own.
-fn rig_from_glob(pattern: &Path) -> Result<Vec<(String, Vec<PathBuf>)>, ReconstructError> {
+fn rig_from_glob(pattern: &Path) -> Result<Vec<(String, Vec<PathBuf>)>, InferError> {
     let text = pattern.to_string_lossy();
-    let matches =
-        glob::glob(&text).map_err(|e| ReconstructError::input(pattern, format!("invalid glob pattern: {e}")))?;
-    let paths = matches.map(|entry| entry.map_err(|e| ReconstructError::input(pattern, e.to_string())));
+    let matches = glob::glob(&text).map_err(|e| InferError::input(pattern, format!("invalid glob pattern: {e}")))?;
+    let paths = matches.map(|entry| entry.map_err(|e| InferError::input(pattern, e.to_string())));
     let (files, folders) = images_and_folders(paths)?;
     if !files.is_empty() {
         return Ok(vec![("cam0".into(), files)]);
@@ -289,7 +276,7 @@ fn rig_from_glob(pattern: &Path) -> Result<Vec<(String, Vec<PathBuf>)>, Reconstr
 }
 
 /// One camera per folder (named after it) with the images in it, leaving out folders without images.
-fn camera_folders(folders: &[PathBuf]) -> Result<Vec<(String, Vec<PathBuf>)>, ReconstructError> {
+fn camera_folders(folders: &[PathBuf]) -> Result<Vec<(String, Vec<PathBuf>)>, InferError> {
     let cameras = folders
         .iter()
         .map(|folder| {
@@ -305,17 +292,15 @@ fn is_image(path: &Path) -> bool {
 }
 
 /// The images and the folders directly in `dir`, each sorted by name.
-fn list(dir: &Path) -> Result<(Vec<PathBuf>, Vec<PathBuf>), ReconstructError> {
-    let entries = std::fs::read_dir(dir).map_err(|e| ReconstructError::input(dir, e.to_string()))?;
-    images_and_folders(
-        entries.map(|entry| entry.map(|e| e.path()).map_err(|e| ReconstructError::input(dir, e.to_string()))),
-    )
+fn list(dir: &Path) -> Result<(Vec<PathBuf>, Vec<PathBuf>), InferError> {
+    let entries = std::fs::read_dir(dir).map_err(|e| InferError::input(dir, e.to_string()))?;
+    images_and_folders(entries.map(|entry| entry.map(|e| e.path()).map_err(|e| InferError::input(dir, e.to_string()))))
 }
 
 /// Splits `paths` into image files and folders (other files are left out), each sorted by name.
 fn images_and_folders(
-    paths: impl Iterator<Item = Result<PathBuf, ReconstructError>>,
-) -> Result<(Vec<PathBuf>, Vec<PathBuf>), ReconstructError> {
+    paths: impl Iterator<Item = Result<PathBuf, InferError>>,
+) -> Result<(Vec<PathBuf>, Vec<PathBuf>), InferError> {
     let (mut files, mut folders) = (Vec::new(), Vec::new());
     for path in paths {
         let path = path?;

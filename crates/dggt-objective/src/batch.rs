@@ -6,10 +6,10 @@
 
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_data::{DepthFlowMap, LoadedSample, PreparedView, Preprocess, Scene};
-use dggt_geom::{ImageSize, PosedCamera, WorldFromCamera};
+use dggt_geom::{ImageSize, PosedCamera};
 use dggt_scene::Timeline;
 
-use crate::error::TrainError;
+use crate::error::ObjectiveError;
 
 /// One view's ground truth.
 #[derive(Debug, Clone)]
@@ -70,27 +70,27 @@ impl StepBatch {
         preprocess: &Preprocess,
         with_depth_flow: bool,
         device: &Device,
-    ) -> Result<Self, TrainError> {
-        let first = sample.inputs.first().ok_or_else(|| TrainError::Invalid {
+    ) -> Result<Self, ObjectiveError> {
+        let first = sample.inputs.first().ok_or_else(|| ObjectiveError::Invalid {
             what: format!("sample of step {}", sample.step),
             detail: "no input views".into(),
         })?;
         let size = first.image.size;
         if let Some(view) = sample.inputs.iter().chain(&sample.targets).find(|v| v.image.size != size) {
-            return Err(TrainError::Invalid {
+            return Err(ObjectiveError::Invalid {
                 what: format!("view (frame {}, camera {})", view.frame, view.camera),
                 detail: format!("size {} differs from the first input's {size}", view.image.size),
             });
         }
         let timeline = Timeline::new(&sample.sample.input_frames)?;
         let reference = first.world_from_camera;
-        let truth = |view: &PreparedView, depth: bool| -> Result<ViewTruth, TrainError> {
+        let truth = |view: &PreparedView, depth: bool| -> Result<ViewTruth, ObjectiveError> {
             Ok(ViewTruth {
                 frame: view.frame,
                 rig_camera: view.camera,
                 time: timeline.time(view.frame as f64),
                 camera: PosedCamera {
-                    world_from_camera: relative_pose(&reference, &view.world_from_camera),
+                    world_from_camera: view.world_from_camera.relative_to(&reference),
                     intrinsics: view.intrinsics,
                 },
                 image: hwc_image(view, device),
@@ -106,11 +106,6 @@ impl StepBatch {
         let images = Tensor::from_data(TensorData::new(planar, [1, sample.inputs.len(), 3, h, w]), device);
         Ok(Self { step: sample.step, images, size, timeline, inputs, targets })
     }
-}
-
-/// `view` expressed in the frame of `reference`: `reference⁻¹ · view`.
-pub fn relative_pose(reference: &WorldFromCamera, view: &WorldFromCamera) -> WorldFromCamera {
-    (reference.inverse() * *view).relabel()
 }
 
 fn hwc_image(view: &PreparedView, device: &Device) -> Tensor<3> {
@@ -132,7 +127,7 @@ fn depth_flow_samples(
     scene: &Scene,
     preprocess: &Preprocess,
     view: &PreparedView,
-) -> Result<Option<DepthFlowSamples>, TrainError> {
+) -> Result<Option<DepthFlowSamples>, ObjectiveError> {
     let Some(path) = &scene.view(view.frame, view.camera).files.depth_flow else { return Ok(None) };
     let original = scene.cameras[view.camera].size;
     let map = DepthFlowMap::read(path, original)?;

@@ -3,24 +3,23 @@
 //! The aggregator attends across all frames, so it runs once on the whole sequence; the dense heads work on
 //! each frame independently, so running them on chunks of frames gives the same maps as
 //! [`Dggt::forward`](dggt_model::Dggt::forward) while holding only one chunk's intermediate feature maps at a
-//! time. Only what the reconstruction reads is kept: camera encodings, depth, dynamic logits, the Gaussian
-//! maps and the motion head's velocities. The point and semantic heads, unused by DGGT, are not run; the
-//! aggregator's tokens are dropped as soon as the heads are done.
+//! time. Only what scene building and the losses read is kept: camera encodings, depth, dynamic logits, the
+//! Gaussian maps and the velocities. The point and semantic heads, unused by DGGT, are not run; the
+//! aggregator's tokens are dropped as soon as the heads are done. Training runs the same pass with one chunk
+//! of all frames, under autodiff.
 
 use burn::tensor::{FloatDType, Tensor};
-use dggt_geom::PixelConvention;
 use dggt_model::Dggt;
 use dggt_model::aggregator::AggregatorOutput;
 use dggt_model::gaussian_maps::GaussianMaps;
-use dggt_scene::{InputView, MeansGradient, PixelGaussians, SceneError, Timeline};
 
-use crate::error::ReconstructError;
+use crate::error::InferError;
 
-/// The outputs a reconstruction uses, over `S` frames of `H x W`.
+/// The outputs a reconstruction uses, over `S` frames of `H x W`, all `f32` whatever the network computes in.
 #[derive(Debug, Clone)]
 pub struct Prediction {
-    /// `[1, S, 9]` the camera head's final encoding.
-    pub pose_encoding: Tensor<3>,
+    /// Every camera-head iteration's `[1, S, 9]` encoding, the final one last.
+    pub encodings: Vec<Tensor<3>>,
     /// `[1, S, H, W]` depth.
     pub depth: Tensor<4>,
     /// `[1, S, H, W]` dynamic logits, when the model has an instance head.
@@ -33,36 +32,18 @@ pub struct Prediction {
 }
 
 impl Prediction {
-    /// The per-pixel Gaussians placed with `views` on `timeline` (means detached, as at inference), moving
-    /// with the predicted velocities when the model has a motion head; `None` without a Gaussian head.
-    pub fn pixel_gaussians(
-        &self,
-        views: Vec<InputView>,
-        unproject_at: PixelConvention,
-        timeline: &Timeline,
-    ) -> Result<Option<PixelGaussians>, SceneError> {
-        let Some(maps) = &self.gaussians else { return Ok(None) };
-        let pixels = PixelGaussians::new(
-            maps,
-            self.depth.clone(),
-            self.dynamic_logit.clone(),
-            views,
-            MeansGradient::Detached,
-            unproject_at,
-        )?;
-        match &self.velocity {
-            Some(velocity) => pixels.with_motion(velocity.clone(), timeline.frames_per_time()).map(Some),
-            None => Ok(Some(pixels)),
-        }
+    /// `[1, S, 9]` the camera head's final encoding.
+    pub fn pose_encoding(&self) -> Tensor<3> {
+        self.encodings.last().cloned().expect("the camera head runs at least one iteration")
     }
 }
 
 /// Runs `model` on `images` (`[1, S, 3, H, W]`, RGB in `[0, 1]`) with the dense heads on `chunk` frames at a
 /// time (at least one).
-pub fn forward_chunked(model: &Dggt, images: Tensor<5>, chunk: usize) -> Result<Prediction, ReconstructError> {
+pub fn forward_chunked(model: &Dggt, images: Tensor<5>, chunk: usize) -> Result<Prediction, InferError> {
     let [batch, ..] = images.dims();
     if batch != 1 {
-        return Err(ReconstructError::invalid("images", format!("batch of {batch}, expected 1")));
+        return Err(InferError::invalid("images", format!("batch of {batch}, expected 1")));
     }
     let aggregator = model.aggregator.forward(images.clone())?;
     heads_chunked(model, aggregator, images, chunk)
@@ -76,13 +57,13 @@ pub fn heads_chunked(
     aggregator: AggregatorOutput,
     images: Tensor<5>,
     chunk: usize,
-) -> Result<Prediction, ReconstructError> {
+) -> Result<Prediction, InferError> {
     let frames = images.dims()[1];
     let chunk = chunk.max(1);
     let f32 = |t: Tensor<4>| t.cast(FloatDType::F32);
-    let last =
-        aggregator.output_list.last().ok_or_else(|| ReconstructError::invalid("model", "no aggregator layer"))?;
-    let pose_encoding = model.camera_head.forward(last.clone()).pose_encoding().cast(FloatDType::F32);
+    let last = aggregator.output_list.last().ok_or_else(|| InferError::invalid("model", "no aggregator layer"))?;
+    let camera = model.camera_head.forward(last.clone());
+    let encodings = camera.encodings.iter().map(|e| e.clone().cast(FloatDType::F32)).collect();
     let (start, grid) = (aggregator.patch_start_idx, aggregator.grid);
 
     let (mut depth, mut dynamic, mut gaussian_raw, mut velocity) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
@@ -115,7 +96,7 @@ pub fn heads_chunked(
         true => gaussians.as_ref().and_then(|maps| maps.velocity.clone()),
     };
     Ok(Prediction {
-        pose_encoding,
+        encodings,
         depth: Tensor::cat(depth, 1),
         dynamic_logit: (!dynamic.is_empty()).then(|| Tensor::cat(dynamic, 1)),
         gaussians,

@@ -28,14 +28,13 @@ use burn::tensor::{Device, Tensor, TensorData};
 use dggt_geom::{CameraFromWorld, ImageSize, PinholeIntrinsics, PixelConvention, PoseEncoding, unproject_depth_map};
 use safetensors::{Dtype, SafeTensors};
 
-use crate::dpt::{DptOutput, DptPrediction};
-use crate::error::ModelError;
-use crate::lifespan::{dynamic_opacity, frame_times, opacity_at, static_opacity};
-use crate::model::GaussianOutput;
-use crate::scene_render::{SceneInputs, SceneRender, render_scene};
-use crate::sky::{SkyGaussians, SkyProjection, grid_coordinates};
-use crate::weights::LoadReport;
-use crate::{Dggt, DggtOutput, ModelConfig};
+use dggt_model::dpt::{DptOutput, DptPrediction};
+use dggt_model::lifespan::{dynamic_opacity, frame_times, opacity_at, static_opacity};
+use dggt_model::sky::{SkyGaussians, SkyProjection, grid_coordinates};
+use dggt_model::weights::LoadReport;
+use dggt_model::{Dggt, DggtOutput, GaussianOutput, ModelConfig, ModelError};
+
+use crate::release::{SceneInputs, SceneRender, render_scene};
 
 /// Absolute tolerance, and tolerance relative to a reference tensor's largest magnitude.
 pub const TOLERANCE: f32 = 1e-4;

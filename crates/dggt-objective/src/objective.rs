@@ -16,27 +16,22 @@
 use std::collections::BTreeMap;
 
 use burn::tensor::{FloatDType, Int, Tensor, TensorData};
-use dggt_geom::{PoseEncoding, PosedCamera};
-use dggt_losses::{GramLoss, Lpips, LpipsKind, bce_with_logits, l2, lifespan_l1, opacity_loss, psnr};
-use dggt_model::{Dggt, ExtraHeads};
-use dggt_scene::{
-    AssemblyCounts, AssemblySettings, InputView, MeansGradient, PixelGaussians, TargetView, interpolate_camera,
-    render_target,
+use dggt_geom::PoseEncoding;
+use dggt_infer::{
+    CameraSource, InputCameras, RenderSection, Scene4d, SceneOptions, SkyChoice, ViewSlot, forward_chunked, input_views,
 };
+use dggt_losses::{GramLoss, Lpips, bce_with_logits, l2, lifespan_l1, opacity_loss, psnr};
+use dggt_model::Dggt;
+use dggt_scene::{AssemblyCounts, PixelGaussians, TargetView};
 
 use crate::batch::{DepthFlowSamples, StepBatch, ViewTruth};
-use crate::config::{CameraSource, LossWeights, MeansGradientSetting, RenderSection};
-use crate::error::TrainError;
-
-/// Predicted fields of view are clamped to this range (radians) before decoding, so an untrained camera head
-/// still yields a finite camera.
-const FOV_RANGE: (f64, f64) = (0.05, 3.0);
+use crate::error::ObjectiveError;
+use crate::weights::{LossTerm, LossWeights};
 
 /// The losses and what they need, built once per run.
 pub struct Objective {
     pub weights: LossWeights,
     pub render: RenderSection,
-    pub assembly: AssemblySettings,
     lpips: Option<Lpips>,
     gram: Option<GramLoss>,
 }
@@ -47,7 +42,7 @@ pub struct SampleLoss {
     /// The weighted sum.
     pub total: Tensor<1>,
     /// Each unweighted term, on the host.
-    pub terms: BTreeMap<&'static str, f64>,
+    pub terms: BTreeMap<LossTerm, f64>,
     /// Mean PSNR of the target renders (dB).
     pub target_psnr: f64,
     /// Gaussians assembled per rendered view, summed.
@@ -64,11 +59,14 @@ pub struct RenderedView {
 }
 
 impl Objective {
-    pub fn new(weights: LossWeights, render: RenderSection, device: &burn::tensor::Device) -> Result<Self, TrainError> {
+    pub fn new(
+        weights: LossWeights,
+        render: RenderSection,
+        device: &burn::tensor::Device,
+    ) -> Result<Self, ObjectiveError> {
         let lpips = match (&weights.lpips_weights, &weights.lpips_backbone) {
             (Some(linear), Some(backbone)) if weights.lpips > 0.0 => {
-                let kind = if weights.lpips_net == "vgg" { LpipsKind::Vgg } else { LpipsKind::Alex };
-                Some(Lpips::load(kind, backbone, linear, device)?)
+                Some(Lpips::load(weights.lpips_net, backbone, linear, device)?)
             }
             _ => None,
         };
@@ -76,8 +74,7 @@ impl Objective {
             Some(path) if weights.gram > 0.0 => Some(GramLoss::load(path, device)?),
             _ => None,
         };
-        let assembly = render.assembly();
-        Ok(Self { weights, render, assembly, lpips, gram })
+        Ok(Self { weights, render, lpips, gram })
     }
 
     /// Runs the network on the batch and renders its views (targets, then inputs when configured).
@@ -86,7 +83,7 @@ impl Objective {
         model: &Dggt,
         batch: &StepBatch,
         with_inputs: bool,
-    ) -> Result<(Forward, Vec<RenderedView>), TrainError> {
+    ) -> Result<(Forward, Vec<RenderedView>), ObjectiveError> {
         let forward = Forward::run(model, batch, &self.render)?;
         let views = self.render_views(&forward, batch, with_inputs)?;
         Ok((forward, views))
@@ -98,7 +95,7 @@ impl Objective {
         forward: &Forward,
         batch: &StepBatch,
         with_inputs: bool,
-    ) -> Result<Vec<RenderedView>, TrainError> {
+    ) -> Result<Vec<RenderedView>, ObjectiveError> {
         let mut views = Vec::new();
         let mut wanted: Vec<(usize, bool)> = (0..batch.targets.len()).map(|i| (i, true)).collect();
         if with_inputs {
@@ -108,11 +105,10 @@ impl Objective {
             let truth = if is_target { &batch.targets[index] } else { &batch.inputs[index] };
             let camera = match self.render.cameras {
                 CameraSource::GroundTruth => truth.camera,
-                CameraSource::Predicted => interpolate_camera(&forward.pixels.views, truth.rig_camera, truth.time)?,
+                CameraSource::Predicted => forward.scene.camera_at(truth.rig_camera, truth.time)?,
             };
             let target = TargetView { rig_camera: truth.rig_camera, time: truth.time, camera };
-            let sky = forward.sky.as_ref();
-            let view = render_target(&forward.pixels, sky, &target, &self.assembly)?;
+            let view = forward.scene.render(&target)?;
             let alpha = view.alpha.squeeze_dim::<2>(0);
             views.push(RenderedView { truth_index: index, is_target, rgb: view.rgb, alpha, counts: view.counts });
         }
@@ -121,16 +117,16 @@ impl Objective {
 
     /// The weighted camera loss alone, from the aggregator and the camera head (no dense head runs, nothing is
     /// rendered): the loss of a pose warm-up step (`optim.pose_warmup_steps`).
-    pub fn pose_loss(&self, model: &Dggt, batch: &StepBatch) -> Result<SampleLoss, TrainError> {
+    pub fn pose_loss(&self, model: &Dggt, batch: &StepBatch) -> Result<SampleLoss, ObjectiveError> {
         let aggregator = model.aggregator.forward(batch.images.clone())?;
-        let last = aggregator.output_list.last().ok_or_else(|| TrainError::Invalid {
+        let last = aggregator.output_list.last().ok_or_else(|| ObjectiveError::Invalid {
             what: "model".into(),
             detail: "the aggregator has no layer".into(),
         })?;
         let camera = model.camera_head.forward(last.clone());
         let encodings: Vec<Tensor<3>> = camera.encodings.iter().map(|e| e.clone().cast(FloatDType::F32)).collect();
         let loss = camera_loss(&encodings, batch)?;
-        let terms = BTreeMap::from([("camera", scalar(&loss))]);
+        let terms = BTreeMap::from([(LossTerm::Camera, scalar(&loss))]);
         Ok(SampleLoss {
             total: loss.mul_scalar(self.weights.camera),
             terms,
@@ -140,24 +136,24 @@ impl Objective {
     }
 
     /// The weighted loss of one sample.
-    pub fn loss(&self, model: &Dggt, batch: &StepBatch) -> Result<SampleLoss, TrainError> {
+    pub fn loss(&self, model: &Dggt, batch: &StepBatch) -> Result<SampleLoss, ObjectiveError> {
         let forward = Forward::run(model, batch, &self.render)?;
         self.loss_of(forward, batch)
     }
 
     /// The weighted loss of a forward pass's outputs (from the network, or built by hand) on `batch`.
-    pub fn loss_of(&self, forward: Forward, batch: &StepBatch) -> Result<SampleLoss, TrainError> {
+    pub fn loss_of(&self, forward: Forward, batch: &StepBatch) -> Result<SampleLoss, ObjectiveError> {
         let w = &self.weights;
         let views = self.render_views(&forward, batch, self.render.render_inputs)?;
         let device = batch.images.device();
         let truth = |view: &RenderedView| -> &ViewTruth {
             if view.is_target { &batch.targets[view.truth_index] } else { &batch.inputs[view.truth_index] }
         };
-        let mut terms: BTreeMap<&'static str, f64> = BTreeMap::new();
+        let mut terms: BTreeMap<LossTerm, f64> = BTreeMap::new();
         let mut total = Tensor::<1>::zeros([1], &device);
-        let mut add = |name: &'static str, weight: f64, value: Tensor<1>, terms: &mut BTreeMap<&'static str, f64>| {
-            let host = scalar(&value);
-            terms.insert(name, host);
+        let mut add = |term: LossTerm, value: Tensor<1>, terms: &mut BTreeMap<LossTerm, f64>| {
+            terms.insert(term, scalar(&value));
+            let weight = term.weight(w);
             if weight > 0.0 {
                 total = total.clone() + value.mul_scalar(weight);
             }
@@ -165,18 +161,18 @@ impl Objective {
 
         let rendered = Tensor::stack::<4>(views.iter().map(|v| v.rgb.clone()).collect(), 0);
         let expected = Tensor::stack::<4>(views.iter().map(|v| truth(v).image.clone()).collect(), 0);
-        add("rgb_l2", w.rgb_l2, l2(rendered.clone(), expected.clone())?, &mut terms);
+        add(LossTerm::RgbL2, l2(rendered.clone(), expected.clone())?, &mut terms);
         if let Some(lpips) = &self.lpips {
-            add("lpips", w.lpips, lpips.train_style(rendered.clone(), expected.clone())?.mean(), &mut terms);
+            add(LossTerm::Lpips, lpips.train_style(rendered.clone(), expected.clone())?.mean(), &mut terms);
         }
         if let Some(gram) = &self.gram {
-            add("gram", w.gram, gram.forward(rendered.clone(), expected.clone())?.value.mean(), &mut terms);
+            add(LossTerm::Gram, gram.forward(rendered.clone(), expected.clone())?.value.mean(), &mut terms);
         }
         let with_sky: Vec<&RenderedView> = views.iter().filter(|v| truth(v).sky.is_some()).collect();
         if w.opacity_bce > 0.0 && !with_sky.is_empty() {
             let alpha = Tensor::stack::<3>(with_sky.iter().map(|v| v.alpha.clone()).collect(), 0);
             let sky = Tensor::stack::<3>(with_sky.iter().map(|v| truth(v).sky.clone().unwrap()).collect(), 0);
-            add("opacity_bce", w.opacity_bce, opacity_loss(alpha, sky)?, &mut terms);
+            add(LossTerm::OpacityBce, opacity_loss(alpha, sky)?, &mut terms);
         }
         if w.dynamic_bce > 0.0
             && let Some(logits) = &forward.dynamic_logit
@@ -190,12 +186,12 @@ impl Objective {
                 );
                 let masks =
                     Tensor::stack::<3>(labelled.iter().map(|&i| batch.inputs[i].dynamic.clone().unwrap()).collect(), 0);
-                add("dynamic_bce", w.dynamic_bce, bce_with_logits(frames.select(0, index), masks)?, &mut terms);
+                add(LossTerm::DynamicBce, bce_with_logits(frames.select(0, index), masks)?, &mut terms);
             }
         }
         if w.lifespan_l1 > 0.0 {
-            let lifespan = forward.pixels.lifespan.clone();
-            let statics = match &forward.pixels.dynamic_logit {
+            let lifespan = forward.pixels().lifespan.clone();
+            let statics = match &forward.pixels().dynamic_logit {
                 Some(logit) => {
                     let values = host(logit.clone());
                     let index: Vec<i64> = (0..values.len()).filter(|&i| values[i] < 0.0).map(|i| i as i64).collect();
@@ -205,22 +201,22 @@ impl Objective {
                 None => lifespan,
             };
             if statics.dims()[0] > 0 {
-                add("lifespan_l1", w.lifespan_l1, lifespan_l1(statics)?, &mut terms);
+                add(LossTerm::LifespanL1, lifespan_l1(statics)?, &mut terms);
             }
         }
         if w.camera > 0.0 {
-            add("camera", w.camera, camera_loss(&forward.encodings, batch)?, &mut terms);
+            add(LossTerm::Camera, camera_loss(&forward.encodings, batch)?, &mut terms);
         }
         if w.depth > 0.0
             && let Some(loss) = depth_loss(&forward.depth, batch)?
         {
-            add("depth", w.depth, loss, &mut terms);
+            add(LossTerm::Depth, loss, &mut terms);
         }
         if w.flow > 0.0
             && let Some(velocity) = &forward.velocity
             && let Some(loss) = flow_loss(velocity, batch)?
         {
-            add("flow", w.flow, loss, &mut terms);
+            add(LossTerm::Flow, loss, &mut terms);
         }
 
         let mut psnrs = Vec::new();
@@ -242,90 +238,61 @@ impl Objective {
 
 /// The network's outputs that the losses and the renders read.
 pub struct Forward {
-    pub pixels: PixelGaussians,
-    pub sky: Option<dggt_model::sky::SkyGaussians>,
+    /// The Gaussians placed with the chosen cameras, and the sky.
+    pub scene: Scene4d,
     /// `[1, S, H, W]`.
     pub depth: Tensor<4>,
     /// `[1, S, H, W]`.
     pub dynamic_logit: Option<Tensor<4>>,
     /// Every camera-head iteration's `[1, S, 9]` encoding.
     pub encodings: Vec<Tensor<3>>,
-    /// `[1, S, H, W, 3]` the motion head's velocities (camera axes, world units per log frame), if it has one.
+    /// `[1, S, H, W, 3]` the predicted velocities (camera axes, world units per log frame), if the network
+    /// predicts them.
     pub velocity: Option<Tensor<5>>,
 }
 
 impl Forward {
-    pub fn run(model: &Dggt, batch: &StepBatch, render: &RenderSection) -> Result<Self, TrainError> {
-        let out = model.forward_with(batch.images.clone(), ExtraHeads::NONE)?;
-        let gaussians = out.gaussians.as_ref().ok_or_else(|| TrainError::Invalid {
-            what: "model".into(),
-            detail: "the configuration has no Gaussian head (gs_head); it cannot be trained to render".into(),
-        })?;
-        let cameras: Vec<PosedCamera> = match render.cameras {
-            CameraSource::GroundTruth => batch.inputs.iter().map(|v| v.camera).collect(),
-            CameraSource::Predicted => decode_cameras(out.camera.pose_encoding().cast(FloatDType::F32), batch.size)?,
+    /// The network on the batch's inputs (one chunk of all frames), its Gaussians placed with the cameras
+    /// `render` chooses.
+    pub fn run(model: &Dggt, batch: &StepBatch, render: &RenderSection) -> Result<Self, ObjectiveError> {
+        let frames = batch.images.dims()[1];
+        let prediction = forward_chunked(model, batch.images.clone(), frames)?;
+        let cameras = match render.cameras {
+            CameraSource::GroundTruth => InputCameras::Given(batch.inputs.iter().map(|v| v.camera).collect()),
+            CameraSource::Predicted => InputCameras::Predicted,
         };
-        let views: Vec<InputView> = batch
-            .inputs
-            .iter()
-            .zip(cameras)
-            .map(|(truth, camera)| InputView { rig_camera: truth.rig_camera, time: truth.time, camera })
-            .collect();
-        // The scene is assembled and rendered in f32 whatever float type the network computes in.
-        let depth = out.depth.prediction.clone().narrow(4, 0, 1).squeeze_dim::<4>(4).cast(FloatDType::F32);
-        let dynamic_logit = out
-            .instance
-            .as_ref()
-            .map(|p| p.prediction.clone().narrow(4, 0, 1).squeeze_dim::<4>(4).cast(FloatDType::F32));
-        let encodings = out.camera.encodings.iter().map(|e| e.clone().cast(FloatDType::F32)).collect();
-        let means_gradient = match render.means_gradient {
-            MeansGradientSetting::Detached => MeansGradient::Detached,
-            MeansGradientSetting::Through => MeansGradient::Through,
+        let slots: Vec<ViewSlot> =
+            batch.inputs.iter().map(|v| ViewSlot { rig_camera: v.rig_camera, time: v.time }).collect();
+        let views = input_views(&prediction, &slots, cameras, batch.size)?;
+        let options = SceneOptions {
+            means_gradient: render.means_gradient,
+            sky: if render.sky { SkyChoice::Render } else { SkyChoice::Skip },
+            assembly: render.assembly(),
         };
-        let pixels = PixelGaussians::new(
-            &gaussians.maps,
-            depth.clone(),
-            dynamic_logit.clone(),
-            views,
-            means_gradient,
-            model.unproject_at,
-        )?;
-        let velocity = out.velocity();
-        let pixels = match &velocity {
-            Some(velocity) => pixels.with_motion(velocity.clone(), batch.timeline.frames_per_time())?,
-            None => pixels,
-        };
-        let sky = match (&model.sky_model, render.sky) {
-            (Some(sky_model), true) => {
-                let [_, s, c, h, w] = batch.images.dims();
-                let cameras: Vec<_> =
-                    pixels.views.iter().map(|v| (v.camera.world_from_camera.inverse(), v.camera.intrinsics)).collect();
-                Some(sky_model.gaussians(batch.images.clone().reshape([s, c, h, w]), &cameras))
-            }
-            _ => None,
-        };
-        Ok(Self { pixels, sky, depth, dynamic_logit, encodings, velocity })
+        let scene =
+            Scene4d::build(model, &prediction, &batch.images, views, &batch.timeline, &options)?.ok_or_else(|| {
+                ObjectiveError::Invalid {
+                    what: "model".into(),
+                    detail: "the configuration has no Gaussian head (gs_head); it cannot be trained to render".into(),
+                }
+            })?;
+        Ok(Self {
+            scene,
+            depth: prediction.depth,
+            dynamic_logit: prediction.dynamic_logit,
+            encodings: prediction.encodings,
+            velocity: prediction.velocity,
+        })
+    }
+
+    /// The per-pixel Gaussians.
+    pub fn pixels(&self) -> &PixelGaussians {
+        &self.scene.pixels
     }
 }
 
-/// Decodes `[1, S, 9]` encodings to cameras (fields of view clamped to [`FOV_RANGE`]).
-pub fn decode_cameras(encoding: Tensor<3>, size: dggt_geom::ImageSize) -> Result<Vec<PosedCamera>, TrainError> {
-    let values = host(encoding);
-    values
-        .chunks_exact(9)
-        .map(|v| {
-            let mut array: [f64; 9] = std::array::from_fn(|i| v[i] as f64);
-            for fov in &mut array[7..9] {
-                *fov = fov.clamp(FOV_RANGE.0, FOV_RANGE.1);
-            }
-            let (camera_from_world, intrinsics) = PoseEncoding::from_array(array).decode(size)?;
-            Ok(PosedCamera { world_from_camera: camera_from_world.inverse(), intrinsics })
-        })
-        .collect()
-}
-
 /// Mean over iterations of the L1 distance between predicted and ground-truth encodings.
-fn camera_loss(encodings: &[Tensor<3>], batch: &StepBatch) -> Result<Tensor<1>, TrainError> {
+fn camera_loss(encodings: &[Tensor<3>], batch: &StepBatch) -> Result<Tensor<1>, ObjectiveError> {
     let device = batch.images.device();
     let truth: Vec<f32> = batch
         .inputs
@@ -344,7 +311,7 @@ fn camera_loss(encodings: &[Tensor<3>], batch: &StepBatch) -> Result<Tensor<1>, 
 }
 
 /// L1 of log depth at the pixels with a measured depth; `None` when no input view has any.
-fn depth_loss(depth: &Tensor<4>, batch: &StepBatch) -> Result<Option<Tensor<1>>, TrainError> {
+fn depth_loss(depth: &Tensor<4>, batch: &StepBatch) -> Result<Option<Tensor<1>>, ObjectiveError> {
     let device = depth.device();
     let [_, frames, h, w] = depth.dims();
     let (mut index, mut values) = (Vec::new(), Vec::new());
@@ -367,7 +334,7 @@ fn depth_loss(depth: &Tensor<4>, batch: &StepBatch) -> Result<Option<Tensor<1>>,
 /// L1 of the predicted velocities against the export's scene flow at the cells with a measurement: the mean
 /// over moving cells plus the mean over still ones, so that the few moving cells of a street weigh as much as
 /// its static surfaces (which must not move); `None` when no input view has flow.
-fn flow_loss(velocity: &Tensor<5>, batch: &StepBatch) -> Result<Option<Tensor<1>>, TrainError> {
+fn flow_loss(velocity: &Tensor<5>, batch: &StepBatch) -> Result<Option<Tensor<1>>, ObjectiveError> {
     let device = velocity.device();
     let [_, frames, h, w, channels] = velocity.dims();
     let (mut index, mut values, mut moving) = (Vec::new(), Vec::<f32>::new(), Vec::new());

@@ -1,0 +1,76 @@
+//! Reading the network of this project's training checkpoints.
+//!
+//! A run writes `checkpoints/step-NNNNNNNN/` folders and a `checkpoints/latest` pointer naming the newest
+//! complete one. Each folder holds the network (`model.bpk`, burnpack) and its configuration (`model.json`);
+//! the optimiser and run state beside them are the trainer's. This module reads what inference needs: the
+//! pointer, the configuration and the weights.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use burn::module::Module;
+use burn::store::ModuleRecord;
+use burn::tensor::Bytes;
+use dggt_model::{Dggt, ModelConfig};
+
+use crate::error::InferError;
+
+/// The pointer file naming the newest complete checkpoint folder.
+pub const LATEST: &str = "latest";
+/// The network's weights in a checkpoint folder.
+pub const MODEL_FILE: &str = "model.bpk";
+/// The network's configuration in a checkpoint folder.
+pub const MODEL_CONFIG_FILE: &str = "model.json";
+/// The run state in a checkpoint folder; its presence marks the folder complete.
+pub const STATE_FILE: &str = "state.json";
+
+fn read(path: &Path) -> Result<Vec<u8>, InferError> {
+    fs::read(path).map_err(|e| InferError::checkpoint(path, e))
+}
+
+/// The checkpoint `latest` points to under `root` (`run/checkpoints`), if any.
+pub fn latest(root: &Path) -> Result<Option<PathBuf>, InferError> {
+    let pointer = root.join(LATEST);
+    if !pointer.exists() {
+        return Ok(None);
+    }
+    let name = fs::read_to_string(&pointer).map_err(|e| InferError::checkpoint(&pointer, e))?;
+    let dir = root.join(name.trim());
+    if !dir.join(STATE_FILE).is_file() {
+        return Err(InferError::checkpoint(&dir, format!("`{LATEST}` points to a folder without {STATE_FILE}")));
+    }
+    Ok(Some(dir))
+}
+
+/// The network configuration stored in a checkpoint folder.
+pub fn read_model_config(dir: &Path) -> Result<ModelConfig, InferError> {
+    let path = dir.join(MODEL_CONFIG_FILE);
+    serde_json::from_slice(&read(&path)?).map_err(|e| InferError::checkpoint(&path, e))
+}
+
+/// Loads the network of a checkpoint folder into `model` (built from the stored configuration).
+pub fn load_model(dir: &Path, model: Dggt) -> Result<Dggt, InferError> {
+    let path = dir.join(MODEL_FILE);
+    let record = ModuleRecord::from_bytes(Bytes::from_bytes_vec(read(&path)?))
+        .map_err(|e| InferError::checkpoint(&path, format!("{e:?}")))?;
+    model.try_load_record(record).map_err(|e| InferError::checkpoint(&path, format!("does not fit the network: {e:?}")))
+}
+
+/// The checkpoint folder of a `step-N` folder, a run's `checkpoints/` folder or a run folder.
+pub fn checkpoint_dir(path: &Path) -> Result<PathBuf, InferError> {
+    if path.join(MODEL_CONFIG_FILE).is_file() {
+        return Ok(path.to_path_buf());
+    }
+    for root in [path.to_path_buf(), path.join("checkpoints")] {
+        if root.join(LATEST).is_file()
+            && let Some(dir) = latest(&root)?
+        {
+            return Ok(dir);
+        }
+    }
+    Err(InferError::checkpoint(
+        path,
+        "a folder without model.json or a `latest` checkpoint pointer (expected a trainer checkpoint folder, a run \
+         folder, or a .pt/.safetensors file)",
+    ))
+}

@@ -1,0 +1,37 @@
+//! Errors of the inference path; each names the file, tensor or setting at fault.
+
+use std::path::PathBuf;
+
+#[derive(Debug, thiserror::Error)]
+pub enum InferError {
+    #[error("{}: {detail}", path.display())]
+    Input { path: PathBuf, detail: String },
+    #[error("checkpoint {}: {detail}", path.display())]
+    Checkpoint { path: PathBuf, detail: String },
+    #[error("configuration {}: {detail}", path.display())]
+    Config { path: PathBuf, detail: String },
+    #[error("{what}: {detail}")]
+    Invalid { what: String, detail: String },
+    #[error("{0}")]
+    Data(#[from] dggt_data::DataError),
+    #[error("{0}")]
+    Model(#[from] dggt_model::ModelError),
+    #[error("{0}")]
+    Scene(#[from] dggt_scene::SceneError),
+    #[error("{0}")]
+    Geom(#[from] dggt_geom::GeomError),
+}
+
+impl InferError {
+    pub fn input(path: impl Into<PathBuf>, detail: impl Into<String>) -> Self {
+        Self::Input { path: path.into(), detail: detail.into() }
+    }
+
+    pub fn invalid(what: impl Into<String>, detail: impl Into<String>) -> Self {
+        Self::Invalid { what: what.into(), detail: detail.into() }
+    }
+
+    pub fn checkpoint(path: impl Into<PathBuf>, detail: impl ToString) -> Self {
+        Self::Checkpoint { path: path.into(), detail: detail.to_string() }
+    }
+}

@@ -1,0 +1,36 @@
+//! The inference path, once: every tool that runs the network (training, reconstruction, evaluation,
+//! benchmarks, the stress suite, parity) goes through it.
+//!
+//! In data-flow order:
+//!
+//! 1. [`network`]: a network from any checkpoint users have (this project's runs, the release's `.pt`,
+//!    VGGT-1B) with its configuration ([`settings`]: the `[model]` and `[render]` sections of a training
+//!    configuration; [`checkpoint`]: this project's checkpoint folders), or a fresh one;
+//! 2. [`inputs`]: the views of an image folder, glob or scene export, preprocessed to the network's size;
+//! 3. [`forward`]: the forward pass, dense heads a few frames at a time;
+//! 4. [`cameras`]: the input views' cameras, predicted or given;
+//! 5. [`scene`]: the 4D scene (pixel and sky Gaussians) and its renders at any time;
+//! 6. [`release`] and [`parity`]: the release's own inference render, and a folder of its reference vectors
+//!    run and compared output by output (`dggt parity`).
+//!
+//! Conventions: poses world-from-camera, OpenCV axes, the world the first input view's camera frame when
+//! cameras are predicted; images RGB in `[0, 1]`; scene time as [`dggt_scene::Timeline`] maps frames.
+
+pub mod cameras;
+pub mod checkpoint;
+mod error;
+pub mod forward;
+pub mod inputs;
+pub mod network;
+pub mod parity;
+pub mod release;
+pub mod scene;
+pub mod settings;
+
+pub use cameras::{InputCameras, ViewSlot, decode_cameras, input_views};
+pub use error::InferError;
+pub use forward::{Prediction, forward_chunked, heads_chunked};
+pub use inputs::{GroundTruth, InputImage, InputSet};
+pub use network::{Architecture, CheckpointInfo, DEFAULT_PRESET, LoadedNetwork, fresh_model, load_network};
+pub use scene::{Scene4d, SceneOptions, SkyChoice};
+pub use settings::{CameraSource, ModelSection, RenderSection, TrainedSettings};
