@@ -50,9 +50,6 @@ impl DeviceChoice {
 
     /// Device number `index` of this backend (GPUs; the CPU backends have one device).
     pub fn device_at(self, index: usize) -> Result<Device> {
-        if index > 0 && matches!(self, Self::Cpu | Self::Ndarray) {
-            bail!("the {self:?} backend has one device; `{self:?}:{index}` does not exist");
-        }
         match self {
             #[cfg(feature = "flex")]
             Self::Cpu => Ok(Device::flex()),
@@ -74,18 +71,74 @@ impl DeviceChoice {
     }
 }
 
-/// Parses a device name: `cpu`, `ndarray`, `wgpu`, `cuda`, optionally with `:N` for the N-th GPU.
-pub fn parse_device(text: &str) -> Result<Device> {
-    let (name, index) = match text.split_once(':') {
-        Some((name, index)) => {
-            let index = index.parse().map_err(|_| anyhow::anyhow!("bad device index in `{text}`"))?;
-            (name, index)
+/// One device: a backend and, for GPUs, which one (`cpu`, `wgpu:1`, `cuda:0`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DeviceSpec {
+    pub choice: DeviceChoice,
+    pub index: usize,
+}
+
+impl std::str::FromStr for DeviceSpec {
+    type Err = anyhow::Error;
+
+    fn from_str(text: &str) -> Result<Self> {
+        let text = text.trim();
+        let (name, index) = match text.split_once(':') {
+            Some((name, index)) => {
+                let index = index.parse().map_err(|_| anyhow::anyhow!("bad device index in `{text}`"))?;
+                (name, index)
+            }
+            None => (text, 0),
+        };
+        let choice = <DeviceChoice as clap::ValueEnum>::from_str(name, true)
+            .map_err(|_| anyhow::anyhow!("unknown device `{text}` (cpu, ndarray, wgpu[:N], cuda[:N])"))?;
+        if index > 0 && matches!(choice, DeviceChoice::Cpu | DeviceChoice::Ndarray) {
+            bail!("the {choice:?} backend has one device; `{text}` does not exist");
         }
-        None => (text, 0),
-    };
-    let choice = <DeviceChoice as clap::ValueEnum>::from_str(name, true)
-        .map_err(|_| anyhow::anyhow!("unknown device `{text}` (cpu, ndarray, wgpu[:N], cuda[:N])"))?;
-    choice.device_at(index)
+        Ok(Self { choice, index })
+    }
+}
+
+impl DeviceSpec {
+    /// The burn device, or an error naming the feature this build lacks.
+    pub fn device(self) -> Result<Device> {
+        self.choice.device_at(self.index)
+    }
+}
+
+/// The devices a command runs on, as `--device` names them (`cpu`, `wgpu`, `cuda:0,cuda:1`): parsed once, when
+/// the command line is read, by every subcommand.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DeviceList(Vec<DeviceSpec>);
+
+impl std::str::FromStr for DeviceList {
+    type Err = anyhow::Error;
+
+    fn from_str(text: &str) -> Result<Self> {
+        Self::from_names(text.split(','))
+    }
+}
+
+impl DeviceList {
+    /// Parses each of `names` (for example a configuration's `run.devices`).
+    pub fn from_names<S: AsRef<str>>(names: impl IntoIterator<Item = S>) -> Result<Self> {
+        let specs = names.into_iter().map(|name| name.as_ref().parse()).collect::<Result<Vec<DeviceSpec>>>()?;
+        anyhow::ensure!(!specs.is_empty(), "no device given");
+        Ok(Self(specs))
+    }
+
+    /// Every device, in order.
+    pub fn devices(&self) -> Result<Vec<Device>> {
+        self.0.iter().map(|spec| spec.device()).collect()
+    }
+
+    /// The one device of a command that runs on one.
+    pub fn single(&self) -> Result<Device> {
+        match self.0.as_slice() {
+            [one] => one.device(),
+            _ => bail!("this command runs on one device; {} were given", self.0.len()),
+        }
+    }
 }
 
 /// Runs a small matrix product on `device` and returns the largest difference from the same product on the

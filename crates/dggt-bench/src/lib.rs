@@ -10,7 +10,6 @@
 //!
 //! There is no diffusion refiner in this project, so refinement is not a knob.
 
-pub mod cli;
 mod error;
 pub mod frames;
 pub mod knobs;

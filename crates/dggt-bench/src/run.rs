@@ -338,24 +338,9 @@ pub fn run_bench(options: &BenchOptions, device: &Device) -> Result<BenchReport,
             }
         };
         tracing::info!("measuring {} ({})", knobs.label(), configuration.varied.name());
-        let run = catch_unwind(AssertUnwindSafe(|| runner.run(&knobs, &inputs, &targets)));
-        let run = match run {
-            Ok(Ok(run)) => run,
-            Ok(Err(error)) if configuration.varied == Varied::Reference => return Err(error),
-            Ok(Err(error)) => {
-                let reason = match knobs.precision {
-                    Precision::F32 => format!("failed: {error}"),
-                    reduced => format!("failed: the network runs in {reduced} but its outputs are unusable: {error}"),
-                };
-                rows.push(RowOutcome::Skipped { configuration, reason });
-                continue;
-            }
-            Err(panic) => {
-                let message = panic_message(&*panic).split_whitespace().collect::<Vec<_>>().join(" ");
-                let reason = format!("failed: {message}");
-                if configuration.varied == Varied::Reference {
-                    return Err(BenchError::invalid("the exact reference render", reason));
-                }
+        let run = match measure(&mut runner, &configuration, &inputs, &targets)? {
+            Ok(run) => run,
+            Err(reason) => {
                 rows.push(RowOutcome::Skipped { configuration, reason });
                 continue;
             }
@@ -403,6 +388,34 @@ pub fn run_bench(options: &BenchOptions, device: &Device) -> Result<BenchReport,
         repeat: options.repeat,
         warmup: options.warmup,
     })
+}
+
+/// Runs one configuration, a panic caught: the run, or why the row is skipped. A failure of the exact reference
+/// is an error, since every other row is measured against it.
+fn measure(
+    runner: &mut Runner<'_>,
+    configuration: &Configuration,
+    inputs: &[usize],
+    targets: &[TargetImages],
+) -> Result<Result<RowRun, String>, BenchError> {
+    let knobs = configuration.knobs;
+    let is_reference = configuration.varied == Varied::Reference;
+    match catch_unwind(AssertUnwindSafe(|| runner.run(&knobs, inputs, targets))) {
+        Ok(Ok(run)) => Ok(Ok(run)),
+        Ok(Err(error)) if is_reference => Err(error),
+        Ok(Err(error)) => Ok(Err(match knobs.precision {
+            Precision::F32 => format!("failed: {error}"),
+            reduced => format!("failed: the network runs in {reduced} but its outputs are unusable: {error}"),
+        })),
+        Err(panic) => {
+            let message = panic_message(&*panic).split_whitespace().collect::<Vec<_>>().join(" ");
+            let reason = format!("failed: {message}");
+            if is_reference {
+                return Err(BenchError::invalid("the exact reference render", reason));
+            }
+            Ok(Err(reason))
+        }
+    }
 }
 
 /// Marks the Pareto fronts of total time against PSNR vs exact and vs truth.

@@ -6,10 +6,8 @@
 //!   (PSNR, SSIM and LPIPS-Alex come from `dggt-losses`);
 //! - [`grid`]: where the export's quarter-resolution lidar cells fall in the rendered view;
 //! - [`runner`]: forward pass, renders of every target view, metrics, stage times;
-//! - [`cli`]: the `dggt eval` arguments;
 //! - [`report`]: per-view records, per-scene and overall means, `eval.json` and `eval.md`.
 
-pub mod cli;
 mod error;
 pub mod grid;
 pub mod metrics;

@@ -1,23 +1,15 @@
 //! `dggt eval` end to end on the bundled fixture (CPU): a tiny network trained one step (the run checks the
-//! plumbing, not the quality), the paper protocol through the command-line arguments, every view and metric
-//! checked in `eval.json` and `eval.md`; the reconstruction mode with LPIPS when the reference weights are
-//! present; and the errors bad inputs give.
+//! plumbing, not the quality), the paper protocol, every view and metric
+//! checked in `eval.json` and `eval.md`; the reconstruction mode with LPIPS from the shared reference weights;
+//! and the errors bad inputs give.
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
 use burn::tensor::Device;
-use clap::Parser;
-use dggt_eval::cli::{EvalArgs, run};
 use dggt_eval::{EvalOptions, LpipsWeights, MOTION_HELD, Protocol, evaluate};
 use dggt_train::{RunOptions, Start, TrainConfig, Trainer};
 use serde_json::Value;
-
-#[derive(Parser)]
-struct Cli {
-    #[command(flatten)]
-    args: EvalArgs,
-}
 
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
@@ -57,24 +49,9 @@ fn paper_protocol_scores_every_view_of_the_fixture() {
     let run_dir = tempfile::tempdir().unwrap();
     tiny_checkpoint(run_dir.path());
     let out = tempfile::tempdir().unwrap();
-    let (scene, checkpoint, out_dir) =
-        (fixture().display().to_string(), run_dir.path().display().to_string(), out.path().display().to_string());
-    let cli = Cli::try_parse_from([
-        "eval",
-        "--scene",
-        &scene,
-        "--checkpoint",
-        &checkpoint,
-        "--protocol",
-        "paper",
-        "--width",
-        "84",
-        "--out",
-        &out_dir,
-    ])
-    .unwrap();
-    let printed = run(&cli.args, &Device::flex()).unwrap();
-    eprintln!("{printed}");
+    let mut options = EvalOptions::new(vec![fixture()], run_dir.path(), out.path());
+    options.width = Some(84);
+    let evaluated = evaluate(&options, &Device::flex()).unwrap();
 
     let report: Value = serde_json::from_slice(&std::fs::read(out.path().join("eval.json")).unwrap()).unwrap();
     assert_eq!(report["motion_source"], MOTION_HELD);
@@ -138,7 +115,7 @@ fn paper_protocol_scores_every_view_of_the_fixture() {
     assert_eq!(stages, ["load", "forward", "assembly", "render", "metrics"]);
 
     let markdown = std::fs::read_to_string(out.path().join("eval.md")).unwrap();
-    assert_eq!(markdown, printed.split("\noutputs: ").next().unwrap());
+    assert_eq!(markdown, evaluated.markdown());
     for heading in ["## reconstruction (input frames)", "## novel view synthesis", MOTION_HELD, "LPIPS: not computed"] {
         assert!(markdown.contains(heading), "{heading} missing from\n{markdown}");
     }
@@ -211,20 +188,4 @@ fn bad_inputs_give_errors_naming_them() {
     // With good scenes the checkpoint is next.
     let message = error_of(&options(vec![fixture()]));
     assert!(message.contains("no-checkpoint") && message.contains("does not exist"), "{message}");
-
-    // Arguments the protocol cannot take.
-    let parse = |extra: &[&str]| {
-        let mut argv = vec!["eval", "--scene", "s", "--checkpoint", "c", "--out", "o"];
-        argv.extend_from_slice(extra);
-        Cli::try_parse_from(argv)
-            .map_err(|e| e.to_string())
-            .and_then(|cli| cli.args.options().map_err(|e| e.to_string()))
-    };
-    assert!(parse(&["--protocol", "paper", "--every", "2"]).unwrap_err().contains("--every"));
-    assert!(parse(&["--frames", "5..5"]).unwrap_err().contains("empty range"));
-    assert!(parse(&["--protocol", "weird"]).is_err());
-    let options =
-        parse(&["--protocol", "interpolation", "--every", "3", "--frames", "4..11", "--cameras", "2"]).unwrap();
-    assert_eq!(options.protocol.input_frames(), vec![4, 7, 10]);
-    assert_eq!(options.protocol.cameras, vec![2]);
 }

@@ -9,17 +9,11 @@ pub enum ReconstructError {
     #[error("{what}: {detail}")]
     Invalid { what: String, detail: String },
     #[error("{0}")]
-    Data(#[from] dggt_data::DataError),
-    #[error("{0}")]
-    Model(#[from] dggt_model::ModelError),
-    #[error("{0}")]
     Scene(#[from] dggt_scene::SceneError),
     #[error("{0}")]
     Infer(#[from] dggt_infer::InferError),
     #[error("{0}")]
     Export(#[from] dggt_export::ExportError),
-    #[error("{0}")]
-    Geom(#[from] dggt_geom::GeomError),
 }
 
 impl ReconstructError {

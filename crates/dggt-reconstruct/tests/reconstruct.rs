@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use burn::tensor::Device;
-use dggt_export::cameras_json::read_cameras_json;
+use dggt_export::cameras_json::{CameraRecord, read_cameras_json};
 use dggt_export::colmap::{read_cameras_txt, read_images_txt};
 use dggt_export::depth::{read_depth_npy, read_depth_png16};
 use dggt_export::images::read_rgb_png;
@@ -14,7 +14,7 @@ use dggt_export::nerfstudio::read_transforms;
 use dggt_export::ply::{INRIA_PROPERTIES, read_ply};
 use dggt_infer::Architecture;
 use dggt_reconstruct::align::pose_error;
-use dggt_reconstruct::{ReconstructOptions, TimeRequest, reconstruct};
+use dggt_reconstruct::{ReconstructOptions, Summary, TimeRequest, reconstruct};
 use dggt_train::{RunOptions, Start, TrainConfig, Trainer};
 
 /// Pose warm-up steps (the camera loss alone, about 0.04 s each), then full training steps, of the checkpoint
@@ -89,8 +89,20 @@ fn reconstructs_the_fixture_from_a_trained_checkpoint() {
     let summary = reconstruct(&options, &Device::flex()).unwrap();
     eprintln!("{summary}");
 
-    // Every listed file exists, and the expected ones are listed.
     let names: Vec<String> = (0..8).map(|f| format!("{f:03}_0")).collect();
+    check_files(&summary, out, &names);
+    check_gaussians(&summary, out);
+    let records = check_cameras(out, &names);
+    check_poses(&summary, &records);
+    check_maps(out, &names);
+    check_renders(&summary, out);
+    let elapsed = started.elapsed().as_secs_f64();
+    eprintln!("total {elapsed:.1} s");
+}
+
+/// Every listed file exists, and the expected ones are listed.
+fn check_files(summary: &Summary, out: &Path, names: &[String]) {
+    // Every listed file exists, and the expected ones are listed.
     for file in &summary.files {
         assert!(out.join(file).is_file(), "{file} listed but not written");
     }
@@ -106,7 +118,7 @@ fn reconstructs_the_fixture_from_a_trained_checkpoint() {
     ]
     .map(String::from)
     .to_vec();
-    for name in &names {
+    for name in names {
         for pattern in
             ["images/{}.png", "depth/{}.npy", "depth/{}.png", "depth/{}.json", "dynamic/{}.png", "sky/{}.png"]
         {
@@ -128,7 +140,10 @@ fn reconstructs_the_fixture_from_a_trained_checkpoint() {
     assert_eq!(on_disk["checkpoint"]["format"], "trainer");
     assert!(on_disk["peak_memory_mib"].as_f64().unwrap() > 0.0);
     assert!(on_disk["stages"].as_array().unwrap().len() >= 5);
+}
 
+/// PLY headers are INRIA's and vertex counts are the Gaussians kept.
+fn check_gaussians(summary: &Summary, out: &Path) {
     // PLY headers are INRIA's and vertex counts are the Gaussians kept.
     let g = &summary.gaussians;
     assert_eq!(g.per_pixel, 8 * 56 * 42);
@@ -146,7 +161,10 @@ fn reconstructs_the_fixture_from_a_trained_checkpoint() {
         assert_eq!(ply(&format!("gaussians/dynamic_t{k:04}.ply")).count, count);
         assert!(count <= 56 * 42, "one view's pixels at most");
     }
+}
 
+/// The three camera formats agree with each other; returns the cameras.json records.
+fn check_cameras(out: &Path, names: &[String]) -> Vec<CameraRecord> {
     // Cameras: the three formats agree with each other.
     let (convention, records) = read_cameras_json(&out.join("cameras.json")).unwrap();
     assert!(convention.axes.contains("OpenCV"));
@@ -164,7 +182,11 @@ fn reconstructs_the_fixture_from_a_trained_checkpoint() {
         assert!(transforms[i].world_from_camera.max_abs_difference(&record.world_from_camera) < 1e-6);
         assert!(out.join(&transforms[i].file_path).is_file());
     }
+    records
+}
 
+/// Poses against the fixture's ground truth, relative to the first view, after similarity alignment.
+fn check_poses(summary: &Summary, records: &[CameraRecord]) {
     // Poses against the fixture's ground truth, relative to the first view, after similarity alignment.
     let scene = dggt_data::open_scene(&fixture(), Some(0..8), Some(vec![0])).unwrap();
     let truth: Vec<_> =
@@ -188,9 +210,12 @@ fn reconstructs_the_fixture_from_a_trained_checkpoint() {
         (reported.centre_rmse - error.centre_rmse).abs() < 1e-9
             && (reported.rotation_max_deg - error.rotation_max_deg).abs() < 1e-6
     );
+}
 
+/// Depth in both formats agrees; maps have the network's size.
+fn check_maps(out: &Path, names: &[String]) {
     // Depth in both formats agrees; maps have the network's size.
-    for name in &names {
+    for name in names {
         let (size, npy) = read_depth_npy(&out.join(format!("depth/{name}.npy"))).unwrap();
         assert_eq!((size.width, size.height), (56, 42));
         assert!(npy.iter().all(|d| d.is_finite() && *d > 0.0));
@@ -200,7 +225,10 @@ fn reconstructs_the_fixture_from_a_trained_checkpoint() {
         assert_eq!((size.width, size.height), (56, 42));
         read_mask_png(&out.join(format!("sky/{name}.png"))).unwrap();
     }
+}
 
+/// Renders at the input times reproduce the inputs; renders between them exist.
+fn check_renders(summary: &Summary, out: &Path) {
     // Renders at the input times reproduce the inputs; renders between them exist.
     let mut at_inputs = 0;
     let mut psnrs = Vec::new();
@@ -221,8 +249,6 @@ fn reconstructs_the_fixture_from_a_trained_checkpoint() {
     let mean_psnr = psnrs.iter().sum::<f64>() / psnrs.len() as f64;
     let reported = summary.input_psnr_db.iter().sum::<f64>() / summary.input_psnr_db.len() as f64;
     assert!((mean_psnr - reported).abs() < 0.5, "summary says {reported:.2} dB, the files {mean_psnr:.2} dB");
-    let elapsed = started.elapsed().as_secs_f64();
-    eprintln!("total {elapsed:.1} s");
 }
 
 fn write_safetensors(path: &Path, tensors: &[(&str, Vec<usize>)]) {

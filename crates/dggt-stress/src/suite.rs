@@ -315,8 +315,15 @@ fn loss_weights(options: &StressOptions, camera: f64) -> LossWeights {
 /// Runs the suite on `device` (training runs on its autodiff form).
 pub fn run_suite(options: &StressOptions, device: &Device) -> Result<StressReport, String> {
     let device = device.clone().autodiff();
-    let mut outcomes = Vec::new();
+    let mut outcomes = geometry_group();
+    let config = ModelConfig::tiny();
+    outcomes.extend(crafted_group(options, &config, &device)?);
+    outcomes.extend(network_group(options, &config, &device)?);
+    Ok(StressReport { device: format!("{device:?}"), full: options.full, cases: outcomes })
+}
 
+/// Camera geometry at its extremes: rotations, translations, timelines, pose encodings.
+fn geometry_group() -> Vec<CaseOutcome> {
     let geometry_cases: [(&str, fn(&mut Probe) -> Result<(), String>); 5] = [
         ("SLERP between near-identical rotations", geometry::near_identical_rotations),
         ("SLERP between opposite rotations", geometry::opposite_rotations),
@@ -324,25 +331,26 @@ pub fn run_suite(options: &StressOptions, device: &Device) -> Result<StressRepor
         ("timelines: one frame, repeats, huge indices", geometry::timelines),
         ("extreme pose encodings", geometry::extreme_pose_encodings),
     ];
-    for (name, run) in geometry_cases {
-        outcomes.push(run_case(Case {
-            group: "geometry",
-            name: name.into(),
-            expect: Expect::Finite,
-            run: Box::new(run),
-        }));
-    }
+    geometry_cases
+        .into_iter()
+        .map(|(name, run)| {
+            run_case(Case { group: "geometry", name: name.into(), expect: Expect::Finite, run: Box::new(run) })
+        })
+        .collect()
+}
 
-    let config = ModelConfig::tiny();
+/// Network outputs crafted at their extremes (no network runs), through the scene, the objective and the
+/// backward pass, with ground-truth cameras.
+fn crafted_group(options: &StressOptions, config: &ModelConfig, device: &Device) -> Result<Vec<CaseOutcome>, String> {
     let sky_config = config.sky_model.clone().ok_or("the tiny preset has no sky model")?;
-    let sky_model = SkyModel::initialised(&sky_config, &device);
+    let sky_model = SkyModel::initialised(&sky_config, device);
     let crafted_render = RenderSection {
         cameras: CameraSource::GroundTruth,
         means_gradient: MeansGradient::Through,
         ..RenderSection::default()
     };
     let crafted_objective =
-        Objective::new(loss_weights(options, 0.0), crafted_render, &device).map_err(|e| e.to_string())?;
+        Objective::new(loss_weights(options, 0.0), crafted_render, device).map_err(|e| e.to_string())?;
     let (size, inputs) = if options.full { (ImageSize::new(70, 56), 3) } else { (ImageSize::new(56, 42), 2) };
     let size = size.map_err(|e| e.to_string())?;
     let mut crafted_cases: Vec<(String, Expect, Edit)> =
@@ -350,8 +358,9 @@ pub fn run_suite(options: &StressOptions, device: &Device) -> Result<StressRepor
     for seed in 0..if options.full { 16 } else { 2 } {
         crafted_cases.push((format!("random extremes, seed {seed}"), Expect::Finite, mixed_extremes));
     }
+    let mut outcomes = Vec::new();
     for (index, (name, expect, edit)) in crafted_cases.into_iter().enumerate() {
-        let (objective, sky_model, device) = (&crafted_objective, &sky_model, &device);
+        let (objective, sky_model) = (&crafted_objective, &sky_model);
         outcomes.push(run_case(Case {
             group: "crafted",
             name,
@@ -364,24 +373,20 @@ pub fn run_suite(options: &StressOptions, device: &Device) -> Result<StressRepor
             }),
         }));
     }
+    Ok(outcomes)
+}
 
-    device.seed(0);
-    let model = fresh_model(&config, None, &device).map_err(|e| e.to_string())?;
-    let network_render = RenderSection {
-        cameras: CameraSource::Predicted,
-        means_gradient: MeansGradient::Through,
-        ..RenderSection::default()
-    };
-    let network_objective =
-        Objective::new(loss_weights(options, 1.0), network_render.clone(), &device).map_err(|e| e.to_string())?;
+/// One network case: name, image size, input frames, how the scenario is set up, and whether it also runs in
+/// f16 and bf16.
+type NetworkCase = (&'static str, ImageSize, usize, fn(&mut Scenario), bool);
+
+/// The network's own cases: extreme images, masks and input counts through the fresh tiny network with its own
+/// predicted cameras, the objective and the backward pass.
+fn network_cases(options: &StressOptions) -> Result<Vec<NetworkCase>, String> {
     let normal = ImageSize::new(70, 56).map_err(|e| e.to_string())?;
     let small = ImageSize::new(42, 42).map_err(|e| e.to_string())?;
     let many = if options.full { (normal, 64) } else { (small, 64) };
-    type Setup = fn(&mut Scenario);
-    // Every case runs in f32; those marked also with the network computing in f16 and in bf16 (parameters,
-    // activations and constants; the scene is assembled and rendered in f32), trained in that type, where the
-    // device declares the type.
-    let network_cases: Vec<(&str, ImageSize, usize, Setup, bool)> = vec![
+    Ok(vec![
         ("random images", normal, 3, |_| {}, true),
         (
             "black images, all sky",
@@ -415,31 +420,38 @@ pub fn run_suite(options: &StressOptions, device: &Device) -> Result<StressRepor
         ),
         ("a single input frame", normal, 1, |_| {}, false),
         ("64 input frames", many.0, many.1, |_| {}, true),
-    ];
-    let cases_in = |reduced: bool| -> Vec<(&str, ImageSize, usize, Setup)> {
-        network_cases
-            .iter()
-            .filter(|case| !reduced || case.4)
-            .map(|&(name, size, inputs, setup, _)| (name, size, inputs, setup))
-            .collect()
+    ])
+}
+
+/// Every network case in f32; those marked also with the network computing in f16 and in bf16 (parameters,
+/// activations and constants; the scene is assembled and rendered in f32), trained in that type, where the
+/// device declares the type.
+fn network_group(options: &StressOptions, config: &ModelConfig, device: &Device) -> Result<Vec<CaseOutcome>, String> {
+    device.seed(0);
+    let model = fresh_model(config, None, device).map_err(|e| e.to_string())?;
+    let network_render = RenderSection {
+        cameras: CameraSource::Predicted,
+        means_gradient: MeansGradient::Through,
+        ..RenderSection::default()
     };
-    let precisions =
-        [(FloatDType::F32, cases_in(false)), (FloatDType::F16, cases_in(true)), (FloatDType::BF16, cases_in(true))];
-    for (dtype, cases) in precisions {
-        let suffix = match dtype {
-            FloatDType::F32 => String::new(),
-            other => format!(", {}", dtype_name(other)),
-        };
-        if dtype != FloatDType::F32 && !device.supports_dtype(dtype) {
-            for (name, size, inputs, _) in cases {
+    let network_objective =
+        Objective::new(loss_weights(options, 1.0), network_render.clone(), device).map_err(|e| e.to_string())?;
+    let network_cases = network_cases(options)?;
+    let mut outcomes = Vec::new();
+    for dtype in [FloatDType::F32, FloatDType::F16, FloatDType::BF16] {
+        let reduced = dtype != FloatDType::F32;
+        let cases: Vec<&NetworkCase> = network_cases.iter().filter(|case| !reduced || case.4).collect();
+        let suffix = if reduced { format!(", {}", dtype_name(dtype)) } else { String::new() };
+        if reduced && !device.supports_dtype(dtype) {
+            for &&(name, size, inputs, _, _) in &cases {
                 let reason = format!("the device lacks {}", dtype_name(dtype));
                 outcomes.push(skipped_case("network", format!("{name} ({inputs} at {size}{suffix})"), reason));
             }
             continue;
         }
         let model = model.clone().with_float_dtype(dtype);
-        for (index, (name, size, inputs, setup)) in cases.into_iter().enumerate() {
-            let (model, objective, render, device) = (&model, &network_objective, &network_render, &device);
+        for (index, &&(name, size, inputs, setup, _)) in cases.iter().enumerate() {
+            let (model, objective, render) = (&model, &network_objective, &network_render);
             outcomes.push(run_case(Case {
                 group: "network",
                 name: format!("{name} ({inputs} at {size}{suffix})"),
@@ -452,5 +464,5 @@ pub fn run_suite(options: &StressOptions, device: &Device) -> Result<StressRepor
             }));
         }
     }
-    Ok(StressReport { device: format!("{device:?}"), full: options.full, cases: outcomes })
+    Ok(outcomes)
 }

@@ -17,11 +17,7 @@ pub enum TrainError {
     #[error("{0}")]
     Model(#[from] dggt_model::ModelError),
     #[error("{0}")]
-    Scene(#[from] dggt_scene::SceneError),
-    #[error("{0}")]
     Loss(#[from] dggt_losses::LossError),
-    #[error("{0}")]
-    Geom(#[from] dggt_geom::GeomError),
     #[error("{what}: {detail}")]
     Invalid { what: String, detail: String },
     /// A configuration value out of its range, or settings that contradict each other.

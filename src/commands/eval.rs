@@ -1,4 +1,4 @@
-//! The `dggt eval` command line: its arguments and their translation into [`EvalOptions`].
+//! `dggt eval`: the arguments, their translation into [`EvalOptions`], and the report printed.
 //!
 //! Defaults: the paper protocol, window `0..20`, cameras `0,1,2`, input stride 5 for the interpolation mode
 //! (the paper's stride; the paper protocol fixes it, the reconstruction mode has none).
@@ -6,13 +6,14 @@
 use std::ops::Range;
 use std::path::PathBuf;
 
-use burn::tensor::Device;
+use anyhow::Result;
+use dggt_eval::protocol::{DEFAULT_CAMERAS, DEFAULT_WINDOW, PAPER_EVERY};
+use dggt_eval::{EvalOptions, LpipsWeights, Protocol, evaluate};
 use dggt_infer::Architecture;
 use dggt_model::Preset;
 
-use crate::error::EvalError;
-use crate::protocol::{DEFAULT_CAMERAS, DEFAULT_WINDOW, PAPER_EVERY, Protocol};
-use crate::runner::{EvalOptions, LpipsWeights, evaluate};
+use crate::backend::DeviceList;
+use crate::commands::parse_range;
 
 /// Which protocol `--protocol` names.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -26,8 +27,10 @@ pub enum ProtocolChoice {
 }
 
 /// Arguments of `dggt eval`.
+/// Evaluate a checkpoint on scene exports under the paper's or the release's protocol: PSNR, SSIM, LPIPS,
+/// aligned depth RMSE and scene-flow metrics per view, split and scene; `eval.json` and `eval.md`.
 #[derive(Debug, Clone, clap::Args)]
-pub struct EvalArgs {
+pub struct Args {
     /// A scene export to evaluate (repeat for several).
     #[arg(long = "scene", required = true)]
     pub scenes: Vec<PathBuf>,
@@ -65,26 +68,15 @@ pub struct EvalArgs {
     pub chunk: usize,
     /// Device: cpu, ndarray, wgpu[:N], cuda[:N].
     #[arg(long, default_value = "cpu")]
-    pub device: String,
+    pub device: DeviceList,
     /// Output folder of eval.json and eval.md.
     #[arg(long)]
     pub out: PathBuf,
 }
 
-/// Parses `START..END` (end exclusive, not empty).
-pub fn parse_range(text: &str) -> Result<Range<usize>, String> {
-    let (start, end) = text.split_once("..").ok_or_else(|| format!("expected START..END, got {text:?}"))?;
-    let start: usize = start.trim().parse().map_err(|_| format!("bad range start in {text:?}"))?;
-    let end: usize = end.trim().parse().map_err(|_| format!("bad range end in {text:?}"))?;
-    if end <= start {
-        return Err(format!("empty range {text:?}"));
-    }
-    Ok(start..end)
-}
-
-impl EvalArgs {
+impl Args {
     /// The protocol these arguments describe.
-    pub fn protocol(&self) -> Result<Protocol, EvalError> {
+    pub fn protocol(&self) -> Result<Protocol> {
         let window = self.frames.clone().unwrap_or(0..DEFAULT_WINDOW);
         let cameras = self.cameras.clone().unwrap_or_else(|| DEFAULT_CAMERAS.to_vec());
         let (start, length) = (window.start, window.len());
@@ -106,7 +98,7 @@ impl EvalArgs {
     }
 
     /// The evaluation these arguments ask for.
-    pub fn options(&self) -> Result<EvalOptions, EvalError> {
+    pub fn options(&self) -> Result<EvalOptions> {
         let mut options = EvalOptions::new(self.scenes.clone(), &self.checkpoint, &self.out);
         options.protocol = self.protocol()?;
         options.architecture = match (&self.config, &self.preset) {
@@ -124,14 +116,49 @@ impl EvalArgs {
     }
 }
 
-/// Runs `dggt eval` on `device`; returns the Markdown report followed by where the files are.
-pub fn run(args: &EvalArgs, device: &Device) -> Result<String, EvalError> {
+/// Runs the evaluation; prints the Markdown report followed by where the files are.
+pub fn run(args: Args) -> Result<()> {
+    let device = args.device.single()?;
     let options = args.options()?;
-    let report = evaluate(&options, device)?;
-    Ok(format!(
-        "{}\noutputs: {} and {}\n",
-        report.markdown(),
-        options.out.join("eval.json").display(),
-        options.out.join("eval.md").display()
-    ))
+    let report = evaluate(&options, &device)?;
+    print!("{}", report.markdown());
+    println!("\noutputs: {} and {}", options.out.join("eval.json").display(), options.out.join("eval.md").display());
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use super::*;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: Args,
+    }
+
+    fn parse(extra: &[&str]) -> Result<EvalOptions, String> {
+        let mut argv = vec!["eval", "--scene", "s", "--checkpoint", "c", "--out", "o"];
+        argv.extend_from_slice(extra);
+        Cli::try_parse_from(argv)
+            .map_err(|e| e.to_string())
+            .and_then(|cli| cli.args.options().map_err(|e| e.to_string()))
+    }
+
+    #[test]
+    fn arguments_the_protocol_cannot_take_are_refused() {
+        assert!(parse(&["--protocol", "paper", "--every", "2"]).unwrap_err().contains("--every"));
+        assert!(parse(&["--frames", "5..5"]).unwrap_err().contains("empty range"));
+        assert!(parse(&["--protocol", "weird"]).is_err());
+        assert!(parse(&["--device", "quantum"]).unwrap_err().contains("unknown device"));
+        let options =
+            parse(&["--protocol", "interpolation", "--every", "3", "--frames", "4..11", "--cameras", "2"]).unwrap();
+        assert_eq!(options.protocol.input_frames(), vec![4, 7, 10]);
+        assert_eq!(options.protocol.cameras, vec![2]);
+        let paper = parse(&["--width", "84", "--preset", "tiny"]).unwrap();
+        assert_eq!(paper.protocol, Protocol::paper());
+        assert_eq!(paper.width, Some(84));
+        assert_eq!(paper.architecture, Some(Architecture::Preset(Preset::Tiny)));
+    }
 }

@@ -1,20 +1,21 @@
-//! The `dggt bench` command line: options, the sweep they describe, and the run that prints the table and
-//! writes `bench.csv`, `bench.png`, `bench.svg` and `bench-notes.txt`.
+//! `dggt bench`: the arguments, the sweep they describe, and the run that prints the table and writes
+//! `bench.csv`, `bench.png`, `bench.svg` and `bench-notes.txt`.
 
 use std::path::PathBuf;
 
-use burn::tensor::Device;
+use anyhow::Result;
+use dggt_bench::knobs::parse_opacity;
+use dggt_bench::{
+    BenchOptions, Culling, Knobs, LpipsFiles, PoseSource, Precision, SweepSpec, report, run_bench, write_outputs,
+};
 
-use crate::error::BenchError;
-use crate::knobs::{Culling, Knobs, Precision, SweepSpec, parse_opacity};
-use crate::run::{BenchOptions, LpipsFiles, PoseSource, run_bench};
-use crate::{report, write_outputs};
+use crate::backend::DeviceList;
 
 /// Measure run time against error over the knobs that trade speed for accuracy: input width, input frames,
 /// culling threshold, precision, sky. A baseline, the exact render (culling off) and one row per other value
 /// of each knob (`--grid` adds every combination).
 #[derive(Debug, Clone, clap::Args)]
-pub struct BenchArgs {
+pub struct Args {
     /// A scene export (its images are the ground truth of the target frames).
     #[arg(long)]
     pub scene: PathBuf,
@@ -24,7 +25,7 @@ pub struct BenchArgs {
     pub checkpoint: Option<PathBuf>,
     /// Device: cpu, ndarray, wgpu[:N], cuda[:N].
     #[arg(long, default_value = "cpu")]
-    pub device: String,
+    pub device: DeviceList,
     /// Timed repetitions per configuration (the median is reported).
     #[arg(long, default_value_t = 3)]
     pub repeat: usize,
@@ -90,17 +91,17 @@ pub struct BenchArgs {
     pub out: PathBuf,
 }
 
-fn parse_sky(text: &str) -> Result<bool, BenchError> {
+fn parse_sky(text: &str) -> Result<bool> {
     match text.trim().to_ascii_lowercase().as_str() {
         "on" | "true" | "yes" => Ok(true),
         "off" | "false" | "no" => Ok(false),
-        other => Err(BenchError::invalid("--sky", format!("`{other}`: expected on or off"))),
+        other => anyhow::bail!("--sky: `{other}`: expected on or off"),
     }
 }
 
-impl BenchArgs {
+impl Args {
     /// The options these arguments describe.
-    pub fn options(&self) -> Result<BenchOptions, BenchError> {
+    pub fn options(&self) -> Result<BenchOptions> {
         let sweep = SweepSpec {
             baseline: Knobs {
                 width: self.width,
@@ -137,20 +138,21 @@ impl BenchArgs {
     }
 }
 
-/// Runs the sweep on `device`, writes the outputs and returns the text to print.
-pub fn run(args: &BenchArgs, device: &Device) -> Result<String, BenchError> {
+/// Runs the sweep, writes the outputs and prints the table, the notes and where the files are.
+pub fn run(args: Args) -> Result<()> {
+    let device = args.device.single()?;
     let options = args.options()?;
-    let report = run_bench(&options, device)?;
+    let report = run_bench(&options, &device)?;
     let files = write_outputs(&report, &args.out)?;
-    let mut text = report::table_text(&report);
-    text.push_str(&report::notes_text(&report));
-    text.push_str(&format!(
-        "outputs: {}, {}{}, {}, {}\n",
+    print!("{}", report::table_text(&report));
+    print!("{}", report::notes_text(&report));
+    println!(
+        "outputs: {}, {}{}, {}, {}",
         files.csv.display(),
         files.png.display(),
         if files.png_has_text { "" } else { " (no font found: no text; see the SVG)" },
         files.svg.display(),
         files.notes.display()
-    ));
-    Ok(text)
+    );
+    Ok(())
 }

@@ -1,0 +1,25 @@
+//! The subcommands of `dggt`, one module each: its arguments, their translation into the library's options,
+//! and what it prints. The libraries know nothing of the command line.
+
+pub mod bench;
+pub mod devices;
+pub mod eval;
+pub mod inspect;
+pub mod parity;
+pub mod reconstruct;
+pub mod stress;
+pub mod synth;
+pub mod train;
+
+use std::ops::Range;
+
+/// Parses `START..END` (end exclusive, not empty), the form every `--frames` takes.
+pub fn parse_range(text: &str) -> Result<Range<usize>, String> {
+    let (start, end) = text.split_once("..").ok_or_else(|| format!("expected START..END, got {text:?}"))?;
+    let start: usize = start.trim().parse().map_err(|_| format!("bad range start in {text:?}"))?;
+    let end: usize = end.trim().parse().map_err(|_| format!("bad range end in {text:?}"))?;
+    if end <= start {
+        return Err(format!("empty range {text:?}"));
+    }
+    Ok(start..end)
+}

@@ -1,0 +1,82 @@
+//! `dggt reconstruct`: one forward pass over unposed images, written as cameras, maps, Gaussians and renders.
+
+use std::ops::Range;
+use std::path::PathBuf;
+
+use anyhow::Result;
+use dggt_infer::Architecture;
+use dggt_model::Preset;
+use dggt_reconstruct::{ReconstructOptions, TimeRequest, reconstruct};
+
+use crate::backend::DeviceList;
+use crate::commands::parse_range;
+
+/// Reconstruct a driving scene from unposed images with one forward pass: cameras (JSON, COLMAP, nerfstudio),
+/// depth, dynamic and sky maps, Gaussians as PLY (static, sky, dynamic per time) and renders.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// A folder of images (one camera), a folder of per-camera image folders, a glob pattern (quoted:
+    /// `'log/*.jpg'` for one camera, `'log/cam*'` for a folder per camera), or a scene export.
+    #[arg(long)]
+    images: PathBuf,
+    /// A trainer checkpoint folder (or run folder), or a release / VGGT `.pt` / `.safetensors` file.
+    #[arg(long)]
+    checkpoint: PathBuf,
+    /// Architecture of a `.pt` / `.safetensors` checkpoint: a model `config.json`, or a training `.toml`
+    /// (its model and preprocessing sections).
+    #[arg(long, conflicts_with = "preset")]
+    config: Option<PathBuf>,
+    /// Architecture preset of a `.pt` / `.safetensors` checkpoint: tiny, vggt_1b, dggt [default: dggt].
+    #[arg(long)]
+    preset: Option<Preset>,
+    /// Only these cameras (positions of the per-camera folders, or export camera ids).
+    #[arg(long, value_delimiter = ',')]
+    cameras: Option<Vec<usize>>,
+    /// Only these frames, as `START..END` (end exclusive).
+    #[arg(long, value_parser = parse_range)]
+    frames: Option<Range<usize>>,
+    /// Render at these times (seconds since the first chosen frame) [default: the input frames' times].
+    #[arg(long, value_delimiter = ',', conflicts_with = "every")]
+    times: Option<Vec<f64>>,
+    /// Render K evenly spaced times per interval between input frames.
+    #[arg(long)]
+    every: Option<usize>,
+    /// Network input width, a multiple of 14 [default: the --config training file's, else 518].
+    #[arg(long)]
+    width: Option<u32>,
+    /// Frames per chunk of the dense heads (lower uses less memory).
+    #[arg(long, default_value_t = 4)]
+    chunk: usize,
+    /// Device: cpu, ndarray, wgpu[:N], cuda[:N].
+    #[arg(long, default_value = "cpu")]
+    device: DeviceList,
+    /// Output folder.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+/// Runs the reconstruction with progress on stderr and prints its summary.
+pub fn run(args: Args) -> Result<()> {
+    let device = args.device.single()?;
+    let mut options = ReconstructOptions::new(args.images, args.checkpoint, args.out);
+    options.architecture = match (args.config, args.preset) {
+        (Some(path), _) => Some(Architecture::Config(path)),
+        (None, Some(preset)) => Some(Architecture::Preset(preset)),
+        (None, None) => None,
+    };
+    options.cameras = args.cameras;
+    options.frames = args.frames;
+    options.times = match (args.times, args.every) {
+        (Some(times), _) => TimeRequest::Seconds(times),
+        (None, Some(k)) => TimeRequest::Every(k),
+        (None, None) => TimeRequest::Inputs,
+    };
+    options.width = args.width;
+    options.chunk_frames = args.chunk;
+    options.progress = std::io::IsTerminal::is_terminal(&std::io::stderr());
+    tracing::info!("reconstructing {} with {} on {device:?}", options.images.display(), options.checkpoint.display());
+    let summary = reconstruct(&options, &device)?;
+    println!("{summary}");
+    println!("outputs: {} (summary.json)", options.out.display());
+    Ok(())
+}

@@ -1,0 +1,42 @@
+//! `dggt stress`: the numerical stress suite.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+
+use crate::backend::DeviceList;
+
+/// Drive the pipeline through extreme inputs and report every non-finite value by stage; fails when any case
+/// does.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The larger suite (bigger scenarios, more random extreme mixtures).
+    #[arg(long)]
+    full: bool,
+    /// A folder with `lpips_alex.safetensors` and `vgg16_features.safetensors`: adds LPIPS and Gram terms.
+    #[arg(long)]
+    loss_weights: Option<PathBuf>,
+    /// Device: cpu, ndarray, wgpu[:N], cuda[:N].
+    #[arg(long, default_value = "cpu")]
+    device: DeviceList,
+    /// Also write the report as JSON to this file.
+    #[arg(long)]
+    json: Option<PathBuf>,
+}
+
+/// Runs the suite, prints the table; an error when any case fails.
+pub fn run(args: Args) -> Result<()> {
+    let device = args.device.single()?;
+    let started = std::time::Instant::now();
+    let options = dggt_stress::StressOptions { full: args.full, loss_weights: args.loss_weights };
+    let report = dggt_stress::run_suite(&options, &device).map_err(|e| anyhow::anyhow!("stress suite: {e}"))?;
+    print!("{}", report.table());
+    println!("({:.1} s on {device:?})", started.elapsed().as_secs_f64());
+    if let Some(path) = args.json {
+        std::fs::write(&path, serde_json::to_string_pretty(&report)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    let failed: Vec<String> = report.failures().map(|c| format!("{} / {}", c.group, c.name)).collect();
+    anyhow::ensure!(failed.is_empty(), "{} stress case(s) failed: {}", failed.len(), failed.join(", "));
+    Ok(())
+}

@@ -1,0 +1,92 @@
+//! `dggt train`: a run as a TOML configuration describes it, with progress, and where its results are.
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+use dggt_train::{RunOptions, Start, TrainConfig, Trainer};
+
+use crate::backend::DeviceList;
+
+/// Train (or fine-tune) the network as a TOML configuration describes (`configs/`).
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The configuration file.
+    #[arg(long)]
+    config: PathBuf,
+    /// Continue from the newest checkpoint in the run's output folder.
+    #[arg(long)]
+    resume: bool,
+    /// Devices to train on, overriding `run.devices` (e.g. `cpu`, `wgpu`, `cuda:0,cuda:1`).
+    #[arg(long)]
+    device: Option<DeviceList>,
+    /// Override `run.steps`.
+    #[arg(long)]
+    steps: Option<u64>,
+    /// Override `run.out_dir`.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Build everything and run no step (checks a configuration and its files).
+    #[arg(long)]
+    dry_run: bool,
+}
+
+/// Builds the run, trains with a progress bar, prints where the results are.
+pub fn run(args: Args) -> Result<()> {
+    let path = &args.config;
+    let mut config = TrainConfig::load(path)?;
+    if let Some(steps) = args.steps {
+        config.run.steps = steps;
+    }
+    if let Some(out) = args.out {
+        config.run.out_dir = out;
+    }
+    config.validate().map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    let devices = match args.device {
+        Some(list) => list,
+        None => DeviceList::from_names(&config.run.devices)
+            .map_err(|e| anyhow::anyhow!("{}: run.devices: {e}", path.display()))?,
+    };
+    let start = if args.resume { Start::Resume } else { Start::Fresh };
+    let mut trainer = Trainer::new(config, devices.devices()?, start)?;
+    let params = burn::module::Module::num_params(trainer.model());
+    tracing::info!(
+        "{} parameters, starting at step {} of {}",
+        params,
+        trainer.state().step,
+        trainer.config().run.steps
+    );
+    if args.dry_run {
+        let validation = trainer.validate()?;
+        println!(
+            "dry run: configuration, scene, network ({params} parameters), losses and optimiser built; validation {}",
+            validation.map_or("not configured".into(), |v| format!("PSNR {:.2} dB, SSIM {:.3}", v.psnr, v.ssim))
+        );
+        return Ok(());
+    }
+    let summary =
+        trainer.run(RunOptions { progress: std::io::IsTerminal::is_terminal(&std::io::stderr()), stop_after: None })?;
+    let out = &trainer.config().run.out_dir;
+    print!(
+        "trained steps {}..{} in {:.1} s ({} skipped)",
+        summary.final_step - summary.steps_run,
+        summary.final_step,
+        summary.elapsed_s,
+        summary.skipped_steps,
+    );
+    match (summary.first_loss, summary.last_loss) {
+        (Some(first), Some(last)) => println!(
+            "; loss {first:.4} -> {last:.4}; target PSNR {:.2} -> {:.2} dB",
+            summary.first_target_psnr.unwrap_or(f64::NAN),
+            summary.last_target_psnr.unwrap_or(f64::NAN),
+        ),
+        _ => println!("; no full training step in this run (pose warm-up only, or nothing left to run)"),
+    }
+    if let Some(v) = &summary.validation {
+        println!("validation: PSNR {:.2} dB, SSIM {:.4} over {} target views", v.psnr, v.ssim, v.views.len());
+    }
+    println!("metrics: {}", out.join("metrics.jsonl").display());
+    if let Some(dir) = &summary.checkpoint {
+        println!("checkpoint: {}", dir.display());
+    }
+    Ok(())
+}
