@@ -3,6 +3,7 @@
 //! two bracketing views when asked), lifespans fade, `eps2d` spreads every footprint.
 
 use burn::tensor::{Device, Tensor, TensorData};
+use dggt_data::random::SplitMix64;
 use dggt_geom::glam::{DQuat, DVec3};
 use dggt_geom::{PinholeIntrinsics, PixelConvention, PosedCamera, WorldFromCamera};
 use dggt_model::gaussian_maps::GaussianMaps;
@@ -33,15 +34,7 @@ fn views() -> Vec<InputView> {
 
 /// Deterministic pseudo-random values in `[-1, 1)`.
 fn noise(count: usize, seed: u64) -> Vec<f32> {
-    let mut state = seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
-    (0..count)
-        .map(|_| {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            ((state >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
-        })
-        .collect()
+    SplitMix64::new(seed).ranges(count, -1.0, 1.0)
 }
 
 /// Raw head output `[1, S, H, W, 12]`: visible colours, mostly opaque, small scales, short or long lifespans.

@@ -11,23 +11,11 @@
 
 use std::time::Instant;
 
+use dggt_data::random::SplitMix64;
 use dggt_geom::{ImageSize, PinholeIntrinsics};
 use dggt_splat::{
     Gaussians, ImageGrads, Opacities, PinholeView, RasterSettings, ViewBatch, rasterize, rasterize_backward,
 };
-
-/// A small deterministic generator (SplitMix64), so the scene is the same on every machine.
-struct Sequence(u64);
-
-impl Sequence {
-    fn next(&mut self) -> f32 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
-    }
-}
 
 struct Scene {
     means: Vec<f32>,
@@ -38,18 +26,18 @@ struct Scene {
 }
 
 fn scene(count: usize, size: ImageSize, k: &PinholeIntrinsics) -> Scene {
-    let mut random = Sequence(count as u64);
+    let mut random = SplitMix64::new(count as u64);
     let mut s = Scene { means: vec![], quats: vec![], scales: vec![], opacities: vec![], colors: vec![] };
     for _ in 0..count {
-        let (u, v) = (random.next() * size.width as f32, random.next() * size.height as f32);
-        let depth = 2.0 + 58.0 * random.next() * random.next();
+        let (u, v) = (random.unit() * size.width as f32, random.unit() * size.height as f32);
+        let depth = 2.0 + 58.0 * random.unit() * random.unit();
         s.means.extend([(u - k.cx as f32) * depth / k.fx as f32, (v - k.cy as f32) * depth / k.fy as f32, depth]);
-        s.quats.extend([1.0, 0.2 * random.next(), 0.2 * random.next(), 0.2 * random.next()]);
-        let pixels = 0.5 + 1.5 * random.next();
+        s.quats.extend([1.0, 0.2 * random.unit(), 0.2 * random.unit(), 0.2 * random.unit()]);
+        let pixels = 0.5 + 1.5 * random.unit();
         let scale = pixels * depth / k.fx as f32;
-        s.scales.extend([scale, scale * (0.5 + random.next()), scale * 0.3]);
-        s.opacities.push(0.3 + 0.65 * random.next());
-        s.colors.extend([random.next(), random.next(), random.next()]);
+        s.scales.extend([scale, scale * (0.5 + random.unit()), scale * 0.3]);
+        s.opacities.push(0.3 + 0.65 * random.unit());
+        s.colors.extend([random.unit(), random.unit(), random.unit()]);
     }
     s
 }

@@ -335,7 +335,7 @@ fn wgpu_matches_the_host_on_a_dense_scene_with_coincident_gaussians() {
     let mut scene = Scene::random(&mut rng, 7500, 3, (0.003, 0.03));
     let copies = 3000;
     let Opacities::Shared(opacities) = &mut scene.opacities else { unreachable!() };
-    let extra: Vec<f32> = rng.vec(copies, 0.05, 0.95);
+    let extra: Vec<f32> = rng.ranges(copies, 0.05, 0.95);
     opacities.extend(extra);
     let (means, quats, scales, colors) = (
         scene.means[..3 * copies].to_vec(),

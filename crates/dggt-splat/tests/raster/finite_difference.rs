@@ -20,7 +20,7 @@ fn smooth_scene() -> (Scene, ViewBatch, RasterSettings) {
         scene.means[3 * i + 1] *= 0.3;
         scene.means[3 * i + 2] = 4.0 + 0.5 * i as f32;
     }
-    scene.opacities = Opacities::Shared(rng.vec(count, 0.3, 0.6));
+    scene.opacities = Opacities::Shared(rng.ranges(count, 0.3, 0.6));
     let settings = RasterSettings { background: Some(vec![0.2, -0.1, 0.5, 0.3]), ..RasterSettings::default() };
     (scene, views, settings)
 }

@@ -35,7 +35,7 @@ fn batch_with_per_view_opacities_equals_separate_views() {
     let views = ViewBatch::new(cameras.clone(), size).unwrap();
     let (count, channels) = (60, 4);
     let mut scene = Scene::random(&mut rng, count, channels, (0.05, 0.4));
-    let mut per_view = rng.vec(views.len() * count, 0.02, 0.95);
+    let mut per_view = rng.ranges(views.len() * count, 0.02, 0.95);
     // Some Gaussians fade out in some views only.
     for k in (0..per_view.len()).step_by(7) {
         per_view[k] = 0.001;

@@ -6,32 +6,8 @@ use dggt_splat::{
     rasterize_backward,
 };
 
-/// SplitMix64: a tiny, seedable generator so that test scenes are reproducible without extra dependencies.
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Self {
-        Self(seed)
-    }
-
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `[low, high)`.
-    pub fn uniform(&mut self, low: f32, high: f32) -> f32 {
-        let unit = (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32;
-        low + (high - low) * unit
-    }
-
-    pub fn vec(&mut self, len: usize, low: f32, high: f32) -> Vec<f32> {
-        (0..len).map(|_| self.uniform(low, high)).collect()
-    }
-}
+/// The seeded generator of the test scenes.
+pub use dggt_data::random::SplitMix64 as Rng;
 
 /// Gaussians as owned buffers (see [`Gaussians`] for the shapes).
 #[derive(Debug, Clone)]
@@ -58,14 +34,14 @@ impl Scene {
     pub fn random(rng: &mut Rng, count: usize, channels: usize, scale: (f32, f32)) -> Self {
         let mut means = Vec::with_capacity(3 * count);
         for _ in 0..count {
-            means.extend([rng.uniform(-1.2, 1.2), rng.uniform(-0.9, 0.9), rng.uniform(2.5, 6.0)]);
+            means.extend([rng.range(-1.2, 1.2), rng.range(-0.9, 0.9), rng.range(2.5, 6.0)]);
         }
         Self {
             means,
-            quats: rng.vec(4 * count, -1.0, 1.0),
-            scales: rng.vec(3 * count, scale.0, scale.1),
-            opacities: Opacities::Shared(rng.vec(count, 0.05, 0.95)),
-            colors: rng.vec(channels * count, -0.2, 1.2),
+            quats: rng.ranges(4 * count, -1.0, 1.0),
+            scales: rng.ranges(3 * count, scale.0, scale.1),
+            opacities: Opacities::Shared(rng.ranges(count, 0.05, 0.95)),
+            colors: rng.ranges(channels * count, -0.2, 1.2),
             channels,
         }
     }
@@ -99,9 +75,9 @@ impl LossWeights {
     pub fn random(rng: &mut Rng, views: usize, size: ImageSize, channels: usize) -> Self {
         let pixels = views * size.area();
         Self {
-            colors: rng.vec(pixels * channels, -1.0, 1.0),
-            alpha: rng.vec(pixels, -1.0, 1.0),
-            depth: rng.vec(pixels, -0.3, 0.3),
+            colors: rng.ranges(pixels * channels, -1.0, 1.0),
+            alpha: rng.ranges(pixels, -1.0, 1.0),
+            depth: rng.ranges(pixels, -0.3, 0.3),
         }
     }
 

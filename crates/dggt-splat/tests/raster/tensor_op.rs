@@ -108,7 +108,7 @@ fn assert_matches_host(
 
 pub fn per_view_scene(rng: &mut Rng, views: usize) -> Scene {
     let mut scene = Scene::random(rng, 60, 4, (0.05, 0.4));
-    let mut per_view = rng.vec(views * scene.len(), 0.02, 0.95);
+    let mut per_view = rng.ranges(views * scene.len(), 0.02, 0.95);
     for k in (0..per_view.len()).step_by(7) {
         per_view[k] = 0.001;
     }
