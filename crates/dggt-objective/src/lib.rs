@@ -12,5 +12,5 @@ pub mod weights;
 
 pub use batch::{DepthFlowSamples, MOVING_SPEED, StepBatch, ViewTruth};
 pub use error::ObjectiveError;
-pub use objective::{Forward, Objective, RenderedView, SampleLoss};
+pub use objective::{Forward, Objective, RenderedView, SampleLoss, ViewsToRender};
 pub use weights::{LossTerm, LossWeights};

@@ -49,6 +49,22 @@ pub struct SampleLoss {
     pub counts: AssemblyCounts,
 }
 
+/// Which of a batch's views a pass renders.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ViewsToRender {
+    /// The targets alone (validation).
+    Targets,
+    /// The targets, then the inputs re-rendered (`render.render_inputs`).
+    TargetsAndInputs,
+}
+
+impl ViewsToRender {
+    /// The views a training step renders under `render`.
+    pub fn for_training(render: &RenderSection) -> Self {
+        if render.render_inputs { Self::TargetsAndInputs } else { Self::Targets }
+    }
+}
+
 /// What a forward pass rendered for one view.
 pub struct RenderedView {
     pub truth_index: usize,
@@ -82,10 +98,10 @@ impl Objective {
         &self,
         model: &Dggt,
         batch: &StepBatch,
-        with_inputs: bool,
+        which: ViewsToRender,
     ) -> Result<(Forward, Vec<RenderedView>), ObjectiveError> {
         let forward = Forward::run(model, batch, &self.render)?;
-        let views = self.render_views(&forward, batch, with_inputs)?;
+        let views = self.render_views(&forward, batch, which)?;
         Ok((forward, views))
     }
 
@@ -94,11 +110,11 @@ impl Objective {
         &self,
         forward: &Forward,
         batch: &StepBatch,
-        with_inputs: bool,
+        which: ViewsToRender,
     ) -> Result<Vec<RenderedView>, ObjectiveError> {
         let mut views = Vec::new();
         let mut wanted: Vec<(usize, bool)> = (0..batch.targets.len()).map(|i| (i, true)).collect();
-        if with_inputs {
+        if which == ViewsToRender::TargetsAndInputs {
             wanted.extend((0..batch.inputs.len()).map(|i| (i, false)));
         }
         for (index, is_target) in wanted {
@@ -144,7 +160,7 @@ impl Objective {
     /// The weighted loss of a forward pass's outputs (from the network, or built by hand) on `batch`.
     pub fn loss_of(&self, forward: Forward, batch: &StepBatch) -> Result<SampleLoss, ObjectiveError> {
         let w = &self.weights;
-        let views = self.render_views(&forward, batch, self.render.render_inputs)?;
+        let views = self.render_views(&forward, batch, ViewsToRender::for_training(&self.render))?;
         let device = batch.images.device();
         let truth = |view: &RenderedView| -> &ViewTruth {
             if view.is_target { &batch.targets[view.truth_index] } else { &batch.inputs[view.truth_index] }

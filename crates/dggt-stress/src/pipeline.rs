@@ -2,7 +2,7 @@
 //! compute the training objective and its gradients, probing each stage's tensors on the way.
 
 use burn::tensor::{Gradients, Tensor};
-use dggt_objective::{Forward, Objective, StepBatch};
+use dggt_objective::{Forward, Objective, StepBatch, ViewsToRender};
 
 use crate::probe::{Probe, Stage};
 
@@ -43,7 +43,7 @@ pub(crate) fn render_and_differentiate(
     batch: &StepBatch,
 ) -> Result<Gradients, String> {
     probe_gaussians(probe, &forward);
-    let views = objective.render_views(&forward, batch, true).map_err(|e| e.to_string())?;
+    let views = objective.render_views(&forward, batch, ViewsToRender::TargetsAndInputs).map_err(|e| e.to_string())?;
     for view in &views {
         let kind = if view.is_target { "target" } else { "input" };
         probe.tensor(Stage::Render, &format!("{kind} {} rgb", view.truth_index), &view.rgb);

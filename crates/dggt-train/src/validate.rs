@@ -9,7 +9,7 @@ use burn::tensor::{Device, Tensor};
 use dggt_data::{Preprocess, Scene, TrainingSample, load_sample};
 use dggt_losses::image_metrics;
 use dggt_model::Dggt;
-use dggt_objective::{Objective, StepBatch};
+use dggt_objective::{Objective, StepBatch, ViewsToRender};
 use serde::Serialize;
 
 use crate::error::TrainError;
@@ -42,7 +42,7 @@ pub fn validate(
     let loaded = load_sample(scene, preprocess, 0, sample.clone())?;
     let batch = StepBatch::new(&loaded, scene, preprocess, false, device)?;
     let model = model.valid();
-    let (_, views) = objective.render(&model, &batch, false)?;
+    let (_, views) = objective.render(&model, &batch, ViewsToRender::Targets)?;
     let rendered = Tensor::stack::<4>(views.iter().map(|v| v.rgb.clone()).collect(), 0);
     let expected = Tensor::stack::<4>(views.iter().map(|v| batch.targets[v.truth_index].image.clone()).collect(), 0);
     let metrics = image_metrics(rendered, expected)?;
