@@ -10,12 +10,15 @@
 //!   1/255 threshold, or whose conservative screen footprint misses the target image, is dropped.
 //!
 //! The culling rules only remove Gaussians the rasteriser would skip anyway (its alpha threshold and its
-//! three-sigma tile footprint), so a culled render equals the uncut one; [`AssemblySettings::exact`] turns
+//! box of `MAX_BOX_SIGMAS` standard deviations), so a culled render equals the uncut one; [`AssemblySettings::exact`] turns
 //! culling off to measure that.
 
 use burn::tensor::{Int, Tensor, TensorData};
 use dggt_model::lifespan::{dynamic_opacity, opacity_at, static_opacity};
-use dggt_splat::{GaussianTensors, OpacityTensor, RasterSettings};
+use dggt_splat::constants::{
+    ALPHA_THRESHOLD, DEFAULT_EPS2D, DEFAULT_FAR_PLANE, DEFAULT_NEAR_PLANE, GUARD_BAND, MAX_BOX_SIGMAS_F32,
+};
+use dggt_splat::{GaussianTensors, OpacityTensor};
 use rayon::prelude::*;
 
 use crate::error::SceneError;
@@ -23,7 +26,7 @@ use crate::pixels::{PixelGaussians, host_values};
 use crate::timeline::{DynamicBlend, TargetView, dynamic_sources};
 
 /// The rasteriser's alpha threshold: Gaussians below it never contribute.
-pub const MIN_OPACITY: f32 = 1.0 / 255.0;
+pub const MIN_OPACITY: f32 = ALPHA_THRESHOLD;
 
 /// How Gaussians are chosen for a target view.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -50,10 +53,10 @@ impl Default for AssemblySettings {
         Self {
             min_opacity: MIN_OPACITY,
             cull_off_screen: true,
-            near_plane: 0.01,
-            far_plane: 1e10,
+            near_plane: DEFAULT_NEAR_PLANE,
+            far_plane: DEFAULT_FAR_PLANE,
             dynamic_blend: DynamicBlend::Nearest,
-            eps2d: RasterSettings::default().eps2d,
+            eps2d: DEFAULT_EPS2D,
         }
     }
 }
@@ -97,135 +100,180 @@ pub fn assemble(
     target: &TargetView,
     settings: &AssemblySettings,
 ) -> Result<AssembledGaussians, SceneError> {
-    let device = pixels.opacity.device();
-    let per_view = pixels.per_view();
-    let (static_opacity_all, dynamic_opacity_all) = match &pixels.dynamic_logit {
-        Some(logit) => (
-            static_opacity(pixels.opacity.clone(), logit.clone()),
-            Some(dynamic_opacity(pixels.opacity.clone(), logit.clone())),
-        ),
-        None => (pixels.opacity.clone(), None),
-    };
-    let faded = opacity_at(static_opacity_all, pixels.lifespan.clone(), pixels.source_time.clone(), target.time);
-
-    // Candidates: every Gaussian as static; the dynamic ones of the source views, moved over their `elapsed`
-    // scene time and weighted.
-    let sources: Vec<DynamicSource> = match &dynamic_opacity_all {
-        Some(_) => dynamic_sources(&pixels.views, target.rig_camera, target.time, settings.dynamic_blend)
-            .into_iter()
-            .map(|(view, weight)| DynamicSource {
-                range: view * per_view..(view + 1) * per_view,
-                elapsed: (target.time - pixels.views[view].time) as f32,
-                weight: weight as f32,
-            })
-            .collect(),
-        None => Vec::new(),
-    };
-    let static_values = host_values(faded.clone(), "static opacity")?;
-
-    let footprint = Footprint::new(target, pixels.size, settings);
-    let keep = |index: usize, mean: [f32; 3], opacity: f32| -> Verdict {
-        if !(opacity >= settings.min_opacity) {
-            Verdict::Transparent
-        } else if settings.cull_off_screen && !footprint.on_screen(mean, pixels.host_max_scale[index]) {
-            Verdict::OffScreen
-        } else {
-            Verdict::Keep
-        }
-    };
-    let static_verdicts: Vec<Verdict> =
-        static_values.par_iter().enumerate().map(|(i, &o)| keep(i, pixels.host_means[i], o)).collect();
-    let mut dynamic_verdicts = Vec::with_capacity(sources.len());
-    if let Some(opacity) = &dynamic_opacity_all {
-        for source in &sources {
-            let values =
-                host_values(opacity.clone().narrow(0, source.range.start, source.range.len()), "dynamic opacity")?;
-            let displaced = |index: usize| -> [f32; 3] {
-                let mean = pixels.host_means[index];
-                match &pixels.host_velocity {
-                    Some(velocity) => std::array::from_fn(|k| mean[k] + velocity[index][k] * source.elapsed),
-                    None => mean,
-                }
-            };
-            let verdicts: Vec<Verdict> = values
-                .par_iter()
-                .enumerate()
-                .map(|(i, &o)| {
-                    let index = source.range.start + i;
-                    keep(index, displaced(index), o * source.weight)
-                })
-                .collect();
-            dynamic_verdicts.push(verdicts);
-        }
-    }
-
-    let mut counts = AssemblyCounts {
-        candidates: static_verdicts.len() + dynamic_verdicts.iter().map(Vec::len).sum::<usize>(),
-        ..Default::default()
-    };
-    for verdict in static_verdicts.iter().chain(dynamic_verdicts.iter().flatten()) {
-        match verdict {
-            Verdict::Transparent => counts.transparent += 1,
-            Verdict::OffScreen => counts.off_screen += 1,
-            Verdict::Keep => {}
-        }
-    }
-    let kept = |verdicts: &[Verdict], offset: usize| -> Vec<i64> {
-        verdicts.iter().enumerate().filter(|(_, v)| **v == Verdict::Keep).map(|(i, _)| (offset + i) as i64).collect()
-    };
-    let static_index = kept(&static_verdicts, 0);
-    let dynamic_indices: Vec<Vec<i64>> =
-        sources.iter().zip(&dynamic_verdicts).map(|(source, verdicts)| kept(verdicts, source.range.start)).collect();
-    counts.static_kept = static_index.len();
-    counts.dynamic_kept = dynamic_indices.iter().map(Vec::len).sum();
-
-    let index_tensor =
-        |index: &[i64]| Tensor::<1, Int>::from_data(TensorData::new(index.to_vec(), [index.len()]), &device);
-    let all: Vec<i64> = static_index.iter().chain(dynamic_indices.iter().flatten()).copied().collect();
-    let all = index_tensor(&all);
-    let pick = |tensor: &Tensor<2>| tensor.clone().select(0, all.clone());
-    // The sources that kept any Gaussian, with their kept rows.
-    let drawn: Vec<(&DynamicSource, &Vec<i64>)> =
-        sources.iter().zip(&dynamic_indices).filter(|(_, index)| !index.is_empty()).collect();
-    let means = match &pixels.velocity {
-        Some(velocity) if drawn.iter().any(|(source, _)| source.elapsed != 0.0) => {
-            let mut parts = vec![pixels.means.clone().select(0, index_tensor(&static_index))];
-            for &(source, index) in &drawn {
-                let index = index_tensor(index);
-                parts.push(
-                    pixels.means.clone().select(0, index.clone())
-                        + velocity.clone().select(0, index).mul_scalar(source.elapsed),
-                );
-            }
-            Tensor::cat(parts, 0)
-        }
-        _ => pick(&pixels.means),
-    };
-    let mut opacities = vec![faded.select(0, index_tensor(&static_index))];
-    if let Some(dynamic) = dynamic_opacity_all {
-        for &(source, index) in &drawn {
-            let picked = dynamic.clone().select(0, index_tensor(index));
-            opacities.push(if source.weight == 1.0 { picked } else { picked.mul_scalar(source.weight) });
-        }
-    }
+    let candidates = Candidates::new(pixels, target, settings);
+    let verdicts = candidates.verdicts(pixels, target, settings)?;
+    let kept = KeptRows::of(&candidates.sources, &verdicts);
     tracing::debug!(
         time = target.time,
-        candidates = counts.candidates,
-        transparent = counts.transparent,
-        off_screen = counts.off_screen,
-        kept = counts.kept(),
+        candidates = kept.counts.candidates,
+        transparent = kept.counts.transparent,
+        off_screen = kept.counts.off_screen,
+        kept = kept.counts.kept(),
         "assembled a target view"
     );
-    Ok(AssembledGaussians {
-        gaussians: GaussianTensors {
+    Ok(AssembledGaussians { gaussians: candidates.gather(pixels, &kept), counts: kept.counts })
+}
+
+/// Every Gaussian as a static candidate, faded to the target time, and the dynamic ones of the source views.
+struct Candidates {
+    /// `[M]` static opacities faded by the lifespan to the target time.
+    faded: Tensor<1>,
+    /// `[M]` dynamic opacities; `None` without a dynamic head.
+    dynamic: Option<Tensor<1>>,
+    sources: Vec<DynamicSource>,
+}
+
+/// The culling verdict of every static candidate, and of every source view's dynamic candidates.
+struct Verdicts {
+    statics: Vec<Verdict>,
+    dynamics: Vec<Vec<Verdict>>,
+}
+
+/// The rows kept, static then per source view, with the counts.
+struct KeptRows {
+    statics: Vec<i64>,
+    dynamics: Vec<Vec<i64>>,
+    counts: AssemblyCounts,
+}
+
+impl Candidates {
+    fn new(pixels: &PixelGaussians, target: &TargetView, settings: &AssemblySettings) -> Self {
+        let per_view = pixels.per_view();
+        let (static_opacity_all, dynamic) = match &pixels.dynamic_logit {
+            Some(logit) => (
+                static_opacity(pixels.opacity.clone(), logit.clone()),
+                Some(dynamic_opacity(pixels.opacity.clone(), logit.clone())),
+            ),
+            None => (pixels.opacity.clone(), None),
+        };
+        let faded = opacity_at(static_opacity_all, pixels.lifespan.clone(), pixels.source_time.clone(), target.time);
+        // The dynamic ones of the source views, moved over their `elapsed` scene time and weighted.
+        let sources: Vec<DynamicSource> = match &dynamic {
+            Some(_) => dynamic_sources(&pixels.views, target.rig_camera, target.time, settings.dynamic_blend)
+                .into_iter()
+                .map(|(view, weight)| DynamicSource {
+                    range: view * per_view..(view + 1) * per_view,
+                    elapsed: (target.time - pixels.views[view].time) as f32,
+                    weight: weight as f32,
+                })
+                .collect(),
+            None => Vec::new(),
+        };
+        Self { faded, dynamic, sources }
+    }
+
+    /// Which candidates the rasteriser would draw: opaque enough at the target time, and on screen.
+    fn verdicts(
+        &self,
+        pixels: &PixelGaussians,
+        target: &TargetView,
+        settings: &AssemblySettings,
+    ) -> Result<Verdicts, SceneError> {
+        let static_values = host_values(self.faded.clone(), "static opacity")?;
+        let footprint = Footprint::new(target, pixels.size, settings);
+        let keep = |index: usize, mean: [f32; 3], opacity: f32| -> Verdict {
+            if !(opacity >= settings.min_opacity) {
+                Verdict::Transparent
+            } else if settings.cull_off_screen && !footprint.on_screen(mean, pixels.host_max_scale[index]) {
+                Verdict::OffScreen
+            } else {
+                Verdict::Keep
+            }
+        };
+        let statics = static_values.par_iter().enumerate().map(|(i, &o)| keep(i, pixels.host_means[i], o)).collect();
+        let mut dynamics = Vec::with_capacity(self.sources.len());
+        if let Some(opacity) = &self.dynamic {
+            for source in &self.sources {
+                let values =
+                    host_values(opacity.clone().narrow(0, source.range.start, source.range.len()), "dynamic opacity")?;
+                let displaced = |index: usize| -> [f32; 3] {
+                    let mean = pixels.host_means[index];
+                    match &pixels.host_velocity {
+                        Some(velocity) => std::array::from_fn(|k| mean[k] + velocity[index][k] * source.elapsed),
+                        None => mean,
+                    }
+                };
+                let verdicts: Vec<Verdict> = values
+                    .par_iter()
+                    .enumerate()
+                    .map(|(i, &o)| {
+                        let index = source.range.start + i;
+                        keep(index, displaced(index), o * source.weight)
+                    })
+                    .collect();
+                dynamics.push(verdicts);
+            }
+        }
+        Ok(Verdicts { statics, dynamics })
+    }
+
+    /// The kept rows' tensors, the dynamic ones moved and weighted.
+    fn gather(&self, pixels: &PixelGaussians, kept: &KeptRows) -> GaussianTensors {
+        let device = pixels.opacity.device();
+        let index_tensor =
+            |index: &[i64]| Tensor::<1, Int>::from_data(TensorData::new(index.to_vec(), [index.len()]), &device);
+        let all: Vec<i64> = kept.statics.iter().chain(kept.dynamics.iter().flatten()).copied().collect();
+        let all = index_tensor(&all);
+        let pick = |tensor: &Tensor<2>| tensor.clone().select(0, all.clone());
+        // The sources that kept any Gaussian, with their kept rows.
+        let drawn: Vec<(&DynamicSource, &Vec<i64>)> =
+            self.sources.iter().zip(&kept.dynamics).filter(|(_, index)| !index.is_empty()).collect();
+        let means = match &pixels.velocity {
+            Some(velocity) if drawn.iter().any(|(source, _)| source.elapsed != 0.0) => {
+                let mut parts = vec![pixels.means.clone().select(0, index_tensor(&kept.statics))];
+                for &(source, index) in &drawn {
+                    let index = index_tensor(index);
+                    parts.push(
+                        pixels.means.clone().select(0, index.clone())
+                            + velocity.clone().select(0, index).mul_scalar(source.elapsed),
+                    );
+                }
+                Tensor::cat(parts, 0)
+            }
+            _ => pick(&pixels.means),
+        };
+        let mut opacities = vec![self.faded.clone().select(0, index_tensor(&kept.statics))];
+        if let Some(dynamic) = &self.dynamic {
+            for &(source, index) in &drawn {
+                let picked = dynamic.clone().select(0, index_tensor(index));
+                opacities.push(if source.weight == 1.0 { picked } else { picked.mul_scalar(source.weight) });
+            }
+        }
+        GaussianTensors {
             means,
             quats_wxyz: pick(&pixels.quats_wxyz),
             scales: pick(&pixels.scales),
             opacities: OpacityTensor::Shared(Tensor::cat(opacities, 0)),
             colors: pick(&pixels.colors),
-        },
-        counts,
-    })
+        }
+    }
+}
+
+impl KeptRows {
+    fn of(sources: &[DynamicSource], verdicts: &Verdicts) -> Self {
+        let Verdicts { statics, dynamics } = verdicts;
+        let mut counts = AssemblyCounts {
+            candidates: statics.len() + dynamics.iter().map(Vec::len).sum::<usize>(),
+            ..Default::default()
+        };
+        for verdict in statics.iter().chain(dynamics.iter().flatten()) {
+            match verdict {
+                Verdict::Transparent => counts.transparent += 1,
+                Verdict::OffScreen => counts.off_screen += 1,
+                Verdict::Keep => {}
+            }
+        }
+        let kept = |verdicts: &[Verdict], offset: usize| -> Vec<i64> {
+            let keep = |(i, v): (usize, &Verdict)| (*v == Verdict::Keep).then_some((offset + i) as i64);
+            verdicts.iter().enumerate().filter_map(keep).collect()
+        };
+        let statics = kept(statics, 0);
+        let dynamics: Vec<Vec<i64>> =
+            sources.iter().zip(dynamics).map(|(source, verdicts)| kept(verdicts, source.range.start)).collect();
+        counts.static_kept = statics.len();
+        counts.dynamic_kept = dynamics.iter().map(Vec::len).sum();
+        Self { statics, dynamics, counts }
+    }
 }
 
 /// One input view lending its dynamic Gaussians to the target.
@@ -246,24 +294,25 @@ enum Verdict {
 }
 
 /// A conservative test of whether a Gaussian can touch the image: its centre in front of the near plane and
-/// within its screen radius of the image. The radius bounds the rasteriser's three-sigma extent: three times
-/// the largest scale projected at the centre's depth with the larger focal length, plus the 2D blur and a pixel.
+/// within its screen radius of the image. The radius bounds the rasteriser's box (`MAX_BOX_SIGMAS` standard
+/// deviations per axis, rounded up): that many times the largest scale projected at the centre's depth with the
+/// larger focal length, plus as many of the `eps2d` blur (`sqrt(a + b) <= sqrt(a) + sqrt(b)`) and a pixel.
 struct Footprint {
     rotation: [[f32; 3]; 3],
     translation: [f32; 3],
     focal: [f32; 2],
     centre: [f32; 2],
     /// Bounds the norm of a row of the projection's Jacobian times depth: the larger focal length times
-    /// `sqrt(1 + lim_x² + lim_y²)`, with `lim` the rasteriser's clamp of `x/z`, `y/z` (1.3x the field of view).
+    /// `sqrt(1 + lim_x² + lim_y²)`, with `lim` bounding the rasteriser's clamp of `x/z`, `y/z` (its guard band).
     radius_gain: f32,
     width: f32,
     height: f32,
+    /// Pixels added to every radius: the box sigmas of the rasteriser's `eps2d` blur, plus one for its
+    /// rounding up.
+    blur_margin: f32,
     near: f32,
     far: f32,
 }
-
-/// Pixels added to every radius: three sigmas of the rasteriser's 0.3 px² blur, plus one for rounding.
-const BLUR_MARGIN_PX: f32 = 3.0 * 0.548 + 1.0;
 
 impl Footprint {
     fn new(target: &TargetView, size: dggt_geom::ImageSize, settings: &AssemblySettings) -> Self {
@@ -277,12 +326,13 @@ impl Footprint {
             centre: [k.cx as f32, k.cy as f32],
             radius_gain: {
                 let (w, h) = (size.width as f64, size.height as f64);
-                let lim_x = (w - k.cx).max(k.cx) / k.fx + 0.3 * w / k.fx;
-                let lim_y = (h - k.cy).max(k.cy) / k.fy + 0.3 * h / k.fy;
+                let lim_x = (w - k.cx).max(k.cx) / k.fx + GUARD_BAND * w / k.fx;
+                let lim_y = (h - k.cy).max(k.cy) / k.fy + GUARD_BAND * h / k.fy;
                 (k.fx.max(k.fy) * (1.0 + lim_x * lim_x + lim_y * lim_y).sqrt()) as f32
             },
             width: size.width as f32,
             height: size.height as f32,
+            blur_margin: MAX_BOX_SIGMAS_F32 * settings.eps2d.max(0.0).sqrt() + 1.0,
             near: settings.near_plane,
             far: settings.far_plane,
         }
@@ -300,7 +350,7 @@ impl Footprint {
         }
         let u = self.focal[0] * p[0] / p[2] + self.centre[0];
         let v = self.focal[1] * p[1] / p[2] + self.centre[1];
-        let radius = 3.0 * max_scale * self.radius_gain / p[2] + BLUR_MARGIN_PX;
+        let radius = MAX_BOX_SIGMAS_F32 * max_scale * self.radius_gain / p[2] + self.blur_margin;
         if !(u.is_finite() && v.is_finite() && radius.is_finite()) {
             // Left to the rasteriser, which sanitises and counts such Gaussians.
             return true;

@@ -136,13 +136,14 @@ impl BlockLists {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::constants::{ALPHA_THRESHOLD, MAX_ALPHA};
 
     /// Exact skip rule of the compositor, evaluated in f32 as it does.
     fn reaches_pixel(mean: [f32; 2], conic: [f32; 3], opacity: f32, px: f32, py: f32) -> bool {
         let (dx, dy) = (mean[0] - px, mean[1] - py);
         let sigma = 0.5 * (conic[0] * dx * dx + conic[2] * dy * dy) + conic[1] * dx * dy;
-        let alpha = (opacity * (-sigma).exp()).min(0.999);
-        sigma >= 0.0 && alpha >= 1.0 / 255.0
+        let alpha = (opacity * (-sigma).exp()).min(MAX_ALPHA);
+        sigma >= 0.0 && alpha >= ALPHA_THRESHOLD
     }
 
     #[test]
@@ -163,7 +164,7 @@ mod tests {
             let det = xx * yy - xy * xy;
             let conic = [yy / det, -xy / det, xx / det];
             let opacity = uniform();
-            let reach = Reach::new(conic, opacity, 1.0 / 255.0);
+            let reach = Reach::new(conic, opacity, ALPHA_THRESHOLD);
             let lists = BlockLists::build(rect, &[mean], &[reach]);
             for y in rect[2]..rect[3] {
                 for x in rect[0]..rect[1] {
@@ -194,14 +195,14 @@ mod tests {
     fn degenerate_conics_are_listed_everywhere() {
         let rect = [0, 16, 0, 16];
         for conic in [[1.0, 2.0, 1.0], [f32::NAN, 0.0, 1.0], [1e8, 0.0, 1e-4]] {
-            let reach = Reach::new(conic, 0.5, 1.0 / 255.0);
+            let reach = Reach::new(conic, 0.5, ALPHA_THRESHOLD);
             assert_eq!(reach.half_extent, None, "{conic:?}");
             let lists = BlockLists::build(rect, &[[100.0, 100.0]], &[reach]);
             assert_eq!(lists.at(0, 0), &[0]);
             assert_eq!(lists.at(15, 15), &[0]);
         }
         // An opacity below the threshold reaches nothing.
-        let faint = Reach::new([1.0, 0.0, 1.0], 0.001, 1.0 / 255.0);
+        let faint = Reach::new([1.0, 0.0, 1.0], 0.001, ALPHA_THRESHOLD);
         assert!(BlockLists::build(rect, &[[8.0, 8.0]], &[faint]).at(8, 8).is_empty());
     }
 }

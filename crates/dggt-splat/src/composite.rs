@@ -12,18 +12,10 @@
 //! passes evaluate alpha with the same function, so their skip decisions agree exactly.
 
 use crate::blocks::{BlockLists, Reach};
+use crate::constants::{ALPHA_THRESHOLD, MAX_ALPHA, MIN_DEPTH_ALPHA, MIN_TRANSMITTANCE};
 use crate::gaussians::Gaussians;
 use crate::projection::Projection;
 use crate::tiles::{TileBins, TileGrid};
-
-/// Footprints below this alpha at a pixel are skipped there; Gaussians below this opacity are culled.
-pub(crate) const ALPHA_THRESHOLD: f32 = 1.0 / 255.0;
-/// Alpha is clamped to this, so a pixel never becomes fully opaque in one step.
-const MAX_ALPHA: f32 = 0.999;
-/// A pixel stops before the footprint that would bring its transmittance to this or below.
-const MIN_TRANSMITTANCE: f32 = 1e-4;
-/// Expected depth divides by `max(alpha, MIN_DEPTH_ALPHA)`.
-const MIN_DEPTH_ALPHA: f32 = 1e-10;
 
 /// Layout of one row of per-footprint gradients: `[mean2d x y, conic a b c, opacity, depth, colour 0..K]`.
 pub(crate) const GRAD_MEAN2D: usize = 0;

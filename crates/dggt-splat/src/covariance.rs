@@ -9,8 +9,7 @@
 
 use glam::{DMat3, DVec3};
 
-/// Quaternions shorter than this are treated as the identity rotation (zero gradient).
-pub const QUAT_MIN_NORM: f64 = 1e-12;
+use crate::constants::QUAT_MIN_NORM;
 
 /// `Σ = M Mᵀ` with `M = R(q / |q|) diag(s)`, keeping what the gradient needs.
 #[derive(Debug, Clone, Copy)]

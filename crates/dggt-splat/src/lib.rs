@@ -27,6 +27,7 @@
 mod backward;
 mod blocks;
 mod composite;
+pub mod constants;
 mod covariance;
 mod cull;
 mod error;
@@ -42,7 +43,7 @@ mod tiles;
 mod view;
 
 pub use backward::{GaussianGrads, ImageGrads, rasterize_backward};
-pub use covariance::QUAT_MIN_NORM;
+pub use constants::QUAT_MIN_NORM;
 pub use cull::{CullReason, CullStats};
 pub use error::SplatError;
 pub use forward::{Images, Rasterized, rasterize};

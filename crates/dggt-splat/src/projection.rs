@@ -12,18 +12,12 @@
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 
-use crate::composite::ALPHA_THRESHOLD;
+use crate::constants::{ALPHA_THRESHOLD, GUARD_BAND, MAX_BOX_SIGMAS};
 use crate::covariance::Covariance;
 use crate::cull::CullReason;
 use crate::gaussians::Gaussians;
 use crate::settings::RasterSettings;
 use crate::view::{PinholeView, ViewBatch};
-
-/// The Jacobian's `x/z` and `y/z` are clamped to the image's half-extent plus this fraction of the half-FoV
-/// tangent on each side (gsplat's 1.3x guard band).
-const GUARD_BAND: f64 = 0.3;
-/// Largest bounding-box half-size in standard deviations.
-const MAX_BOX_SIGMAS: f64 = 3.33;
 
 /// The projected footprints of all Gaussians in all views. Dense (not packed): entry `[v, n]` exists for every
 /// view and Gaussian; culled entries hold zeros and their reason.

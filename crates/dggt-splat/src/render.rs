@@ -8,7 +8,7 @@ use dggt_geom::ImageSize;
 
 use crate::cull::CullStats;
 use crate::error::SplatError;
-use crate::op::SplatOps;
+use crate::op::{SplatInputs, SplatOps};
 use crate::settings::RasterSettings;
 use crate::view::ViewBatch;
 
@@ -107,18 +107,17 @@ fn dispatch(
         OpacityTensor::Shared(values) => values.clone().into_dispatch(),
         OpacityTensor::PerView(values) => values.clone().into_dispatch(),
     };
-    let (images, stats) = <Dispatch as SplatOps>::splat_render(
-        gaussians.means.clone().into_dispatch(),
-        gaussians.quats_wxyz.clone().into_dispatch(),
-        gaussians.scales.clone().into_dispatch(),
+    let inputs = SplatInputs {
+        means: gaussians.means.clone().into_dispatch(),
+        quats: gaussians.quats_wxyz.clone().into_dispatch(),
+        scales: gaussians.scales.clone().into_dispatch(),
         opacities,
-        gaussians.colors.clone().into_dispatch(),
-        background.into_dispatch(),
-        cameras.world_to_camera.clone().into_dispatch(),
-        cameras.intrinsics.clone().into_dispatch(),
-        settings.raster.clone(),
-        cameras.size,
-    );
+        colors: gaussians.colors.clone().into_dispatch(),
+        background: background.into_dispatch(),
+        viewmats: cameras.world_to_camera.clone().into_dispatch(),
+        intrinsics: cameras.intrinsics.clone().into_dispatch(),
+    };
+    let (images, stats) = <Dispatch as SplatOps>::splat_render(inputs, settings.raster.clone(), cameras.size);
     let images = Tensor::<4>::from_dispatch(images);
     let images = RenderTensors {
         colors: images.clone().narrow(3, 0, channels),

@@ -1,5 +1,6 @@
 //! Rasteriser settings: clipping planes, the 2D blur, the tile size and the background colour.
 
+use crate::constants::{DEFAULT_EPS2D, DEFAULT_FAR_PLANE, DEFAULT_NEAR_PLANE, DEFAULT_TILE_SIZE};
 use crate::error::SplatError;
 
 /// How a batch is rasterised. The defaults are gsplat's (and DGGT's): near 0.01, far 1e10, eps2d 0.3,
@@ -21,7 +22,13 @@ pub struct RasterSettings {
 
 impl Default for RasterSettings {
     fn default() -> Self {
-        Self { near_plane: 0.01, far_plane: 1e10, eps2d: 0.3, tile_size: 16, background: None }
+        Self {
+            near_plane: DEFAULT_NEAR_PLANE,
+            far_plane: DEFAULT_FAR_PLANE,
+            eps2d: DEFAULT_EPS2D,
+            tile_size: DEFAULT_TILE_SIZE,
+            background: None,
+        }
     }
 }
 

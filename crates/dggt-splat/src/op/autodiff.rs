@@ -46,17 +46,11 @@ impl<B: Backend + SplatKernels> Backward<B, 6> for SplatBackward {
 
 impl<B: Backend + SplatKernels, C: CheckpointStrategy> SplatOps for Autodiff<B, C> {
     fn splat_render(
-        means: FloatTensor<Self>,
-        quats: FloatTensor<Self>,
-        scales: FloatTensor<Self>,
-        opacities: FloatTensor<Self>,
-        colors: FloatTensor<Self>,
-        background: FloatTensor<Self>,
-        viewmats: FloatTensor<Self>,
-        intrinsics: FloatTensor<Self>,
+        inputs: SplatInputs<Self>,
         settings: RasterSettings,
         size: ImageSize,
     ) -> (FloatTensor<Self>, IntTensor<Self>) {
+        let SplatInputs { means, quats, scales, opacities, colors, background, viewmats, intrinsics } = inputs;
         let guards = [means.node(), quats.node(), scales.node(), opacities.node(), colors.node(), background.node()];
         let inputs = SplatInputs::<B> {
             means: means.into_primitive(),

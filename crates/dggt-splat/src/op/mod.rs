@@ -38,7 +38,7 @@ mod fusion;
 mod host;
 
 use burn::backend::tensor::{FloatTensor, IntTensor};
-use burn::backend::{Backend, backend_extension};
+use burn::backend::{Backend, ExtensionType, backend_extension};
 use dggt_geom::ImageSize;
 
 use crate::settings::RasterSettings;
@@ -85,23 +85,15 @@ pub const PACKED_EXTRA_CHANNELS: usize = 2;
     Autodiff
 )]
 pub trait SplatOps: Backend {
-    #[allow(clippy::too_many_arguments)]
     fn splat_render(
-        means: FloatTensor<Self>,
-        quats: FloatTensor<Self>,
-        scales: FloatTensor<Self>,
-        opacities: FloatTensor<Self>,
-        colors: FloatTensor<Self>,
-        background: FloatTensor<Self>,
-        viewmats: FloatTensor<Self>,
-        intrinsics: FloatTensor<Self>,
+        #[extension_type] inputs: SplatInputs<Self>,
         settings: RasterSettings,
         size: ImageSize,
     ) -> (FloatTensor<Self>, IntTensor<Self>);
 }
 
 /// The inputs of one call as backend primitives, shaped as documented on [`SplatOps`].
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, ExtensionType)]
 pub struct SplatInputs<B: Backend> {
     pub means: FloatTensor<B>,
     pub quats: FloatTensor<B>,
@@ -155,18 +147,10 @@ pub trait SplatKernels: Backend {
 
 impl<B: SplatKernels> SplatOps for B {
     fn splat_render(
-        means: FloatTensor<Self>,
-        quats: FloatTensor<Self>,
-        scales: FloatTensor<Self>,
-        opacities: FloatTensor<Self>,
-        colors: FloatTensor<Self>,
-        background: FloatTensor<Self>,
-        viewmats: FloatTensor<Self>,
-        intrinsics: FloatTensor<Self>,
+        inputs: SplatInputs<Self>,
         settings: RasterSettings,
         size: ImageSize,
     ) -> (FloatTensor<Self>, IntTensor<Self>) {
-        let inputs = SplatInputs { means, quats, scales, opacities, colors, background, viewmats, intrinsics };
         let outputs = B::splat_forward(inputs, &settings, size);
         (outputs.images, outputs.stats)
     }

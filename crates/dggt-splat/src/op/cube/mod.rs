@@ -1,7 +1,15 @@
 //! [`SplatKernels`] for burn's CubeCL backend: the host pipeline's stages as CubeCL kernels, so that one kernel
 //! set runs on every CubeCL runtime (wgpu/Vulkan/Metal, CUDA, ROCm).
 //!
-//! Forward, for a batch of `V` views (`kernels` has the details of each stage):
+//! The kernels, one module per stage, all in `f32`: [`math`] (shared device math and the atomic float add),
+//! [`project`], tile binning ([`bin`]: count and fill; [`scan`]; [`sort`]), [`composite`], and the backward
+//! kernels [`composite_backward`] and [`project_backward`]. Every kernel reads and writes flat, contiguous
+//! buffers with the layouts of the host pipeline (`Projection`, `TileBins`, `Images`): index `k = v * N + n` for
+//! per-(view, Gaussian) values, pixel `p = (v * H + y) * W + x` for per-pixel values. Sizes arrive as runtime
+//! `u32` scalars; only the number of colour channels is a compile-time constant (one compiled kernel per `K`),
+//! so that per-pixel colour accumulators live in registers. Their constants are [`crate::constants`].
+//!
+//! Forward, for a batch of `V` views:
 //!
 //! 1. `project_kernel`: one unit per (view, Gaussian) projects and culls exactly as the host does (same rules
 //!    and order, same culling codes), in `f32` where the host uses `f64`.
@@ -29,7 +37,14 @@
 //! with tolerances, not bit for bit. A footprint radius or tile boundary that falls within rounding of an
 //! integer can differ by one between the two, which changes `tile_intersections` (never a pixel value).
 
-mod kernels;
+mod bin;
+mod composite;
+mod composite_backward;
+mod math;
+mod project;
+mod project_backward;
+mod scan;
+mod sort;
 
 use std::fmt;
 use std::sync::Arc;
@@ -52,7 +67,8 @@ use dggt_geom::ImageSize;
 use super::{PACKED_EXTRA_CHANNELS, SplatGrads, SplatInputs, SplatKernels, SplatOutputs};
 use crate::cull::CullStats;
 use crate::settings::RasterSettings;
-use kernels::{NativeAdd, SCAN_THREADS, SwapAdd};
+use math::{NativeAdd, SwapAdd};
+use scan::SCAN_THREADS;
 
 /// Units per cube of the per-element kernels.
 const ELEMENT_UNITS: u32 = 256;
@@ -208,7 +224,7 @@ fn sorted_tile_lists(
     }
     let cursors = zeroed(device, layout.views * layout.tiles(), DType::U32);
     let (cubes, dim) = element_launch(client, layout.pairs());
-    kernels::fill_kernel::launch(
+    bin::fill_kernel::launch(
         client,
         cubes,
         dim,
@@ -229,7 +245,7 @@ fn sorted_tile_lists(
     );
     if len > intersections {
         let (cubes, dim) = element_launch(client, len - intersections);
-        kernels::pad_kernel::launch(
+        sort::pad_kernel::launch(
             client,
             cubes,
             dim,
@@ -245,7 +261,7 @@ fn sorted_tile_lists(
     while block <= len32 {
         let mut stride = block / 2;
         while stride > 0 {
-            kernels::bitonic_step_kernel::launch(
+            sort::bitonic_step_kernel::launch(
                 client,
                 cubes.clone(),
                 dim,
@@ -263,6 +279,176 @@ fn sorted_tile_lists(
     entry_ids
 }
 
+/// The per-(view, Gaussian) footprints of the projection, with the per-list intersection counts and the
+/// culling statistics.
+struct Footprints {
+    means2d: CubeTensor,
+    conics: CubeTensor,
+    depths: CubeTensor,
+    radii: CubeTensor,
+    reasons: CubeTensor,
+    tile_counts: CubeTensor,
+    stats: CubeTensor,
+}
+
+/// What compositing writes: the packed images, the final transmittance and each pixel's list end.
+struct Composited {
+    images: CubeTensor,
+    transmittance: CubeTensor,
+    list_ends: CubeTensor,
+}
+
+/// Every input made contiguous, so the kernels index it linearly.
+fn contiguous_inputs(inputs: SplatInputs<CubeBackend>) -> SplatInputs<CubeBackend> {
+    SplatInputs {
+        means: contiguous(inputs.means, "means"),
+        quats: contiguous(inputs.quats, "quats"),
+        scales: contiguous(inputs.scales, "scales"),
+        opacities: contiguous(inputs.opacities, "opacities"),
+        colors: contiguous(inputs.colors, "colors"),
+        background: contiguous(inputs.background, "background"),
+        viewmats: contiguous(inputs.viewmats, "viewmats"),
+        intrinsics: contiguous(inputs.intrinsics, "intrinsics"),
+    }
+}
+
+/// Projects and culls every (view, Gaussian) pair, then counts the tiles each kept footprint touches.
+fn project_and_count(device: &CubeDevice, layout: &Layout, inputs: &SplatInputs<CubeBackend>) -> Footprints {
+    let client = device.client();
+    let (views, pairs) = (layout.views, layout.pairs());
+    let footprints = Footprints {
+        means2d: buffer(device, 2 * pairs, DType::F32),
+        conics: buffer(device, 3 * pairs, DType::F32),
+        depths: buffer(device, pairs, DType::F32),
+        radii: buffer(device, 2 * pairs, DType::U32),
+        reasons: buffer(device, pairs, DType::U32),
+        tile_counts: zeroed(device, views * layout.tiles(), DType::U32),
+        stats: zeros_client(client.clone(), device.clone(), Shape::new([views, CullStats::COUNTS]), DType::I32),
+    };
+    if pairs == 0 {
+        return footprints;
+    }
+    let (count32, views32) = (layout.count as u32, views as u32);
+    let (cubes, dim) = element_launch(&client, pairs);
+    project::project_kernel::launch(
+        &client,
+        cubes.clone(),
+        dim,
+        arg(&inputs.means),
+        arg(&inputs.quats),
+        arg(&inputs.scales),
+        arg(&inputs.opacities),
+        arg(&inputs.colors),
+        arg(&inputs.viewmats),
+        arg(&inputs.intrinsics),
+        arg(&footprints.means2d),
+        arg(&footprints.conics),
+        arg(&footprints.depths),
+        arg(&footprints.radii),
+        arg(&footprints.reasons),
+        count32,
+        views32,
+        layout.per_view as u32,
+        layout.width,
+        layout.height,
+        layout.near,
+        layout.far,
+        layout.eps2d,
+        layout.channels,
+    );
+    bin::count_kernel::launch(
+        &client,
+        cubes,
+        dim,
+        arg(&footprints.means2d),
+        arg(&footprints.radii),
+        arg(&footprints.reasons),
+        arg(&footprints.tile_counts),
+        arg(&footprints.stats),
+        count32,
+        views32,
+        layout.tile_size,
+        layout.tiles_x,
+        layout.tiles_y,
+    );
+    footprints
+}
+
+/// Each list's offset into the intersection buffer (the exclusive prefix sum of `tile_counts`, `lists + 1`
+/// long) and the total, read back to the host to size that buffer.
+fn list_offsets(device: &CubeDevice, tile_counts: &CubeTensor, lists: usize) -> (CubeTensor, usize) {
+    let offsets = buffer(device, lists + 1, DType::U32);
+    if lists == 0 {
+        return (offsets, 0);
+    }
+    let total = buffer(device, 1, DType::U32);
+    scan::scan_kernel::launch(
+        &device.client(),
+        CubeCount::new_single(),
+        CubeDim::new_1d(SCAN_THREADS),
+        arg(tile_counts),
+        arg(&offsets),
+        arg(&total),
+        lists as u32,
+        (lists as u32).div_ceil(SCAN_THREADS),
+    );
+    let data = into_data_sync(total);
+    let intersections = data.iter::<u32>().next().expect("one total") as usize;
+    (offsets, intersections)
+}
+
+/// Blends every pixel's sorted list front to back.
+fn composite_pixels(
+    device: &CubeDevice,
+    layout: &Layout,
+    inputs: &SplatInputs<CubeBackend>,
+    footprints: &Footprints,
+    ids: &CubeTensor,
+    offsets: &CubeTensor,
+) -> Composited {
+    let client = device.client();
+    let (views, channels) = (layout.views, layout.channels);
+    let pixels = views * layout.pixels();
+    let images_shape =
+        Shape::new([views, layout.height as usize, layout.width as usize, channels + PACKED_EXTRA_CHANNELS]);
+    let composited = Composited {
+        images: empty_device_dtype(client.clone(), device.clone(), images_shape, DType::F32),
+        transmittance: buffer(device, pixels, DType::F32),
+        list_ends: buffer(device, pixels, DType::U32),
+    };
+    if pixels == 0 {
+        return composited;
+    }
+    let (cubes, dim) = pixel_launch(layout);
+    composite::composite_kernel::launch(
+        &client,
+        cubes,
+        dim,
+        arg(ids),
+        arg(offsets),
+        arg(&footprints.means2d),
+        arg(&footprints.conics),
+        arg(&footprints.depths),
+        arg(&inputs.opacities),
+        arg(&inputs.colors),
+        arg(&inputs.background),
+        arg(&composited.images),
+        arg(&composited.transmittance),
+        arg(&composited.list_ends),
+        layout.count as u32,
+        layout.per_view as u32,
+        layout.width,
+        layout.height,
+        layout.tile_size,
+        layout.tiles_x,
+        layout.tiles_y,
+        channels,
+    );
+    composited
+}
+
+/// The forward pass: projection and tile counts, list offsets, sorted tile lists, compositing; returns the
+/// outputs and what the backward pass needs.
 fn forward_saved(
     inputs: SplatInputs<CubeBackend>,
     settings: &RasterSettings,
@@ -271,126 +457,25 @@ fn forward_saved(
     let layout = layout(&inputs, settings, size);
     let device = inputs.means.device.clone();
     let client = device.client();
-    let means = contiguous(inputs.means, "means");
-    let quats = contiguous(inputs.quats, "quats");
-    let scales = contiguous(inputs.scales, "scales");
-    let opacities = contiguous(inputs.opacities, "opacities");
-    let colors = contiguous(inputs.colors, "colors");
-    let background = contiguous(inputs.background, "background");
-    let viewmats = contiguous(inputs.viewmats, "viewmats");
-    let intrinsics = contiguous(inputs.intrinsics, "intrinsics");
-    let (views, count, channels) = (layout.views, layout.count, layout.channels);
-    let pairs = layout.pairs();
-    let lists = views * layout.tiles();
-
-    let means2d = buffer(&device, 2 * pairs, DType::F32);
-    let conics = buffer(&device, 3 * pairs, DType::F32);
-    let depths = buffer(&device, pairs, DType::F32);
-    let radii = buffer(&device, 2 * pairs, DType::U32);
-    let reasons = buffer(&device, pairs, DType::U32);
-    let tile_counts = zeroed(&device, lists, DType::U32);
-    let stats = zeros_client(client.clone(), device.clone(), Shape::new([views, CullStats::COUNTS]), DType::I32);
-    let offsets = buffer(&device, lists + 1, DType::U32);
-    let total = buffer(&device, 1, DType::U32);
-    let (count32, views32) = (count as u32, views as u32);
-    let (width, height) = (layout.width, layout.height);
-    let (tile_size, tiles_x, tiles_y) = (layout.tile_size, layout.tiles_x, layout.tiles_y);
-    let per_view = layout.per_view as u32;
-
-    if pairs > 0 {
-        let (cubes, dim) = element_launch(&client, pairs);
-        kernels::project_kernel::launch(
-            &client,
-            cubes.clone(),
-            dim,
-            arg(&means),
-            arg(&quats),
-            arg(&scales),
-            arg(&opacities),
-            arg(&colors),
-            arg(&viewmats),
-            arg(&intrinsics),
-            arg(&means2d),
-            arg(&conics),
-            arg(&depths),
-            arg(&radii),
-            arg(&reasons),
-            count32,
-            views32,
-            per_view,
-            width,
-            height,
-            layout.near,
-            layout.far,
-            layout.eps2d,
-            channels,
-        );
-        kernels::count_kernel::launch(
-            &client,
-            cubes,
-            dim,
-            arg(&means2d),
-            arg(&radii),
-            arg(&reasons),
-            arg(&tile_counts),
-            arg(&stats),
-            count32,
-            views32,
-            tile_size,
-            tiles_x,
-            tiles_y,
-        );
-    }
-    let mut intersections = 0usize;
-    if lists > 0 {
-        kernels::scan_kernel::launch(
-            &client,
-            CubeCount::new_single(),
-            CubeDim::new_1d(SCAN_THREADS),
-            arg(&tile_counts),
-            arg(&offsets),
-            arg(&total),
-            lists as u32,
-            (lists as u32).div_ceil(SCAN_THREADS),
-        );
-        let data = into_data_sync(total);
-        intersections = data.iter::<u32>().next().expect("one total") as usize;
-    }
-    let ids =
-        sorted_tile_lists(&client, &device, &layout, &means2d, &radii, &reasons, &depths, &offsets, intersections);
-    let pixels = views * layout.pixels();
-    let images_shape = Shape::new([views, height as usize, width as usize, channels + PACKED_EXTRA_CHANNELS]);
-    let images = empty_device_dtype(client.clone(), device.clone(), images_shape, DType::F32);
-    let transmittance = buffer(&device, pixels, DType::F32);
-    let list_ends = buffer(&device, pixels, DType::U32);
-    if pixels > 0 {
-        let (cubes, dim) = pixel_launch(&layout);
-        kernels::composite_kernel::launch(
-            &client,
-            cubes,
-            dim,
-            arg(&ids),
-            arg(&offsets),
-            arg(&means2d),
-            arg(&conics),
-            arg(&depths),
-            arg(&opacities),
-            arg(&colors),
-            arg(&background),
-            arg(&images),
-            arg(&transmittance),
-            arg(&list_ends),
-            count32,
-            per_view,
-            width,
-            height,
-            tile_size,
-            tiles_x,
-            tiles_y,
-            channels,
-        );
-    }
-
+    let inputs = contiguous_inputs(inputs);
+    let footprints = project_and_count(&device, &layout, &inputs);
+    let lists = layout.views * layout.tiles();
+    let (offsets, intersections) = list_offsets(&device, &footprints.tile_counts, lists);
+    let f = &footprints;
+    let ids = sorted_tile_lists(
+        &client,
+        &device,
+        &layout,
+        &f.means2d,
+        &f.radii,
+        &f.reasons,
+        &f.depths,
+        &offsets,
+        intersections,
+    );
+    let composited = composite_pixels(&device, &layout, &inputs, &footprints, &ids, &offsets);
+    let SplatInputs { means, quats, scales, opacities, colors, background, viewmats, intrinsics } = inputs;
+    let Footprints { means2d, conics, depths, reasons, stats, .. } = footprints;
     let saved = CubeForward {
         layout,
         means,
@@ -407,11 +492,11 @@ fn forward_saved(
         reasons,
         offsets,
         ids,
-        images: images.clone(),
-        transmittance,
-        list_ends,
+        images: composited.images.clone(),
+        transmittance: composited.transmittance,
+        list_ends: composited.list_ends,
     };
-    (SplatOutputs { images, stats }, saved)
+    (SplatOutputs { images: composited.images, stats }, saved)
 }
 
 /// The `f32` gradient buffers the backward kernels add into, zeroed, sized like `shape`.
@@ -441,9 +526,9 @@ fn backward(saved: &CubeForward, grad_images: FloatTensor<CubeBackend>) -> Splat
     if pixels > 0 && count > 0 {
         let (cubes, dim) = pixel_launch(&layout);
         let launch = if native_float_atomics(&client) {
-            kernels::composite_backward_kernel::launch::<NativeAdd>
+            composite_backward::composite_backward_kernel::launch::<NativeAdd>
         } else {
-            kernels::composite_backward_kernel::launch::<SwapAdd>
+            composite_backward::composite_backward_kernel::launch::<SwapAdd>
         };
         launch(
             &client,
@@ -475,7 +560,7 @@ fn backward(saved: &CubeForward, grad_images: FloatTensor<CubeBackend>) -> Splat
             channels,
         );
         let (cubes, dim) = element_launch(&client, count);
-        kernels::project_backward_kernel::launch(
+        project_backward::project_backward_kernel::launch(
             &client,
             cubes,
             dim,
