@@ -14,6 +14,10 @@
 //! 4. `composite`: front-to-back alpha compositing per pixel, and its backward pass.
 //! 5. [`rasterize`] / [`rasterize_backward`] run the stages over a batch of views.
 //!
+//! Every threshold and default they use (alpha threshold, transmittance floor, guard band, box sigmas, near and
+//! far planes, `eps2d`) is defined once in [`constants`], which the CubeCL kernels and `dggt-scene`'s culling
+//! read too.
+//!
 //! On burn tensors: [`render`] checks typed tensor inputs and calls [`SplatOps`], a backend extension whose CPU
 //! implementation runs the host pipeline above and whose autodiff implementation calls its backward pass. With the
 //! `wgpu` or `cuda` feature the same op runs on burn's CubeCL backend: the pipeline's stages as CubeCL kernels on

@@ -21,6 +21,74 @@ pub fn rotation_backward(cov: Covariance, g: M3) -> (f32, f32, f32, f32) {
     (gw, gx, gy, gz)
 }
 
+/// The gradients of the camera-space covariance and of the projection Jacobian's two rows, from the conic's.
+#[derive(CubeType, Clone, Copy)]
+#[expand(derive(Clone, Copy))]
+pub struct FootprintBackward {
+    pub g_cov_camera: M3,
+    pub g_j0: V3,
+    pub g_j1: V3,
+}
+
+/// Back through `conic = cov2d⁻¹` and `cov2d = J Σc Jᵀ`, given `dL/dconic = (ga, gb, gc)`.
+#[cube]
+pub fn conic_backward(e: Ewa, ga: f32, gb: f32, gc: f32) -> FootprintBackward {
+    // conic = cov2d⁻¹ as a symmetric Q; dL/dcov2d = -Q (dL/dQ) Q with dL/dQ = [[ga, gb/2], [gb/2, gc]].
+    let hb = 0.5 * gb;
+    let (qa, qb, qc) = (e.a, e.b, e.c);
+    let m00 = qa * ga + qb * hb;
+    let m01 = qa * hb + qb * gc;
+    let m10 = qb * ga + qc * hb;
+    let m11 = qb * hb + qc * gc;
+    let g00 = -(m00 * qa + m01 * qb);
+    let g01 = -(m00 * qb + m01 * qc);
+    let g10 = -(m10 * qa + m11 * qb);
+    let g11 = -(m10 * qb + m11 * qc);
+    let j0 = e.j0;
+    let j1 = e.j1;
+    let g_cov_camera = mat_sum(
+        mat_sum(mat_scaled(outer(j0, j0), g00), mat_scaled(outer(j0, j1), g01)),
+        mat_sum(mat_scaled(outer(j1, j0), g10), mat_scaled(outer(j1, j1), g11)),
+    );
+    // cov2d = J Σc Jᵀ with symmetric Σc: dL/dJ = 2 (dL/dcov2d) J Σc, row by row.
+    let s0 = apply(e.cov_camera, j0);
+    let s1 = apply(e.cov_camera, j1);
+    let g_j0 = scaled(sum3(scaled(s0, g00), scaled(s1, g01)), 2.0);
+    let g_j1 = scaled(sum3(scaled(s0, g10), scaled(s1, g11)), 2.0);
+    FootprintBackward { g_cov_camera, g_j0, g_j1 }
+}
+
+/// `dL/dpoint` in camera space: through the projected mean (`gmx`, `gmy`), the depth (`gdepth`) and the
+/// Jacobian's dependence on the point (guard-band clamping included).
+#[cube]
+pub fn point_backward(e: Ewa, cam: Camera, point: V3, g: FootprintBackward, gmx: f32, gmy: f32, gdepth: f32) -> V3 {
+    let g_j0 = g.g_j0;
+    let g_j1 = g.g_j1;
+    let (x, y, z) = (point.x, point.y, point.z);
+    let (fx, fy) = (cam.fx, cam.fy);
+    let (tx, ty) = (e.tx, e.ty);
+    let z2 = z * z;
+    let z3 = z2 * z;
+    let mut gpx = gmx * fx / z;
+    let mut gpy = gmy * fy / z;
+    let mut gpz = -(gmx * fx * x + gmy * fy * y) / z2 + gdepth;
+    gpz += -g_j0.x * fx / z2 - g_j1.y * fy / z2 + 2.0 * (g_j0.z * fx * tx + g_j1.z * fy * ty) / z3;
+    let glx = -g_j0.z * fx / z2;
+    let gly = -g_j1.z * fy / z2;
+    // Unclamped: tx = x. Clamped: tx = z * bound, so dtx/dx = 0 and dtx/dz = tx / z.
+    if e.clamped_x {
+        gpz += glx * tx / z;
+    } else {
+        gpx += glx;
+    }
+    if e.clamped_y {
+        gpz += gly * ty / z;
+    } else {
+        gpy += gly;
+    }
+    v3(gpx, gpy, gpz)
+}
+
 /// Pulls the footprint gradients of every view (`footprint_grads`, laid out as in
 /// [`composite_backward_kernel`]) back to the Gaussian's mean, quaternion and scales: one unit per Gaussian,
 /// views in order. Writes `grad_means [N, 3]`, `grad_quats [N, 4]`, `grad_scales [N, 3]`.
@@ -69,52 +137,12 @@ pub fn project_backward_kernel(
             let e = ewa(cov, cam, point, width as f32, height as f32, eps2d);
             let conic = 2 * pairs + 3 * k;
             let (ga, gb, gc) = (footprint_grads[conic], footprint_grads[conic + 1], footprint_grads[conic + 2]);
-            // conic = cov2d⁻¹ as a symmetric Q; dL/dcov2d = -Q (dL/dQ) Q with dL/dQ = [[ga, gb/2], [gb/2, gc]].
-            let hb = 0.5 * gb;
-            let (qa, qb, qc) = (e.a, e.b, e.c);
-            let m00 = qa * ga + qb * hb;
-            let m01 = qa * hb + qb * gc;
-            let m10 = qb * ga + qc * hb;
-            let m11 = qb * hb + qc * gc;
-            let g00 = -(m00 * qa + m01 * qb);
-            let g01 = -(m00 * qb + m01 * qc);
-            let g10 = -(m10 * qa + m11 * qb);
-            let g11 = -(m10 * qb + m11 * qc);
-            let j0 = e.j0;
-            let j1 = e.j1;
-            let g_cov_camera = mat_sum(
-                mat_sum(mat_scaled(outer(j0, j0), g00), mat_scaled(outer(j0, j1), g01)),
-                mat_sum(mat_scaled(outer(j1, j0), g10), mat_scaled(outer(j1, j1), g11)),
-            );
-            // cov2d = J Σc Jᵀ with symmetric Σc: dL/dJ = 2 (dL/dcov2d) J Σc, row by row.
-            let s0 = apply(e.cov_camera, j0);
-            let s1 = apply(e.cov_camera, j1);
-            let g_j0 = scaled(sum3(scaled(s0, g00), scaled(s1, g01)), 2.0);
-            let g_j1 = scaled(sum3(scaled(s0, g10), scaled(s1, g11)), 2.0);
-
-            let (x, y, z) = (point.x, point.y, point.z);
-            let (fx, fy) = (cam.fx, cam.fy);
-            let (tx, ty) = (e.tx, e.ty);
-            let z2 = z * z;
-            let z3 = z2 * z;
-            let (gmx, gmy) = (footprint_grads[2 * k], footprint_grads[2 * k + 1]);
-            let mut gpx = gmx * fx / z;
-            let mut gpy = gmy * fy / z;
-            let mut gpz = -(gmx * fx * x + gmy * fy * y) / z2 + footprint_grads[5 * pairs + k];
-            gpz += -g_j0.x * fx / z2 - g_j1.y * fy / z2 + 2.0 * (g_j0.z * fx * tx + g_j1.z * fy * ty) / z3;
-            let glx = -g_j0.z * fx / z2;
-            let gly = -g_j1.z * fy / z2;
-            // Unclamped: tx = x. Clamped: tx = z * bound, so dtx/dx = 0 and dtx/dz = tx / z.
-            if e.clamped_x {
-                gpz += glx * tx / z;
-            } else {
-                gpx += glx;
-            }
-            if e.clamped_y {
-                gpz += gly * ty / z;
-            } else {
-                gpy += gly;
-            }
+            let g = conic_backward(e, ga, gb, gc);
+            let (gmx, gmy, gdepth) =
+                (footprint_grads[2 * k], footprint_grads[2 * k + 1], footprint_grads[5 * pairs + k]);
+            let g_point = point_backward(e, cam, point, g, gmx, gmy, gdepth);
+            let (gpx, gpy, gpz) = (g_point.x, g_point.y, g_point.z);
+            let g_cov_camera = g.g_cov_camera;
             let rt = transpose(cam.rotation);
             let g_mean = apply(rt, v3(gpx, gpy, gpz));
             gmx_sum += g_mean.x;
