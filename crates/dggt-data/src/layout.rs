@@ -1,7 +1,9 @@
 //! File names of the scene-export layout (drivestudio / OmniRe), shared by readers and writers.
 //!
-//! One scene is one folder. Frame indices are zero-padded to three digits, camera ids are Waymo's
-//! `CameraName - 1` (0 FRONT, 1 FRONT_LEFT, 2 FRONT_RIGHT, 3 SIDE_LEFT, 4 SIDE_RIGHT).
+//! One scene is one folder. Frame indices are zero-padded to three digits; camera ids are the dataset's export
+//! ids (Waymo's `CameraName - 1`: 0 FRONT, 1 FRONT_LEFT, 2 FRONT_RIGHT, 3 SIDE_LEFT, 4 SIDE_RIGHT; the names of
+//! the others are in [`crate::variant::ExportVariant::camera_names`]). Which of these files a scene has, and what
+//! they hold, depends on its [`ExportVariant`](crate::variant::ExportVariant).
 
 use std::path::{Path, PathBuf};
 
@@ -59,6 +61,21 @@ impl ExportLayout {
         self.root.join("extrinsics").join(format!("{camera}.txt"))
     }
 
+    /// `extrinsics/{t:03}_{cam}.txt`: 4x4 camera -> world in OpenCV axes, per frame (nuScenes).
+    pub fn extrinsics_at(&self, frame: usize, camera: usize) -> PathBuf {
+        self.root.join("extrinsics").join(format!("{frame:03}_{camera}.txt"))
+    }
+
+    /// `lidar_pose/{t:03}.txt`: 4x4 lidar sensor -> world (nuScenes, which has no ego poses).
+    pub fn lidar_pose(&self, frame: usize) -> PathBuf {
+        self.root.join("lidar_pose").join(format!("{frame:03}.txt"))
+    }
+
+    /// `timestamps.txt`: one line `frame seconds` per frame, when the converter knew the log's times.
+    pub fn timestamps(&self) -> PathBuf {
+        self.root.join("timestamps.txt")
+    }
+
     /// `ego_pose/{t:03}.txt`: 4x4 ego -> world.
     pub fn ego_pose(&self, frame: usize) -> PathBuf {
         self.root.join("ego_pose").join(format!("{frame:03}.txt"))
@@ -74,7 +91,12 @@ impl ExportLayout {
         self.root.join(kind.folder()).join(format!("{frame:03}_{camera}.png"))
     }
 
-    /// `lidar/{t:03}.bin`: float32 N x 14.
+    /// `dynamic_masks/{t:03}_{cam}.png`: the STORM variant's single dynamic mask (255 = moving).
+    pub fn flat_dynamic_mask(&self, frame: usize, camera: usize) -> PathBuf {
+        self.root.join("dynamic_masks").join(format!("{frame:03}_{camera}.png"))
+    }
+
+    /// `lidar/{t:03}.bin`: float32 rows, [`LidarFormat`](crate::lidar::LidarFormat) by variant.
     pub fn lidar(&self, frame: usize) -> PathBuf {
         self.root.join("lidar").join(format!("{frame:03}.bin"))
     }

@@ -1,6 +1,7 @@
 //! Driving-scene data for dggt: everything between files on disk and the tensors a training step consumes.
 //!
-//! - [`layout`]: file names of the scene-export layout (drivestudio / OmniRe).
+//! - [`layout`]: file names of the scene-export layout (drivestudio / OmniRe); [`variant`]: what its Waymo,
+//!   nuScenes, Argoverse 2 and STORM variants put there, and how to tell them apart.
 //! - [`export`], [`kitti`], [`lidar`], [`depth_flow`]: readers of the driving-log formats into a [`Scene`].
 //! - [`scene`]: the in-memory log: cameras, frames, ground-truth poses, per-view files.
 //! - [`preprocess`]: the release's resize/crop of images and masks, with intrinsics to match;
@@ -32,6 +33,7 @@ pub mod sampler;
 pub mod scene;
 pub mod summary;
 pub mod text;
+pub mod variant;
 pub mod views;
 
 pub use depth_flow::DepthFlowMap;
@@ -40,10 +42,11 @@ pub use export::{ExportOptions, read_export};
 pub use kitti::read_kitti_odometry;
 pub use layout::{DynamicMaskKind, ExportLayout};
 pub use loader::{LoadedSample, LoaderOptions, load_sample, training_stream};
-pub use open::open_scene;
+pub use open::{LogLayout, open_scene, open_scene_as};
 pub use prefetch::Prefetcher;
 pub use preprocess::{BinaryMask, PlanarImage, Preprocess, PreprocessPlan};
 pub use sampler::{Sampler, SamplerConfig, TrainingSample};
 pub use scene::{Scene, SceneCamera, SceneFrame, SceneSource, View, ViewFiles};
 pub use summary::SceneSummary;
+pub use variant::ExportVariant;
 pub use views::{PreparedView, prepare_view};

@@ -9,13 +9,26 @@ use std::path::PathBuf;
 
 use dggt_geom::{EgoFromCamera, ImageSize, PinholeIntrinsics, WorldFromCamera, WorldFromEgo, WorldFromLogWorld};
 
+use crate::lidar::LidarSweep;
+use crate::variant::ExportVariant;
+
 /// Where a scene came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SceneSource {
-    /// The drivestudio / OmniRe export layout (Waymo, nuScenes, Argoverse 2, synthetic).
-    Export,
+    /// The scene-export layout (Waymo, nuScenes, Argoverse 2, synthetic), in one of its variants.
+    Export(ExportVariant),
     /// A KITTI odometry sequence.
     Kitti,
+}
+
+impl SceneSource {
+    /// What `dggt inspect` and the logs call it: `scene export (nuscenes)`, `KITTI odometry`.
+    pub fn describe(self) -> String {
+        match self {
+            Self::Export(variant) => format!("scene export ({variant})"),
+            Self::Kitti => "KITTI odometry".into(),
+        }
+    }
 }
 
 /// One camera of the rig.
@@ -31,7 +44,8 @@ pub struct SceneCamera {
     pub intrinsics: PinholeIntrinsics,
     /// OpenCV distortion `k1 k2 p1 p2 k3` as stored by the source; images are used as pinhole images.
     pub distortion: [f64; 5],
-    /// Mounting on the vehicle (OpenCV camera axes), when the source provides it.
+    /// Mounting on the vehicle (OpenCV camera axes), when the source provides one for the whole log (nuScenes
+    /// exports give a camera -> world pose per frame instead).
     pub ego_from_camera: Option<EgoFromCamera>,
 }
 
@@ -78,7 +92,7 @@ pub struct Scene {
     /// Frame-major: view `(f, c)` is at `f * cameras.len() + c`.
     pub views: Vec<View>,
     /// Lidar sweep per frame (`lidar/{t:03}.bin`), when present.
-    pub lidar: Vec<Option<PathBuf>>,
+    pub lidar: Vec<Option<LidarSweep>>,
     /// The log's world frame (its ego poses and exported scene flow) in the scene's world, which is anchored at
     /// the first chosen frame.
     pub world_from_log: WorldFromLogWorld,

@@ -5,14 +5,14 @@ use std::fmt;
 use serde::Serialize;
 
 use crate::preprocess::Preprocess;
-use crate::scene::{Scene, SceneSource};
+use crate::scene::Scene;
 
 /// What a user wants to know about a log before training on it.
 #[derive(Debug, Clone, Serialize)]
 pub struct SceneSummary {
     pub name: String,
     pub root: String,
-    pub source: &'static str,
+    pub source: String,
     pub frames: usize,
     pub first_frame: usize,
     pub last_frame: usize,
@@ -78,10 +78,7 @@ impl SceneSummary {
         Self {
             name: scene.name.clone(),
             root: scene.root.display().to_string(),
-            source: match scene.source {
-                SceneSource::Export => "scene export",
-                SceneSource::Kitti => "KITTI odometry",
-            },
+            source: scene.source.describe(),
             frames: scene.frames.len(),
             first_frame: scene.frames.first().map_or(0, |f| f.index),
             last_frame: scene.frames.last().map_or(0, |f| f.index),
@@ -116,11 +113,14 @@ impl fmt::Display for SceneSummary {
             self.mean_speed_m_s
         )?;
         writeln!(f, "cameras    {}", self.cameras.len())?;
-        writeln!(f, "  id  name         size        fx        fy        cx        cy    fov h x w (deg)  network")?;
+        writeln!(
+            f,
+            "  id  name               size        fx        fy        cx        cy    fov h x w (deg)  network"
+        )?;
         for c in &self.cameras {
             writeln!(
                 f,
-                "  {:<3} {:<12} {:>4}x{:<5} {:>9.2} {:>9.2} {:>9.2} {:>9.2}  {:>6.1} x {:<6.1}  {}x{}{}",
+                "  {:<3} {:<18} {:>4}x{:<5} {:>9.2} {:>9.2} {:>9.2} {:>9.2}  {:>6.1} x {:<6.1}  {}x{}{}",
                 c.id,
                 c.name,
                 c.width,

@@ -119,7 +119,7 @@ fn missing_files() {
 fn frame_and_camera_selection() {
     let dir = tempfile::tempdir().unwrap();
     let layout = write_minimal_export(dir.path());
-    let options = ExportOptions { cameras: Some(vec![0]), frames: Some(1..2), frame_rate_hz: None };
+    let options = ExportOptions { cameras: Some(vec![0]), frames: Some(1..2), ..ExportOptions::default() };
     let scene = read_export(dir.path(), &options).unwrap();
     assert_eq!(scene.frames[0].index, 1);
     let centre = scene.view(0, 0).world_from_camera.translation();

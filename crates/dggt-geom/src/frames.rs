@@ -30,6 +30,11 @@ pub struct Camera;
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct WaymoCamera;
 
+/// The frame a lidar sweep's points are stored in: the ego frame (Waymo, Argoverse 2 exports) or the lidar
+/// sensor's own (nuScenes exports: x right, y forward, z up).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Sweep;
+
 impl Frame for World {
     const NAME: &'static str = "world";
 }
@@ -41,6 +46,9 @@ impl Frame for Ego {
 }
 impl Frame for Camera {
     const NAME: &'static str = "camera (OpenCV: x right, y down, z forward)";
+}
+impl Frame for Sweep {
+    const NAME: &'static str = "lidar sweep";
 }
 impl Frame for WaymoCamera {
     const NAME: &'static str = "Waymo camera (x forward, y left, z up)";

@@ -25,7 +25,7 @@ mod rigid;
 mod unproject;
 
 pub use error::GeomError;
-pub use frames::{Camera, Ego, LogWorld, WaymoCamera, World};
+pub use frames::{Camera, Ego, LogWorld, Sweep, WaymoCamera, World};
 pub use interpolate::{PosedCamera, interpolate_intrinsics, interpolate_rigid};
 pub use intrinsics::{ImageSize, PinholeIntrinsics, PixelConvention};
 pub use pose_encoding::PoseEncoding;

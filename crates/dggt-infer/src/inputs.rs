@@ -47,8 +47,8 @@ pub struct GroundTruth {
 #[derive(Debug, Clone, PartialEq)]
 pub struct InputSet {
     pub root: PathBuf,
-    /// "scene export", "KITTI sequence" or "image folder".
-    pub kind: &'static str,
+    /// "scene export (waymo)", "KITTI odometry", "image folder", ...
+    pub kind: String,
     pub views: Vec<InputImage>,
     /// Chosen frame indices, ascending.
     pub frames: Vec<usize>,
@@ -109,10 +109,7 @@ impl InputSet {
         let size = images::read_size(&views[0].path)?;
         Ok(Self {
             root: root.to_path_buf(),
-            kind: match scene.source {
-                dggt_data::SceneSource::Export => "scene export",
-                dggt_data::SceneSource::Kitti => "KITTI sequence",
-            },
+            kind: scene.source.describe(),
             frames: scene.frames.iter().map(|f| f.index).collect(),
             cameras: scene.cameras.iter().map(|c| c.name.clone()).collect(),
             views,
@@ -188,7 +185,7 @@ impl InputSet {
         let size = images::read_size(&views[0].path)?;
         Ok(Self {
             root: root.to_path_buf(),
-            kind,
+            kind: kind.into(),
             frames: range.collect(),
             cameras: rig.into_iter().map(|(name, _)| name).collect(),
             views,

@@ -196,7 +196,7 @@ pub fn reconstruct(options: &ReconstructOptions, device: &Device) -> Result<Summ
     written.files.push("summary.json".into());
     let summary = Summary {
         input: inputs.root.clone(),
-        input_kind: inputs.kind.into(),
+        input_kind: inputs.kind.clone(),
         frames: inputs.frames.len(),
         cameras: inputs.cameras.clone(),
         views: inputs.views.len(),

@@ -8,6 +8,8 @@ pub enum SynthError {
     InvalidConfig(String),
     #[error("no view for frame {frame}, camera {camera}: the scene has {frames} frames and {cameras} cameras")]
     NoSuchView { frame: usize, camera: usize, frames: usize, cameras: usize },
+    #[error("no frame {frame}: the scene has {frames} frames")]
+    NoSuchFrame { frame: usize, frames: usize },
     #[error(transparent)]
     Data(#[from] dggt_data::DataError),
     #[error("synthetic-scene geometry: {0}")]

@@ -1,19 +1,25 @@
-//! Writing a scene in the scene-export layout ([`dggt_data::ExportLayout`]), frames `0..F`, cameras `0..C`.
+//! Writing a scene in the scene-export layout ([`dggt_data::ExportLayout`]), frames `0..F`, cameras `0..C`, in
+//! any [`ExportVariant`]. The variant decides the camera and pose files, the dynamic-mask folders and the lidar
+//! rows; everything else is written alike, so one scene read through every variant gives the same cameras.
 //!
 //! | path | content |
 //! |---|---|
 //! | `images/{t:03}_{cam}.jpg` | colour, JPEG quality 92, 2x2 supersampled |
 //! | `intrinsics/{cam}.txt` | `fx fy cx cy 0 0 0 0 0`, one per line (no distortion; image spans `[0,W]x[0,H]`) |
-//! | `extrinsics/{cam}.txt` | 4x4 camera -> ego in Waymo camera axes (x forward, y left, z up); readers get the OpenCV mounting as `extrinsic · M` ([`dggt_geom::axes`]) |
-//! | `ego_pose/{t:03}.txt` | 4x4 ego -> world; frame 0 is the identity (the world is the first ego frame: x along the road, z up) |
+//! | `extrinsics/{cam}.txt` | Waymo variants: 4x4 camera -> ego in Waymo camera axes (x forward, y left, z up); readers get the OpenCV mounting as `extrinsic · M` ([`dggt_geom::axes`]). Argoverse 2: camera -> ego in OpenCV axes |
+//! | `extrinsics/{t:03}_{cam}.txt` | nuScenes: 4x4 camera -> world in OpenCV axes, per frame |
+//! | `ego_pose/{t:03}.txt` | all but nuScenes: 4x4 ego -> world; frame 0 is the identity (the world is the first ego frame: x along the road, z up) |
+//! | `lidar_pose/{t:03}.txt` | nuScenes: 4x4 lidar -> world, the lidar's axes being the ego's turned a quarter right (x right, y forward, z up) |
+//! | `lidar/{t:03}.bin` | the sweep of [`crate::lidar`] in the variant's rows ([`dggt_data::lidar::LidarFormat`]): ego frame, or the lidar frame for nuScenes |
+//! | `timestamps.txt` | `frame seconds` per line (10 Hz) |
 //! | `sky_masks/{t:03}_{cam}.png` | 255 where the pixel-centre ray hits nothing |
-//! | `dynamic_masks/all/…png`, `dynamic_masks/vehicle/…png` | 255 where the pixel-centre ray crosses the 3D box of a car moving faster than 1 m/s, ignoring occlusion (the projected-box mask); every mover is a vehicle, so both are equal |
+//! | `dynamic_masks/all/…png`, `dynamic_masks/vehicle/…png` | 255 where the pixel-centre ray crosses the 3D box of a car moving faster than 1 m/s, ignoring occlusion (the projected-box mask); every mover is a vehicle, so both are equal. The STORM variant writes this mask once, flat, as `dynamic_masks/{t:03}_{cam}.png` |
 //! | `dynamic_masks/human/…png` | all 0 (no pedestrians) |
 //! | `fine_dynamic_masks/all/…png` | 255 where the pixel-centre ray actually hits such a car (exact, occlusion-aware) |
 //! | `depth_flows_4/{t:03}_{cam}.npy` | float32 `(H/4, W/4, 4)` (integer division): the ray through full-resolution coordinates `(4 col + 2, 4 row + 2)`; channel 0 its z-depth (m, along the optical axis, 0 for sky), channels 1-3 the world-frame velocity (m/s) of the surface point hit (zero for static surfaces and sky), including the rotation of turning cars |
 //! | `instances/instances_info.json` | every car, see below |
 //! | `instances/frame_instances.json` | `{"<frame>": [instance ids present], ...}` for every frame |
-//! | `synth.json` | the configuration, the command line that reproduces the scene, and these conventions in brief |
+//! | `synth.json` | the configuration, the variant (`layout`), the command line that reproduces the scene, and these conventions in brief |
 //!
 //! `instances_info.json` maps each instance id (a string; ids are `0..N`, moving cars first) to
 //! `{"id", "class_name": "vehicle", "dynamic", "box_size": [length, width, height], "frame_annotations":
@@ -27,7 +33,9 @@
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
-use dggt_data::{DynamicMaskKind, ExportLayout, images, io, npy, text};
+use dggt_data::lidar::write_lidar;
+use dggt_data::variant::{CameraAxes, CameraMounting, DynamicMaskFolders, FramePoses, nuscenes_lidar_from_ego};
+use dggt_data::{DynamicMaskKind, ExportLayout, ExportVariant, images, io, npy, text};
 use image::GrayImage;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -36,7 +44,7 @@ use serde::ser::{SerializeMap, Serializer};
 use crate::config::{FRAME_INTERVAL_S, SynthConfig};
 use crate::error::{Result, SynthError};
 use crate::generate::generate;
-use crate::rig::{CAMERA_NAMES, HORIZONTAL_FOV_DEG};
+use crate::rig::HORIZONTAL_FOV_DEG;
 use crate::scene::{ObjectId, SynthScene};
 
 /// JPEG quality of the colour images.
@@ -59,10 +67,10 @@ pub struct SynthSummary {
     pub sky_pixels: u64,
 }
 
-/// Generates the scene of `config` and writes it to `out_dir`.
-pub fn synthesize(config: &SynthConfig, out_dir: &Path) -> Result<SynthSummary> {
+/// Generates the scene of `config` and writes it to `out_dir` in `variant`.
+pub fn synthesize(config: &SynthConfig, out_dir: &Path, variant: ExportVariant) -> Result<SynthSummary> {
     let scene = generate(config)?;
-    write_export(&scene, out_dir)
+    write_export(&scene, out_dir, variant)
 }
 
 /// A JSON object whose keys keep the given order.
@@ -108,11 +116,12 @@ struct Conventions {
 #[derive(Serialize)]
 struct Description<'a> {
     generator: &'static str,
+    layout: ExportVariant,
     description: &'static str,
     command: String,
     config: &'a SynthConfig,
     frame_interval_s: f64,
-    camera_names: &'a [&'static str],
+    camera_names: Vec<String>,
     horizontal_fov_deg: f64,
     moving_instances: Vec<ObjectId>,
     parked_instances: Vec<ObjectId>,
@@ -147,15 +156,28 @@ fn count_set(mask: &GrayImage) -> u64 {
     mask.pixels().filter(|p| p.0[0] != 0).count() as u64
 }
 
-fn write_view(scene: &SynthScene, layout: &ExportLayout, frame: usize, camera: usize) -> Result<ViewRecord> {
+fn write_view(
+    scene: &SynthScene,
+    layout: &ExportLayout,
+    variant: ExportVariant,
+    frame: usize,
+    camera: usize,
+) -> Result<ViewRecord> {
     let view = scene.render_view(frame, camera)?;
     images::write_jpeg(&layout.image(frame, camera), &view.image, JPEG_QUALITY)?;
     images::write_png_gray(&layout.sky_mask(frame, camera), &view.sky_mask)?;
-    for kind in [DynamicMaskKind::All, DynamicMaskKind::Vehicle] {
-        images::write_png_gray(&layout.dynamic_mask(kind, frame, camera), &view.dynamic_box_mask)?;
+    match variant.dynamic_masks() {
+        DynamicMaskFolders::PerClass => {
+            for kind in [DynamicMaskKind::All, DynamicMaskKind::Vehicle] {
+                images::write_png_gray(&layout.dynamic_mask(kind, frame, camera), &view.dynamic_box_mask)?;
+            }
+            let nobody = GrayImage::new(view.image.width(), view.image.height());
+            images::write_png_gray(&layout.dynamic_mask(DynamicMaskKind::Human, frame, camera), &nobody)?;
+        }
+        DynamicMaskFolders::Flat => {
+            images::write_png_gray(&layout.flat_dynamic_mask(frame, camera), &view.dynamic_box_mask)?
+        }
     }
-    let nobody = GrayImage::new(view.image.width(), view.image.height());
-    images::write_png_gray(&layout.dynamic_mask(DynamicMaskKind::Human, frame, camera), &nobody)?;
     images::write_png_gray(&layout.dynamic_mask(DynamicMaskKind::FineAll, frame, camera), &view.dynamic_mask)?;
     npy::write_npy_f32(&layout.depth_flow(frame, camera), &view.depth_flow_shape, &view.depth_flow)?;
     Ok(ViewRecord {
@@ -166,26 +188,69 @@ fn write_view(scene: &SynthScene, layout: &ExportLayout, frame: usize, camera: u
     })
 }
 
-/// Renders every view of `scene` and writes the whole export to `out_dir` (created if needed).
-pub fn write_export(scene: &SynthScene, out_dir: &Path) -> Result<SynthSummary> {
+/// The cameras' calibration and the frames' poses, in the variant's files.
+fn write_geometry(scene: &SynthScene, layout: &ExportLayout, variant: ExportVariant) -> Result<()> {
+    let k = scene.intrinsics();
+    let intrinsic_rows = [k.fx, k.fy, k.cx, k.cy, 0.0, 0.0, 0.0, 0.0, 0.0].map(|v| [v]);
+    for camera in scene.rig() {
+        text::write_rows(&layout.intrinsics(camera.id), &intrinsic_rows)?;
+        match (variant.camera_mounting(), variant.camera_axes()) {
+            (CameraMounting::FixedOnEgo, CameraAxes::Waymo) => {
+                text::write_rows(&layout.extrinsics(camera.id), &camera.extrinsic_rows)?
+            }
+            (CameraMounting::FixedOnEgo, CameraAxes::OpenCv) => {
+                text::write_rows(&layout.extrinsics(camera.id), &camera.ego_from_camera.to_rows())?
+            }
+            (CameraMounting::PerFrameInWorld, _) => {
+                for frame in 0..scene.config().frames {
+                    let pose = scene.world_from_camera(frame, camera.id).expect("frame and camera of the scene");
+                    text::write_rows(&layout.extrinsics_at(frame, camera.id), &pose.to_rows())?;
+                }
+            }
+        }
+    }
+    for (frame, rows) in scene.ego_pose_rows.iter().enumerate() {
+        match variant.frame_poses() {
+            FramePoses::Ego => text::write_rows(&layout.ego_pose(frame), rows)?,
+            FramePoses::Lidar => {
+                let world_from_lidar = scene.world_from_ego[frame] * nuscenes_lidar_from_ego().inverse();
+                text::write_rows(&layout.lidar_pose(frame), &world_from_lidar.to_rows())?
+            }
+        }
+    }
+    let times: Vec<[f64; 2]> =
+        (0..scene.config().frames).map(|frame| [frame as f64, SynthConfig::frame_time(frame)]).collect();
+    Ok(text::write_rows(&layout.timestamps(), &times)?)
+}
+
+/// The lidar sweep of every frame, in the variant's rows and frame.
+fn write_sweeps(scene: &SynthScene, layout: &ExportLayout, variant: ExportVariant) -> Result<()> {
+    (0..scene.config().frames).into_par_iter().try_for_each(|frame| {
+        let mut points = crate::lidar::sweep(scene, frame)?;
+        if variant.frame_poses() == FramePoses::Lidar {
+            let lidar_from_ego = nuscenes_lidar_from_ego();
+            for p in &mut points {
+                p.origin = lidar_from_ego.transform_point(p.origin);
+                p.point = lidar_from_ego.transform_point(p.point);
+                p.flow = lidar_from_ego.transform_vector(p.flow);
+            }
+        }
+        Ok(write_lidar(&layout.lidar(frame), variant.lidar_format(), &points)?)
+    })
+}
+
+/// Renders every view of `scene` and writes the whole export to `out_dir` (created if needed) in `variant`.
+pub fn write_export(scene: &SynthScene, out_dir: &Path, variant: ExportVariant) -> Result<SynthSummary> {
     let config = scene.config();
     let layout = ExportLayout::new(out_dir);
     let views: Vec<(usize, usize)> =
         (0..config.frames).flat_map(|frame| (0..config.cameras).map(move |camera| (frame, camera))).collect();
     let records = views
         .par_iter()
-        .map(|&(frame, camera)| write_view(scene, &layout, frame, camera))
+        .map(|&(frame, camera)| write_view(scene, &layout, variant, frame, camera))
         .collect::<Result<Vec<_>>>()?;
-
-    let k = scene.intrinsics();
-    let intrinsic_rows = [k.fx, k.fy, k.cx, k.cy, 0.0, 0.0, 0.0, 0.0, 0.0].map(|v| [v]);
-    for camera in scene.rig() {
-        text::write_rows(&layout.intrinsics(camera.id), &intrinsic_rows)?;
-        text::write_rows(&layout.extrinsics(camera.id), &camera.extrinsic_rows)?;
-    }
-    for (frame, rows) in scene.ego_pose_rows.iter().enumerate() {
-        text::write_rows(&layout.ego_pose(frame), rows)?;
-    }
+    write_geometry(scene, &layout, variant)?;
+    write_sweeps(scene, &layout, variant)?;
 
     let mut present: Vec<BTreeSet<ObjectId>> = vec![BTreeSet::new(); config.frames];
     for record in &records {
@@ -223,13 +288,14 @@ pub fn write_export(scene: &SynthScene, out_dir: &Path) -> Result<SynthSummary> 
 
     let description = Description {
         generator: "dggt-synth",
+        layout: variant,
         description: "Procedural driving street rendered by an analytic ray caster: road with lane markings, \
                       sidewalks, textured buildings, poles, trees, parked cars and moving cars (one turning into a \
                       side street), seen from a forward-driving ego vehicle at 10 Hz.",
         command: config.command_line(),
         config,
         frame_interval_s: FRAME_INTERVAL_S,
-        camera_names: &CAMERA_NAMES[..config.cameras],
+        camera_names: (0..config.cameras).map(|id| variant.camera_name(id)).collect(),
         horizontal_fov_deg: HORIZONTAL_FOV_DEG,
         moving_instances: moving.clone(),
         parked_instances: parked,

@@ -10,14 +10,16 @@
 //! - [`generate()`]: the seeded layout, producing a [`SynthScene`].
 //! - [`scene`]: objects and ray casting ([`SynthScene::cast`], [`SceneAt`]).
 //! - [`motion`], [`rig`], [`street`]: ego and car trajectories, the camera rig, the street's cross-section.
-//! - [`render`]: one view's colours, masks and depth-flow.
-//! - [`export`]: the files written ([`synthesize`], [`write_export`]) and their conventions.
+//! - [`render`]: one view's colours, masks and depth-flow; [`lidar`]: the ego vehicle's lidar sweeps.
+//! - [`export`]: the files written ([`synthesize`], [`write_export`]) in any export variant, and their
+//!   conventions.
 
 pub mod config;
 mod error;
 pub mod export;
 mod generate;
 mod grid;
+pub mod lidar;
 pub mod motion;
 mod noise;
 pub mod render;
