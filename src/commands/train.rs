@@ -83,6 +83,20 @@ pub fn run(args: Args) -> Result<()> {
     }
     if let Some(v) = &summary.validation {
         println!("validation: PSNR {:.2} dB, SSIM {:.4} over {} target views", v.psnr, v.ssim, v.views.len());
+        if v.scenes.len() > 1 {
+            for scene in &v.scenes {
+                println!("  {:<32} PSNR {:.2} dB, SSIM {:.4}", scene.scene, scene.psnr, scene.ssim);
+            }
+        }
+    }
+    let index = trainer.index();
+    if !index.excluded.is_empty() || trainer.state().bad_samples > 0 {
+        println!(
+            "data: {} scenes excluded at indexing (see {}), {} samples failed to load and were replaced",
+            index.excluded.len(),
+            out.join("scene-index.json").display(),
+            trainer.state().bad_samples
+        );
     }
     println!("metrics: {}", out.join("metrics.jsonl").display());
     if let Some(dir) = &summary.checkpoint {

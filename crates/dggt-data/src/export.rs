@@ -93,6 +93,13 @@ pub fn read_export(root: &Path, options: &ExportOptions) -> Result<Scene> {
     })
 }
 
+/// The frame indices of the export at `root` (those with a pose file), sorted, and the folder they are listed in.
+pub fn frame_indices(root: &Path, variant: ExportVariant) -> Result<(Vec<usize>, PathBuf)> {
+    let layout = ExportLayout::new(root);
+    let poses = FramePoseFiles::new(&layout, variant);
+    Ok((numbered_files(poses.folder(), ".txt")?, poses.folder().to_owned()))
+}
+
 fn read_rigid<To, From>(path: &Path) -> Result<Rigid<To, From>> {
     let rows = text::read_matrix::<4, 4>(path)?;
     Rigid::from_rows(rows).map_err(|e| DataError::geometry(path, e))

@@ -10,7 +10,27 @@ use crate::error::{DataError, Result};
 
 fn decode(path: &Path) -> Result<image::DynamicImage> {
     let bytes = std::fs::read(path).map_err(|e| DataError::io(path, e))?;
+    check_jpeg_is_complete(path, &bytes)?;
     image::load_from_memory(&bytes).map_err(|source| DataError::Image { path: path.to_owned(), source })
+}
+
+/// A JPEG (it starts with the SOI marker) must end with the EOI marker, trailing zero padding aside: the
+/// decoder fills a truncated file's missing rows with grey instead of failing, which would train on garbage.
+fn check_jpeg_is_complete(path: &Path, bytes: &[u8]) -> Result<()> {
+    const SOI: [u8; 2] = [0xFF, 0xD8];
+    const EOI: [u8; 2] = [0xFF, 0xD9];
+    if !bytes.starts_with(&SOI) {
+        return Ok(());
+    }
+    let end = bytes.iter().rposition(|&b| b != 0).map_or(0, |last| last + 1);
+    if bytes[..end].ends_with(&EOI) {
+        return Ok(());
+    }
+    Err(DataError::malformed(
+        path,
+        "a complete JPEG ending with the EOI marker FF D9",
+        format!("a truncated file of {} bytes", bytes.len()),
+    ))
 }
 
 /// Reads a camera image as 8-bit RGB (grayscale images are replicated to three channels).

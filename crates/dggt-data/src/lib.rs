@@ -6,6 +6,8 @@
 //! - [`scene`]: the in-memory log: cameras, frames, ground-truth poses, per-view files.
 //! - [`preprocess`]: the release's resize/crop of images and masks, with intrinsics to match;
 //!   [`views`] applies it to one view of a scene.
+//! - [`index`]: the scenes of a run's datasets, found and checked once and cached; [`mix`]: which scene each
+//!   training step draws.
 //! - [`sampler`]: which input and target frames each training step sees, reproducibly per step.
 //! - [`prefetch`]: worker threads that load upcoming items ahead of the consumer, in order, with bounded memory;
 //!   [`loader`] streams decoded training samples through it.
@@ -19,11 +21,13 @@ pub mod depth_flow;
 mod error;
 pub mod export;
 pub mod images;
+pub mod index;
 pub mod io;
 pub mod kitti;
 pub mod layout;
 pub mod lidar;
 pub mod loader;
+pub mod mix;
 pub mod npy;
 mod open;
 pub mod prefetch;
@@ -39,9 +43,11 @@ pub mod views;
 pub use depth_flow::DepthFlowMap;
 pub use error::{DataError, Result};
 pub use export::{ExportOptions, read_export};
+pub use index::{DatasetIndex, DatasetSpec, HeldOut, IndexedScene, Split};
 pub use kitti::read_kitti_odometry;
 pub use layout::{DynamicMaskKind, ExportLayout};
-pub use loader::{LoadedSample, LoaderOptions, load_sample, training_stream};
+pub use loader::{DatasetSampling, LoadedSample, LoaderOptions, dataset_stream, load_sample, training_stream};
+pub use mix::SceneMix;
 pub use open::{LogLayout, open_scene, open_scene_as};
 pub use prefetch::Prefetcher;
 pub use preprocess::{BinaryMask, PlanarImage, Preprocess, PreprocessPlan};

@@ -1,25 +1,42 @@
-//! The training data stream: samples drawn by the [`Sampler`], their views decoded and preprocessed by worker
-//! threads ahead of the training step that consumes them ([`Prefetcher`]).
+//! The training data stream: samples drawn by the [`Sampler`] (across the scenes of a [`DatasetIndex`], by the
+//! [`SceneMix`]), their views decoded and preprocessed by worker threads ahead of the training step that
+//! consumes them ([`Prefetcher`]).
+//!
+//! A sample of a dataset run opens only its scene's window of frames, in the worker, so memory stays flat
+//! however many scenes there are. When a sample fails to load (a corrupt JPEG, a truncated mask), the worker
+//! draws a replacement scene for it (a function of the seed, the sample and the attempt, so resuming draws
+//! the same) and records the failure, naming the file, in the sample it finally delivers; after
+//! [`MAX_LOAD_ATTEMPTS`] failures in a row the sample is an error.
 
 use std::sync::Arc;
 
-use crate::error::Result;
+use crate::error::{DataError, Result};
+use crate::index::DatasetIndex;
+use crate::mix::SceneMix;
 use crate::prefetch::Prefetcher;
 use crate::preprocess::Preprocess;
-use crate::sampler::{Sampler, TrainingSample};
+use crate::sampler::{Sampler, SamplerConfig, TrainingSample};
 use crate::scene::Scene;
 use crate::views::{PreparedView, prepare_view};
+
+/// Loads tried for one sample before it is an error.
+pub const MAX_LOAD_ATTEMPTS: u32 = 4;
 
 /// One training step's data.
 #[derive(Debug, Clone)]
 pub struct LoadedSample {
     /// The training step this sample belongs to.
     pub step: u64,
+    /// The scene the views come from (for a dataset run, the window of frames the sample spans).
+    pub scene: Arc<Scene>,
+    /// Positions in `scene`.
     pub sample: TrainingSample,
     /// Frame-major: input frame `i`, camera `c` is at `i * cameras + c`.
     pub inputs: Vec<PreparedView>,
     /// Frame-major, like `inputs`.
     pub targets: Vec<PreparedView>,
+    /// Loads that failed before this one succeeded, each naming the file at fault.
+    pub failures: Vec<String>,
 }
 
 /// How many threads decode and how many samples may wait decoded.
@@ -37,7 +54,12 @@ impl Default for LoaderOptions {
 }
 
 /// Decodes the views of one sample.
-pub fn load_sample(scene: &Scene, preprocess: &Preprocess, step: u64, sample: TrainingSample) -> Result<LoadedSample> {
+pub fn load_sample(
+    scene: &Arc<Scene>,
+    preprocess: &Preprocess,
+    step: u64,
+    sample: TrainingSample,
+) -> Result<LoadedSample> {
     let load = |frames: &[usize]| -> Result<Vec<PreparedView>> {
         frames
             .iter()
@@ -47,7 +69,77 @@ pub fn load_sample(scene: &Scene, preprocess: &Preprocess, step: u64, sample: Tr
     };
     let inputs = load(&sample.input_frames)?;
     let targets = load(&sample.target_frames)?;
-    Ok(LoadedSample { step, sample, inputs, targets })
+    Ok(LoadedSample { step, scene: scene.clone(), sample, inputs, targets, failures: Vec::new() })
+}
+
+/// Where a dataset run's samples come from: the indexed scenes, which scene each sample draws, and how frames
+/// are drawn within it.
+#[derive(Debug, Clone)]
+pub struct DatasetSampling {
+    pub index: Arc<DatasetIndex>,
+    pub mix: SceneMix,
+    pub sampler: SamplerConfig,
+    pub seed: u64,
+}
+
+impl DatasetSampling {
+    /// Sample `sample`: its scene window opened and its views decoded, replacing scenes that fail to load.
+    pub fn load(&self, preprocess: &Preprocess, sample: u64) -> Result<LoadedSample> {
+        let (mut failures, mut failed) = (Vec::new(), Vec::new());
+        for attempt in 0..MAX_LOAD_ATTEMPTS {
+            let scene = match attempt {
+                0 => self.mix.scene_at(sample),
+                _ => self.mix.replacement(sample, attempt, &failed),
+            };
+            match self.load_from(scene, preprocess, sample, attempt) {
+                Ok(mut loaded) => {
+                    loaded.failures = failures;
+                    return Ok(loaded);
+                }
+                Err(error) => {
+                    tracing::warn!(sample, scene = %self.index.scenes[scene].name, %error, "sample skipped");
+                    failures.push(error.to_string());
+                    failed.push(scene);
+                }
+            }
+        }
+        Err(DataError::Worker(format!(
+            "sample {sample}: {MAX_LOAD_ATTEMPTS} scenes failed to load: {}",
+            failures.join("; ")
+        )))
+    }
+
+    /// Draws the frames of sample `sample` in scene `scene`, opens the window they span and decodes them.
+    fn load_from(&self, scene: usize, preprocess: &Preprocess, sample: u64, attempt: u32) -> Result<LoadedSample> {
+        let indexed = &self.index.scenes[scene];
+        let camera_positions: Vec<usize> = (0..indexed.cameras.len()).collect();
+        let config = SamplerConfig { cameras: Vec::new(), ..self.sampler.clone() };
+        let sampler = Sampler::new(config, indexed.frame_count(), camera_positions.len())
+            .map_err(|e| DataError::Config(format!("{}: {e}", indexed.name)))?;
+        let drawn = sampler.sample_at(self.seed ^ attempt as u64, sample);
+        let frames = drawn.input_frames.iter().chain(&drawn.target_frames);
+        let (first, last) = (*frames.clone().min().expect("inputs"), *frames.max().expect("inputs"));
+        let window = Arc::new(indexed.open(first..last + 1)?);
+        let shift = |frames: &[usize]| frames.iter().map(|f| f - first).collect();
+        let in_window = TrainingSample {
+            input_frames: shift(&drawn.input_frames),
+            target_frames: shift(&drawn.target_frames),
+            cameras: drawn.cameras,
+        };
+        load_sample(&window, preprocess, sample, in_window)
+    }
+}
+
+/// The endless stream of a dataset run's samples from sample `first_sample` on, decoded ahead of time. Sample
+/// `k` is always the same, so a resumed run sees what the uninterrupted one would.
+pub fn dataset_stream(
+    sampling: DatasetSampling,
+    preprocess: Preprocess,
+    first_sample: u64,
+    options: LoaderOptions,
+) -> Result<Prefetcher<LoadedSample>> {
+    preprocess.validate()?;
+    Prefetcher::new(first_sample.., options.workers, options.capacity, move |sample| sampling.load(&preprocess, sample))
 }
 
 /// The endless stream of training samples of the run seeded with `seed`, from step `first_step` on, decoded

@@ -56,6 +56,17 @@ impl LogLayout {
     }
 }
 
+impl From<ExportVariant> for LogLayout {
+    fn from(variant: ExportVariant) -> Self {
+        match variant {
+            ExportVariant::Waymo => Self::Waymo,
+            ExportVariant::WaymoStorm => Self::WaymoStorm,
+            ExportVariant::NuScenes => Self::Nuscenes,
+            ExportVariant::Argoverse2 => Self::Argoverse2,
+        }
+    }
+}
+
 fn is_kitti(root: &Path) -> bool {
     root.join("poses.txt").is_file() && root.join("calib.txt").is_file()
 }

@@ -58,6 +58,18 @@ impl SplitMix64 {
         (0..count).map(|_| self.normal() * std).collect()
     }
 
+    /// Uniform in `0..n` (`n > 0`), by the multiply-shift reduction of 64 random bits.
+    pub fn below(&mut self, n: usize) -> usize {
+        ((self.next_u64() as u128 * n as u128) >> 64) as usize
+    }
+
+    /// Shuffles `items` in place (Fisher-Yates).
+    pub fn shuffle<T>(&mut self, items: &mut [T]) {
+        for i in (1..items.len()).rev() {
+            items.swap(i, self.below(i + 1));
+        }
+    }
+
     /// One of `choices`, uniformly.
     pub fn pick<T: Copy>(&mut self, choices: &[T]) -> T {
         choices[((self.unit() * choices.len() as f32) as usize).min(choices.len() - 1)]

@@ -31,6 +31,8 @@ pub use cameras::{InputCameras, ViewSlot, decode_cameras, input_views};
 pub use error::InferError;
 pub use forward::{Prediction, forward_chunked, heads_chunked};
 pub use inputs::{GroundTruth, InputImage, InputSet};
-pub use network::{Architecture, CheckpointInfo, DEFAULT_PRESET, LoadedNetwork, fresh_model, load_network};
+pub use network::{
+    Architecture, CheckpointInfo, DEFAULT_PRESET, LoadedNetwork, StartingWeights, fresh_model, load_network,
+};
 pub use scene::{Scene4d, SceneOptions, SkyChoice};
 pub use settings::{CameraSource, ModelSection, RenderSection, TrainedSettings};

@@ -180,25 +180,68 @@ fn read_architecture(arch: &Architecture) -> Result<(ModelConfig, Option<Trained
     }
 }
 
-/// A fresh network: random layers, the sky model's fixed buffers, then the starting checkpoint when given
-/// (the release's key names; the tensors it lacks keep their fresh values).
-pub fn fresh_model(config: &ModelConfig, init: Option<&Path>, device: &Device) -> Result<Dggt, InferError> {
+/// A starting checkpoint (the release's key names) and the parameters it may lack.
+#[derive(Debug, Clone, Copy)]
+pub struct StartingWeights<'a> {
+    pub path: &'a Path,
+    /// Glob patterns over module paths (`gs_head.*`) of parameters that start fresh when the file lacks them.
+    pub may_lack: &'a [String],
+}
+
+/// A fresh network: random layers, the sky model's fixed buffers, then the starting checkpoint when given.
+/// A parameter the checkpoint lacks is an error naming it unless `may_lack` allows it; tensors of mismatched
+/// shape are an error naming every one; tensors the network does not use are reported by name.
+pub fn fresh_model(
+    config: &ModelConfig,
+    init: Option<StartingWeights<'_>>,
+    device: &Device,
+) -> Result<Dggt, InferError> {
     let mut model = Dggt::new(config, device)?;
-    materialise(&model);
     if let Some(sky) = &config.sky_model {
         model.sky_model = Some(SkyModel::initialised(sky, device));
     }
-    if let Some(path) = init {
-        let report = load_checkpoint_with(&mut model, path, Coverage::Partial)?;
+    // Loaded before the fresh parameters are drawn, so that a wrong file fails before the network is allocated.
+    if let Some(init) = init {
+        let report = load_checkpoint_with(&mut model, init.path, Coverage::Partial)?;
+        check_coverage(init, &report)?;
+        if !report.unused.is_empty() {
+            tracing::warn!(checkpoint = %init.path.display(), unused = ?report.unused, "tensors the network does not use");
+        }
         tracing::info!(
-            checkpoint = %path.display(),
+            checkpoint = %init.path.display(),
             applied = report.applied.len(),
-            missing = report.missing.len(),
+            fresh = report.missing.len(),
             unused = report.unused.len(),
-            "starting weights loaded (parameters the checkpoint lacks start fresh)"
+            "starting weights loaded"
         );
     }
+    materialise(&model);
     Ok(model)
+}
+
+/// Every parameter the checkpoint lacks must match one of the allowed patterns.
+fn check_coverage(init: StartingWeights<'_>, report: &dggt_model::weights::LoadReport) -> Result<(), InferError> {
+    let patterns = init
+        .may_lack
+        .iter()
+        .map(|p| glob::Pattern::new(p).map_err(|e| InferError::invalid("model.init_may_lack", format!("{p:?}: {e}"))))
+        .collect::<Result<Vec<_>, _>>()?;
+    let lacking: Vec<&String> =
+        report.missing.iter().filter(|name| !patterns.iter().any(|p| p.matches(name))).collect();
+    if lacking.is_empty() {
+        return Ok(());
+    }
+    let shown: Vec<&str> = lacking.iter().take(20).map(|s| s.as_str()).collect();
+    Err(InferError::checkpoint(
+        init.path,
+        format!(
+            "lacks {} parameter(s) the network needs and model.init_may_lack does not allow ({} applied): {}{}",
+            lacking.len(),
+            report.applied.len(),
+            shown.join(", "),
+            if lacking.len() > shown.len() { ", ..." } else { "" }
+        ),
+    ))
 }
 
 /// Initialises every lazily created parameter now, in visiting order, so that the starting weights depend on

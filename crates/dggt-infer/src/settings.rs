@@ -21,6 +21,10 @@ pub struct ModelSection {
     /// Starting weights with the release's key names (`.pt`, `.pth`, `.safetensors`): a VGGT-1B checkpoint
     /// (the Gaussian heads then start fresh) or the DGGT release. `None` starts from random weights.
     pub init_checkpoint: Option<PathBuf>,
+    /// Parameters the starting checkpoint may lack, as glob patterns over module paths (`gs_head.*`): they
+    /// start fresh. Any other parameter the checkpoint lacks is an error naming it, so a wrong file never
+    /// silently trains from random weights.
+    pub init_may_lack: Vec<String>,
     /// Turn on the Gaussian head's colour skip (`GaussianHeadConfig::color_skip`; off in the release).
     pub color_skip: bool,
     /// Where Gaussian means are unprojected (`GaussianHeadConfig::unproject_at`): `integer` (the release's
@@ -45,6 +49,7 @@ impl Default for ModelSection {
         Self {
             preset: Preset::Tiny,
             init_checkpoint: None,
+            init_may_lack: Vec::new(),
             color_skip: false,
             unproject_at: PixelConvention::Integer,
             sky_resolution: None,

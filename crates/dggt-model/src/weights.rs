@@ -143,6 +143,19 @@ pub fn load_checkpoint_with<M: Module>(
         }
         _ => return Err(file_error("unknown checkpoint format (expected .safetensors, .pt or .pth)".into())),
     };
+    let mismatched: Vec<String> = result
+        .errors
+        .iter()
+        .filter_map(|error| match error {
+            ApplyError::ShapeMismatch { path, expected, found } => {
+                Some(format!("{path} (checkpoint {:?}, network {:?})", found.to_vec(), expected.to_vec()))
+            }
+            _ => None,
+        })
+        .collect();
+    if mismatched.len() > 1 {
+        return Err(ModelError::ShapeMismatches(mismatched));
+    }
     if let Some(error) = result.errors.first() {
         return Err(match error {
             ApplyError::ShapeMismatch { path, expected, found } => {

@@ -36,6 +36,9 @@ pub struct RunState {
     pub skipped_steps: u64,
     /// Training seconds before this checkpoint (summed over resumed segments).
     pub elapsed_s: f64,
+    /// Samples that failed to load and were replaced.
+    #[serde(default)]
+    pub bad_samples: u64,
 }
 
 /// The optimiser's state in a checkpoint folder.

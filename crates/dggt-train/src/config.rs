@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use dggt_data::{Preprocess, SamplerConfig};
+use dggt_data::{DatasetSpec, Preprocess, SamplerConfig};
 pub use dggt_infer::{CameraSource, ModelSection, RenderSection};
 use dggt_objective::LossTerm;
 pub use dggt_objective::LossWeights;
@@ -23,20 +23,40 @@ pub struct TrainConfig {
     pub run: RunSection,
 }
 
-/// The training scene and how its views are prepared.
+/// The training scenes and how their views are prepared.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct DataSection {
-    /// A scene export or KITTI odometry sequence.
+    /// One scene export or KITTI odometry sequence: the run's only dataset when `datasets` is empty.
     pub scene: PathBuf,
-    /// Log frames `[start, end)` to use; all when absent.
+    /// Log frames `[start, end)` of `scene` to use; all when absent.
     pub frames: Option<[usize; 2]>,
+    /// Datasets of scene folders (`[[data.datasets]]`), mixed by weight, some scenes held out for validation.
+    pub datasets: Vec<DatasetSpec>,
     pub preprocess: Preprocess,
-    /// Validation: target frames rendered between fixed input frames and scored. The sampler may also draw
-    /// these frames in training (an overfit check); validate on another scene to measure generalisation.
+    /// Validation: target frames rendered between fixed input frames and scored, on every held-out scene (or,
+    /// when none is held out, on the first training scene: an overfit check).
     pub validation: ValidationSection,
     /// Decoding threads.
     pub workers: usize,
+    /// Samples that may fail to load (each replaced by another scene's, with a warning) before the run stops.
+    pub max_bad_samples: u64,
+}
+
+impl DataSection {
+    /// The run's datasets: `datasets`, or `scene` as a dataset of one. `cameras` (the sampler's) fill in
+    /// datasets that name none.
+    pub fn dataset_specs(&self, cameras: &[usize]) -> Vec<DatasetSpec> {
+        let mut specs = if self.datasets.is_empty() {
+            vec![DatasetSpec { root: Some(self.scene.clone()), frames: self.frames, ..DatasetSpec::default() }]
+        } else {
+            self.datasets.clone()
+        };
+        for spec in specs.iter_mut().filter(|spec| spec.cameras.is_empty()) {
+            spec.cameras = cameras.to_vec();
+        }
+        specs
+    }
 }
 
 impl Default for DataSection {
@@ -45,8 +65,10 @@ impl Default for DataSection {
             scene: PathBuf::from("data-fixtures/synth-s0"),
             frames: None,
             preprocess: Preprocess::default(),
+            datasets: Vec::new(),
             validation: ValidationSection::default(),
             workers: 2,
+            max_bad_samples: 100,
         }
     }
 }
@@ -181,6 +203,9 @@ impl TrainConfig {
             }
         };
         resolve(&mut self.data.scene);
+        for spec in &mut self.data.datasets {
+            spec.resolve_paths(base);
+        }
         resolve(&mut self.run.out_dir);
         for path in [
             &mut self.model.init_checkpoint,
@@ -282,6 +307,9 @@ impl TrainConfig {
         }
         if self.run.devices.is_empty() {
             return Err(setting("run.devices", "must name at least one device"));
+        }
+        for spec in &self.data.datasets {
+            spec.validate().map_err(|e| setting("data.datasets", e.to_string()))?;
         }
         if self.data.validation.inputs.is_empty() != self.data.validation.targets.is_empty() {
             return Err(setting("data.validation", "give both inputs and targets, or neither"));

@@ -17,8 +17,11 @@ use std::time::Instant;
 use burn::module::Module;
 use burn::optim::{GradientsAccumulator, GradientsParams};
 use burn::tensor::Device;
-use dggt_data::{LoadedSample, LoaderOptions, Prefetcher, Sampler, Scene, TrainingSample, open_scene, training_stream};
-use dggt_infer::fresh_model;
+use dggt_data::{
+    DatasetIndex, DatasetSampling, IndexedScene, LoadedSample, LoaderOptions, Prefetcher, SceneMix, Split,
+    dataset_stream,
+};
+use dggt_infer::{StartingWeights, fresh_model};
 use dggt_model::{Dggt, ModelConfig};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde_json::json;
@@ -30,7 +33,7 @@ use crate::config::TrainConfig;
 use crate::error::TrainError;
 use crate::optimizer::{Optimizer, freeze};
 use crate::schedule::WarmupCosine;
-use crate::validate::{Validation, validate, validation_sample};
+use crate::validate::{Validation, validate_scenes};
 
 /// How a run ended.
 #[derive(Debug, Clone, PartialEq)]
@@ -69,8 +72,10 @@ pub enum Start {
 pub struct Trainer {
     config: TrainConfig,
     model_config: ModelConfig,
-    scene: Arc<Scene>,
-    sampler: Sampler,
+    /// The indexed scenes and how each sample draws from them.
+    sampling: DatasetSampling,
+    /// Scored by [`Trainer::validate`]: the held-out scenes, or the first training scene.
+    validation_scenes: Vec<IndexedScene>,
     objective: Objective,
     /// Training devices with autodiff; the first holds the master weights.
     devices: Vec<Device>,
@@ -91,25 +96,7 @@ impl Trainer {
         })?;
         let autodiff: Vec<Device> = devices.iter().map(|d| d.clone().autodiff()).collect();
         let device = autodiff[0].clone();
-        let frames = config.data.frames.map(|[a, b]| a..b);
-        let cameras = (!config.sampler.cameras.is_empty()).then(|| config.sampler.cameras.clone());
-        let scene = Arc::new(open_scene(&config.data.scene, frames, cameras)?);
-        let mut sampler_config = config.sampler.clone();
-        // The scene was opened with only the chosen cameras: they are positions 0.. in it.
-        sampler_config.cameras.clear();
-        let sampler = Sampler::new(sampler_config, scene.frames.len(), scene.cameras.len())?;
-        let validation = &config.data.validation;
-        if let Some(&frame) = validation.inputs.iter().chain(&validation.targets).find(|&&f| f >= scene.frames.len()) {
-            return Err(TrainError::Invalid {
-                what: "data.validation".into(),
-                detail: format!(
-                    "frame {frame} is outside the {} frames chosen from {} (positions 0..{})",
-                    scene.frames.len(),
-                    config.data.scene.display(),
-                    scene.frames.len()
-                ),
-            });
-        }
+        let (sampling, validation_scenes) = index_datasets(&config)?;
         let objective = Objective::new(config.loss.clone(), config.render.clone(), &device)?;
 
         let checkpoints = config.run.out_dir.join("checkpoints");
@@ -132,10 +119,16 @@ impl Trainer {
             None => {
                 device.seed(config.run.seed);
                 let model_config = config.model.architecture();
-                let model = fresh_model(&model_config, config.model.init_checkpoint.as_deref(), &device)?;
+                let init = config
+                    .model
+                    .init_checkpoint
+                    .as_deref()
+                    .map(|path| StartingWeights { path, may_lack: &config.model.init_may_lack });
+                let model = fresh_model(&model_config, init, &device)?;
                 let model = freeze(model, &config.optim.frozen)?;
                 let optimizer = Optimizer::new(&config.optim, &model);
-                let state = RunState { step: 0, seed: config.run.seed, skipped_steps: 0, elapsed_s: 0.0 };
+                let state =
+                    RunState { step: 0, seed: config.run.seed, skipped_steps: 0, elapsed_s: 0.0, bad_samples: 0 };
                 (model, model_config, optimizer, state)
             }
         };
@@ -148,8 +141,8 @@ impl Trainer {
         Ok(Self {
             config,
             model_config,
-            scene,
-            sampler,
+            sampling,
+            validation_scenes,
             objective,
             devices: autodiff,
             plain_device,
@@ -181,9 +174,9 @@ impl Trainer {
         WarmupCosine { peak: 1.0, warmup: o.warmup_steps, total: self.config.run.steps, min_ratio: o.min_lr_ratio }
     }
 
-    fn validation(&self) -> Option<TrainingSample> {
-        let v = &self.config.data.validation;
-        (!v.inputs.is_empty()).then(|| validation_sample(&v.inputs, &v.targets, self.sampler.cameras()))
+    /// The run's scene index.
+    pub fn index(&self) -> &DatasetIndex {
+        &self.sampling.index
     }
 
     /// Scores the current weights on the validation frames.
@@ -193,16 +186,19 @@ impl Trainer {
 
     /// [`Trainer::validate`], writing each target's render, truth and difference as a PNG into `save_to`.
     pub fn validate_into(&self, save_to: Option<&Path>) -> Result<Option<Validation>, TrainError> {
-        let Some(sample) = self.validation() else { return Ok(None) };
+        let frames = &self.config.data.validation;
+        if frames.inputs.is_empty() {
+            return Ok(None);
+        }
         let model = self.model.clone().valid().fork(&self.plain_device);
         let preprocess = &self.config.data.preprocess;
-        validate(&model, &self.objective, &self.scene, preprocess, &sample, &self.plain_device, save_to).map(Some)
+        let scenes = &self.validation_scenes;
+        validate_scenes(&model, &self.objective, scenes, frames, preprocess, &self.plain_device, save_to)
     }
 
     /// The sample drawn for sample index `index` (`step · accumulation + j`), decoded.
     pub fn sample(&self, index: u64) -> Result<LoadedSample, TrainError> {
-        let sample = self.sampler.sample_at(self.config.run.seed, index);
-        Ok(dggt_data::load_sample(&self.scene, &self.config.data.preprocess, index, sample)?)
+        Ok(self.sampling.load(&self.config.data.preprocess, index)?)
     }
 
     /// Trains until `run.steps` (or the time limit, or `options.stop_after`), checkpointing on the way.
@@ -224,14 +220,8 @@ impl Trainer {
         let first_sample = self.state.step * accumulation;
         let options_loader =
             LoaderOptions { workers: self.config.data.workers.max(1), capacity: 2 * self.config.data.workers.max(1) };
-        let mut stream = training_stream(
-            self.scene.clone(),
-            self.sampler.clone(),
-            self.config.data.preprocess,
-            self.config.run.seed,
-            first_sample,
-            options_loader,
-        )?;
+        let mut stream =
+            dataset_stream(self.sampling.clone(), self.config.data.preprocess, first_sample, options_loader)?;
 
         let last_step = options.stop_after.map_or(run.steps, |s| s.min(run.steps));
         let bar = progress_bar(options.progress, self.state.step, run.steps);
@@ -256,7 +246,10 @@ impl Trainer {
         while self.state.step < last_step {
             let step = self.state.step;
             let samples = (0..accumulation).map(|_| next_sample(&mut stream)).collect::<Result<Vec<_>, _>>()?;
+            self.count_bad_samples(&samples)?;
             let mut record = self.train_step(&samples, schedule.factor(step), with_depth_flow)?;
+            record["scenes"] = json!(samples.iter().map(|s| s.scene.name.clone()).collect::<Vec<_>>());
+            record["bad_samples"] = json!(self.state.bad_samples);
             let pose_warmup = step < self.config.optim.pose_warmup_steps;
             if pose_warmup {
                 bar.set_message(format!(
@@ -302,7 +295,8 @@ impl Trainer {
                         "validation"
                     );
                     log(json!({ "kind": "validation", "step": self.state.step, "psnr": validation.psnr,
-                        "ssim": validation.ssim, "views": validation.views, "time_s": elapsed }))?;
+                        "ssim": validation.ssim, "views": validation.views, "scenes": validation.scenes,
+                        "time_s": elapsed }))?;
                     summary.validation = Some(validation);
                 }
             }
@@ -423,7 +417,8 @@ impl Trainer {
             .iter()
             .map(|sample| {
                 let started = Instant::now();
-                let batch = StepBatch::new(sample, &self.scene, &self.config.data.preprocess, with_depth_flow, device)?;
+                let preprocess = &self.config.data.preprocess;
+                let batch = StepBatch::new(sample, &sample.scene, preprocess, with_depth_flow, device)?;
                 let prepared = Instant::now();
                 let pose_warmup = sample.step < self.config.optim.pose_warmup_steps;
                 let loss = if pose_warmup {
@@ -463,6 +458,77 @@ impl Trainer {
             })
             .collect()
     }
+}
+
+impl Trainer {
+    /// Counts the load failures the samples carry; past `data.max_bad_samples` the run stops, after saving a
+    /// checkpoint of the weights so far.
+    fn count_bad_samples(&mut self, samples: &[LoadedSample]) -> Result<(), TrainError> {
+        let failures: Vec<&String> = samples.iter().flat_map(|s| &s.failures).collect();
+        self.state.bad_samples += failures.len() as u64;
+        let limit = self.config.data.max_bad_samples;
+        if self.state.bad_samples <= limit {
+            return Ok(());
+        }
+        let run = &self.config.run;
+        checkpoint::save(
+            &run.out_dir.join("checkpoints"),
+            &self.model,
+            &self.model_config,
+            self.optimizer.adamw(),
+            &self.state,
+            run.keep_checkpoints,
+        )?;
+        Err(TrainError::Invalid {
+            what: "data".into(),
+            detail: format!(
+                "{} samples failed to load, more than data.max_bad_samples = {limit}; the last: {}",
+                self.state.bad_samples,
+                failures.last().map_or("-", |f| f.as_str())
+            ),
+        })
+    }
+}
+
+/// Indexes the configured datasets (reusing `out_dir/scene-index.json` when still valid), excludes scenes too
+/// short for the sampler's window, and picks the validation scenes.
+fn index_datasets(config: &TrainConfig) -> Result<(DatasetSampling, Vec<IndexedScene>), TrainError> {
+    let specs = config.data.dataset_specs(&config.sampler.cameras);
+    fs::create_dir_all(&config.run.out_dir)
+        .map_err(|source| TrainError::Io { path: config.run.out_dir.clone(), source })?;
+    let cache = config.run.out_dir.join("scene-index.json");
+    let mut index = DatasetIndex::load_or_build(&specs, config.run.seed, &cache, &|_, _| {})?;
+    index.exclude_shorter_than(config.sampler.window);
+    if !index.excluded.is_empty() {
+        tracing::warn!(excluded = index.excluded.len(), indexed = index.scenes.len(), "scenes excluded (see the log)");
+    }
+    let mix = SceneMix::new(&index, config.run.seed)?;
+    let mut validation_scenes: Vec<IndexedScene> = index.split(Split::Validation).cloned().collect();
+    if validation_scenes.is_empty() {
+        validation_scenes.extend(index.split(Split::Train).next().cloned());
+    }
+    let needed = config.data.validation.inputs.iter().chain(&config.data.validation.targets).max().map(|f| f + 1);
+    if let Some(scene) = validation_scenes.iter().find(|s| needed.is_some_and(|n| s.frame_count() < n)) {
+        return Err(TrainError::Invalid {
+            what: "data.validation".into(),
+            detail: format!(
+                "frame {} is outside the {} frames of {} (positions 0..{})",
+                needed.unwrap_or(0) - 1,
+                scene.frame_count(),
+                scene.root.display(),
+                scene.frame_count()
+            ),
+        });
+    }
+    tracing::info!(
+        training = index.split(Split::Train).count(),
+        validation = validation_scenes.len(),
+        excluded = index.excluded.len(),
+        "scenes indexed"
+    );
+    let sampling =
+        DatasetSampling { index: Arc::new(index), mix, sampler: config.sampler.clone(), seed: config.run.seed };
+    Ok((sampling, validation_scenes))
 }
 
 struct SampleResult {

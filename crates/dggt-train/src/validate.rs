@@ -1,26 +1,87 @@
-//! Validation: a fixed set of input frames, and target frames between them rendered and scored with PSNR and
-//! SSIM (skimage's definitions), without building a gradient graph. Optionally each target is written as a
-//! PNG: the render, the ground truth and their absolute difference (scaled by 4) side by side.
+//! Validation: on every validation scene, a fixed set of input frames, and target frames between them rendered
+//! and scored with PSNR and SSIM (skimage's definitions), without building a gradient graph; the scores are
+//! kept per scene and averaged over scenes. Optionally each target is written as a PNG: the render, the ground
+//! truth and their absolute difference (scaled by 4) side by side.
 
 use std::path::Path;
+use std::sync::Arc;
 
 use burn::module::Module;
 use burn::tensor::{Device, Tensor};
-use dggt_data::{Preprocess, Scene, TrainingSample, load_sample};
+use dggt_data::{IndexedScene, Preprocess, Scene, TrainingSample, load_sample};
 use dggt_losses::image_metrics;
 use dggt_model::Dggt;
 use dggt_objective::{Objective, StepBatch, ViewsToRender};
 use serde::Serialize;
 
+use crate::config::ValidationSection;
 use crate::error::TrainError;
 
 /// Scores of one validation pass.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Validation {
+    /// Means over the scenes of the per-scene means.
     pub psnr: f64,
     pub ssim: f64,
-    /// Per target view: `(frame, camera, psnr, ssim)`.
+    /// Per target view of every scene: `(frame, camera, psnr, ssim)`.
     pub views: Vec<(usize, usize, f64, f64)>,
+    /// Per scene.
+    pub scenes: Vec<SceneScore>,
+}
+
+/// One validation scene's scores.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SceneScore {
+    pub scene: String,
+    pub psnr: f64,
+    pub ssim: f64,
+}
+
+/// Scores `model` on every scene of `scenes` at the frames of `frames` (positions in each scene); a scene that
+/// fails to load is left out with a warning, and the pass fails only when every scene does. Renders go to
+/// `save_to`, in a folder per scene when there are several.
+pub fn validate_scenes(
+    model: &Dggt,
+    objective: &Objective,
+    scenes: &[IndexedScene],
+    frames: &ValidationSection,
+    preprocess: &Preprocess,
+    device: &Device,
+    save_to: Option<&Path>,
+) -> Result<Option<Validation>, TrainError> {
+    let needed = frames.inputs.iter().chain(&frames.targets).max().map_or(0, |f| f + 1);
+    let (mut scores, mut views, mut last_error) = (Vec::new(), Vec::new(), None);
+    for indexed in scenes {
+        let folder = save_to.map(|dir| match scenes.len() {
+            1 => dir.to_owned(),
+            _ => dir.join(indexed.name.replace('/', "_")),
+        });
+        let scored = indexed.open(0..needed).map_err(TrainError::from).and_then(|scene| {
+            let cameras: Vec<usize> = (0..scene.cameras.len()).collect();
+            let sample = validation_sample(&frames.inputs, &frames.targets, &cameras);
+            validate(model, objective, &Arc::new(scene), preprocess, &sample, device, folder.as_deref())
+        });
+        match scored {
+            Ok(validation) => {
+                scores.push(SceneScore { scene: indexed.name.clone(), psnr: validation.psnr, ssim: validation.ssim });
+                views.extend(validation.views);
+            }
+            Err(error) => {
+                tracing::warn!(scene = %indexed.name, %error, "validation scene skipped");
+                last_error = Some(error);
+            }
+        }
+    }
+    if scores.is_empty() {
+        return last_error.map_or(Ok(None), Err);
+    }
+    let count = scores.len() as f64;
+    Ok(Some(Validation {
+        psnr: scores.iter().map(|s| s.psnr).sum::<f64>() / count,
+        ssim: scores.iter().map(|s| s.ssim).sum::<f64>() / count,
+        views,
+        scenes: scores,
+    }))
 }
 
 /// The validation sample: `inputs` and `targets` frames of every camera in `cameras`.
@@ -33,7 +94,7 @@ pub fn validation_sample(inputs: &[usize], targets: &[usize], cameras: &[usize])
 pub fn validate(
     model: &Dggt,
     objective: &Objective,
-    scene: &Scene,
+    scene: &Arc<Scene>,
     preprocess: &Preprocess,
     sample: &TrainingSample,
     device: &Device,
@@ -65,11 +126,9 @@ pub fn validate(
         }
     }
     let count = metrics.len().max(1) as f64;
-    Ok(Validation {
-        psnr: metrics.iter().map(|m| m.psnr).sum::<f64>() / count,
-        ssim: metrics.iter().map(|m| m.ssim).sum::<f64>() / count,
-        views: per_view,
-    })
+    let (psnr, ssim) =
+        (metrics.iter().map(|m| m.psnr).sum::<f64>() / count, metrics.iter().map(|m| m.ssim).sum::<f64>() / count);
+    Ok(Validation { psnr, ssim, views: per_view, scenes: Vec::new() })
 }
 
 /// `[H, W, 3]` render and truth in `[0, 1]` as one RGB image: render | truth | 4 |render - truth|.

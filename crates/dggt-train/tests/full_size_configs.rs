@@ -33,7 +33,9 @@ fn vggt_stand_in(dir: &Path) -> PathBuf {
     let kept: Vec<(String, safetensors::tensor::TensorView)> = tensors
         .tensors()
         .into_iter()
-        .filter(|(name, _)| ["aggregator.", "camera_head.", "depth_head."].iter().any(|p| name.starts_with(p)))
+        .filter(|(name, _)| {
+            ["aggregator.", "camera_head.", "depth_head.", "point_head."].iter().any(|p| name.starts_with(p))
+        })
         .collect();
     assert!(kept.len() > 50 && kept.len() < tensors.len(), "{} of {} tensors kept", kept.len(), tensors.len());
     let path = dir.join("vggt-stand-in.safetensors");
