@@ -24,16 +24,24 @@ pub struct Args {
     /// The export variant to write: waymo, waymo-storm, nuscenes or argoverse2.
     #[arg(long, default_value_t = dggt_data::ExportVariant::Waymo)]
     layout: dggt_data::ExportVariant,
+    /// Also write ray-cast lidar sweeps (`lidar/{t}.bin`, about 0.6 MB a frame).
+    #[arg(long)]
+    lidar: bool,
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let Args { out, seed, frames, cameras, width, height, layout } = args;
+    let Args { out, seed, frames, cameras, width, height, layout, lidar } = args;
     let is_non_empty = out.read_dir().map(|mut entries| entries.next().is_some()).unwrap_or(false);
     anyhow::ensure!(!is_non_empty, "{} is not empty; choose a new folder", out.display());
     let config = dggt_synth::SynthConfig { seed, frames, cameras, width, height };
     let started = std::time::Instant::now();
-    let summary = dggt_synth::synthesize(&config, &out, layout)
-        .with_context(|| format!("writing the synthetic scene to {}", out.display()))?;
+    let summary = dggt_synth::synthesize(
+        &config,
+        &out,
+        layout,
+        if lidar { dggt_synth::Sweeps::Write } else { dggt_synth::Sweeps::Skip },
+    )
+    .with_context(|| format!("writing the synthetic scene to {}", out.display()))?;
     println!(
         "wrote {} images ({} frames x {} cameras at {width}x{height}) and {} instances ({} moving) to {} ({layout} layout) in {:.1} s",
         summary.images,

@@ -10,7 +10,7 @@
 //! | `extrinsics/{t:03}_{cam}.txt` | nuScenes: 4x4 camera -> world in OpenCV axes, per frame |
 //! | `ego_pose/{t:03}.txt` | all but nuScenes: 4x4 ego -> world; frame 0 is the identity (the world is the first ego frame: x along the road, z up) |
 //! | `lidar_pose/{t:03}.txt` | nuScenes: 4x4 lidar -> world, the lidar's axes being the ego's turned a quarter right (x right, y forward, z up) |
-//! | `lidar/{t:03}.bin` | the sweep of [`crate::lidar`] in the variant's rows ([`dggt_data::lidar::LidarFormat`]): ego frame, or the lidar frame for nuScenes |
+//! | `lidar/{t:03}.bin` | with [`Sweeps::Write`]: the sweep of [`crate::lidar`] in the variant's rows ([`dggt_data::lidar::LidarFormat`]): ego frame, or the lidar frame for nuScenes |
 //! | `timestamps.txt` | `frame seconds` per line (10 Hz) |
 //! | `sky_masks/{t:03}_{cam}.png` | 255 where the pixel-centre ray hits nothing |
 //! | `dynamic_masks/all/…png`, `dynamic_masks/vehicle/…png` | 255 where the pixel-centre ray crosses the 3D box of a car moving faster than 1 m/s, ignoring occlusion (the projected-box mask); every mover is a vehicle, so both are equal. The STORM variant writes this mask once, flat, as `dynamic_masks/{t:03}_{cam}.png` |
@@ -67,10 +67,22 @@ pub struct SynthSummary {
     pub sky_pixels: u64,
 }
 
+/// Whether an export gets the lidar sweeps of [`crate::lidar`] (`lidar/{t}.bin`, about 0.6 MB a frame).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Sweeps {
+    Write,
+    Skip,
+}
+
 /// Generates the scene of `config` and writes it to `out_dir` in `variant`.
-pub fn synthesize(config: &SynthConfig, out_dir: &Path, variant: ExportVariant) -> Result<SynthSummary> {
+pub fn synthesize(
+    config: &SynthConfig,
+    out_dir: &Path,
+    variant: ExportVariant,
+    sweeps: Sweeps,
+) -> Result<SynthSummary> {
     let scene = generate(config)?;
-    write_export(&scene, out_dir, variant)
+    write_export(&scene, out_dir, variant, sweeps)
 }
 
 /// A JSON object whose keys keep the given order.
@@ -240,7 +252,12 @@ fn write_sweeps(scene: &SynthScene, layout: &ExportLayout, variant: ExportVarian
 }
 
 /// Renders every view of `scene` and writes the whole export to `out_dir` (created if needed) in `variant`.
-pub fn write_export(scene: &SynthScene, out_dir: &Path, variant: ExportVariant) -> Result<SynthSummary> {
+pub fn write_export(
+    scene: &SynthScene,
+    out_dir: &Path,
+    variant: ExportVariant,
+    sweeps: Sweeps,
+) -> Result<SynthSummary> {
     let config = scene.config();
     let layout = ExportLayout::new(out_dir);
     let views: Vec<(usize, usize)> =
@@ -250,7 +267,9 @@ pub fn write_export(scene: &SynthScene, out_dir: &Path, variant: ExportVariant) 
         .map(|&(frame, camera)| write_view(scene, &layout, variant, frame, camera))
         .collect::<Result<Vec<_>>>()?;
     write_geometry(scene, &layout, variant)?;
-    write_sweeps(scene, &layout, variant)?;
+    if sweeps == Sweeps::Write {
+        write_sweeps(scene, &layout, variant)?;
+    }
 
     let mut present: Vec<BTreeSet<ObjectId>> = vec![BTreeSet::new(); config.frames];
     for record in &records {

@@ -16,7 +16,7 @@ fn small(seed: u64, frames: usize) -> SynthConfig {
 fn export(config: &SynthConfig) -> (tempfile::TempDir, SynthScene, ExportLayout) {
     let dir = tempfile::tempdir().unwrap();
     let scene = generate(config).unwrap();
-    write_export(&scene, dir.path(), ExportVariant::Waymo).unwrap();
+    write_export(&scene, dir.path(), ExportVariant::Waymo, dggt_synth::Sweeps::Skip).unwrap();
     let layout = ExportLayout::new(dir.path());
     (dir, scene, layout)
 }
@@ -75,14 +75,14 @@ fn time(frame: usize) -> f64 {
 fn same_seed_gives_identical_files_and_another_seed_different_images() {
     let config = small(7, 3);
     let (a, b, c) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
-    let summary = synthesize(&config, a.path(), ExportVariant::Waymo).unwrap();
-    synthesize(&config, b.path(), ExportVariant::Waymo).unwrap();
-    synthesize(&SynthConfig { seed: 8, ..config }, c.path(), ExportVariant::Waymo).unwrap();
+    let summary = synthesize(&config, a.path(), ExportVariant::Waymo, dggt_synth::Sweeps::Skip).unwrap();
+    synthesize(&config, b.path(), ExportVariant::Waymo, dggt_synth::Sweeps::Skip).unwrap();
+    synthesize(&SynthConfig { seed: 8, ..config }, c.path(), ExportVariant::Waymo, dggt_synth::Sweeps::Skip).unwrap();
     let (files_a, files_b, files_c) = (all_files(a.path()), all_files(b.path()), all_files(c.path()));
     let views = config.frames * config.cameras;
-    // Per view: image, sky, 4 dynamic masks, depth-flow; per camera: 2 calibration files; per frame: ego pose
-    // and lidar sweep; plus the two instance files, timestamps.txt and synth.json.
-    assert_eq!(files_a.len(), views * 7 + config.cameras * 2 + config.frames * 2 + 4);
+    // Per view: image, sky, 4 dynamic masks, depth-flow; per camera: 2 calibration files; per frame: ego pose;
+    // plus the two instance files, timestamps.txt and synth.json.
+    assert_eq!(files_a.len(), views * 7 + config.cameras * 2 + config.frames + 4);
     assert_eq!(summary.images, views);
     assert_eq!(files_a.keys().collect::<Vec<_>>(), files_b.keys().collect::<Vec<_>>());
     for (path, bytes) in &files_a {
@@ -405,7 +405,10 @@ fn invalid_configurations_are_errors() {
         assert!(matches!(generate(&config), Err(SynthError::InvalidConfig(_))), "{config:?}");
         let dir = tempfile::tempdir().unwrap();
         let out = dir.path().join("scene");
-        assert!(matches!(synthesize(&config, &out, ExportVariant::Waymo), Err(SynthError::InvalidConfig(_))));
+        assert!(matches!(
+            synthesize(&config, &out, ExportVariant::Waymo, dggt_synth::Sweeps::Skip),
+            Err(SynthError::InvalidConfig(_))
+        ));
         assert!(!out.exists(), "nothing is written for an invalid configuration");
     }
     let scene = generate(&valid).unwrap();

@@ -20,7 +20,7 @@ fn write_all() -> (tempfile::TempDir, Vec<(ExportVariant, Scene)>) {
         .into_iter()
         .map(|variant| {
             let root = dir.path().join(variant.name());
-            write_export(&scene, &root, variant).unwrap();
+            write_export(&scene, &root, variant, dggt_synth::Sweeps::Write).unwrap();
             (variant, read_export(&root, &ExportOptions::default()).unwrap())
         })
         .collect();

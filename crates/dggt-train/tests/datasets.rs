@@ -19,7 +19,7 @@ fn repo() -> PathBuf {
 fn scenes(root: &Path, variant: ExportVariant, seeds: std::ops::Range<u64>) {
     for (i, seed) in seeds.enumerate() {
         let config = dggt_synth::SynthConfig { seed, frames: 10, cameras: 1, width: 64, height: 48 };
-        dggt_synth::synthesize(&config, &root.join(format!("{i:03}")), variant).unwrap();
+        dggt_synth::synthesize(&config, &root.join(format!("{i:03}")), variant, dggt_synth::Sweeps::Skip).unwrap();
     }
 }
 

@@ -162,7 +162,7 @@ fn training_on_varied_synthetic_scenes_stays_finite() {
         let dir = tempfile::tempdir().unwrap();
         let scene = dir.path().join("scene");
         let synth = dggt_synth::SynthConfig { seed, frames: 10, cameras: 1, width: 96, height: 64 };
-        dggt_synth::synthesize(&synth, &scene, dggt_data::ExportVariant::Waymo).unwrap();
+        dggt_synth::synthesize(&synth, &scene, dggt_data::ExportVariant::Waymo, dggt_synth::Sweeps::Skip).unwrap();
         let mut config = small_config(&dir.path().join("run"), 20);
         config.data.scene = scene;
         config.data.frames = None;
