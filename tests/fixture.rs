@@ -150,6 +150,7 @@ fn reproject_static_points(scene: &Scene, camera: usize, a: usize, b: usize, k: 
     let size = scene.cameras[camera].size;
     let depth_a = DepthFlowMap::read(scene.view(a, camera).files.depth_flow.as_ref().unwrap(), size).unwrap();
     let depth_b = DepthFlowMap::read(scene.view(b, camera).files.depth_flow.as_ref().unwrap(), size).unwrap();
+    let [flow_a, flow_b] = [&depth_a, &depth_b].map(|map| map.flow.as_ref().expect("depth_flows_4 has flow"));
     let world_from_a = scene.view(a, camera).world_from_camera;
     let b_from_world: Rigid<dggt_geom::Camera, World> = scene.view(b, camera).world_from_camera.inverse();
     let (w, h) = (depth_a.size.width as usize, depth_a.size.height as usize);
@@ -158,7 +159,7 @@ fn reproject_static_points(scene: &Scene, camera: usize, a: usize, b: usize, k: 
         for col in 0..w {
             let i = row * w + col;
             let d = depth_a.depth[i] as f64;
-            if d <= 0.0 || d > 40.0 || depth_a.flow[i] != [0.0; 3] {
+            if d <= 0.0 || d > 40.0 || flow_a[i] != [0.0; 3] {
                 continue;
             }
             let centre = DVec2::new(col as f64 + 0.5, row as f64 + 0.5);
@@ -172,7 +173,7 @@ fn reproject_static_points(scene: &Scene, camera: usize, a: usize, b: usize, k: 
             }
             let (c0, r0) = (c0 as usize, r0 as usize);
             let around = [r0 * w + c0, r0 * w + c0 + 1, (r0 + 1) * w + c0, (r0 + 1) * w + c0 + 1];
-            if around.iter().any(|&j| depth_b.depth[j] <= 0.0 || depth_b.flow[j] != [0.0; 3]) {
+            if around.iter().any(|&j| depth_b.depth[j] <= 0.0 || flow_b[j] != [0.0; 3]) {
                 continue;
             }
             result.candidates += 1;

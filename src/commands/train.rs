@@ -82,10 +82,10 @@ pub fn run(args: Args) -> Result<()> {
         _ => println!("; no full training step in this run (pose warm-up only, or nothing left to run)"),
     }
     if let Some(v) = &summary.validation {
-        println!("validation: PSNR {:.2} dB, SSIM {:.4} over {} target views", v.psnr, v.ssim, v.views.len());
+        println!("validation: {} over {} target views", v.scores_line(), v.views.len());
         if v.scenes.len() > 1 {
             for scene in &v.scenes {
-                println!("  {:<32} PSNR {:.2} dB, SSIM {:.4}", scene.scene, scene.psnr, scene.ssim);
+                println!("  {:<32} {}", scene.scene, scene.scores_line());
             }
         }
     }

@@ -1,36 +1,57 @@
-//! Quarter-resolution depth and scene-flow maps (`depth_flows_4/{t}_{cam}.npy`).
+//! Quarter-resolution depth (and scene-flow) maps of a view: STORM's `depth_flows_4/{t}_{cam}.npy`, or the
+//! frame's lidar sweep projected into the camera when the export has no such maps.
 //!
-//! Shape `(H/4, W/4, 4)` float32: channel 0 is z-depth in metres (0 = no measurement), channels 1-3 the scene
-//! flow of that surface point. Cell `(row, col)` covers the full-resolution pixels `4 row .. 4 row + 4` and
-//! `4 col .. 4 col + 4`, so its centre is at continuous coordinates `(4 col + 2, 4 row + 2)`.
+//! A `depth_flows_4` file has shape `(H/4, W/4, 4)` float32: channel 0 is z-depth in metres (0 = no
+//! measurement), channels 1-3 the scene flow of that surface point. Cell `(row, col)` covers the full-resolution
+//! pixels `4 row .. 4 row + 4` and `4 col .. 4 col + 4`, so its centre is at continuous coordinates
+//! `(4 col + 2, 4 row + 2)`. A lidar map uses the same grid (a return lands in the cell of the pixel it projects
+//! into; the nearest return of a cell wins) and has no flow: the exports' lidar flow columns are not in the
+//! camera-relative units the motion supervision needs.
 
 use std::path::Path;
 
-use dggt_geom::ImageSize;
+use dggt_geom::glam::DVec3;
+use dggt_geom::{CameraFromWorld, ImageSize, PinholeIntrinsics};
 
 use crate::error::{DataError, Result};
+use crate::lidar::project_to_depth;
 use crate::npy::read_npy_f32;
+use crate::scene::Scene;
 
 /// Downsampling factor of the maps.
 pub const DEPTH_FLOW_STRIDE: u32 = 4;
 
-/// One depth-and-flow map.
+/// Where a scene's depth supervision comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DepthSource {
+    /// The export's `depth_flows_4` maps (depth and scene flow).
+    DepthFlows4,
+    /// The export's lidar sweeps projected into each view (depth only).
+    Lidar,
+}
+
+/// One quarter-resolution depth map, with scene flow where the source has it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DepthFlowMap {
     /// Size of the quarter-resolution grid.
     pub size: ImageSize,
     /// Row-major z-depth, 0 where unknown.
     pub depth: Vec<f32>,
-    /// Row-major scene flow.
-    pub flow: Vec<[f32; 3]>,
+    /// Row-major scene flow (the log world's axes, units per second); `None` for lidar maps.
+    pub flow: Option<Vec<[f32; 3]>>,
+}
+
+/// The quarter-resolution grid of a full-resolution image.
+fn grid_size(image_size: ImageSize) -> ImageSize {
+    ImageSize { width: image_size.width / DEPTH_FLOW_STRIDE, height: image_size.height / DEPTH_FLOW_STRIDE }
 }
 
 impl DepthFlowMap {
     /// Reads a map and checks it against the full-resolution image size it belongs to.
     pub fn read(path: &Path, image_size: ImageSize) -> Result<Self> {
         let array = read_npy_f32(path)?;
-        let expected =
-            [(image_size.height / DEPTH_FLOW_STRIDE) as usize, (image_size.width / DEPTH_FLOW_STRIDE) as usize, 4];
+        let grid = grid_size(image_size);
+        let expected = [grid.height as usize, grid.width as usize, 4];
         if array.shape != expected {
             return Err(DataError::malformed(
                 path,
@@ -43,6 +64,48 @@ impl DepthFlowMap {
         }
         let depth = array.data.chunks_exact(4).map(|c| c[0]).collect();
         let flow = array.data.chunks_exact(4).map(|c| [c[1], c[2], c[3]]).collect();
-        Ok(Self { size: ImageSize { width: expected[1] as u32, height: expected[0] as u32 }, depth, flow })
+        Ok(Self { size: grid, depth, flow: Some(flow) })
+    }
+
+    /// Bins world points seen by a camera into the grid of its `image_size` image: a point projecting to the
+    /// continuous pixel `(u, v)` lands in cell `(floor(v / 4), floor(u / 4))`; the nearest point of a cell wins.
+    pub fn from_points(
+        points_in_world: &[DVec3],
+        camera_from_world: &CameraFromWorld,
+        intrinsics: &PinholeIntrinsics,
+        image_size: ImageSize,
+    ) -> Self {
+        let scale = 1.0 / DEPTH_FLOW_STRIDE as f64;
+        let grid = grid_size(image_size);
+        let depth = project_to_depth(points_in_world, camera_from_world, &intrinsics.scaled(scale, scale), grid);
+        Self { size: grid, depth, flow: None }
+    }
+}
+
+impl Scene {
+    /// Where this scene's depth supervision comes from: `depth_flows_4` when every view has a map, else lidar
+    /// when every frame has a sweep; `None` when neither.
+    pub fn depth_source(&self) -> Option<DepthSource> {
+        if self.all_views_have(|v| v.depth_flow.is_some()) {
+            Some(DepthSource::DepthFlows4)
+        } else if !self.lidar.is_empty() && self.lidar.iter().all(Option::is_some) {
+            Some(DepthSource::Lidar)
+        } else {
+            None
+        }
+    }
+
+    /// The depth map of the view at frame position `frame` and camera position `camera`: its `depth_flows_4`
+    /// file when it has one, else the frame's lidar sweep projected into the camera; `None` when neither.
+    pub fn depth_map(&self, frame: usize, camera: usize) -> Result<Option<DepthFlowMap>> {
+        let view = self.view(frame, camera);
+        let size = self.cameras[camera].size;
+        if let Some(path) = &view.files.depth_flow {
+            return DepthFlowMap::read(path, size).map(Some);
+        }
+        let Some(Some(sweep)) = self.lidar.get(frame) else { return Ok(None) };
+        let points = sweep.read_in_world()?;
+        let camera_from_world = view.world_from_camera.inverse();
+        Ok(Some(DepthFlowMap::from_points(&points, &camera_from_world, &self.cameras[camera].intrinsics, size)))
     }
 }

@@ -40,7 +40,7 @@ pub mod text;
 pub mod variant;
 pub mod views;
 
-pub use depth_flow::DepthFlowMap;
+pub use depth_flow::{DepthFlowMap, DepthSource};
 pub use error::{DataError, Result};
 pub use export::{ExportOptions, read_export};
 pub use index::{DatasetIndex, DatasetSpec, HeldOut, IndexedScene, Split};

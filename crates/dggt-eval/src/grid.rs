@@ -1,4 +1,4 @@
-//! Where the export's quarter-resolution depth-and-flow cells (`depth_flows_4`) fall in the rendered view.
+//! Where the quarter-resolution depth cells of a view (`depth_flows_4`, or the lidar binned the same way) fall in the rendered view.
 //!
 //! Cell `(row, col)` of a map belongs to the full-resolution pixels `4 row .. 4 row + 4` x `4 col .. 4 col + 4`
 //! and is sampled at its centre, continuous coordinates `(4 col + 2, 4 row + 2)` of the original image. The

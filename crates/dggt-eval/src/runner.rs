@@ -22,7 +22,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use burn::tensor::{Device, Tensor, TensorData};
-use dggt_data::{DepthFlowMap, PlanarImage, Preprocess, Scene, images, open_scene, prepare_view};
+use dggt_data::{DepthFlowMap, DepthSource, PlanarImage, Preprocess, Scene, images, open_scene, prepare_view};
 use dggt_geom::ImageSize;
 use dggt_infer::{
     Architecture, GroundTruth, InputCameras, InputSet, LoadedNetwork, Scene4d, SceneOptions, ViewSlot, forward_chunked,
@@ -190,7 +190,7 @@ pub fn evaluate(options: &EvalOptions, device: &Device) -> Result<EvalReport, Ev
         checkpoint: network.info.clone(),
         device: format!("{device:?}"),
         motion_source: motion.label().into(),
-        depth_protocol: "rendered expected depth vs lidar depth (depth_flows_4), least-squares scale and shift, at \
+        depth_protocol: "rendered expected depth vs lidar depth (depth_flows_4, else the lidar sweep binned on the same grid), least-squares scale and shift, at \
                          cells with lidar depth > 0, no sky pixel and the centre (4 col + 2, 4 row + 2) inside the \
                          view, the render sampled bilinearly there"
             .into(),
@@ -320,7 +320,9 @@ fn collect_cells(
             if let Some(predicted) = mapping.sample(depth, row, col) {
                 cells.predicted_depth.push(predicted);
                 cells.true_depth.push(map.depth[i]);
-                cells.true_flow.push(map.flow[i]);
+                if let Some(flow) = &map.flow {
+                    cells.true_flow.push(flow[i]);
+                }
             }
         }
     }
@@ -381,7 +383,9 @@ fn evaluate_scene(root: &Path, scene: &Scene, context: &SceneContext<'_>) -> Res
     }
     let mut notes = Vec::new();
     if !seen.has_depth_flow {
-        notes.push("the export has no depth_flows_4: no D-RMSE or motion metrics".into());
+        notes.push("the export has neither depth_flows_4 nor lidar: no D-RMSE or motion metrics".into());
+    } else if scene.depth_source() == Some(DepthSource::Lidar) {
+        notes.push("depth from the projected lidar sweeps, which carry no scene flow: no motion metrics".into());
     } else if seen.largest_flow <= MOTION_GATE {
         for record in &mut records {
             record.motion = None;
@@ -505,11 +509,10 @@ fn score_view(
         motion: None,
     };
     let files = &scene.view(view.frame_position, view.camera_position).files;
-    match &files.depth_flow {
-        None => record.depth_note = Some("the export has no depth_flows_4 map for this view".into()),
-        Some(path) => {
+    match scene.depth_map(view.frame_position, view.camera_position)? {
+        None => record.depth_note = Some("the export has neither a depth_flows_4 map nor lidar for this view".into()),
+        Some(map) => {
             seen.has_depth_flow = true;
-            let map = DepthFlowMap::read(path, camera.size)?;
             let sky_mask = read_sky_mask(files.sky_mask.as_deref(), camera.size)?;
             let cells = collect_cells(&map, sky_mask.as_deref(), camera.size, &forward.mapping, depth);
             score_cells(&mut record, &cells, context.motion, seen)?;

@@ -189,3 +189,26 @@ fn bad_inputs_give_errors_naming_them() {
     let message = error_of(&options(vec![fixture()]));
     assert!(message.contains("no-checkpoint") && message.contains("does not exist"), "{message}");
 }
+
+#[test]
+fn exports_without_depth_maps_are_scored_against_their_projected_lidar() {
+    let data = tempfile::tempdir().unwrap();
+    let scene = data.path().join("nuscenes-000");
+    let synth = dggt_synth::SynthConfig { seed: 60, frames: 20, cameras: 3, width: 64, height: 48 };
+    dggt_synth::synthesize(&synth, &scene, dggt_data::ExportVariant::NuScenes, dggt_synth::Sweeps::Write).unwrap();
+    std::fs::remove_dir_all(scene.join("depth_flows_4")).unwrap();
+    let run_dir = tempfile::tempdir().unwrap();
+    tiny_checkpoint(run_dir.path());
+    let out = tempfile::tempdir().unwrap();
+    let mut options = EvalOptions::new(vec![scene], run_dir.path(), out.path());
+    options.width = Some(56);
+    let report = evaluate(&options, &Device::flex()).unwrap();
+    let scene = &report.scenes[0];
+    assert_eq!(scene.views.len(), 60);
+    for view in &scene.views {
+        let d_rmse = view.d_rmse.unwrap_or_else(|| panic!("no D-RMSE: {:?}", view.depth_note));
+        assert!(d_rmse.is_finite() && d_rmse >= 0.0 && view.depth_cells > 0, "{d_rmse} {}", view.depth_cells);
+        assert!(view.motion.is_none(), "lidar carries no scene flow");
+    }
+    assert!(scene.notes.iter().any(|n| n.contains("projected lidar")), "{:?}", scene.notes);
+}

@@ -28,7 +28,8 @@ fn read(path: &Path) -> Result<Vec<u8>, InferError> {
     fs::read(path).map_err(|e| InferError::checkpoint(path, e))
 }
 
-/// The checkpoint `latest` points to under `root` (`run/checkpoints`), if any.
+/// The checkpoint `latest` points to under `root` (`run/checkpoints`), if any. When that folder is incomplete
+/// (a run killed while rewriting it), the newest complete `step-*` folder instead.
 pub fn latest(root: &Path) -> Result<Option<PathBuf>, InferError> {
     let pointer = root.join(LATEST);
     if !pointer.exists() {
@@ -36,10 +37,28 @@ pub fn latest(root: &Path) -> Result<Option<PathBuf>, InferError> {
     }
     let name = fs::read_to_string(&pointer).map_err(|e| InferError::checkpoint(&pointer, e))?;
     let dir = root.join(name.trim());
-    if !dir.join(STATE_FILE).is_file() {
-        return Err(InferError::checkpoint(&dir, format!("`{LATEST}` points to a folder without {STATE_FILE}")));
+    if dir.join(STATE_FILE).is_file() {
+        return Ok(Some(dir));
     }
-    Ok(Some(dir))
+    match newest_complete(root)? {
+        Some(complete) => {
+            tracing::warn!(incomplete = %dir.display(), using = %complete.display(), "`latest` names an incomplete checkpoint");
+            Ok(Some(complete))
+        }
+        None => Err(InferError::checkpoint(&dir, format!("`{LATEST}` points to a folder without {STATE_FILE}"))),
+    }
+}
+
+/// The `step-*` folder under `root` with the highest step that holds a run state.
+fn newest_complete(root: &Path) -> Result<Option<PathBuf>, InferError> {
+    let entries = fs::read_dir(root).map_err(|e| InferError::checkpoint(root, e))?;
+    let mut complete: Vec<PathBuf> = entries
+        .filter_map(|entry| entry.ok().map(|e| e.path()))
+        .filter(|p| p.file_name().is_some_and(|n| n.to_string_lossy().starts_with("step-")))
+        .filter(|p| p.join(STATE_FILE).is_file())
+        .collect();
+    complete.sort();
+    Ok(complete.pop())
 }
 
 /// The network configuration stored in a checkpoint folder.

@@ -139,11 +139,11 @@ fn shape_mismatch_names_tensor_and_shapes() {
     let error = Dggt::from_checkpoint(&config, parity_dir().join("weights.safetensors"), &device)
         .expect_err("a mismatching network must not load");
     match &error {
-        ModelError::ShapeMismatch { name, expected, found } => {
-            assert!(name.starts_with("camera_head.pose_branch.fc"), "{name}");
-            assert_ne!(expected, found);
+        ModelError::ShapeMismatches(mismatches) => {
+            assert_eq!(mismatches.len(), 3, "fc1 weight and bias, fc2 weight: {mismatches:?}");
+            assert!(mismatches.iter().all(|m| m.starts_with("camera_head.pose_branch.fc")), "{mismatches:?}");
         }
-        other => panic!("expected a shape mismatch, got {other}"),
+        other => panic!("expected shape mismatches, got {other}"),
     }
     let message = error.to_string();
     println!("{message}");

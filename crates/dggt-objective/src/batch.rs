@@ -5,7 +5,7 @@
 //! the frame the camera head predicts in, so they can stand in for predicted cameras and supervise them.
 
 use burn::tensor::{Device, Tensor, TensorData};
-use dggt_data::{DepthFlowMap, LoadedSample, PreparedView, Preprocess, Scene};
+use dggt_data::{LoadedSample, PreparedView, Preprocess, Scene};
 use dggt_geom::{ImageSize, PosedCamera};
 use dggt_scene::Timeline;
 
@@ -31,8 +31,8 @@ pub struct ViewTruth {
     pub depth_flow: Option<DepthFlowSamples>,
 }
 
-/// The export's quarter-resolution depth-and-flow cells of one view, at the pixels of the preprocessed image
-/// their centres land on (cells without a depth, such as sky, are left out).
+/// The quarter-resolution depth cells of one view (the export's `depth_flows_4`, or its lidar), at the pixels
+/// of the preprocessed image their centres land on (cells without a depth, such as sky, are left out).
 #[derive(Debug, Clone, PartialEq)]
 pub struct DepthFlowSamples {
     /// Row-major indices into the preprocessed image.
@@ -40,9 +40,9 @@ pub struct DepthFlowSamples {
     /// z-depths in world units.
     pub depths: Vec<f32>,
     /// Scene flow in the view's camera axes (OpenCV) and world units per log frame, the motion head's units;
-    /// `None` when the scene has a single frame and so no frame interval.
+    /// `None` when the depth came from lidar (no flow) or the scene has a single frame and so no frame interval.
     pub velocities: Option<Vec<[f32; 3]>>,
-    /// Whether each cell moves faster than [`MOVING_SPEED`].
+    /// Whether each cell moves faster than [`MOVING_SPEED`] (empty without flow).
     pub moving: Vec<bool>,
 }
 
@@ -118,19 +118,18 @@ fn mask_tensor(mask: &[u8], size: ImageSize, device: &Device) -> Tensor<2> {
     Tensor::from_data(TensorData::new(values, [size.height as usize, size.width as usize]), device)
 }
 
-/// The export's quarter-resolution depth and flow of `view`, mapped to pixels of the preprocessed image: a
-/// cell's centre `(4 col + 2, 4 row + 2)` (continuous coordinates of the original image) lands at the scaled
-/// position less the rows cropped from the top. The flow (the log world's axes, world units per second) is
-/// rotated into the view's camera axes and scaled to one log frame. `None` when the export has no map for the
-/// view.
-fn depth_flow_samples(
+/// The view's quarter-resolution depth (and flow, where the export has it: see [`Scene::depth_map`]) mapped to
+/// pixels of the preprocessed image: a cell's centre `(4 col + 2, 4 row + 2)` (continuous coordinates of the
+/// original image) lands at the scaled position less the rows cropped from the top. The flow (the log world's
+/// axes, world units per second) is rotated into the view's camera axes and scaled to one log frame. `None` when
+/// the export has neither depth maps nor lidar for the view.
+pub fn depth_flow_samples(
     scene: &Scene,
     preprocess: &Preprocess,
     view: &PreparedView,
 ) -> Result<Option<DepthFlowSamples>, ObjectiveError> {
-    let Some(path) = &scene.view(view.frame, view.camera).files.depth_flow else { return Ok(None) };
+    let Some(map) = scene.depth_map(view.frame, view.camera)? else { return Ok(None) };
     let original = scene.cameras[view.camera].size;
-    let map = DepthFlowMap::read(path, original)?;
     let plan = preprocess.plan(original)?;
     let sx = plan.resized.width as f64 / original.width as f64;
     let sy = plan.resized.height as f64 / original.height as f64;
@@ -145,16 +144,20 @@ fn depth_flow_samples(
         let (row, col) = ((i / map.size.width as usize) as f64, (i % map.size.width as usize) as f64);
         let x = ((4.0 * col + 2.0) * sx).floor() as i64;
         let y = ((4.0 * row + 2.0) * sy - plan.crop_top as f64).floor() as i64;
-        if (0..w).contains(&x) && (0..h).contains(&y) {
-            pixels.push(y * w + x);
-            depths.push(d);
-            let [fx, fy, fz] = map.flow[i].map(f64::from);
+        if !((0..w).contains(&x) && (0..h).contains(&y)) {
+            continue;
+        }
+        pixels.push(y * w + x);
+        depths.push(d);
+        if let Some(flow) = &map.flow {
+            let [fx, fy, fz] = flow[i].map(f64::from);
             let velocity = camera_from_log * dggt_geom::glam::DVec3::new(fx, fy, fz) * seconds_per_frame.unwrap_or(0.0);
             velocities.push(velocity.to_array().map(|v| v as f32));
-            moving.push(map.flow[i].iter().map(|v| v * v).sum::<f32>().sqrt() > MOVING_SPEED);
+            moving.push(flow[i].iter().map(|v| v * v).sum::<f32>().sqrt() > MOVING_SPEED);
         }
     }
-    Ok(Some(DepthFlowSamples { pixels, depths, velocities: seconds_per_frame.map(|_| velocities), moving }))
+    let velocities = map.flow.as_ref().and(seconds_per_frame).map(|_| velocities);
+    Ok(Some(DepthFlowSamples { pixels, depths, velocities, moving }))
 }
 
 #[cfg(test)]

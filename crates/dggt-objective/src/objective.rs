@@ -71,6 +71,8 @@ pub struct RenderedView {
     pub is_target: bool,
     pub rgb: Tensor<3>,
     pub alpha: Tensor<2>,
+    /// `[H, W]` expected depth of the foreground (0 where empty).
+    pub depth: Tensor<2>,
     pub counts: AssemblyCounts,
 }
 
@@ -126,7 +128,15 @@ impl Objective {
             let target = TargetView { rig_camera: truth.rig_camera, time: truth.time, camera };
             let view = forward.scene.render(&target)?;
             let alpha = view.alpha.squeeze_dim::<2>(0);
-            views.push(RenderedView { truth_index: index, is_target, rgb: view.rgb, alpha, counts: view.counts });
+            let depth = view.depth.squeeze_dim::<2>(0);
+            views.push(RenderedView {
+                truth_index: index,
+                is_target,
+                rgb: view.rgb,
+                alpha,
+                depth,
+                counts: view.counts,
+            });
         }
         Ok(views)
     }

@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use dggt_data::lidar::project_to_depth;
-use dggt_data::{ExportOptions, ExportVariant, Scene, SceneSource, read_export};
+use dggt_data::{DepthSource, ExportOptions, ExportVariant, Scene, SceneSource, read_export};
 use dggt_geom::glam::DVec3;
 use dggt_synth::{SynthConfig, generate, write_export};
 
@@ -107,4 +107,42 @@ fn variants_are_told_apart_without_the_synthetic_description() {
     let options = ExportOptions { variant: Some(ExportVariant::Waymo), ..ExportOptions::default() };
     let message = read_export(&nuscenes, &options).unwrap_err().to_string();
     assert!(message.contains("ego_pose"), "{message}");
+}
+
+#[test]
+fn views_without_depth_maps_take_their_depth_from_the_lidar_at_quarter_resolution() {
+    let (dir, _) = write_all();
+    for variant in ExportVariant::ALL {
+        // Only STORM's export has depth_flows_4; the synthetic writer adds them to every variant.
+        let root = dir.path().join(variant.name());
+        if variant != ExportVariant::WaymoStorm {
+            remove(&root.join("depth_flows_4"));
+        }
+        let scene = read_export(&root, &ExportOptions::default()).unwrap();
+        let (frame, camera) = (2, 0);
+        let map = scene.depth_map(frame, camera).unwrap().expect("every variant has lidar or depth maps");
+        if variant == ExportVariant::WaymoStorm {
+            assert_eq!(scene.depth_source(), Some(DepthSource::DepthFlows4));
+            assert!(map.flow.is_some(), "{variant}: depth_flows_4 carries flow");
+            continue;
+        }
+        assert_eq!(scene.depth_source(), Some(DepthSource::Lidar), "{variant}");
+        assert!(map.flow.is_none(), "{variant}: lidar maps carry no flow");
+        // The quarter-resolution cell holds the nearest return of its 4 x 4 full-resolution pixels.
+        let view = scene.view(frame, camera);
+        let size = scene.cameras[camera].size;
+        let points = scene.lidar[frame].as_ref().unwrap().read_in_world().unwrap();
+        let full =
+            project_to_depth(&points, &view.world_from_camera.inverse(), &scene.cameras[camera].intrinsics, size);
+        assert_eq!((map.size.width, map.size.height), (size.width / 4, size.height / 4));
+        for (i, &cell) in map.depth.iter().enumerate() {
+            let (row, col) = (i / map.size.width as usize, i % map.size.width as usize);
+            let nearest = (0..16)
+                .map(|k| full[(4 * row + k / 4) * size.width as usize + 4 * col + k % 4])
+                .filter(|&d| d > 0.0)
+                .fold(0.0f32, |best, d| if best == 0.0 { d } else { best.min(d) });
+            assert_eq!(cell, nearest, "{variant}: cell ({row}, {col})");
+        }
+        assert!(map.depth.iter().filter(|&&d| d > 0.0).count() > 20, "{variant}: lidar cells");
+    }
 }

@@ -8,15 +8,17 @@
 //! ids included so the optimiser state stays attached), the AdamW state (`optimizer.bpk`), the network's
 //! configuration (`model.json`) and the run state (`state.json`: the next step, seed and counters). The
 //! learning-rate schedule is a function of the step and the sampler draws sample `k` from `(seed, k)`, so no
-//! random-generator state needs saving. Every file is written through a temporary file and a rename, and the
-//! `checkpoints/latest` pointer is replaced last: an interrupted write leaves the previous checkpoint current.
+//! random-generator state needs saving. The weights and moments are written tensor by tensor (peak host memory
+//! is one tensor, not the 16 GB of a full-size model and its AdamW state). Every file is written through a
+//! temporary file and a rename, `state.json` marks a folder complete and the `checkpoints/latest` pointer is
+//! replaced last: a run killed at any moment, in the middle of a checkpoint included, resumes from the last
+//! complete one.
 
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use burn::module::Module;
-use burn::optim::ModuleOptimizer;
-use burn::tensor::Bytes;
+use burn::module::{Module, ModuleVisitor, Param};
+use burn::tensor::Tensor;
 use dggt_data::io::write_atomically;
 pub use dggt_infer::checkpoint::{
     LATEST, MODEL_CONFIG_FILE, MODEL_FILE, STATE_FILE, latest, load_model, read_model_config,
@@ -25,6 +27,8 @@ use dggt_model::{Dggt, ModelConfig};
 use serde::{Deserialize, Serialize};
 
 use crate::error::TrainError;
+use crate::failpoint;
+use crate::optimizer::{Optimizer, deferred_tensor};
 
 /// The counters of a run.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -53,24 +57,58 @@ pub fn save(
     root: &Path,
     model: &Dggt,
     config: &ModelConfig,
-    optimizer: &ModuleOptimizer,
+    optimizer: &Optimizer,
     state: &RunState,
     keep: usize,
 ) -> Result<PathBuf, TrainError> {
     let name = format!("step-{:08}", state.step);
     let dir = root.join(&name);
+    fs::create_dir_all(&dir).map_err(|e| checkpoint_error(&dir, e))?;
     let write = |file: &str, bytes: &[u8]| -> Result<(), TrainError> {
         write_atomically(&dir.join(file), bytes).map_err(|e| checkpoint_error(&dir.join(file), e))
     };
-    let model_bytes = model.clone().into_record().into_bytes().map_err(|e| checkpoint_error(&dir, format!("{e:?}")))?;
-    write(MODEL_FILE, &model_bytes)?;
-    let optim_bytes = optimizer.into_bytes().map_err(|e| checkpoint_error(&dir, format!("{e:?}")))?;
-    write(OPTIMIZER_FILE, &optim_bytes)?;
+    // The run state goes last: a folder without it is incomplete and never resumed from.
+    let _ = fs::remove_file(dir.join(STATE_FILE));
+    save_model(&dir.join(MODEL_FILE), model)?;
+    failpoint::reached(failpoint::INSIDE_CHECKPOINT);
+    optimizer.save(&dir.join(OPTIMIZER_FILE))?;
     write(MODEL_CONFIG_FILE, serde_json::to_string_pretty(config).expect("configs serialise").as_bytes())?;
     write(STATE_FILE, serde_json::to_string_pretty(state).expect("states serialise").as_bytes())?;
     write_atomically(&root.join(LATEST), name.as_bytes()).map_err(|e| checkpoint_error(&root.join(LATEST), e))?;
     prune(root, keep.max(1))?;
     Ok(dir)
+}
+
+/// Writes the network's parameters as a burnpack file readable by [`load_model`], one tensor at a time: each
+/// is read back from its device only when the writer reaches it, so saving never holds a host copy of the
+/// whole network.
+pub fn save_model(path: &Path, model: &Dggt) -> Result<(), TrainError> {
+    let mut collect = DeferredParameters::default();
+    model.visit(&mut collect);
+    burn_pack::Writer::new(collect.tensors).write_to_file(path).map_err(|e| checkpoint_error(path, e))
+}
+
+/// Every parameter of a module as a deferred burnpack entry named by its module path, as burn's module records
+/// name them.
+#[derive(Default)]
+struct DeferredParameters {
+    path: Vec<String>,
+    tensors: Vec<burn_pack::Tensor>,
+}
+
+impl ModuleVisitor for DeferredParameters {
+    fn enter_module(&mut self, name: &str, _container_type: &str) {
+        self.path.push(name.to_string());
+    }
+
+    fn exit_module(&mut self, _name: &str, _container_type: &str) {
+        self.path.pop();
+    }
+
+    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+        let saved = param.transform_for_save().val();
+        self.tensors.push(deferred_tensor(self.path.join("."), &saved, &param.id));
+    }
 }
 
 fn prune(root: &Path, keep: usize) -> Result<(), TrainError> {
@@ -91,7 +129,6 @@ fn prune(root: &Path, keep: usize) -> Result<(), TrainError> {
 pub struct Loaded {
     pub model: Dggt,
     pub config: ModelConfig,
-    pub optimizer: ModuleOptimizer,
     pub state: RunState,
 }
 
@@ -99,15 +136,17 @@ fn read(path: &Path) -> Result<Vec<u8>, TrainError> {
     fs::read(path).map_err(|e| checkpoint_error(path, e))
 }
 
-/// Loads everything; `model` and `optimizer` are fresh ones built from the stored configuration.
-pub fn load(dir: &Path, model: Dggt, optimizer: ModuleOptimizer) -> Result<Loaded, TrainError> {
+/// Loads the network into `model` (built from the stored configuration) and the run state; the optimiser
+/// loads its own file ([`optimizer_file`]).
+pub fn load(dir: &Path, model: Dggt) -> Result<Loaded, TrainError> {
     let config = read_model_config(dir)?;
     let model = load_model(dir, model)?;
-    let path = dir.join(OPTIMIZER_FILE);
-    let optimizer = optimizer
-        .from_bytes(Bytes::from_bytes_vec(read(&path)?))
-        .map_err(|e| checkpoint_error(&path, format!("{e:?}")))?;
     let path = dir.join(STATE_FILE);
     let state: RunState = serde_json::from_slice(&read(&path)?).map_err(|e| checkpoint_error(&path, e))?;
-    Ok(Loaded { model, config, optimizer, state })
+    Ok(Loaded { model, config, state })
+}
+
+/// The AdamW state's file in a checkpoint folder (see [`Optimizer::load`]).
+pub fn optimizer_file(dir: &Path) -> PathBuf {
+    dir.join(OPTIMIZER_FILE)
 }

@@ -78,13 +78,18 @@ impl Default for DataSection {
 pub struct ValidationSection {
     /// Input frames of the validation pass (positions in the scene's frame list).
     pub inputs: Vec<usize>,
-    /// Target frames rendered and scored (PSNR, SSIM); interpolated between the inputs.
+    /// Target frames rendered and scored (PSNR, SSIM, LPIPS, D-RMSE); interpolated between the inputs.
     pub targets: Vec<usize>,
+    /// LPIPS-Alex's linear layers (the lpips package's `alex.pth`, or safetensors with its names); with
+    /// `lpips_backbone`, validation also scores LPIPS.
+    pub lpips_weights: Option<PathBuf>,
+    /// AlexNet `features` weights (torchvision or lpips names; may be the same file as `lpips_weights`).
+    pub lpips_backbone: Option<PathBuf>,
 }
 
 impl Default for ValidationSection {
     fn default() -> Self {
-        Self { inputs: vec![0, 5, 10, 15], targets: vec![2, 7, 12] }
+        Self { inputs: vec![0, 5, 10, 15], targets: vec![2, 7, 12], lpips_weights: None, lpips_backbone: None }
     }
 }
 
@@ -212,6 +217,8 @@ impl TrainConfig {
             &mut self.loss.lpips_weights,
             &mut self.loss.lpips_backbone,
             &mut self.loss.gram_backbone,
+            &mut self.data.validation.lpips_weights,
+            &mut self.data.validation.lpips_backbone,
         ]
         .into_iter()
         .flatten()
@@ -277,6 +284,13 @@ impl TrainConfig {
             return Err(setting(
                 "loss.lpips",
                 "> 0 needs loss.lpips_weights and loss.lpips_backbone (or set loss.lpips = 0)",
+            ));
+        }
+        let v = &self.data.validation;
+        if v.lpips_weights.is_some() != v.lpips_backbone.is_some() {
+            return Err(setting(
+                "data.validation.lpips_weights",
+                "LPIPS needs both data.validation.lpips_weights and data.validation.lpips_backbone",
             ));
         }
         if l.flow > 0.0 && !(self.model.motion_head || self.model.gaussian_velocity) {

@@ -11,7 +11,9 @@
 pub mod checkpoint;
 pub mod config;
 mod error;
+pub mod failpoint;
 pub mod optimizer;
+pub mod replicas;
 pub mod schedule;
 pub mod trainer;
 pub mod validate;

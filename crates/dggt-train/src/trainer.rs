@@ -1,8 +1,9 @@
 //! The training loop.
 //!
-//! Each optimiser step draws `accumulation` samples (sample `k = step · accumulation + j`, a pure function of
-//! the seed), computes each sample's loss and gradients, sums them (spread over the configured devices, one
-//! thread each), clips the global norm, and steps AdamW per parameter group at the scheduled rate. A sample with
+//! Each optimiser step draws `accumulation` samples for every device (sample `k = step · samples_per_step + j`,
+//! a pure function of the seed); every device computes its samples' losses and gradients on its own replica of
+//! the network (one thread each), the gradients are all-reduced ([`replicas`](crate::replicas)), and every
+//! replica clips the global norm and steps AdamW per parameter group at the scheduled rate. A sample with
 //! a non-finite loss or network output (a depth that overflowed, say), or a step with a non-finite gradient
 //! norm, is skipped with a warning and leaves the weights untouched. Metrics go to `metrics.jsonl`, checkpoints to `checkpoints/` (see [`checkpoint`]).
 //!
@@ -22,6 +23,7 @@ use dggt_data::{
     dataset_stream,
 };
 use dggt_infer::{StartingWeights, fresh_model};
+use dggt_losses::{Lpips, LpipsKind};
 use dggt_model::{Dggt, ModelConfig};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde_json::json;
@@ -32,8 +34,9 @@ use crate::checkpoint::{self, RunState};
 use crate::config::TrainConfig;
 use crate::error::TrainError;
 use crate::optimizer::{Optimizer, freeze};
+use crate::replicas::{Replica, Replicas};
 use crate::schedule::WarmupCosine;
-use crate::validate::{Validation, validate_scenes};
+use crate::validate::{Validation, Validator};
 
 /// How a run ended.
 #[derive(Debug, Clone, PartialEq)]
@@ -77,12 +80,12 @@ pub struct Trainer {
     /// Scored by [`Trainer::validate`]: the held-out scenes, or the first training scene.
     validation_scenes: Vec<IndexedScene>,
     objective: Objective,
-    /// Training devices with autodiff; the first holds the master weights.
-    devices: Vec<Device>,
+    /// The network and optimiser on every training device (with autodiff); the first is the master.
+    replicas: Replicas,
     /// The first device without autodiff (validation).
     plain_device: Device,
-    model: Dggt,
-    optimizer: Optimizer,
+    /// LPIPS-Alex for validation, when configured.
+    validation_lpips: Option<Lpips>,
     state: RunState,
 }
 
@@ -108,11 +111,10 @@ impl Trainer {
             Some(dir) => {
                 let model_config = checkpoint::read_model_config(&dir)?;
                 let blank = Dggt::new(&model_config, &device)?;
-                let seeded = Optimizer::new(&config.optim, &blank);
-                let loaded = checkpoint::load(&dir, blank, seeded.adamw().clone())?;
+                let loaded = checkpoint::load(&dir, blank)?;
                 let model = freeze(loaded.model, &config.optim.frozen)?;
                 let mut optimizer = Optimizer::new(&config.optim, &model);
-                optimizer.set_adamw(loaded.optimizer);
+                optimizer.load(&checkpoint::optimizer_file(&dir), &device)?;
                 tracing::info!(checkpoint = %dir.display(), step = loaded.state.step, "resuming");
                 (model, loaded.config, optimizer, loaded.state)
             }
@@ -138,22 +140,33 @@ impl Trainer {
                 detail: format!("the checkpoint's seed {} differs from run.seed {}", state.seed, config.run.seed),
             });
         }
+        let validation_lpips = validation_lpips(&config, &plain_device)?;
         Ok(Self {
             config,
             model_config,
             sampling,
             validation_scenes,
             objective,
-            devices: autodiff,
+            replicas: Replicas::new(model, optimizer, &autodiff),
+            validation_lpips,
             plain_device,
-            model,
-            optimizer,
             state,
         })
     }
 
+    /// The master replica's network.
     pub fn model(&self) -> &Dggt {
-        &self.model
+        &self.replicas.master().model
+    }
+
+    /// The network and optimiser on every training device.
+    pub fn replicas(&self) -> &Replicas {
+        &self.replicas
+    }
+
+    /// Samples drawn per optimiser step: `optim.accumulation` on every device.
+    pub fn samples_per_step(&self) -> u64 {
+        self.config.optim.accumulation as u64 * self.replicas.len() as u64
     }
 
     pub fn model_config(&self) -> &ModelConfig {
@@ -190,13 +203,18 @@ impl Trainer {
         if frames.inputs.is_empty() {
             return Ok(None);
         }
-        let model = self.model.clone().valid().fork(&self.plain_device);
-        let preprocess = &self.config.data.preprocess;
-        let scenes = &self.validation_scenes;
-        validate_scenes(&model, &self.objective, scenes, frames, preprocess, &self.plain_device, save_to)
+        let model = self.model().clone().valid().fork(&self.plain_device);
+        let validator = Validator {
+            model: &model,
+            objective: &self.objective,
+            lpips: self.validation_lpips.as_ref(),
+            preprocess: &self.config.data.preprocess,
+            device: &self.plain_device,
+        };
+        validator.scenes(&self.validation_scenes, frames, save_to)
     }
 
-    /// The sample drawn for sample index `index` (`step · accumulation + j`), decoded.
+    /// The sample drawn for sample index `index` (`step · samples_per_step + j`), decoded.
     pub fn sample(&self, index: u64) -> Result<LoadedSample, TrainError> {
         Ok(self.sampling.load(&self.config.data.preprocess, index)?)
     }
@@ -216,8 +234,8 @@ impl Trainer {
             writeln!(metrics, "{value}").map_err(|source| TrainError::Io { path: metrics_path.clone(), source })
         };
 
-        let accumulation = self.config.optim.accumulation as u64;
-        let first_sample = self.state.step * accumulation;
+        let samples_per_step = self.samples_per_step();
+        let first_sample = self.state.step * samples_per_step;
         let options_loader =
             LoaderOptions { workers: self.config.data.workers.max(1), capacity: 2 * self.config.data.workers.max(1) };
         let mut stream =
@@ -240,12 +258,11 @@ impl Trainer {
             elapsed_s: elapsed_before,
             checkpoint: None,
         };
-        let checkpoints = run.out_dir.join("checkpoints");
         let with_depth_flow = self.config.loss.depth > 0.0 || self.config.loss.flow > 0.0;
 
         while self.state.step < last_step {
             let step = self.state.step;
-            let samples = (0..accumulation).map(|_| next_sample(&mut stream)).collect::<Result<Vec<_>, _>>()?;
+            let samples = (0..samples_per_step).map(|_| next_sample(&mut stream)).collect::<Result<Vec<_>, _>>()?;
             self.count_bad_samples(&samples)?;
             let mut record = self.train_step(&samples, schedule.factor(step), with_depth_flow)?;
             record["scenes"] = json!(samples.iter().map(|s| s.scene.name.clone()).collect::<Vec<_>>());
@@ -275,15 +292,7 @@ impl Trainer {
                 || run.time_limit_s.is_some_and(|limit| started.elapsed().as_secs_f64() >= limit);
             // Saved before validating, so that a failing validation never loses the step's weights.
             if self.state.step.is_multiple_of(run.checkpoint_every) || done {
-                let dir = checkpoint::save(
-                    &checkpoints,
-                    &self.model,
-                    &self.model_config,
-                    self.optimizer.adamw(),
-                    &self.state,
-                    run.keep_checkpoints,
-                )?;
-                summary.checkpoint = Some(dir);
+                summary.checkpoint = Some(self.save_checkpoint()?);
             }
             if (run.validate_every > 0 && self.state.step.is_multiple_of(run.validate_every)) || done {
                 let renders = run.out_dir.join("validation").join(format!("step-{:08}", self.state.step));
@@ -295,8 +304,14 @@ impl Trainer {
                         "validation"
                     );
                     log(json!({ "kind": "validation", "step": self.state.step, "psnr": validation.psnr,
-                        "ssim": validation.ssim, "views": validation.views, "scenes": validation.scenes,
-                        "time_s": elapsed }))?;
+                        "ssim": validation.ssim, "lpips": validation.lpips, "d_rmse": validation.d_rmse,
+                        "views": validation.views, "scenes": validation.scenes, "time_s": elapsed }))?;
+                    bar.println(format!(
+                        "validation at step {} on {} scene(s): {}",
+                        self.state.step,
+                        validation.scenes.len(),
+                        validation.scores_line()
+                    ));
                     summary.validation = Some(validation);
                 }
             }
@@ -326,10 +341,8 @@ impl Trainer {
         match outcome {
             Some(outcome) => {
                 let update = Instant::now();
-                let model = self.model.clone();
-                let (model, report) = self.optimizer.step(model, outcome.grads, factor);
-                self.model = model;
-                match report {
+                let grads = self.replicas.all_reduce(outcome.grads);
+                match self.replicas.step(grads, factor) {
                     Some(report) => {
                         record["grad_norm"] = json!(report.grad_norm);
                         record["clipped"] = json!(report.clipped);
@@ -359,104 +372,118 @@ impl Trainer {
         Ok(record)
     }
 
-    /// Loss and summed gradients of the samples of one step, spread over the devices; `None` when a loss is
-    /// not finite.
+    /// Loss and gradients of the samples of one step: every device takes its own consecutive
+    /// `optim.accumulation` samples (on its own thread) and sums their gradients; `None` when a loss is not
+    /// finite. The gradients come back per device, in device order, for [`Replicas::all_reduce`].
     fn accumulate(&self, samples: &[LoadedSample], with_depth_flow: bool) -> Result<Option<StepOutcome>, TrainError> {
         let scale = 1.0 / samples.len() as f64;
-        let shares: Vec<Vec<&LoadedSample>> = (0..self.devices.len())
-            .map(|d| samples.iter().skip(d).step_by(self.devices.len()).collect())
-            .filter(|share: &Vec<&LoadedSample>| !share.is_empty())
-            .collect();
-        let master = &self.devices[0];
-        let results: Vec<Result<Vec<SampleResult>, TrainError>> = if shares.len() == 1 {
-            vec![self.run_share(&self.model, &shares[0], master, scale, with_depth_flow)]
+        let shares: Vec<&[LoadedSample]> = samples.chunks(samples.len().div_ceil(self.replicas.len())).collect();
+        let results: Vec<Result<DeviceShare, TrainError>> = if shares.len() == 1 {
+            vec![self.run_share(self.replicas.master(), shares[0], scale, with_depth_flow)]
         } else {
             std::thread::scope(|scope| {
-                let handles: Vec<_> = shares
+                let handles: Vec<_> = self
+                    .replicas
                     .iter()
-                    .zip(&self.devices)
-                    .map(|(share, device)| {
-                        let model = self.model.clone().fork(device);
-                        scope.spawn(move || self.run_share(&model, share, device, scale, with_depth_flow))
-                    })
+                    .zip(&shares)
+                    .map(|(replica, share)| scope.spawn(move || self.run_share(replica, share, scale, with_depth_flow)))
                     .collect();
                 handles.into_iter().map(|h| h.join().expect("a training thread panicked")).collect()
             })
         };
-        let mut accumulator = GradientsAccumulator::<Dggt>::new();
-        let (mut loss, mut target_psnr, mut kept) = (0.0, 0.0, 0);
-        let mut terms = std::collections::BTreeMap::<String, f64>::new();
-        let mut stages = std::collections::BTreeMap::<String, f64>::new();
+        let mut outcome = StepOutcome::default();
         for share in results {
-            for result in share? {
-                let Some(grads) = result.grads else { return Ok(None) };
-                accumulator.accumulate(&self.model, grads.to_device(master, &self.model));
-                loss += result.loss * scale;
-                target_psnr += result.target_psnr * scale;
-                kept += result.kept;
-                for (name, value) in result.terms {
-                    *terms.entry(name.name().to_string()).or_default() += value * scale;
-                }
-                for (name, value) in result.stages {
-                    *stages.entry(name.to_string()).or_default() += value;
-                }
+            let share = share?;
+            let Some(grads) = share.grads else { return Ok(None) };
+            outcome.grads.push(grads);
+            for result in share.samples {
+                outcome.add(&result, scale);
             }
         }
-        Ok(Some(StepOutcome { grads: accumulator.grads(), loss, terms, target_psnr, kept, stages }))
+        Ok(Some(outcome))
     }
 
+    /// Runs `share` on `replica`, summing its gradients on the replica's device.
     fn run_share(
         &self,
+        replica: &Replica,
+        share: &[LoadedSample],
+        scale: f64,
+        with_depth_flow: bool,
+    ) -> Result<DeviceShare, TrainError> {
+        let mut sum = GradientsAccumulator::<Dggt>::new();
+        let mut samples = Vec::with_capacity(share.len());
+        let mut finite = true;
+        for sample in share {
+            let (result, grads) = self.run_sample(&replica.model, sample, &replica.device, scale, with_depth_flow)?;
+            match grads {
+                Some(grads) => sum.accumulate(&replica.model, grads),
+                None => finite = false,
+            }
+            samples.push(result);
+        }
+        Ok(DeviceShare { grads: finite.then(|| sum.grads()), samples })
+    }
+
+    /// Loss and gradients of one sample; no gradients when the loss or the network's output is not finite.
+    fn run_sample(
+        &self,
         model: &Dggt,
-        share: &[&LoadedSample],
+        sample: &LoadedSample,
         device: &Device,
         scale: f64,
         with_depth_flow: bool,
-    ) -> Result<Vec<SampleResult>, TrainError> {
-        share
-            .iter()
-            .map(|sample| {
-                let started = Instant::now();
-                let preprocess = &self.config.data.preprocess;
-                let batch = StepBatch::new(sample, &sample.scene, preprocess, with_depth_flow, device)?;
-                let prepared = Instant::now();
-                let pose_warmup = sample.step < self.config.optim.pose_warmup_steps;
-                let loss = if pose_warmup {
-                    self.objective.pose_loss(model, &batch)
-                } else {
-                    self.objective.loss(model, &batch)
-                };
-                let loss = match loss {
-                    Err(error) if error.is_non_finite_output() => {
-                        tracing::warn!(step = sample.step, %error, "non-finite network output");
-                        return Ok(SampleResult::non_finite());
-                    }
-                    other => other?,
-                };
-                let evaluated = Instant::now();
-                let value = loss.terms.iter().fold(0.0, |sum, (term, v)| sum + v * term.weight(&self.config.loss));
-                let grads = if value.is_finite() {
-                    let gradients = loss.total.mul_scalar(scale).backward();
-                    Some(GradientsParams::from_grads(gradients, model))
-                } else {
-                    tracing::warn!(step = sample.step, ?loss.terms, "non-finite loss");
-                    None
-                };
-                let stages = [
-                    ("batch", (prepared - started).as_secs_f64()),
-                    ("forward_and_render", (evaluated - prepared).as_secs_f64()),
-                    ("backward", evaluated.elapsed().as_secs_f64()),
-                ];
-                Ok(SampleResult {
-                    grads,
-                    loss: value,
-                    terms: loss.terms,
-                    target_psnr: loss.target_psnr,
-                    kept: loss.counts.kept(),
-                    stages,
-                })
-            })
-            .collect()
+    ) -> Result<(SampleResult, Option<GradientsParams>), TrainError> {
+        let started = Instant::now();
+        let preprocess = &self.config.data.preprocess;
+        let batch = StepBatch::new(sample, &sample.scene, preprocess, with_depth_flow, device)?;
+        let prepared = Instant::now();
+        let pose_warmup = sample.step < self.config.optim.pose_warmup_steps;
+        let loss =
+            if pose_warmup { self.objective.pose_loss(model, &batch) } else { self.objective.loss(model, &batch) };
+        let loss = match loss {
+            Err(error) if error.is_non_finite_output() => {
+                tracing::warn!(step = sample.step, %error, "non-finite network output");
+                return Ok((SampleResult::non_finite(), None));
+            }
+            other => other?,
+        };
+        let evaluated = Instant::now();
+        let value = loss.terms.iter().fold(0.0, |sum, (term, v)| sum + v * term.weight(&self.config.loss));
+        let grads = if value.is_finite() {
+            let gradients = loss.total.mul_scalar(scale).backward();
+            Some(GradientsParams::from_grads(gradients, model))
+        } else {
+            tracing::warn!(step = sample.step, ?loss.terms, "non-finite loss");
+            None
+        };
+        let stages = [
+            ("batch", (prepared - started).as_secs_f64()),
+            ("forward_and_render", (evaluated - prepared).as_secs_f64()),
+            ("backward", evaluated.elapsed().as_secs_f64()),
+        ];
+        let result = SampleResult {
+            loss: value,
+            terms: loss.terms,
+            target_psnr: loss.target_psnr,
+            kept: loss.counts.kept(),
+            stages,
+        };
+        Ok((result, grads))
+    }
+
+    /// Writes a checkpoint of the master replica at the current step.
+    fn save_checkpoint(&self) -> Result<PathBuf, TrainError> {
+        let run = &self.config.run;
+        let master = self.replicas.master();
+        checkpoint::save(
+            &run.out_dir.join("checkpoints"),
+            &master.model,
+            &self.model_config,
+            &master.optimizer,
+            &self.state,
+            run.keep_checkpoints,
+        )
     }
 }
 
@@ -470,15 +497,7 @@ impl Trainer {
         if self.state.bad_samples <= limit {
             return Ok(());
         }
-        let run = &self.config.run;
-        checkpoint::save(
-            &run.out_dir.join("checkpoints"),
-            &self.model,
-            &self.model_config,
-            self.optimizer.adamw(),
-            &self.state,
-            run.keep_checkpoints,
-        )?;
+        self.save_checkpoint()?;
         Err(TrainError::Invalid {
             what: "data".into(),
             detail: format!(
@@ -487,6 +506,15 @@ impl Trainer {
                 failures.last().map_or("-", |f| f.as_str())
             ),
         })
+    }
+}
+
+/// LPIPS-Alex for validation when `data.validation` names its weights.
+fn validation_lpips(config: &TrainConfig, device: &Device) -> Result<Option<Lpips>, TrainError> {
+    let v = &config.data.validation;
+    match (&v.lpips_weights, &v.lpips_backbone) {
+        (Some(linear), Some(backbone)) => Ok(Some(Lpips::load(LpipsKind::Alex, backbone, linear, device)?)),
+        _ => Ok(None),
     }
 }
 
@@ -531,8 +559,8 @@ fn index_datasets(config: &TrainConfig) -> Result<(DatasetSampling, Vec<IndexedS
     Ok((sampling, validation_scenes))
 }
 
+/// What one sample of a step measured.
 struct SampleResult {
-    grads: Option<GradientsParams>,
     loss: f64,
     terms: std::collections::BTreeMap<LossTerm, f64>,
     target_psnr: f64,
@@ -544,7 +572,6 @@ impl SampleResult {
     /// A sample whose network outputs were not finite: no gradients, so the step is skipped.
     fn non_finite() -> Self {
         Self {
-            grads: None,
             loss: f64::NAN,
             terms: Default::default(),
             target_psnr: f64::NAN,
@@ -554,13 +581,36 @@ impl SampleResult {
     }
 }
 
+/// One device's part of a step: its summed gradients (`None` when a sample was not finite) and its samples.
+struct DeviceShare {
+    grads: Option<GradientsParams>,
+    samples: Vec<SampleResult>,
+}
+
+/// A step's gradients per device and its metrics averaged over the samples.
+#[derive(Default)]
 struct StepOutcome {
-    grads: GradientsParams,
+    grads: Vec<GradientsParams>,
     loss: f64,
     terms: std::collections::BTreeMap<String, f64>,
     target_psnr: f64,
     kept: usize,
     stages: std::collections::BTreeMap<String, f64>,
+}
+
+impl StepOutcome {
+    /// Adds one sample's metrics, weighted by `scale` (one over the samples of the step).
+    fn add(&mut self, result: &SampleResult, scale: f64) {
+        self.loss += result.loss * scale;
+        self.target_psnr += result.target_psnr * scale;
+        self.kept += result.kept;
+        for (name, value) in &result.terms {
+            *self.terms.entry(name.name().to_string()).or_default() += value * scale;
+        }
+        for (name, value) in result.stages {
+            *self.stages.entry(name.to_string()).or_default() += value;
+        }
+    }
 }
 
 fn next_sample(stream: &mut Prefetcher<LoadedSample>) -> Result<LoadedSample, TrainError> {

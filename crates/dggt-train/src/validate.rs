@@ -1,17 +1,21 @@
 //! Validation: on every validation scene, a fixed set of input frames, and target frames between them rendered
-//! and scored with PSNR and SSIM (skimage's definitions), without building a gradient graph; the scores are
-//! kept per scene and averaged over scenes. Optionally each target is written as a PNG: the render, the ground
-//! truth and their absolute difference (scaled by 4) side by side.
+//! without building a gradient graph and scored with PSNR and SSIM (skimage's definitions), LPIPS (AlexNet, the
+//! evaluation's `[-1, 1]` input, when weights are configured) and D-RMSE (the rendered expected depth against
+//! the export's depth cells, `depth_flows_4` or projected lidar, after the least-squares scale and shift, as
+//! `dggt eval` computes it). The scores are kept per view and per scene and averaged over scenes. Optionally
+//! each target is written as a PNG: the render, the ground truth and their absolute difference (scaled by 4)
+//! side by side.
 
 use std::path::Path;
 use std::sync::Arc;
 
 use burn::module::Module;
 use burn::tensor::{Device, Tensor};
-use dggt_data::{IndexedScene, Preprocess, Scene, TrainingSample, load_sample};
-use dggt_losses::image_metrics;
+use dggt_data::{IndexedScene, LoadedSample, Preprocess, Scene, TrainingSample, load_sample};
+use dggt_eval::{MetricError, aligned_depth_rmse};
+use dggt_losses::{Lpips, image_metrics};
 use dggt_model::Dggt;
-use dggt_objective::{Objective, StepBatch, ViewsToRender};
+use dggt_objective::{Objective, RenderedView, StepBatch, ViewsToRender, depth_flow_samples};
 use serde::Serialize;
 
 use crate::config::ValidationSection;
@@ -20,68 +24,176 @@ use crate::error::TrainError;
 /// Scores of one validation pass.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Validation {
-    /// Means over the scenes of the per-scene means.
+    /// Means over the scenes of the per-scene means (LPIPS and D-RMSE over the scenes that have them).
     pub psnr: f64,
     pub ssim: f64,
-    /// Per target view of every scene: `(frame, camera, psnr, ssim)`.
-    pub views: Vec<(usize, usize, f64, f64)>,
+    pub lpips: Option<f64>,
+    pub d_rmse: Option<f64>,
+    /// Per target view of every scene.
+    pub views: Vec<ViewScore>,
     /// Per scene.
     pub scenes: Vec<SceneScore>,
 }
 
-/// One validation scene's scores.
+/// One target view's scores.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ViewScore {
+    /// Position in the scene's frames and cameras.
+    pub frame: usize,
+    pub camera: usize,
+    pub psnr: f64,
+    pub ssim: f64,
+    /// `None` without LPIPS weights.
+    pub lpips: Option<f64>,
+    /// `None` when the view has no depth cell inside the render.
+    pub d_rmse: Option<f64>,
+}
+
+/// One validation scene's scores: means over its target views.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SceneScore {
     pub scene: String,
     pub psnr: f64,
     pub ssim: f64,
+    pub lpips: Option<f64>,
+    pub d_rmse: Option<f64>,
 }
 
-/// Scores `model` on every scene of `scenes` at the frames of `frames` (positions in each scene); a scene that
-/// fails to load is left out with a warning, and the pass fails only when every scene does. Renders go to
-/// `save_to`, in a folder per scene when there are several.
-pub fn validate_scenes(
-    model: &Dggt,
-    objective: &Objective,
-    scenes: &[IndexedScene],
-    frames: &ValidationSection,
-    preprocess: &Preprocess,
-    device: &Device,
-    save_to: Option<&Path>,
-) -> Result<Option<Validation>, TrainError> {
-    let needed = frames.inputs.iter().chain(&frames.targets).max().map_or(0, |f| f + 1);
-    let (mut scores, mut views, mut last_error) = (Vec::new(), Vec::new(), None);
-    for indexed in scenes {
-        let folder = save_to.map(|dir| match scenes.len() {
-            1 => dir.to_owned(),
-            _ => dir.join(indexed.name.replace('/', "_")),
-        });
-        let scored = indexed.open(0..needed).map_err(TrainError::from).and_then(|scene| {
-            let cameras: Vec<usize> = (0..scene.cameras.len()).collect();
-            let sample = validation_sample(&frames.inputs, &frames.targets, &cameras);
-            validate(model, objective, &Arc::new(scene), preprocess, &sample, device, folder.as_deref())
-        });
-        match scored {
-            Ok(validation) => {
-                scores.push(SceneScore { scene: indexed.name.clone(), psnr: validation.psnr, ssim: validation.ssim });
-                views.extend(validation.views);
-            }
-            Err(error) => {
-                tracing::warn!(scene = %indexed.name, %error, "validation scene skipped");
-                last_error = Some(error);
+impl Validation {
+    /// `PSNR 24.10 dB, SSIM 0.8123, LPIPS 0.1200, D-RMSE 1.2345`: the means it has.
+    pub fn scores_line(&self) -> String {
+        scores_line(self.psnr, self.ssim, self.lpips, self.d_rmse)
+    }
+}
+
+impl SceneScore {
+    /// The scene's means, as [`Validation::scores_line`] writes them.
+    pub fn scores_line(&self) -> String {
+        scores_line(self.psnr, self.ssim, self.lpips, self.d_rmse)
+    }
+}
+
+fn scores_line(psnr: f64, ssim: f64, lpips: Option<f64>, d_rmse: Option<f64>) -> String {
+    let optional = |name: &str, value: Option<f64>| value.map_or(String::new(), |v| format!(", {name} {v:.4}"));
+    format!("PSNR {psnr:.2} dB, SSIM {ssim:.4}{}{}", optional("LPIPS", lpips), optional("D-RMSE", d_rmse))
+}
+
+/// What a validation pass runs with.
+pub struct Validator<'a> {
+    /// The network, on `device`.
+    pub model: &'a Dggt,
+    pub objective: &'a Objective,
+    /// LPIPS (AlexNet) for the metric, when configured.
+    pub lpips: Option<&'a Lpips>,
+    pub preprocess: &'a Preprocess,
+    /// A device without autodiff.
+    pub device: &'a Device,
+}
+
+impl Validator<'_> {
+    /// Scores every scene of `scenes` at the frames of `frames` (positions in each scene); a scene that fails
+    /// to load is left out with a warning, and the pass fails only when every scene does. Renders go to
+    /// `save_to`, in a folder per scene when there are several.
+    pub fn scenes(
+        &self,
+        scenes: &[IndexedScene],
+        frames: &ValidationSection,
+        save_to: Option<&Path>,
+    ) -> Result<Option<Validation>, TrainError> {
+        let needed = frames.inputs.iter().chain(&frames.targets).max().map_or(0, |f| f + 1);
+        let (mut scores, mut views, mut last_error) = (Vec::new(), Vec::new(), None);
+        for indexed in scenes {
+            let folder = save_to.map(|dir| match scenes.len() {
+                1 => dir.to_owned(),
+                _ => dir.join(indexed.name.replace('/', "_")),
+            });
+            let scored = indexed.open(0..needed).map_err(TrainError::from).and_then(|scene| {
+                let cameras: Vec<usize> = (0..scene.cameras.len()).collect();
+                let sample = validation_sample(&frames.inputs, &frames.targets, &cameras);
+                self.scene(&Arc::new(scene), &sample, folder.as_deref())
+            });
+            match scored {
+                Ok(validation) => {
+                    scores.push(SceneScore { scene: indexed.name.clone(), ..scene_score(&validation.views) });
+                    views.extend(validation.views);
+                }
+                Err(error) => {
+                    tracing::warn!(scene = %indexed.name, %error, "validation scene skipped");
+                    last_error = Some(error);
+                }
             }
         }
+        if scores.is_empty() {
+            return last_error.map_or(Ok(None), Err);
+        }
+        Ok(Some(Validation {
+            psnr: mean(scores.iter().map(|s| Some(s.psnr))).unwrap_or(f64::NAN),
+            ssim: mean(scores.iter().map(|s| Some(s.ssim))).unwrap_or(f64::NAN),
+            lpips: mean(scores.iter().map(|s| s.lpips)),
+            d_rmse: mean(scores.iter().map(|s| s.d_rmse)),
+            views,
+            scenes: scores,
+        }))
     }
-    if scores.is_empty() {
-        return last_error.map_or(Ok(None), Err);
+
+    /// Renders the targets of `sample` and scores them; writes the comparison images into `save_to` when
+    /// given. The result's `scenes` is empty.
+    pub fn scene(
+        &self,
+        scene: &Arc<Scene>,
+        sample: &TrainingSample,
+        save_to: Option<&Path>,
+    ) -> Result<Validation, TrainError> {
+        let loaded = load_sample(scene, self.preprocess, 0, sample.clone())?;
+        let batch = StepBatch::new(&loaded, scene, self.preprocess, false, self.device)?;
+        let model = self.model.valid();
+        let (_, views) = self.objective.render(&model, &batch, ViewsToRender::Targets)?;
+        let rendered = Tensor::stack::<4>(views.iter().map(|v| v.rgb.clone()).collect(), 0);
+        let expected =
+            Tensor::stack::<4>(views.iter().map(|v| batch.targets[v.truth_index].image.clone()).collect(), 0);
+        let lpips = match self.lpips {
+            Some(lpips) => Some(host(lpips.eval(rendered.clone(), expected.clone())?.into_data())),
+            None => None,
+        };
+        let metrics = image_metrics(rendered, expected)?;
+        let mut scores = Vec::with_capacity(views.len());
+        for (i, (view, m)) in views.iter().zip(&metrics).enumerate() {
+            let truth = &batch.targets[view.truth_index];
+            scores.push(ViewScore {
+                frame: truth.frame,
+                camera: truth.rig_camera,
+                psnr: m.psnr,
+                ssim: m.ssim,
+                lpips: lpips.as_ref().map(|values| f64::from(values[i])),
+                d_rmse: self.depth_rmse(scene, &loaded, view)?,
+            });
+        }
+        if let Some(dir) = save_to {
+            save_comparisons(dir, &views, &batch)?;
+        }
+        let score = scene_score(&scores);
+        Ok(Validation {
+            psnr: score.psnr,
+            ssim: score.ssim,
+            lpips: score.lpips,
+            d_rmse: score.d_rmse,
+            views: scores,
+            scenes: Vec::new(),
+        })
     }
-    let count = scores.len() as f64;
-    Ok(Some(Validation {
-        psnr: scores.iter().map(|s| s.psnr).sum::<f64>() / count,
-        ssim: scores.iter().map(|s| s.ssim).sum::<f64>() / count,
-        views,
-        scenes: scores,
-    }))
+
+    /// D-RMSE of a rendered target against the export's depth cells of its view; `None` without cells.
+    fn depth_rmse(&self, scene: &Scene, loaded: &LoadedSample, view: &RenderedView) -> Result<Option<f64>, TrainError> {
+        let target = &loaded.targets[view.truth_index];
+        let Some(cells) = depth_flow_samples(scene, self.preprocess, target)? else { return Ok(None) };
+        let rendered = host(view.depth.clone().into_data());
+        let predicted: Vec<f32> = cells.pixels.iter().map(|&p| rendered[p as usize]).collect();
+        match aligned_depth_rmse(&predicted, &cells.depths) {
+            Ok(alignment) => Ok(Some(alignment.rmse)),
+            Err(MetricError::Empty { .. }) => Ok(None),
+            Err(error) => Err(TrainError::Invalid { what: "validation D-RMSE".into(), detail: error.to_string() }),
+        }
+    }
 }
 
 /// The validation sample: `inputs` and `targets` frames of every camera in `cameras`.
@@ -89,52 +201,44 @@ pub fn validation_sample(inputs: &[usize], targets: &[usize], cameras: &[usize])
     TrainingSample { input_frames: inputs.to_vec(), target_frames: targets.to_vec(), cameras: cameras.to_vec() }
 }
 
-/// Renders the targets of `sample` with `model` (on a device without autodiff) and scores them; writes the
-/// comparison images into `save_to` when given.
-pub fn validate(
-    model: &Dggt,
-    objective: &Objective,
-    scene: &Arc<Scene>,
-    preprocess: &Preprocess,
-    sample: &TrainingSample,
-    device: &Device,
-    save_to: Option<&Path>,
-) -> Result<Validation, TrainError> {
-    let loaded = load_sample(scene, preprocess, 0, sample.clone())?;
-    let batch = StepBatch::new(&loaded, scene, preprocess, false, device)?;
-    let model = model.valid();
-    let (_, views) = objective.render(&model, &batch, ViewsToRender::Targets)?;
-    let rendered = Tensor::stack::<4>(views.iter().map(|v| v.rgb.clone()).collect(), 0);
-    let expected = Tensor::stack::<4>(views.iter().map(|v| batch.targets[v.truth_index].image.clone()).collect(), 0);
-    let metrics = image_metrics(rendered, expected)?;
-    let per_view: Vec<(usize, usize, f64, f64)> = views
-        .iter()
-        .zip(&metrics)
-        .map(|(v, m)| {
-            let truth = &batch.targets[v.truth_index];
-            (truth.frame, truth.rig_camera, m.psnr, m.ssim)
-        })
-        .collect();
-    if let Some(dir) = save_to {
-        std::fs::create_dir_all(dir).map_err(|source| TrainError::Io { path: dir.into(), source })?;
-        for view in &views {
-            let truth = &batch.targets[view.truth_index];
-            let path = dir.join(format!("frame{:03}_camera{}.png", truth.frame, truth.rig_camera));
-            comparison(view.rgb.clone(), truth.image.clone())
-                .save(&path)
-                .map_err(|e| TrainError::Invalid { what: path.display().to_string(), detail: e.to_string() })?;
-        }
+/// The mean of the present values; `None` when none is.
+fn mean(values: impl Iterator<Item = Option<f64>>) -> Option<f64> {
+    let present: Vec<f64> = values.flatten().collect();
+    (!present.is_empty()).then(|| present.iter().sum::<f64>() / present.len() as f64)
+}
+
+/// Means over a scene's views (its name left empty).
+fn scene_score(views: &[ViewScore]) -> SceneScore {
+    SceneScore {
+        scene: String::new(),
+        psnr: mean(views.iter().map(|v| Some(v.psnr))).unwrap_or(f64::NAN),
+        ssim: mean(views.iter().map(|v| Some(v.ssim))).unwrap_or(f64::NAN),
+        lpips: mean(views.iter().map(|v| v.lpips)),
+        d_rmse: mean(views.iter().map(|v| v.d_rmse)),
     }
-    let count = metrics.len().max(1) as f64;
-    let (psnr, ssim) =
-        (metrics.iter().map(|m| m.psnr).sum::<f64>() / count, metrics.iter().map(|m| m.ssim).sum::<f64>() / count);
-    Ok(Validation { psnr, ssim, views: per_view, scenes: Vec::new() })
+}
+
+fn host(data: burn::tensor::TensorData) -> Vec<f32> {
+    data.convert::<f32>().try_into_vec::<f32>().unwrap_or_default()
+}
+
+/// Writes every target's render, truth and difference into `dir`.
+fn save_comparisons(dir: &Path, views: &[RenderedView], batch: &StepBatch) -> Result<(), TrainError> {
+    std::fs::create_dir_all(dir).map_err(|source| TrainError::Io { path: dir.into(), source })?;
+    for view in views {
+        let truth = &batch.targets[view.truth_index];
+        let path = dir.join(format!("frame{:03}_camera{}.png", truth.frame, truth.rig_camera));
+        comparison(view.rgb.clone(), truth.image.clone())
+            .save(&path)
+            .map_err(|e| TrainError::Invalid { what: path.display().to_string(), detail: e.to_string() })?;
+    }
+    Ok(())
 }
 
 /// `[H, W, 3]` render and truth in `[0, 1]` as one RGB image: render | truth | 4 |render - truth|.
 fn comparison(rendered: Tensor<3>, truth: Tensor<3>) -> image::RgbImage {
     let [h, w, _] = rendered.dims();
-    let pixels = |t: Tensor<3>| t.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default();
+    let pixels = |t: Tensor<3>| host(t.into_data());
     let (rendered, truth) = (pixels(rendered), pixels(truth));
     let byte = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
     image::RgbImage::from_fn(3 * w as u32, h as u32, |x, y| {

@@ -3,12 +3,15 @@
 //! corrupt is skipped sample by sample and counted, and past `data.max_bad_samples` the run stops; a starting
 //! checkpoint that does not cover the network is refused with the names of what it lacks.
 
+mod common;
+
+use common::weights;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
-use burn::module::{Module, ModuleVisitor, Param};
-use burn::tensor::{Device, Tensor};
+use burn::tensor::Device;
 use dggt_data::{DatasetSpec, ExportVariant, HeldOut};
+use dggt_objective::StepBatch;
 use dggt_train::{RunOptions, Start, TrainConfig, Trainer};
 
 fn repo() -> PathBuf {
@@ -21,6 +24,19 @@ fn scenes(root: &Path, variant: ExportVariant, seeds: std::ops::Range<u64>) {
         let config = dggt_synth::SynthConfig { seed, frames: 10, cameras: 1, width: 64, height: 48 };
         dggt_synth::synthesize(&config, &root.join(format!("{i:03}")), variant, dggt_synth::Sweeps::Skip).unwrap();
     }
+}
+
+/// The shared LPIPS-Alex weights: the linear layers and the AlexNet features.
+fn lpips_alex() -> (PathBuf, PathBuf) {
+    let parity = std::env::var_os("DGGT_PARITY_DIR").map_or_else(|| repo().join("../shared/parity"), PathBuf::from);
+    let files = (
+        parity.join("metrics/lpips_alex.safetensors"),
+        parity.join("metrics/alexnet_features_torchvision_names.safetensors"),
+    );
+    for file in [&files.0, &files.1] {
+        assert!(file.is_file(), "{} not found: set DGGT_PARITY_DIR to the shared parity folder", file.display());
+    }
+    files
 }
 
 fn dataset(root: PathBuf, held_out: &[&str]) -> DatasetSpec {
@@ -46,18 +62,6 @@ fn config(datasets: Vec<DatasetSpec>, out: &Path, steps: u64) -> TrainConfig {
     config
 }
 
-fn weights(trainer: &Trainer) -> Vec<f32> {
-    struct Collect(Vec<f32>);
-    impl ModuleVisitor for Collect {
-        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-            self.0.extend(param.val().into_data().convert::<f32>().try_into_vec::<f32>().unwrap());
-        }
-    }
-    let mut collect = Collect(Vec::new());
-    trainer.model().visit(&mut collect);
-    collect.0
-}
-
 fn records(out: &Path) -> Vec<serde_json::Value> {
     let text = std::fs::read_to_string(out.join("metrics.jsonl")).unwrap();
     text.lines().map(|line| serde_json::from_str(line).unwrap()).collect()
@@ -71,8 +75,11 @@ fn a_multiscene_run_trains_on_its_scenes_validates_on_held_out_ones_and_resumes_
     let datasets = vec![dataset(data.path().join("waymo"), &["002"]), dataset(data.path().join("nuscenes"), &["000"])];
 
     let straight = tempfile::tempdir().unwrap();
-    let mut trainer =
-        Trainer::new(config(datasets.clone(), straight.path(), 4), vec![Device::flex()], Start::Fresh).unwrap();
+    let mut scored = config(datasets.clone(), straight.path(), 4);
+    let (linear, alexnet) = lpips_alex();
+    scored.data.validation.lpips_weights = Some(linear);
+    scored.data.validation.lpips_backbone = Some(alexnet);
+    let mut trainer = Trainer::new(scored, vec![Device::flex()], Start::Fresh).unwrap();
     assert_eq!(trainer.index().scenes.len(), 6);
     let summary = trainer.run(RunOptions::default()).unwrap();
     let expected = weights(&trainer);
@@ -80,6 +87,13 @@ fn a_multiscene_run_trains_on_its_scenes_validates_on_held_out_ones_and_resumes_
     let validated: Vec<&str> = validation.scenes.iter().map(|s| s.scene.as_str()).collect();
     assert_eq!(validated, ["waymo/002", "nuscenes/000"]);
     assert!(validation.scenes.iter().all(|s| s.psnr.is_finite() && s.psnr > 5.0), "{validation:?}");
+    for scene in &validation.scenes {
+        assert!(scene.d_rmse.is_some_and(|d| d.is_finite() && d >= 0.0), "D-RMSE from depth_flows_4: {scene:?}");
+        assert!(scene.lpips.is_some_and(|l| (0.0..2.0).contains(&l)), "LPIPS: {scene:?}");
+    }
+    assert_eq!(validation.views.len(), 4, "two targets of one camera in each of two scenes");
+    let logged = records(straight.path()).into_iter().find(|r| r["kind"] == "validation").unwrap();
+    assert!(logged["lpips"].is_f64() && logged["d_rmse"].is_f64(), "{logged}");
     let drawn: BTreeSet<String> = records(straight.path())
         .iter()
         .filter(|r| r["kind"] == "train")
@@ -200,4 +214,29 @@ fn indexing_excludes_broken_scenes_by_name_and_the_cache_follows_the_folders() {
     std::fs::rename(data.path().join("more/000"), root.join("003")).unwrap();
     let grown = DatasetIndex::load_or_build(&specs, 1, &cache, &progress).unwrap();
     assert_eq!(grown.scenes.len(), 2, "a new scene folder invalidates the cache");
+}
+
+#[test]
+fn exports_without_depth_maps_supervise_depth_with_their_projected_lidar() {
+    let data = tempfile::tempdir().unwrap();
+    let scene = data.path().join("argoverse2/000");
+    let synth = dggt_synth::SynthConfig { seed: 50, frames: 10, cameras: 1, width: 64, height: 48 };
+    dggt_synth::synthesize(&synth, &scene, ExportVariant::Argoverse2, dggt_synth::Sweeps::Write).unwrap();
+    std::fs::remove_dir_all(scene.join("depth_flows_4")).unwrap();
+    let out = tempfile::tempdir().unwrap();
+    let trainer = Trainer::new(
+        config(vec![dataset(data.path().join("argoverse2"), &[])], out.path(), 1),
+        vec![Device::flex()],
+        Start::Fresh,
+    )
+    .unwrap();
+    let sample = trainer.sample(0).unwrap();
+    let preprocess = &trainer.config().data.preprocess;
+    let batch = StepBatch::new(&sample, &sample.scene, preprocess, true, &Device::flex().autodiff()).unwrap();
+    for view in &batch.inputs {
+        let depth = view.depth_flow.as_ref().expect("lidar depth for every input view");
+        assert!(depth.pixels.len() > 20, "{} lidar cells", depth.pixels.len());
+        assert!(depth.depths.iter().all(|d| d.is_finite() && *d > 0.0));
+        assert!(depth.velocities.is_none(), "lidar carries no flow");
+    }
 }
