@@ -43,6 +43,9 @@ pub struct RunState {
     /// Samples that failed to load and were replaced.
     #[serde(default)]
     pub bad_samples: u64,
+    /// Samples drawn per step (`optim.accumulation` x devices) when the checkpoint was written; 0 when unknown.
+    #[serde(default)]
+    pub samples_per_step: u64,
 }
 
 /// The optimiser's state in a checkpoint folder.

@@ -129,8 +129,14 @@ impl Trainer {
                 let model = fresh_model(&model_config, init, &device)?;
                 let model = freeze(model, &config.optim.frozen)?;
                 let optimizer = Optimizer::new(&config.optim, &model);
-                let state =
-                    RunState { step: 0, seed: config.run.seed, skipped_steps: 0, elapsed_s: 0.0, bad_samples: 0 };
+                let state = RunState {
+                    step: 0,
+                    seed: config.run.seed,
+                    skipped_steps: 0,
+                    elapsed_s: 0.0,
+                    bad_samples: 0,
+                    samples_per_step: 0,
+                };
                 (model, model_config, optimizer, state)
             }
         };
@@ -140,6 +146,17 @@ impl Trainer {
                 detail: format!("the checkpoint's seed {} differs from run.seed {}", state.seed, config.run.seed),
             });
         }
+        let mut state = state;
+        let samples_per_step = config.optim.accumulation as u64 * autodiff.len() as u64;
+        if state.samples_per_step != 0 && state.samples_per_step != samples_per_step {
+            tracing::warn!(
+                before = state.samples_per_step,
+                now = samples_per_step,
+                "resuming with another number of samples per step (optim.accumulation x devices): the run continues \
+                 on a different sample sequence than the uninterrupted run would"
+            );
+        }
+        state.samples_per_step = samples_per_step;
         let validation_lpips = validation_lpips(&config, &plain_device)?;
         Ok(Self {
             config,

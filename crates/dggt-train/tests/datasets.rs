@@ -140,7 +140,7 @@ fn a_scene_with_corrupt_images_is_skipped_sample_by_sample_and_counted() {
     let summary = trainer.run(RunOptions::default()).unwrap();
     assert_eq!(summary.steps_run, 3);
     assert_eq!(trainer.state().bad_samples, 1, "one epoch of three scenes meets the broken one once");
-    let last_step = records(out.path()).into_iter().filter(|r| r["kind"] == "train").last().unwrap();
+    let last_step = records(out.path()).into_iter().filter(|r| r["kind"] == "train").next_back().unwrap();
     assert_eq!(last_step["bad_samples"], 1);
 
     let strict = tempfile::tempdir().unwrap();

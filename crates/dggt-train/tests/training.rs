@@ -128,6 +128,7 @@ fn two_devices_each_with_its_own_sample_train_like_one_device_accumulating_both(
         config.optim.accumulation = accumulation;
         let mut trainer = Trainer::new(config, devices, Start::Fresh).unwrap();
         assert_eq!(trainer.samples_per_step(), 2);
+        assert_eq!(trainer.state().samples_per_step, 2, "recorded for the checkpoints");
         let summary = trainer.run(RunOptions::default()).unwrap();
         assert_eq!((summary.steps_run, summary.skipped_steps), (2, 0));
         let replicas: Vec<Vec<f32>> = trainer.replicas().iter().map(|r| parameters(&r.model)).collect();
