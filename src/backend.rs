@@ -49,6 +49,7 @@ impl DeviceChoice {
     }
 
     /// Device number `index` of this backend (GPUs; the CPU backends have one device).
+    #[cfg_attr(not(any(feature = "wgpu", feature = "cuda")), allow(unused_variables))]
     pub fn device_at(self, index: usize) -> Result<Device> {
         match self {
             #[cfg(feature = "flex")]

@@ -59,7 +59,7 @@ pub fn run(args: Args) -> Result<()> {
         let validation = trainer.validate()?;
         println!(
             "dry run: configuration, scene, network ({params} parameters), losses and optimiser built; validation {}",
-            validation.map_or("not configured".into(), |v| format!("PSNR {:.2} dB, SSIM {:.3}", v.psnr, v.ssim))
+            validation.map_or("not configured".into(), |v| v.scores_line())
         );
         return Ok(());
     }

@@ -83,7 +83,7 @@ pub fn load_network(
         }
         None => (None, None, String::new()),
     };
-    let preprocess = trained.as_ref().map(|t| t.preprocess().clone());
+    let preprocess = trained.as_ref().map(|t| *t.preprocess());
     let assembly = trained.as_ref().map_or(AssemblySettings::default(), |t| t.render.assembly());
     let mut warnings = Vec::new();
     if path.is_dir() {

@@ -542,7 +542,15 @@ fn index_datasets(config: &TrainConfig) -> Result<(DatasetSampling, Vec<IndexedS
     fs::create_dir_all(&config.run.out_dir)
         .map_err(|source| TrainError::Io { path: config.run.out_dir.clone(), source })?;
     let cache = config.run.out_dir.join("scene-index.json");
-    let mut index = DatasetIndex::load_or_build(&specs, config.run.seed, &cache, &|_, _| {})?;
+    // Drawn only when stderr is a terminal.
+    let template = "indexing scenes {elapsed_precise} [{bar:30}] {pos}/{len} ({per_sec}, {eta})";
+    let bar = styled_bar(template, ProgressDrawTarget::stderr(), None);
+    let show = |done: usize, total: usize| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    };
+    let mut index = DatasetIndex::load_or_build(&specs, config.run.seed, &cache, &show)?;
+    bar.finish_and_clear();
     index.exclude_shorter_than(config.sampler.window);
     if !index.excluded.is_empty() {
         tracing::warn!(excluded = index.excluded.len(), indexed = index.scenes.len(), "scenes excluded (see the log)");
@@ -660,15 +668,15 @@ fn truncate_metrics(path: &Path, step: u64) -> Result<(), TrainError> {
 }
 
 fn progress_bar(visible: bool, position: u64, total: u64) -> ProgressBar {
-    let bar = ProgressBar::with_draw_target(
-        Some(total),
-        if visible { ProgressDrawTarget::stderr() } else { ProgressDrawTarget::hidden() },
-    );
-    bar.set_style(
-        ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} ({eta}) {msg}")
-            .expect("a valid template")
-            .progress_chars("=> "),
-    );
+    let target = if visible { ProgressDrawTarget::stderr() } else { ProgressDrawTarget::hidden() };
+    let bar = styled_bar("{elapsed_precise} [{bar:30}] {pos}/{len} ({eta}) {msg}", target, Some(total));
     bar.set_position(position);
+    bar
+}
+
+/// A bar of the trainer's style drawn with `template`.
+fn styled_bar(template: &str, target: ProgressDrawTarget, total: Option<u64>) -> ProgressBar {
+    let bar = ProgressBar::with_draw_target(total, target);
+    bar.set_style(ProgressStyle::with_template(template).expect("a valid template").progress_chars("=> "));
     bar
 }
