@@ -183,7 +183,7 @@ impl Trainer {
 
     /// Samples drawn per optimiser step: `optim.accumulation` on every device.
     pub fn samples_per_step(&self) -> u64 {
-        self.config.optim.accumulation as u64 * self.replicas.len() as u64
+        self.state.samples_per_step
     }
 
     pub fn model_config(&self) -> &ModelConfig {
