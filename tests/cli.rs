@@ -67,3 +67,74 @@ fn devices_checks_the_default_cpu_backend() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stdout));
     assert!(String::from_utf8_lossy(&out.stdout).contains("Cpu: ok"));
 }
+
+/// The GPU comparison's suite, at the reduced size on the CPU: every workload yields a figure, the table is
+/// written, and `bench table` merges our records with a reference's and prints the ratio.
+#[test]
+fn bench_compute_runs_every_workload_at_reduced_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("compute");
+    let run = dggt(&[
+        "bench",
+        "compute",
+        "--scale",
+        "reduced",
+        "--device",
+        "cpu",
+        "--repeat",
+        "2",
+        "--warmup",
+        "0",
+        "--longest-budget-s",
+        "60",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let file: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("compute.json")).unwrap()).unwrap();
+    let records = file["records"].as_array().unwrap();
+    let keys: Vec<&str> = records.iter().map(|r| r["key"].as_str().unwrap()).collect();
+    for key in [
+        "forward/2/f32",
+        "forward/4/f32",
+        "train-step/2+4/f32",
+        "raster/20000x2/forward",
+        "raster/20000x2/forward+backward",
+    ] {
+        let record = records.iter().find(|r| r["key"] == key).unwrap_or_else(|| panic!("no {key} in {keys:?}"));
+        let ms = record["median_ms"].as_f64().unwrap_or_else(|| panic!("{key} has no time: {record}"));
+        assert!(ms.is_finite() && ms > 0.0, "{key}: {ms}");
+        assert_eq!(record["runs_ms"].as_array().unwrap().len(), 2, "{key}");
+    }
+    let longest = records.iter().find(|r| r["key"] == "longest/bf16").expect("a longest-sequence record");
+    // The CPU backend may not compute in bf16; then the record says why instead of a figure.
+    match longest["frames"].as_u64() {
+        Some(frames) => assert!((2..=8).contains(&frames), "{longest}"),
+        None => assert!(longest["error"].as_str().is_some_and(|e| e.contains("bf16")), "{longest}"),
+    }
+    assert!(std::fs::read_to_string(out.join("compute.md")).unwrap().contains("| `forward/2/f32` |"));
+
+    let reference = dir.path().join("reference.json");
+    let forward_2 = records.iter().find(|r| r["key"] == "forward/2/f32").unwrap();
+    let doubled = forward_2["median_ms"].as_f64().unwrap() * 2.0;
+    std::fs::write(
+        &reference,
+        serde_json::json!({"implementation": "reference", "device": "CPU", "records": [
+            {"key": "forward/2/f32", "impl": "release", "median_ms": doubled}
+        ]})
+        .to_string(),
+    )
+    .unwrap();
+    let table = dggt(&[
+        "bench",
+        "table",
+        "--ours",
+        out.join("compute.json").to_str().unwrap(),
+        "--reference",
+        reference.to_str().unwrap(),
+    ]);
+    assert!(table.status.success(), "{}", String::from_utf8_lossy(&table.stderr));
+    let text = String::from_utf8_lossy(&table.stdout);
+    assert!(text.contains("(release)") && text.contains("| 2.00x |"), "{text}");
+}

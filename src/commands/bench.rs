@@ -1,5 +1,6 @@
-//! `dggt bench`: the arguments, the sweep they describe, and the run that prints the table and writes
-//! `bench.csv`, `bench.png`, `bench.svg` and `bench-notes.txt`.
+//! `dggt bench`: the speed/accuracy sweep (the arguments, the sweep they describe, and the run that prints the
+//! table and writes `bench.csv`, `bench.png`, `bench.svg` and `bench-notes.txt`), or with `compute` the suite of
+//! [`super::bench_compute`].
 
 use std::path::PathBuf;
 
@@ -10,12 +11,42 @@ use dggt_bench::{
 };
 
 use crate::backend::DeviceList;
+use crate::commands::bench_compute;
+
+/// Benchmarks: without a suite, run time against error over the reconstruction's knobs on a scene; `compute`
+/// times the network, a training step and the rasteriser at the release's scale.
+#[derive(Debug, Clone, clap::Args)]
+#[command(args_conflicts_with_subcommands = true)]
+pub struct Args {
+    #[command(subcommand)]
+    suite: Option<Suite>,
+    #[command(flatten)]
+    sweep: Option<SweepArgs>,
+}
+
+#[derive(Debug, Clone, clap::Subcommand)]
+enum Suite {
+    /// The network, a training step and the rasteriser at the release's scale, beside the reference's figures.
+    Compute(bench_compute::Args),
+    /// The compute suite's table from record files (ours in parts, and the references').
+    Table(bench_compute::TableArgs),
+}
+
+/// Runs the suite the arguments name.
+pub fn run(args: Args) -> Result<()> {
+    match (args.suite, args.sweep) {
+        (Some(Suite::Compute(compute)), _) => bench_compute::run(compute),
+        (Some(Suite::Table(table)), _) => bench_compute::run_table(table),
+        (None, Some(sweep)) => run_sweep(sweep),
+        (None, None) => anyhow::bail!("dggt bench needs --scene and --out (the sweep), or a suite (`compute`)"),
+    }
+}
 
 /// Measure run time against error over the knobs that trade speed for accuracy: input width, input frames,
 /// culling threshold, precision, sky. A baseline, the exact render (culling off) and one row per other value
 /// of each knob (`--grid` adds every combination).
 #[derive(Debug, Clone, clap::Args)]
-pub struct Args {
+pub struct SweepArgs {
     /// A scene export (its images are the ground truth of the target frames).
     #[arg(long)]
     pub scene: PathBuf,
@@ -99,7 +130,7 @@ fn parse_sky(text: &str) -> Result<bool> {
     }
 }
 
-impl Args {
+impl SweepArgs {
     /// The options these arguments describe.
     pub fn options(&self) -> Result<BenchOptions> {
         let sweep = SweepSpec {
@@ -139,7 +170,7 @@ impl Args {
 }
 
 /// Runs the sweep, writes the outputs and prints the table, the notes and where the files are.
-pub fn run(args: Args) -> Result<()> {
+fn run_sweep(args: SweepArgs) -> Result<()> {
     let device = args.device.single()?;
     let options = args.options()?;
     let report = run_bench(&options, &device)?;

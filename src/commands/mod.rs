@@ -2,6 +2,7 @@
 //! and what it prints. The libraries know nothing of the command line.
 
 pub mod bench;
+pub mod bench_compute;
 pub mod devices;
 pub mod eval;
 pub mod inspect;

@@ -9,7 +9,11 @@
 //! `bench.svg` (error against total time with the Pareto front, [`pareto`]) and `bench-notes.txt`.
 //!
 //! There is no diffusion refiner in this project, so refinement is not a knob.
+//!
+//! [`compute`] is the other suite (`dggt bench compute`): the network, a training step and the rasteriser at
+//! the release's scale, with the reference implementations' figures beside ours.
 
+pub mod compute;
 mod error;
 pub mod frames;
 pub mod knobs;
