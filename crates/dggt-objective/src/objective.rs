@@ -152,7 +152,7 @@ impl Objective {
         let camera = model.camera_head.forward(last.clone());
         let encodings: Vec<Tensor<3>> = camera.encodings.iter().map(|e| e.clone().cast(FloatDType::F32)).collect();
         let loss = camera_loss(&encodings, batch)?;
-        let terms = BTreeMap::from([(LossTerm::Camera, scalar(&loss))]);
+        let terms = BTreeMap::from([(LossTerm::Camera, scalar(&loss)?)]);
         Ok(SampleLoss {
             total: loss.mul_scalar(self.weights.camera),
             terms,
@@ -178,27 +178,28 @@ impl Objective {
         let mut terms: BTreeMap<LossTerm, f64> = BTreeMap::new();
         let mut total = Tensor::<1>::zeros([1], &device);
         let mut add = |term: LossTerm, value: Tensor<1>, terms: &mut BTreeMap<LossTerm, f64>| {
-            terms.insert(term, scalar(&value));
+            terms.insert(term, scalar(&value)?);
             let weight = term.weight(w);
             if weight > 0.0 {
                 total = total.clone() + value.mul_scalar(weight);
             }
+            Ok::<(), ObjectiveError>(())
         };
 
         let rendered = Tensor::stack::<4>(views.iter().map(|v| v.rgb.clone()).collect(), 0);
         let expected = Tensor::stack::<4>(views.iter().map(|v| truth(v).image.clone()).collect(), 0);
-        add(LossTerm::RgbL2, l2(rendered.clone(), expected.clone())?, &mut terms);
+        add(LossTerm::RgbL2, l2(rendered.clone(), expected.clone())?, &mut terms)?;
         if let Some(lpips) = &self.lpips {
-            add(LossTerm::Lpips, lpips.train_style(rendered.clone(), expected.clone())?.mean(), &mut terms);
+            add(LossTerm::Lpips, lpips.train_style(rendered.clone(), expected.clone())?.mean(), &mut terms)?;
         }
         if let Some(gram) = &self.gram {
-            add(LossTerm::Gram, gram.forward(rendered.clone(), expected.clone())?.value.mean(), &mut terms);
+            add(LossTerm::Gram, gram.forward(rendered.clone(), expected.clone())?.value.mean(), &mut terms)?;
         }
         let with_sky: Vec<&RenderedView> = views.iter().filter(|v| truth(v).sky.is_some()).collect();
         if w.opacity_bce > 0.0 && !with_sky.is_empty() {
             let alpha = Tensor::stack::<3>(with_sky.iter().map(|v| v.alpha.clone()).collect(), 0);
             let sky = Tensor::stack::<3>(with_sky.iter().map(|v| truth(v).sky.clone().unwrap()).collect(), 0);
-            add(LossTerm::OpacityBce, opacity_loss(alpha, sky)?, &mut terms);
+            add(LossTerm::OpacityBce, opacity_loss(alpha, sky)?, &mut terms)?;
         }
         if w.dynamic_bce > 0.0
             && let Some(logits) = &forward.dynamic_logit
@@ -212,14 +213,14 @@ impl Objective {
                 );
                 let masks =
                     Tensor::stack::<3>(labelled.iter().map(|&i| batch.inputs[i].dynamic.clone().unwrap()).collect(), 0);
-                add(LossTerm::DynamicBce, bce_with_logits(frames.select(0, index), masks)?, &mut terms);
+                add(LossTerm::DynamicBce, bce_with_logits(frames.select(0, index), masks)?, &mut terms)?;
             }
         }
         if w.lifespan_l1 > 0.0 {
             let lifespan = forward.pixels().lifespan.clone();
             let statics = match &forward.pixels().dynamic_logit {
                 Some(logit) => {
-                    let values = host(logit.clone());
+                    let values = host(logit.clone())?;
                     let index: Vec<i64> = (0..values.len()).filter(|&i| values[i] < 0.0).map(|i| i as i64).collect();
                     let count = index.len();
                     lifespan.select(0, Tensor::<1, Int>::from_data(TensorData::new(index, [count]), &device))
@@ -227,22 +228,22 @@ impl Objective {
                 None => lifespan,
             };
             if statics.dims()[0] > 0 {
-                add(LossTerm::LifespanL1, lifespan_l1(statics)?, &mut terms);
+                add(LossTerm::LifespanL1, lifespan_l1(statics)?, &mut terms)?;
             }
         }
         if w.camera > 0.0 {
-            add(LossTerm::Camera, camera_loss(&forward.encodings, batch)?, &mut terms);
+            add(LossTerm::Camera, camera_loss(&forward.encodings, batch)?, &mut terms)?;
         }
         if w.depth > 0.0
             && let Some(loss) = depth_loss(&forward.depth, batch)?
         {
-            add(LossTerm::Depth, loss, &mut terms);
+            add(LossTerm::Depth, loss, &mut terms)?;
         }
         if w.flow > 0.0
             && let Some(velocity) = &forward.velocity
             && let Some(loss) = flow_loss(velocity, batch)?
         {
-            add(LossTerm::Flow, loss, &mut terms);
+            add(LossTerm::Flow, loss, &mut terms)?;
         }
 
         let mut psnrs = Vec::new();
@@ -254,7 +255,7 @@ impl Objective {
             counts.static_kept += view.counts.static_kept;
             counts.dynamic_kept += view.counts.dynamic_kept;
             if view.is_target {
-                psnrs.push(psnr(&host(view.rgb.clone()), &host(truth(view).image.clone()))?);
+                psnrs.push(psnr(&host(view.rgb.clone())?, &host(truth(view).image.clone())?)?);
             }
         }
         let target_psnr = if psnrs.is_empty() { f64::NAN } else { psnrs.iter().sum::<f64>() / psnrs.len() as f64 };
@@ -389,12 +390,18 @@ fn flow_loss(velocity: &Tensor<5>, batch: &StepBatch) -> Result<Option<Tensor<1>
     Ok(Some(((picked - truth).abs() * shares).sum()))
 }
 
-fn host<const D: usize>(tensor: Tensor<D>) -> Vec<f32> {
-    tensor.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default()
+/// The values of `tensor` on the host; a failure of the device (out of memory, a lost device) is an error
+/// here, where the computation is first waited for.
+fn host<const D: usize>(tensor: Tensor<D>) -> Result<Vec<f32>, ObjectiveError> {
+    let data = tensor.try_into_data().map_err(|error| ObjectiveError::Invalid {
+        what: "device".into(),
+        detail: format!("computing the loss failed: {error}"),
+    })?;
+    Ok(data.convert::<f32>().try_into_vec::<f32>().unwrap_or_default())
 }
 
-fn scalar(tensor: &Tensor<1>) -> f64 {
-    host(tensor.clone()).first().copied().map(f64::from).unwrap_or(f64::NAN)
+fn scalar(tensor: &Tensor<1>) -> Result<f64, ObjectiveError> {
+    Ok(host(tensor.clone())?.first().copied().map(f64::from).unwrap_or(f64::NAN))
 }
 
 #[cfg(test)]
@@ -446,7 +453,7 @@ mod tests {
         let loss = |velocity: [[f32; 3]; 4]| {
             let values: Vec<f32> = velocity.iter().flatten().copied().collect();
             let velocity = Tensor::<5>::from_data(TensorData::new(values, [1, 1, 2, 2, 3]), &device);
-            scalar(&flow_loss(&velocity, &batch).unwrap().expect("flow samples"))
+            scalar(&flow_loss(&velocity, &batch).unwrap().expect("flow samples")).unwrap()
         };
         assert!(loss([[0.6, 0.0, -0.3], [0.0; 3], [0.0; 3], [0.0; 3]]).abs() < 1e-7, "exact flow costs nothing");
         // Predicting no motion costs the moving cell's mean error, 0.3, undiluted by the still cells.

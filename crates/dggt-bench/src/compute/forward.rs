@@ -30,25 +30,10 @@ pub fn forward_records(
     device: &Device,
     keep: &mut impl FnMut(Record),
 ) -> Result<(), BenchError> {
-    let network = Network::new(spec, options.seed, device)?;
-    for &precision in &options.precisions {
-        let model = match network.in_precision(precision) {
-            Ok(model) => model,
-            Err(reason) => {
-                for &frames in &spec.forward_frames {
-                    keep(Record::failed(format!("forward/{frames}/{precision}"), &reason));
-                }
-                continue;
-            }
-        };
-        for &frames in &spec.forward_frames {
-            let images = network.images(frames);
-            let key = format!("forward/{frames}/{precision}");
-            let record = timed(key, options, device, || run_forward(&model, images.clone(), options.chunk_frames));
-            keep(record.with_note(format!("{HEADS_NOTE}; dense heads {} frames at a time", options.chunk_frames)));
-        }
-    }
-    Ok(())
+    let note = format!("{HEADS_NOTE}; dense heads {} frames at a time", options.chunk_frames);
+    per_size("forward", &note, options, spec, device, keep, |model, images| {
+        run_forward(model, images, options.chunk_frames)
+    })
 }
 
 /// `aggregator/{S}/{precision}`: the aggregator alone (the DINO encoder and the alternating attention), the
@@ -59,29 +44,36 @@ pub fn aggregator_records(
     device: &Device,
     keep: &mut impl FnMut(Record),
 ) -> Result<(), BenchError> {
+    per_size("aggregator", "", options, spec, device, keep, |model, images| {
+        let output = model.aggregator.forward(images)?;
+        let last = output.output_list.last().cloned();
+        settle(&last.ok_or_else(|| BenchError::invalid("model", "no aggregator layer"))?.sum())
+    })
+}
+
+/// `{name}/{S}/{precision}` timed (with `note`) for every frame count and precision of the scale; a precision
+/// the device cannot compute in is recorded as failed.
+fn per_size(
+    name: &str,
+    note: &str,
+    options: &ComputeOptions,
+    spec: &ScaleSpec,
+    device: &Device,
+    keep: &mut impl FnMut(Record),
+    mut run: impl FnMut(&Dggt, Tensor<5>) -> Result<(), BenchError>,
+) -> Result<(), BenchError> {
     let network = Network::new(spec, options.seed, device)?;
     for &precision in &options.precisions {
-        let model = match network.in_precision(precision) {
-            Ok(model) => model,
-            Err(reason) => {
-                for &frames in &spec.forward_frames {
-                    keep(Record::failed(format!("aggregator/{frames}/{precision}"), &reason));
-                }
-                continue;
-            }
-        };
+        let model = network.in_precision(precision);
         for &frames in &spec.forward_frames {
-            let images = network.images(frames);
-            let key = format!("aggregator/{frames}/{precision}");
-            keep(timed(key, options, device, || {
-                let output = model.aggregator.forward(images.clone())?;
-                let last = output
-                    .output_list
-                    .last()
-                    .cloned()
-                    .ok_or_else(|| BenchError::invalid("model", "no aggregator layer"))?;
-                settle(&last.sum())
-            }));
+            let key = format!("{name}/{frames}/{precision}");
+            match &model {
+                Ok(model) => {
+                    let images = network.images(frames);
+                    keep(timed(key, options, device, || run(model, images.clone())).with_note(note));
+                }
+                Err(reason) => keep(Record::failed(key, reason)),
+            }
         }
     }
     Ok(())
