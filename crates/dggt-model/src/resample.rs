@@ -12,8 +12,9 @@
 //! therefore plain a = -0.5 bicubic whose border taps are dropped and renormalised rather than clamped.
 //!
 //! The DPT heads' bilinear resize with `align_corners = True` ([`bilinear_aligned`]) is built the same way, one
-//! axis at a time, from gathers and products: burn's CubeCL backends have no backward for bilinear
-//! `interpolate`, and this form is differentiable on every backend.
+//! axis at a time: a product with the dense tap matrix for short axes, two gathers and a blend for long ones.
+//! burn's CubeCL backends have no backward for bilinear `interpolate`, and both forms are differentiable on
+//! every backend.
 
 use burn::tensor::{Int, Tensor, TensorData};
 
@@ -104,14 +105,32 @@ fn bilinear_aligned_taps(input: usize, output: usize) -> (Vec<i64>, Vec<i64>, Ve
     taps
 }
 
-/// Resizes axis `axis` of `x` to `output` samples, bilinearly with `align_corners = True`.
+/// Axes at most this long are resized by a product with the dense `[input, output]` tap matrix (at most this
+/// many multiply-adds per output sample, all in the matrix kernels, forward and backward); longer ones by two
+/// gathers, whose backward is a scatter (single-threaded on the CPU backends).
+const DENSE_RESIZE_MAX_INPUT: usize = 64;
+
+/// Resizes axis `axis` (2: height, 3: width) of `x` to `output` samples, bilinearly with `align_corners = True`.
 fn bilinear_aligned_axis(x: Tensor<4>, axis: usize, output: usize) -> Tensor<4> {
     let input = x.dims()[axis];
     if input == output {
         return x;
     }
-    let device = x.device();
     let (lower, upper, fraction) = bilinear_aligned_taps(input, output);
+    if input <= DENSE_RESIZE_MAX_INPUT {
+        return dense_resize_axis(x, axis, (&lower, &upper, &fraction));
+    }
+    gathered_resize_axis(x, axis, (lower, upper, fraction))
+}
+
+/// The resize as two gathers (each output sample's taps below and above) and a blend by the fractions.
+fn gathered_resize_axis(
+    x: Tensor<4>,
+    axis: usize,
+    (lower, upper, fraction): (Vec<i64>, Vec<i64>, Vec<f32>),
+) -> Tensor<4> {
+    let device = x.device();
+    let output = lower.len();
     let index = |taps: Vec<i64>| Tensor::<1, Int>::from_data(TensorData::new(taps, [output]), &device);
     let mut shape = [1; 4];
     shape[axis] = output;
@@ -119,6 +138,28 @@ fn bilinear_aligned_axis(x: Tensor<4>, axis: usize, output: usize) -> Tensor<4> 
     let below = x.clone().select(axis, index(lower));
     let above = x.select(axis, index(upper));
     below.clone() + (above - below) * fraction
+}
+
+/// The resize as a product with the dense tap matrix: output sample `i` weighs input `lower[i]` by
+/// `1 - fraction[i]` and `upper[i]` by `fraction[i]`.
+fn dense_resize_axis(x: Tensor<4>, axis: usize, (lower, upper, fraction): (&[i64], &[i64], &[f32])) -> Tensor<4> {
+    let input = x.dims()[axis];
+    let output = lower.len();
+    let mut matrix = vec![0.0f32; input * output];
+    // Width: x [.., W] · M [W, W']; height: M [H', H] · x [.., H, W].
+    let cell = |source: i64, target: usize| match axis {
+        3 => source as usize * output + target,
+        _ => target * input + source as usize,
+    };
+    for (i, ((&lo, &up), &f)) in lower.iter().zip(upper).zip(fraction).enumerate() {
+        matrix[cell(lo, i)] += 1.0 - f;
+        matrix[cell(up, i)] += f;
+    }
+    let site = ConstantSite::like(&x);
+    match axis {
+        3 => x.matmul(site.tensor(matrix, [1, 1, input, output])),
+        _ => site.tensor(matrix, [1, 1, output, input]).matmul(x),
+    }
 }
 
 /// `[B, C, H, W]` resized to `size = [height, width]` like PyTorch's
@@ -154,6 +195,43 @@ mod tests {
             // Each output sample's weights sum to one, so the input gradients sum to the output count.
             let (total, expected) = (grad.iter().map(|&g| f64::from(g)).sum::<f64>(), (6 * size[0] * size[1]) as f64);
             assert!((total - expected).abs() < 1e-5 * expected, "{size:?}: {total}");
+        }
+    }
+
+    #[test]
+    fn the_dense_and_gathered_resizes_agree_in_value_and_gradient() {
+        let device = Device::flex().autodiff();
+        for (shape, size) in [([8, 16, 4, 6], [42, 56]), ([3, 32, 12, 16], [24, 32]), ([1, 4, 30, 40], [7, 9])] {
+            let count = shape.iter().product::<usize>();
+            let values: Vec<f32> = (0..count).map(|i| ((i * 7919) % 1009) as f32 / 1009.0 - 0.5).collect();
+            let x = Tensor::<4>::from_data(TensorData::new(values, shape), &device).require_grad();
+            let weights = Tensor::<4>::random(
+                [shape[0], shape[1], size[0], size[1]],
+                burn::tensor::Distribution::Normal(0.0, 1.0),
+                &device,
+            );
+            let resize = |dense: bool| {
+                let mut y = x.clone();
+                for (axis, output) in [(3, size[1]), (2, size[0])] {
+                    let taps = bilinear_aligned_taps(y.dims()[axis], output);
+                    y = if dense {
+                        dense_resize_axis(y, axis, (&taps.0, &taps.1, &taps.2))
+                    } else {
+                        gathered_resize_axis(y, axis, taps)
+                    };
+                }
+                let grads = (y.clone() * weights.clone()).sum().backward();
+                (y.into_data().to_vec::<f32>().unwrap(), x.grad(&grads).unwrap().into_data().to_vec::<f32>().unwrap())
+            };
+            let (dense, dense_grad) = resize(true);
+            let (gathered, gathered_grad) = resize(false);
+            let worst = |a: &[f32], b: &[f32]| a.iter().zip(b).map(|(p, q)| (p - q).abs()).fold(0.0f32, f32::max);
+            assert!(worst(&dense, &gathered) < 1e-5, "{shape:?}: values differ by {}", worst(&dense, &gathered));
+            assert!(
+                worst(&dense_grad, &gathered_grad) < 1e-4,
+                "{shape:?}: gradients differ by {}",
+                worst(&dense_grad, &gathered_grad)
+            );
         }
     }
 
