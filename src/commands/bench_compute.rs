@@ -90,7 +90,7 @@ pub fn run(args: Args) -> Result<()> {
     let mut file = RecordFile { implementation: IMPLEMENTATION.into(), device: describe(&device), records: vec![] };
     eprintln!("dggt bench compute on {} ({:?} scale)", file.device, options.scale);
     let mut save_error = None;
-    let records = run_compute(&options, &device, |record: &Record| {
+    run_compute(&options, &device, |record: &Record| {
         eprintln!("{}", one_line(record));
         file.records.push(record.clone());
         if let Err(error) = file.write(&json_path) {
@@ -100,7 +100,7 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(error) = save_error {
         return Err(error).context("saving compute.json");
     }
-    file.records = records;
+    // Written after every record already; once more so that a run of no workloads leaves the file too.
     file.write(&json_path)?;
     let table = markdown(&file, &references);
     let table_path = args.out.join("compute.md");

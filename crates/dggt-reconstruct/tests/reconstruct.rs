@@ -62,8 +62,8 @@ fn train_config(out: &Path) -> TrainConfig {
     // usable poses.
     config.loss.camera = 1.0;
     // Seed 0's short run leaves one input view near the render floor, where rounding-level changes to the
-    // network's arithmetic move it across (11.6 dB against frame 6 with the matrix-product resize, above 13 dB
-    // with the gathered one); seed 1's keeps every view well above it with either (mean 19.9 dB).
+    // network's arithmetic move it across (to 11.6 dB against frame 6); seed 1's keeps every view well above it
+    // (mean 19.9 dB).
     config.run.seed = 1;
     config.optim.groups.insert("camera_head".into(), 1e-2);
     config.unattended(out)

@@ -81,6 +81,8 @@ struct RoadScene {
     size: ImageSize,
     /// `fx = fy`, pixels.
     focal: f32,
+    /// `(cx, cy)`, pixels: the image centre.
+    principal_point: (f32, f32),
     means: Vec<f32>,
     quats: Vec<f32>,
     scales: Vec<f32>,
@@ -98,6 +100,7 @@ impl RoadScene {
             count,
             size,
             focal,
+            principal_point: (cx, cy),
             means: Vec::with_capacity(3 * count),
             quats: Vec::with_capacity(4 * count),
             scales: Vec::with_capacity(3 * count),
@@ -134,7 +137,7 @@ impl RoadScene {
     }
 
     fn cameras(&self, device: &Device) -> CameraTensors {
-        let (cx, cy) = (self.size.width as f32 / 2.0, self.size.height as f32 / 2.0);
+        let (cx, cy) = self.principal_point;
         let mut world_to_camera = Vec::with_capacity(16 * self.views);
         let mut intrinsics = Vec::with_capacity(9 * self.views);
         for i in 0..self.views {
