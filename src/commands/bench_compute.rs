@@ -138,12 +138,19 @@ fn read_all(paths: &[PathBuf]) -> Result<Vec<RecordFile>> {
     Ok(paths.iter().map(|path| RecordFile::read(path)).collect::<Result<Vec<_>, _>>()?)
 }
 
-/// The device in words: burn's identity of it where the backend gives one.
+/// The device in words: burn's identity of it where the backend gives one (CubeCL backends only).
+#[cfg(any(feature = "wgpu", feature = "cuda"))]
 fn describe(device: &burn::tensor::Device) -> String {
     match device.identity() {
         Some(identity) => format!("{device:?}: {identity:?}"),
         None => format!("{device:?}"),
     }
+}
+
+/// The device in words: a CPU-only build names it.
+#[cfg(not(any(feature = "wgpu", feature = "cuda")))]
+fn describe(device: &burn::tensor::Device) -> String {
+    format!("{device:?}")
 }
 
 /// A record as a progress line.

@@ -20,6 +20,7 @@ use burn::tensor::{Device, Tensor};
 
 use crate::config::{DptConfig, DptHeadConfig, HeadActivation};
 use crate::constant::ConstantSite;
+use crate::conv;
 use crate::leaf::replace_value;
 use crate::resample::bilinear_aligned;
 use crate::uv_embed::uv_sincos_embedding;
@@ -54,7 +55,7 @@ impl ResidualConvUnit {
 
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
         let x = relu(x);
-        self.conv2.forward(relu(self.conv1.forward(x.clone()))) + x
+        conv::conv2d(&self.conv2, relu(conv::conv2d(&self.conv1, x.clone()))) + x
     }
 }
 
@@ -85,7 +86,7 @@ impl FusionBlock {
         };
         let x = self.res_conf_unit2.forward(x);
         let [_, _, h, w] = x.dims();
-        self.out_conv.forward(bilinear_aligned(x, size.unwrap_or([2 * h, 2 * w])))
+        conv::conv2d(&self.out_conv, bilinear_aligned(x, size.unwrap_or([2 * h, 2 * w])))
     }
 }
 
@@ -115,8 +116,8 @@ impl ResizeLayers {
 
     pub fn forward(&self, level: usize, x: Tensor<4>) -> Tensor<4> {
         match level {
-            0 => self.up4.forward(x),
-            1 => self.up2.forward(x),
+            0 => conv::conv_transpose2d(&self.up4, x),
+            1 => conv::conv_transpose2d(&self.up2, x),
             2 => x,
             3 => self.down2.forward(x),
             _ => panic!("DPT has four levels, got level {level}"),
@@ -275,15 +276,15 @@ impl DptHead {
             batch = b;
             let patches = self.norm.forward(x.narrow(2, patch_start_idx, n - patch_start_idx));
             let map = patches.reshape([b * s, rows * cols, c]).swap_dims(1, 2).reshape([b * s, c, rows, cols]);
-            let projected = self.add_pos_embed(self.projects[level].forward(map), aspect);
+            let projected = self.add_pos_embed(conv::conv2d(&self.projects[level], map), aspect);
             resized.push(self.resize_layers.forward(level, projected));
         }
 
         let sc = &self.scratch;
-        let l1 = sc.layer1_rn.forward(resized[0].clone());
-        let l2 = sc.layer2_rn.forward(resized[1].clone());
-        let l3 = sc.layer3_rn.forward(resized[2].clone());
-        let l4 = sc.layer4_rn.forward(resized[3].clone());
+        let l1 = conv::conv2d(&sc.layer1_rn, resized[0].clone());
+        let l2 = conv::conv2d(&sc.layer2_rn, resized[1].clone());
+        let l3 = conv::conv2d(&sc.layer3_rn, resized[2].clone());
+        let l4 = conv::conv2d(&sc.layer4_rn, resized[3].clone());
         let size = |t: &Tensor<4>| {
             let [_, _, h, w] = t.dims();
             [h, w]
@@ -292,17 +293,17 @@ impl DptHead {
         let x = sc.refinenet3.forward(x, Some(l3.clone()), Some(size(&l2)));
         let x = sc.refinenet2.forward(x, Some(l2.clone()), Some(size(&l1)));
         let x = sc.refinenet1.forward(x, Some(l1), None);
-        let fused = sc.output_conv1.forward(x);
+        let fused = conv::conv2d(&sc.output_conv1, x);
 
         let head_in = self.add_pos_embed(bilinear_aligned(fused.clone(), [height, width]), aspect);
         let head_in = match &self.pixel_skip {
             Some(conv) => {
                 let pixels = images.clone().cast(head_in.dtype()).reshape([head_in.dims()[0], 3, height, width]);
-                head_in + conv.forward(pixels)
+                head_in + conv::conv2d(conv, pixels)
             }
             None => head_in,
         };
-        let out = sc.output_conv2.out.forward(relu(sc.output_conv2.hidden.forward(head_in.clone())));
+        let out = conv::conv2d(&sc.output_conv2.out, relu(conv::conv2d(&sc.output_conv2.hidden, head_in.clone())));
         let [frames, channels, _, _] = out.dims();
         let raw = out.permute([0, 2, 3, 1]).reshape([batch, frames / batch, height, width, channels]);
         DptOutput { resized, fused, head_in, raw }

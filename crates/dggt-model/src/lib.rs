@@ -28,6 +28,7 @@ pub mod block;
 pub mod camera_head;
 pub mod config;
 pub mod constant;
+pub mod conv;
 pub mod dino;
 pub mod dpt;
 mod error;

@@ -221,7 +221,10 @@ mod tests {
                     };
                 }
                 let grads = (y.clone() * weights.clone()).sum().backward();
-                (y.into_data().to_vec::<f32>().unwrap(), x.grad(&grads).unwrap().into_data().to_vec::<f32>().unwrap())
+                (
+                    y.into_data().try_to_vec::<f32>().unwrap(),
+                    x.grad(&grads).unwrap().into_data().try_to_vec::<f32>().unwrap(),
+                )
             };
             let (dense, dense_grad) = resize(true);
             let (gathered, gathered_grad) = resize(false);

@@ -1,0 +1,216 @@
+//! The DPT heads' convolutions on the CPU backend as matrix products, forward and backward, instead of burn's
+//! im2col convolution (whose weight gradient is a convolution by the whole output gradient and whose input
+//! gradient is a transposed convolution). Same values up to the order of the sums.
+//!
+//! - [`conv2d`]: a 3x3 convolution with stride 1 and zero padding 1 runs the host kernels of [`host`] (nine
+//!   shifted matrix products; a backend extension with a hand-written backward, [`op`]); a 1x1 convolution with
+//!   stride 1 and no padding is one matrix product over the channels.
+//! - [`conv_transpose2d`]: a transposed convolution whose stride equals its kernel (no padding), the DPT's x2
+//!   and x4 resize, writes disjoint `k x k` patches: one matrix product and a reshuffle of the patches.
+//!
+//! The rewrites apply to `f32` tensors on the `Flex` device, with or without autodiff; everywhere else (GPU
+//! devices, `ndarray`, half precision, other settings) the module's own forward runs.
+
+mod host;
+mod op;
+
+use burn::backend::Dispatch;
+use burn::nn::PaddingConfig2d;
+use burn::nn::conv::{Conv2d, ConvTranspose2d};
+use burn::tensor::{DType, Device, Tensor};
+
+use op::Conv3x3Ops;
+
+/// `conv.forward(x)` for `x` `[N, C, H, W]`, as matrix products where they apply.
+pub fn conv2d(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
+    match Conv2dRoute::of(conv, &x) {
+        Conv2dRoute::SameThreeByThree => same_3x3(conv, x),
+        Conv2dRoute::Pointwise => pointwise(conv, x),
+        Conv2dRoute::Module => conv.forward(x),
+    }
+}
+
+/// `conv.forward(x)` for `x` `[N, C, h, w]`, as a matrix product where the patches are disjoint.
+pub fn conv_transpose2d(conv: &ConvTranspose2d, x: Tensor<4>) -> Tensor<4> {
+    let disjoint = conv.stride == conv.kernel_size
+        && conv.padding == [0, 0]
+        && conv.padding_out == [0, 0]
+        && conv.dilation == [1, 1]
+        && conv.groups == 1;
+    if !(disjoint && host_f32(&x, conv.weight.val().dtype())) {
+        return conv.forward(x);
+    }
+    let [n, c, h, w] = x.dims();
+    let [_, o, kh, kw] = conv.weight.dims();
+    // y[n, o, i·kh + p, j·kw + q] = Σ_c x[n, c, i, j] · W[c, o, p, q] + b[o].
+    let weight = conv.weight.val().reshape([1, c, o * kh * kw]).swap_dims(1, 2);
+    let patches = weight.matmul(x.reshape([n, c, h * w]));
+    let y = patches.reshape([n, o, kh, kw, h, w]).permute([0, 1, 4, 2, 5, 3]).reshape([n, o, h * kh, w * kw]);
+    add_bias(y, conv.bias.as_ref().map(|b| b.val()))
+}
+
+/// Which computation [`conv2d`] runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Conv2dRoute {
+    /// The host kernels of a 3x3 convolution with zero padding 1.
+    SameThreeByThree,
+    /// One matrix product over the channels.
+    Pointwise,
+    /// The module's own forward.
+    Module,
+}
+
+impl Conv2dRoute {
+    fn of(conv: &Conv2d, x: &Tensor<4>) -> Self {
+        let plain = conv.stride == [1, 1] && conv.dilation == [1, 1] && conv.groups == 1;
+        if !(plain && host_f32(x, conv.weight.val().dtype())) {
+            return Self::Module;
+        }
+        match (conv.kernel_size, &conv.padding) {
+            ([3, 3], PaddingConfig2d::Explicit(1, 1, 1, 1)) => Self::SameThreeByThree,
+            ([1, 1], PaddingConfig2d::Valid | PaddingConfig2d::Explicit(0, 0, 0, 0)) => Self::Pointwise,
+            _ => Self::Module,
+        }
+    }
+}
+
+fn same_3x3(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
+    let weight = conv.weight.val();
+    let bias = match &conv.bias {
+        Some(bias) => bias.val(),
+        None => Tensor::zeros([weight.dims()[0]], &x.device()),
+    };
+    let output =
+        <Dispatch as Conv3x3Ops>::conv3x3_same(x.into_dispatch(), weight.into_dispatch(), bias.into_dispatch());
+    Tensor::from_dispatch(output)
+}
+
+fn pointwise(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
+    let [n, c, h, w] = x.dims();
+    let o = conv.weight.dims()[0];
+    let weight = conv.weight.val().reshape([1, o, c]);
+    let y = weight.matmul(x.reshape([n, c, h * w])).reshape([n, o, h, w]);
+    add_bias(y, conv.bias.as_ref().map(|b| b.val()))
+}
+
+fn add_bias(y: Tensor<4>, bias: Option<Tensor<1>>) -> Tensor<4> {
+    match bias {
+        Some(bias) => {
+            let o = bias.dims()[0];
+            y + bias.reshape([1, o, 1, 1])
+        }
+        None => y,
+    }
+}
+
+/// Whether `x` and weights of `weight_dtype` are `f32` on the `Flex` CPU device (directly or under autodiff).
+fn host_f32(x: &Tensor<4>, weight_dtype: DType) -> bool {
+    x.dtype() == DType::F32 && weight_dtype == DType::F32 && on_flex(&x.device())
+}
+
+fn on_flex(device: &Device) -> bool {
+    device.clone().without_autodiff() == Device::flex()
+}
+
+#[cfg(test)]
+mod tests {
+    use burn::nn::conv::{Conv2dConfig, ConvTranspose2dConfig};
+    use burn::tensor::TensorData;
+
+    use super::*;
+
+    fn input(shape: [usize; 4], seed: usize, device: &Device) -> Tensor<4> {
+        let values = (0..shape.iter().product()).map(|i| (((i + seed) * 7919) % 1009) as f32 / 1009.0 - 0.5).collect();
+        Tensor::<4>::from_data(TensorData::new(values, shape), device).require_grad()
+    }
+
+    /// Output, input gradient, weight gradient and bias gradient of `layer` under a random linear loss.
+    fn outputs_and_grads(
+        layer: impl Fn(Tensor<4>) -> Tensor<4>,
+        x: &Tensor<4>,
+        weight: &Tensor<4>,
+        bias: Option<&Tensor<1>>,
+    ) -> Vec<Vec<f32>> {
+        let y = layer(x.clone());
+        // A fixed, varied loss weight per output value: the same on both sides of a comparison.
+        let count = y.shape().num_elements() as i64;
+        let loss_weights = Tensor::arange(0..count, &y.device()).float().mul_scalar(0.37).sin().reshape(y.dims());
+        let grads = (y.clone() * loss_weights).sum().backward();
+        let flat = |t: Tensor<4>| t.into_data().try_to_vec::<f32>().unwrap();
+        let mut all = vec![flat(y), flat(x.grad(&grads).expect("an input gradient"))];
+        all.push(flat(weight.grad(&grads).expect("a weight gradient")));
+        if let Some(bias) = bias {
+            all.push(bias.grad(&grads).expect("a bias gradient").into_data().try_to_vec::<f32>().unwrap());
+        }
+        all
+    }
+
+    fn assert_close(case: &str, ours: &[Vec<f32>], reference: &[Vec<f32>]) {
+        let names = ["output", "input gradient", "weight gradient", "bias gradient"];
+        assert_eq!(ours.len(), reference.len(), "{case}: gradient count");
+        for ((a, b), what) in ours.iter().zip(reference).zip(names) {
+            assert_eq!(a.len(), b.len(), "{case}: {what} sizes");
+            let scale = b.iter().fold(1.0f32, |m, v| m.max(v.abs()));
+            let worst = a.iter().zip(b).map(|(p, q)| (p - q).abs()).fold(0.0f32, f32::max);
+            assert!(worst < 1e-5 * scale, "{case}: {what} differs by {worst} (scale {scale})");
+        }
+    }
+
+    #[test]
+    fn convolutions_as_products_match_burns_in_value_and_gradient() {
+        let device = Device::flex().autodiff();
+        // The DPT heads' shapes at training sizes, single pixels and rows, one input channel.
+        let cases = [
+            ([4, 16, 14, 21], 32, 3, true),
+            ([3, 32, 8, 12], 16, 3, false),
+            ([2, 3, 1, 1], 5, 3, true),
+            ([1, 1, 1, 9], 2, 3, true),
+            ([2, 5, 7, 1], 3, 3, true),
+            ([3, 16, 14, 21], 7, 1, true),
+            ([2, 4, 1, 3], 2, 1, false),
+        ];
+        for (seed, (shape, outputs, kernel, bias)) in cases.into_iter().enumerate() {
+            let padding = if kernel == 3 { PaddingConfig2d::Explicit(1, 1, 1, 1) } else { PaddingConfig2d::Valid };
+            let conv = Conv2dConfig::new([shape[1], outputs], [kernel, kernel])
+                .with_padding(padding)
+                .with_bias(bias)
+                .init(&device);
+            let x = input(shape, seed, &device);
+            let expected = if kernel == 3 { Conv2dRoute::SameThreeByThree } else { Conv2dRoute::Pointwise };
+            assert_eq!(Conv2dRoute::of(&conv, &x), expected, "{shape:?}");
+            let (weight, bias) = (conv.weight.val(), conv.bias.as_ref().map(|b| b.val()));
+            let ours = outputs_and_grads(|x| conv2d(&conv, x), &x, &weight, bias.as_ref());
+            let reference = outputs_and_grads(|x| conv.forward(x), &x, &weight, bias.as_ref());
+            assert_close(&format!("{kernel}x{kernel} {shape:?} -> {outputs}"), &ours, &reference);
+        }
+    }
+
+    #[test]
+    fn disjoint_transposed_convolutions_match_burns_in_value_and_gradient() {
+        let device = Device::flex().autodiff();
+        for (seed, (shape, outputs, k)) in
+            [([3, 16, 4, 6], 16, 4), ([2, 8, 3, 5], 4, 2), ([1, 2, 1, 1], 3, 2)].into_iter().enumerate()
+        {
+            let conv = ConvTranspose2dConfig::new([shape[1], outputs], [k, k]).with_stride([k, k]).init(&device);
+            let x = input(shape, seed, &device);
+            let (weight, bias) = (conv.weight.val(), conv.bias.as_ref().map(|b| b.val()));
+            let ours = outputs_and_grads(|x| conv_transpose2d(&conv, x), &x, &weight, bias.as_ref());
+            let reference = outputs_and_grads(|x| conv.forward(x), &x, &weight, bias.as_ref());
+            assert_close(&format!("transposed x{k} {shape:?} -> {outputs}"), &ours, &reference);
+        }
+    }
+
+    #[test]
+    fn other_convolutions_and_precisions_keep_the_modules_forward() {
+        let device = Device::flex();
+        let padded = PaddingConfig2d::Explicit(1, 1, 1, 1);
+        let strided = Conv2dConfig::new([3, 4], [3, 3]).with_stride([2, 2]).with_padding(padded.clone()).init(&device);
+        let unpadded = Conv2dConfig::new([3, 4], [3, 3]).init(&device);
+        let same = Conv2dConfig::new([3, 4], [3, 3]).with_padding(padded).init(&device);
+        let x = Tensor::<4>::zeros([1, 3, 8, 8], &device);
+        assert_eq!(Conv2dRoute::of(&strided, &x), Conv2dRoute::Module);
+        assert_eq!(Conv2dRoute::of(&unpadded, &x), Conv2dRoute::Module);
+        assert_eq!(Conv2dRoute::of(&same, &x.clone().cast(DType::F16)), Conv2dRoute::Module);
+        assert_eq!(Conv2dRoute::of(&same, &x), Conv2dRoute::SameThreeByThree);
+    }
+}
