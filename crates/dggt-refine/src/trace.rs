@@ -1,6 +1,6 @@
 //! Optional capture of named intermediate tensors, under the names the parity vectors use
 //! (`enc.down_in.0`, `unet.mid`, `dec.skip.1`, ...). Off, recording costs nothing; on, each tensor is read
-//! back to the host when recorded.
+//! back to the host, into memory of its own, when recorded.
 
 use burn::tensor::{Tensor, TensorData};
 
@@ -19,7 +19,11 @@ impl Trace {
 
     pub fn record<const D: usize>(&mut self, name: impl Into<String>, tensor: &Tensor<D>) {
         if let Self::On(records) = self {
-            records.push((name.into(), tensor.clone().into_data()));
+            let data = tensor.clone().into_data();
+            // An owned copy: on the wgpu backend the read-back bytes can alias a staging buffer that a later
+            // read of the same size overwrites.
+            let owned = TensorData::from_bytes_vec(data.as_bytes().to_vec(), data.shape().clone(), data.dtype());
+            records.push((name.into(), owned));
         }
     }
 
