@@ -3,8 +3,8 @@
 //! A one-step DDPM schedule's previous timestep has `abar_prev = 1`, so the step returns `x0` itself (its
 //! noise term has standard deviation 1e-10 and is left out).
 //!
-//! `alphas_cumprod` is computed in f32 as PyTorch does (`scaled_linear` betas: a linspace of square roots,
-//! squared), so it matches the reference's values.
+//! `alphas_cumprod` is computed as PyTorch does (`scaled_linear` betas: an f32 linspace of square roots,
+//! squared; the cumulative product accumulated in f64), so it matches the reference's values bit for bit.
 
 use std::path::Path;
 
@@ -20,12 +20,13 @@ pub fn alphas_cumprod(config: &SchedulerConfig, path: &Path) -> Result<Vec<f32>,
     require(config.num_train_timesteps >= 2, path, || "num_train_timesteps below 2".into())?;
     let roots =
         linspace_f32(config.beta_start.sqrt() as f32, config.beta_end.sqrt() as f32, config.num_train_timesteps);
-    let mut product = 1.0f32;
+    // Betas and alphas in f32, their running product accumulated in f64 (PyTorch's CPU `cumprod`).
+    let mut product = 1.0f64;
     Ok(roots
         .into_iter()
         .map(|root| {
-            product *= 1.0 - root * root;
-            product
+            product *= f64::from(1.0 - root * root);
+            product as f32
         })
         .collect())
 }
