@@ -18,6 +18,7 @@ pub mod config;
 mod error;
 pub mod layers;
 pub mod lora;
+pub mod parity;
 pub mod refiner;
 pub mod resnet;
 pub mod scheduler;
