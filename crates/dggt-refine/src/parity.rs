@@ -115,7 +115,7 @@ impl fmt::Display for ParityReport {
 
 /// Compares `actual` with `reference` (both f32).
 pub fn compare(name: &str, actual: Option<&TensorData>, reference: &TensorData) -> ParityRow {
-    let expected = reference.try_to_vec::<f32>().unwrap_or_default();
+    let expected = reference.clone().convert::<f32>().try_to_vec::<f32>().unwrap_or_default();
     let max_ref = expected.iter().fold(0.0f64, |m, v| m.max(f64::from(v.abs())));
     let mut row = ParityRow {
         name: name.to_string(),
@@ -129,7 +129,11 @@ pub fn compare(name: &str, actual: Option<&TensorData>, reference: &TensorData) 
         row.status = Status::Missing(format!("produced with shape {:?}", actual.shape().to_vec()));
         return row;
     }
-    let values = actual.try_to_vec::<f32>().unwrap_or_default();
+    let values = actual.clone().convert::<f32>().try_to_vec::<f32>().unwrap_or_default();
+    if values.len() != expected.len() {
+        row.status = Status::Missing("values not readable as f32".into());
+        return row;
+    }
     let max_abs = values.iter().zip(&expected).fold(0.0f64, |m, (a, e)| {
         let error = (f64::from(*a) - f64::from(*e)).abs();
         if error.is_nan() { f64::INFINITY } else { m.max(error) }

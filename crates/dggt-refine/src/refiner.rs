@@ -5,12 +5,13 @@
 //! (view 0 the image), mapped to [-1, 1], padded at the bottom and right (edge pixels repeated) to a multiple
 //! of 8, encoded to the posterior, scaled by the VAE's scaling factor, denoised at timestep 199 by the UNet
 //! (in the reference mode its self-attention spans both views), stepped to the clean latent `x0`, decoded
-//! with the encoder's skips, cropped back, and view 0 is returned clamped and mapped back to [0, 1].
+//! with the encoder's skips, cropped back, and view 0 is returned clamped and mapped back to [0, 1]. Images,
+//! latents and the result are f32; the UNet may compute in f16 or bf16 ([`Refiner::with_unet_dtype`]).
 
 use std::path::{Path, PathBuf};
 
 use burn::tensor::ops::PadMode;
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{Device, FloatDType, Tensor, TensorData};
 use rand::rngs::Xoshiro256PlusPlus;
 use rand::{RngExt, SeedableRng};
 
@@ -116,6 +117,12 @@ impl Refiner {
         Ok((refiner, report))
     }
 
+    /// The refiner with its UNet computing in `dtype` (f32, f16, bf16). The VAE stays in f32 (sd-turbo's VAE
+    /// asks for it: `force_upcast`), and the UNet's attention in f32 when its configuration upcasts it.
+    pub fn with_unet_dtype(self, dtype: FloatDType) -> Self {
+        Self { unet: self.unet.with_float_dtype(dtype), prompt_embeds: self.prompt_embeds.cast(dtype), ..self }
+    }
+
     /// The prompt's text-encoder output `[1, tokens, context_dim]`, the UNet's cross-attention context.
     pub fn prompt_embeds(&self) -> &Tensor<3> {
         &self.prompt_embeds
@@ -148,10 +155,6 @@ impl Refiner {
                 )));
             }
         };
-        let view_count = match views {
-            ViewAttention::PerView => 1,
-            ViewAttention::Joint { views } => views,
-        };
         let x = (rows - 0.5) / 0.5;
         trace.record("x_in", &x);
         let x = pad_to_multiple(x, SIDE_MULTIPLE);
@@ -164,7 +167,11 @@ impl Refiner {
         trace.record("latent", &latent);
 
         let context = self.prompt_embeds.clone().repeat_dim(0, latent.dims()[0]);
-        let eps = self.unet.forward(latent.clone(), self.step.timestep, &context, views, trace);
+        let unet_dtype = self.prompt_embeds.dtype();
+        let eps = self
+            .unet
+            .forward(latent.clone().cast(unet_dtype), self.step.timestep, &context, views, trace)
+            .cast(FloatDType::F32);
         trace.record("unet.eps", &eps);
         let x0 = self.step.clean_latent(latent, eps);
         trace.record("x0", &x0);
@@ -173,7 +180,7 @@ impl Refiner {
         let decoded = self.vae.decode(decoder_input, &posterior.down_inputs, trace);
 
         let decoded = decoded.narrow(2, 0, height).narrow(3, 0, width);
-        let first_view = decoded.reshape([batch, view_count, channels, height, width]).narrow(1, 0, 1);
+        let first_view = decoded.reshape([batch, views.views(), channels, height, width]).narrow(1, 0, 1);
         let image_out = first_view.reshape([batch, channels, height, width]).clamp(-1.0, 1.0) * 0.5 + 0.5;
         trace.record("image_out", &image_out);
         Ok(image_out)

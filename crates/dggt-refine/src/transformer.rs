@@ -5,12 +5,12 @@
 //! In the reference-view mode ([`ViewAttention::Joint`]) each self-attention runs over the tokens of all views
 //! of a sample at once (view 0's tokens first); cross-attention and the feed-forward stay per view.
 //!
-//! The checkpoint's attention is "upcast" (scores and softmax in f32); in f32 that is what runs anyway.
+//! With [`ScorePrecision::Float32`] ("upcast attention") a UNet computing in f16 or bf16 attends in f32.
 
 use burn::module::Module;
 use burn::nn::{GroupNorm, LayerNorm, Linear};
-use burn::tensor::Tensor;
 use burn::tensor::activation::gelu;
+use burn::tensor::{DType, FloatDType, Tensor};
 use dggt_model::attention::attend;
 
 use crate::error::RefineError;
@@ -31,6 +31,25 @@ pub enum ViewAttention {
     Joint { views: usize },
 }
 
+impl ViewAttention {
+    /// Batch rows per sample.
+    pub fn views(self) -> usize {
+        match self {
+            Self::PerView => 1,
+            Self::Joint { views } => views,
+        }
+    }
+}
+
+/// The type attention scores and their softmax are computed in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ScorePrecision {
+    /// The activations' type.
+    Native,
+    /// f32 whatever the activations' type.
+    Float32,
+}
+
 /// Sizes of one spatial transformer.
 #[derive(Debug, Clone, Copy)]
 pub struct TransformerShape {
@@ -39,6 +58,7 @@ pub struct TransformerShape {
     pub context_dim: usize,
     pub groups: usize,
     pub layers: usize,
+    pub scores: ScorePrecision,
 }
 
 #[derive(Module, Debug)]
@@ -90,9 +110,9 @@ impl TransformerBlock {
         let (norm1, norm2, norm3) = (norm("norm1")?, norm("norm2")?, norm("norm3")?);
         Ok(Self {
             norm1,
-            attn1: Attention::load(weights, &format!("{prefix}.attn1"), d, d, shape.heads)?,
+            attn1: Attention::load(weights, &format!("{prefix}.attn1"), d, d, shape)?,
             norm2,
-            attn2: Attention::load(weights, &format!("{prefix}.attn2"), d, shape.context_dim, shape.heads)?,
+            attn2: Attention::load(weights, &format!("{prefix}.attn2"), d, shape.context_dim, shape)?,
             norm3,
             ff: GegluFeedForward::load(weights, &format!("{prefix}.ff"), d)?,
         })
@@ -122,6 +142,8 @@ struct Attention {
     to_v: Linear,
     to_out: Linear,
     heads: usize,
+    #[module(skip)]
+    scores: ScorePrecision,
 }
 
 impl Attention {
@@ -130,14 +152,15 @@ impl Attention {
         prefix: &str,
         dim: usize,
         context_dim: usize,
-        heads: usize,
+        shape: TransformerShape,
     ) -> Result<Self, RefineError> {
         Ok(Self {
             to_q: linear(weights, &format!("{prefix}.to_q"), dim, dim, Bias::Without)?,
             to_k: linear(weights, &format!("{prefix}.to_k"), context_dim, dim, Bias::Without)?,
             to_v: linear(weights, &format!("{prefix}.to_v"), context_dim, dim, Bias::Without)?,
             to_out: linear(weights, &format!("{prefix}.to_out.0"), dim, dim, Bias::With)?,
-            heads,
+            heads: shape.heads,
+            scores: shape.scores,
         })
     }
 
@@ -150,7 +173,15 @@ impl Attention {
         let q = split(self.to_q.forward(x));
         let k = split(self.to_k.forward(context.clone()));
         let v = split(self.to_v.forward(context));
-        let out = attend(q, k, v).swap_dims(1, 2).reshape([batch, queries, dim]);
+        let dtype = q.dtype();
+        let out = match self.scores {
+            ScorePrecision::Float32 if dtype != DType::F32 => {
+                let f32 = |t: Tensor<4>| t.cast(FloatDType::F32);
+                attend(f32(q), f32(k), f32(v)).cast(dtype)
+            }
+            _ => attend(q, k, v),
+        };
+        let out = out.swap_dims(1, 2).reshape([batch, queries, dim]);
         self.to_out.forward(out)
     }
 }

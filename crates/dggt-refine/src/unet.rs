@@ -6,21 +6,25 @@
 //! blocks. When a latent side is not a multiple of `2^upsamplers`, every upsampler resizes to the exact size
 //! of the activation it is about to be joined with instead of doubling. Resnet GroupNorms use the config's
 //! eps; downsamplers are 3x3 stride-2 convolutions padded by one on every side.
+//!
+//! The UNet computes in the type of its parameters ([`Unet::with_float_dtype`]); with `upcast_attention` its
+//! attention runs in f32 whatever that type.
 
 use std::path::Path;
 
-use burn::module::Module;
+use burn::module::{Module, ModuleMapper, Param};
 use burn::nn::conv::Conv2d;
 use burn::nn::{GroupNorm, Linear};
 use burn::tensor::activation::silu;
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{Device, FloatDType, Tensor, TensorData};
+use dggt_model::leaf::replace_value;
 
 use crate::config::{UnetConfig, require};
 use crate::error::RefineError;
 use crate::layers::{Bias, ConvShape, conv, group_norm, linear, resize_nearest};
 use crate::resnet::{ResnetBlock, ResnetShape};
 use crate::trace::Trace;
-use crate::transformer::{SpatialTransformer, TransformerShape, ViewAttention};
+use crate::transformer::{ScorePrecision, SpatialTransformer, TransformerShape, ViewAttention};
 use crate::weights::Weights;
 
 /// Period of the slowest sinusoid of the timestep features.
@@ -92,6 +96,7 @@ impl TimeEmbedding {
         let row: Vec<f32> =
             if self.flip_sin_to_cos { cosines.chain(sines).collect() } else { sines.chain(cosines).collect() };
         let features = Tensor::<1>::from_data(TensorData::new(row, [self.features]), device)
+            .cast(self.linear_1.weight.val().dtype())
             .unsqueeze_dim::<2>(0)
             .repeat_dim(0, rows);
         self.linear_2.forward(silu(self.linear_1.forward(features)))
@@ -144,6 +149,18 @@ impl Unet {
             conv_norm_out: group_norm(weights, "conv_norm_out", config.norm_num_groups, widths[0], config.norm_eps)?,
             conv_out: conv(weights, "conv_out", ConvShape::same3(widths[0], config.out_channels), Bias::With)?,
         })
+    }
+
+    /// The UNet with every float parameter in `dtype` (f32, f16, bf16); its inputs must then be in `dtype`.
+    pub fn with_float_dtype(self, dtype: FloatDType) -> Self {
+        struct CastFloats(FloatDType);
+        impl ModuleMapper for CastFloats {
+            fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+                let dtype = self.0;
+                replace_value(param, |tensor| tensor.cast(dtype))
+            }
+        }
+        self.map(&mut CastFloats(dtype))
     }
 
     /// The noise prediction for `latent` `[rows, c, h, w]` at `timestep`, given `context`
@@ -240,6 +257,7 @@ impl<'a> LevelBuilder<'a> {
             context_dim: self.config.cross_attention_dim,
             groups: self.config.norm_num_groups,
             layers: self.config.transformer_layers_per_block,
+            scores: if self.config.upcast_attention { ScorePrecision::Float32 } else { ScorePrecision::Native },
         }
     }
 

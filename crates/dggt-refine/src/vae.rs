@@ -261,7 +261,7 @@ impl Decoder {
             .collect::<Result<_, _>>()?;
         let skip_convs = (0..levels)
             .map(|i| {
-                // The encoder's down input N-1-i has the width of encoder level N-2-i (level 0 for the last two).
+                // Encoder down input k is the output of level k-1 (input 0 is conv_in's, of level 0's width).
                 let source = config.block_out_channels[(levels - 1 - i).saturating_sub(1)];
                 let target = widths[i.saturating_sub(1)];
                 let shape = ConvShape::pointwise(source, target);

@@ -90,12 +90,12 @@ impl Weights {
 
     /// The tensor `name`, which must have `shape`, as a parameter tensor.
     pub fn take<const D: usize>(&mut self, name: &str, shape: [usize; D]) -> Result<Tensor<D>, RefineError> {
-        let tensor = self.take_host(name, &shape)?;
+        let tensor = self.checked(name, &shape)?;
         Ok(Tensor::from_data(TensorData::new(tensor.values.clone(), shape), &self.device))
     }
 
-    /// The host copy of the tensor `name`, which must have `shape`.
-    pub fn take_host(&mut self, name: &str, shape: &[usize]) -> Result<&HostTensor, RefineError> {
+    /// The host copy of the tensor `name`, which must have `shape`, marked used.
+    fn checked(&mut self, name: &str, shape: &[usize]) -> Result<&HostTensor, RefineError> {
         let Some(tensor) = self.tensors.get(name) else {
             return Err(RefineError::MissingTensor { path: self.source.clone(), name: name.to_string() });
         };
