@@ -1,0 +1,34 @@
+//! The single-step diffusion refiner of DGGT's last stage (Difix on sd-turbo): it cleans rendered frames —
+//! ghosting, disocclusion gaps, holes — with one denoising step at timestep 199, optionally attending to a
+//! reference input view.
+//!
+//! - [`vae`]: the autoencoder, its encoder keeping its down-block inputs and its decoder adding them back
+//!   through skip convolutions; decoder LoRA merged at load ([`lora`]);
+//! - [`unet`]: the SD 2.1-layout denoiser with its spatial transformers ([`transformer`]) and residual
+//!   blocks ([`resnet`]);
+//! - [`text_encoder`]: the CLIP text encoder for the fixed prompt, run once;
+//! - [`scheduler`]: the noise schedule and the step to the clean latent;
+//! - [`refiner`]: the whole computation, and loading a diffusers model folder ([`config`], [`weights`]) with
+//!   a Difix checkpoint ([`checkpoint`]) over it.
+//!
+//! Tensors carry no backend type: the [`burn::tensor::Device`] the refiner is loaded on selects it.
+
+pub mod checkpoint;
+pub mod config;
+mod error;
+pub mod layers;
+pub mod lora;
+pub mod parity;
+pub mod refiner;
+pub mod resnet;
+pub mod scheduler;
+pub mod text_encoder;
+pub mod trace;
+pub mod transformer;
+pub mod unet;
+pub mod vae;
+pub mod weights;
+
+pub use error::RefineError;
+pub use refiner::{Latent, LoadReport, Refiner, TIMESTEP};
+pub use trace::Trace;

@@ -1,0 +1,96 @@
+//! Applying a refiner checkpoint's VAE entries to the base VAE's tensors: skip convolutions and other
+//! plain weights replace or extend the base, and every LoRA pair is merged into its target's weight,
+//! `W + (alpha / r) B A` (for a convolution `B` is 1x1 and `A` has the target's kernel, stride and padding,
+//! so the merged kernel is exactly equivalent).
+//!
+//! peft names a wrapped module's own weight `<module>.base_layer.weight` and its pair
+//! `<module>.lora_A.<adapter>.weight` / `<module>.lora_B.<adapter>.weight`. `alpha` is peft's default, 8.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use crate::error::RefineError;
+use crate::weights::{HostTensor, NamedTensors};
+
+/// peft's default `lora_alpha`, which Difix's configuration keeps.
+pub const LORA_ALPHA: f32 = 8.0;
+
+/// What the checkpoint changed in the VAE.
+#[derive(Debug, Clone, Default)]
+pub struct VaeOverlay {
+    /// Plain tensors taken from the checkpoint (the skip convolutions), by VAE name.
+    pub replaced: Vec<String>,
+    /// Modules whose weight received a merged LoRA update.
+    pub merged: Vec<String>,
+}
+
+/// Applies the checkpoint's `vae` tensors to `base` (see the module's doc). `targets` must each have a LoRA
+/// pair, and every pair must belong to a target.
+pub fn apply_vae_overlay(
+    base: &mut NamedTensors,
+    checkpoint: NamedTensors,
+    targets: &[String],
+    rank: usize,
+    path: &Path,
+) -> Result<VaeOverlay, RefineError> {
+    let lora_error = |module: &str, message: String| RefineError::Lora {
+        path: path.display().to_string(),
+        module: module.to_string(),
+        message,
+    };
+    let mut pairs: BTreeMap<String, (Option<HostTensor>, Option<HostTensor>)> = BTreeMap::new();
+    let mut overlay = VaeOverlay::default();
+    for (name, tensor) in checkpoint {
+        let half = |marker: &str| name.split_once(marker).map(|(module, _)| module.to_string());
+        if let Some(module) = half(".lora_A.") {
+            pairs.entry(module).or_default().0 = Some(tensor);
+        } else if let Some(module) = half(".lora_B.") {
+            pairs.entry(module).or_default().1 = Some(tensor);
+        } else {
+            let name = name.replace(".base_layer.", ".");
+            overlay.replaced.push(name.clone());
+            base.insert(name, tensor);
+        }
+    }
+    let scale = LORA_ALPHA / rank as f32;
+    for target in targets {
+        let Some((Some(down), Some(up))) = pairs.remove(target) else {
+            return Err(lora_error(target, "lora_A or lora_B is missing from state_dict_vae".into()));
+        };
+        let weight_name = format!("{target}.weight");
+        let weight = base.get_mut(&weight_name).ok_or_else(|| RefineError::MissingTensor {
+            path: path.display().to_string(),
+            name: weight_name.clone(),
+        })?;
+        merge(weight, &down, &up, rank, scale).map_err(|message| lora_error(target, message))?;
+        overlay.merged.push(target.clone());
+    }
+    if let Some(stray) = pairs.keys().next() {
+        return Err(lora_error(stray, "has a LoRA pair but is not in vae_lora_target_modules".into()));
+    }
+    Ok(overlay)
+}
+
+/// `weight += scale * up @ down`, `weight`: `[out, rest...]`, `down`: `[rank, rest...]`,
+/// `up`: `[out, rank, (1, 1)]`.
+fn merge(weight: &mut HostTensor, down: &HostTensor, up: &HostTensor, rank: usize, scale: f32) -> Result<(), String> {
+    let out = weight.shape[0];
+    let rest = &weight.shape[1..];
+    let up_ok = up.shape.len() >= 2 && up.shape[..2] == [out, rank] && up.shape[2..].iter().all(|&d| d == 1);
+    if down.shape[0] != rank || &down.shape[1..] != rest || !up_ok {
+        return Err(format!(
+            "lora_A {:?} and lora_B {:?} do not fit the weight {:?} at rank {rank}",
+            down.shape, up.shape, weight.shape
+        ));
+    }
+    let inner: usize = rest.iter().product();
+    for o in 0..out {
+        let row = &mut weight.values[o * inner..(o + 1) * inner];
+        for r in 0..rank {
+            let coefficient = scale * up.values[o * rank + r];
+            let down_row = &down.values[r * inner..(r + 1) * inner];
+            row.iter_mut().zip(down_row).for_each(|(w, d)| *w += coefficient * d);
+        }
+    }
+    Ok(())
+}

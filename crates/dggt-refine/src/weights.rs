@@ -1,0 +1,118 @@
+//! Named host tensors read from checkpoint files, and the builder's view of them: each module takes its
+//! tensors by their checkpoint name and expected shape, so a missing or mis-shaped tensor is an error naming
+//! the file and the tensor, and whatever no module took is reported.
+//!
+//! Values are held on the host as f32 (files in f16 or bf16 are widened) because the loader edits some of
+//! them before they become parameters: checkpoint overlays replace base tensors and LoRA pairs are merged
+//! into their targets ([`crate::lora`]).
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+use burn::tensor::{DType, Device, Tensor, TensorData};
+use safetensors::Dtype;
+
+use crate::error::RefineError;
+
+/// One tensor's shape, values (row-major) and the file it was read from.
+#[derive(Debug, Clone)]
+pub struct HostTensor {
+    pub shape: Vec<usize>,
+    pub values: Vec<f32>,
+    pub file: PathBuf,
+}
+
+impl HostTensor {
+    /// Widens `data` (any float type) to f32.
+    pub fn from_data(data: TensorData, file: &Path, name: &str) -> Result<Self, RefineError> {
+        if !matches!(data.dtype(), DType::F64 | DType::F32 | DType::F16 | DType::BF16) {
+            return Err(RefineError::file(
+                file,
+                format!("tensor '{name}' has type {:?}, expected a float", data.dtype()),
+            ));
+        }
+        let shape = data.shape().to_vec();
+        let values = data
+            .convert::<f32>()
+            .try_into_vec::<f32>()
+            .map_err(|e| RefineError::file(file, format!("tensor '{name}': {e:?}")))?;
+        Ok(Self { shape, values, file: file.to_path_buf() })
+    }
+}
+
+/// Tensors by checkpoint name.
+pub type NamedTensors = BTreeMap<String, HostTensor>;
+
+/// Every tensor of a safetensors file.
+pub fn read_safetensors(path: &Path) -> Result<NamedTensors, RefineError> {
+    let bytes = std::fs::read(path).map_err(|e| RefineError::io(path, e))?;
+    let file = safetensors::SafeTensors::deserialize(&bytes)
+        .map_err(|e| RefineError::file(path, format!("not a safetensors file: {e}")))?;
+    let mut tensors = NamedTensors::new();
+    for (name, view) in file.tensors() {
+        let dtype = match view.dtype() {
+            Dtype::F64 => DType::F64,
+            Dtype::F32 => DType::F32,
+            Dtype::F16 => DType::F16,
+            Dtype::BF16 => DType::BF16,
+            other => {
+                return Err(RefineError::file(path, format!("tensor '{name}' has type {other:?}, expected a float")));
+            }
+        };
+        let data = TensorData::from_bytes_vec(view.data().to_vec(), view.shape().to_vec(), dtype);
+        tensors.insert(name.clone(), HostTensor::from_data(data, path, &name)?);
+    }
+    Ok(tensors)
+}
+
+/// The tensors a module tree is built from, on the device its parameters go to. Taking a tensor marks it
+/// used; [`Weights::unused`] lists the rest.
+pub struct Weights {
+    tensors: NamedTensors,
+    taken: BTreeSet<String>,
+    source: String,
+    device: Device,
+}
+
+impl Weights {
+    /// `source`: the files the tensors came from, as error messages name them.
+    pub fn new(tensors: NamedTensors, source: impl Into<String>, device: &Device) -> Self {
+        Self { tensors, taken: BTreeSet::new(), source: source.into(), device: device.clone() }
+    }
+
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    pub fn contains(&self, name: &str) -> bool {
+        self.tensors.contains_key(name)
+    }
+
+    /// The tensor `name`, which must have `shape`, as a parameter tensor.
+    pub fn take<const D: usize>(&mut self, name: &str, shape: [usize; D]) -> Result<Tensor<D>, RefineError> {
+        let tensor = self.checked(name, &shape)?;
+        Ok(Tensor::from_data(TensorData::new(tensor.values.clone(), shape), &self.device))
+    }
+
+    /// The host copy of the tensor `name`, which must have `shape`, marked used.
+    fn checked(&mut self, name: &str, shape: &[usize]) -> Result<&HostTensor, RefineError> {
+        let Some(tensor) = self.tensors.get(name) else {
+            return Err(RefineError::MissingTensor { path: self.source.clone(), name: name.to_string() });
+        };
+        if tensor.shape != shape {
+            return Err(RefineError::ShapeMismatch {
+                path: tensor.file.display().to_string(),
+                name: name.to_string(),
+                expected: shape.to_vec(),
+                found: tensor.shape.clone(),
+            });
+        }
+        self.taken.insert(name.to_string());
+        Ok(tensor)
+    }
+
+    /// Names of the tensors no module took.
+    pub fn unused(&self) -> Vec<String> {
+        self.tensors.keys().filter(|name| !self.taken.contains(*name)).cloned().collect()
+    }
+}

@@ -1,0 +1,124 @@
+//! Parity with the reference refiner (diffusers 0.42.1 / peft 0.21.2, float32) on the tiny random
+//! configuration in `shared/parity/difix_tiny_s1`: the prompt embedding, the noise schedule and every stored
+//! intermediate of both modes (single view, and with a reference view), each within
+//! `5e-5 * max(1, max|ref|)`, on the CPU backend and (feature `wgpu`) on burn's wgpu device.
+//!
+//! The vectors live beside the repository in `shared/parity/difix_tiny_s1` (`$DGGT_PARITY_DIR/difix_tiny_s1`
+//! when set; the variable names the shared `parity` folder). Their README describes the computation.
+
+use std::path::PathBuf;
+
+use burn::tensor::{Device, FloatDType, Tensor};
+use dggt_refine::parity::{Status, compare, is_refiner_folder, read_vectors, run_parity};
+use dggt_refine::{Latent, Refiner, Trace};
+
+fn vectors_dir() -> PathBuf {
+    let root = std::env::var_os("DGGT_PARITY_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/parity"));
+    let dir = root.join("difix_tiny_s1");
+    assert!(
+        is_refiner_folder(&dir),
+        "refiner parity vectors not found at {} (set DGGT_PARITY_DIR to the shared parity folder)",
+        dir.display()
+    );
+    dir
+}
+
+fn both_modes_match_the_reference(device: &Device) {
+    let dir = vectors_dir();
+    let report = run_parity(&dir, None, device).expect("the refiner loads and runs");
+    println!("{report}{}", report.summary());
+    assert_eq!(report.load.unet_from_checkpoint.len(), 208, "the checkpoint's full UNet");
+    assert_eq!(report.load.unet_from_base, 0);
+    assert_eq!(report.load.vae.merged.len(), 35);
+    assert_eq!(report.load.vae.replaced.len(), 4, "{:?}", report.load.vae.replaced);
+    assert!(report.load.unused.is_empty(), "unused tensors: {:?}", report.load.unused);
+    let outputs = read_vectors(&dir.join("outputs.safetensors")).unwrap();
+    assert_eq!(report.rows.len(), outputs.len() + 1, "every output and the prompt embedding compared");
+    for mode in ["single.", "ref."] {
+        let expected = outputs.keys().filter(|name| name.starts_with(mode)).count();
+        assert!(expected >= 24, "only {expected} reference tensors of the {mode} mode");
+    }
+    let failed: Vec<&str> = report.failed().map(|row| row.name.as_str()).collect();
+    assert!(failed.is_empty(), "outside the tolerance: {failed:?}");
+}
+
+#[test]
+fn both_modes_match_the_reference_on_the_cpu() {
+    both_modes_match_the_reference(&Device::flex());
+}
+
+#[cfg(feature = "wgpu")]
+#[test]
+fn both_modes_match_the_reference_on_wgpu() {
+    both_modes_match_the_reference(&Device::wgpu(burn::tensor::DeviceKind::default()));
+}
+
+#[test]
+fn a_perturbed_tensor_fails_the_comparison() {
+    let outputs = read_vectors(&vectors_dir().join("outputs.safetensors")).unwrap();
+    let reference = &outputs["single.image_out"];
+    let mut values = reference.try_to_vec::<f32>().unwrap();
+    values[17] += 1e-3;
+    let perturbed = burn::tensor::TensorData::new(values, reference.shape().clone());
+    assert_eq!(compare("single.image_out", Some(reference), reference).status, Status::Pass);
+    assert_eq!(compare("single.image_out", Some(&perturbed), reference).status, Status::Fail);
+    assert!(matches!(compare("single.image_out", None, reference).status, Status::Missing(_)));
+}
+
+fn load_refiner(device: &Device) -> (Refiner, Tensor<4>) {
+    let dir = vectors_dir();
+    let inputs = read_vectors(&dir.join("inputs.safetensors")).unwrap();
+    let tokens = inputs["input_ids"].try_to_vec::<i64>().unwrap();
+    let (refiner, _) = Refiner::load(&dir.join("base"), &dir.join("model_difix.pkl"), &tokens, device).unwrap();
+    (refiner, Tensor::from_data(inputs["image"].clone(), device))
+}
+
+#[test]
+fn a_sampled_latent_is_reproducible_from_its_seed_and_differs_from_the_mean() {
+    let (refiner, image) = load_refiner(&Device::flex());
+    let run = |latent: Latent| refiner.refine(image.clone(), None, latent, &mut Trace::Off).unwrap().into_data();
+    let first = run(Latent::Sampled { seed: 7 });
+    assert_eq!(first, run(Latent::Sampled { seed: 7 }), "the same seed gives the same image");
+    for other in [run(Latent::PosteriorMean), run(Latent::Sampled { seed: 8 })] {
+        let difference = compare("sampled", Some(&first), &other).max_abs.unwrap();
+        assert!(difference > 1e-3, "sampling changed the image by only {difference}");
+    }
+}
+
+#[test]
+fn an_image_whose_sides_are_not_multiples_of_8_keeps_its_size() {
+    let (refiner, image) = load_refiner(&Device::flex());
+    // 29 x 43: padded to 32 x 48 (latent 4 x 6), cropped back.
+    let cropped = image.narrow(2, 0, 29).narrow(3, 0, 43);
+    let out = refiner.refine(cropped, None, Latent::PosteriorMean, &mut Trace::Off).unwrap();
+    assert_eq!(out.dims(), [1, 3, 29, 43]);
+    let values = out.into_data().try_to_vec::<f32>().unwrap();
+    assert!(values.iter().all(|v| (0.0..=1.0).contains(v)), "outside [0, 1]");
+}
+
+/// The UNet in f16 and bf16 (VAE in f32, attention upcast): the refined image stays close to the f32 one.
+/// Bounds: a few times the types' rounding (2^-11, 2^-8) carried through the UNet's depth; on this tiny
+/// random model f16 moves the image by about 7e-3 and bf16 by about 4e-2.
+#[test]
+fn a_reduced_precision_unet_stays_close_to_f32() {
+    let device = Device::flex();
+    let (refiner, image) = load_refiner(&device);
+    let refine = |refiner: &Refiner| {
+        let mut trace = Trace::on();
+        let out = refiner.refine(image.clone(), None, Latent::PosteriorMean, &mut trace).unwrap().into_data();
+        let eps = trace.into_records().into_iter().find(|(name, _)| name == "unet.eps").unwrap().1;
+        (out, eps)
+    };
+    let (reference, reference_eps) = refine(&refiner);
+    for (dtype, bound) in [(FloatDType::F16, 1.5e-2), (FloatDType::BF16, 8e-2)] {
+        let (out, eps) = refine(&load_refiner(&device).0.with_unet_dtype(dtype));
+        assert_eq!(out.dtype(), burn::tensor::DType::F32, "the image comes back in f32");
+        let image_error = compare("image_out", Some(&out), &reference).max_abs.unwrap();
+        let eps_error = compare("unet.eps", Some(&eps), &reference_eps).max_abs.unwrap();
+        println!("{dtype:?}: image_out {image_error:.3e}, unet.eps {eps_error:.3e}");
+        assert!(image_error > 0.0, "{dtype:?} computed nothing in reduced precision");
+        assert!(image_error < bound && eps_error < 2.0 * bound, "{dtype:?}: {image_error} / {eps_error}");
+    }
+}
