@@ -17,6 +17,9 @@ pub enum ConvertError {
     /// A record decodes but its content breaks a rule the converter relies on.
     #[error("{}: record {record}: expected {expected}, found {found}", path.display())]
     Content { path: PathBuf, record: usize, expected: String, found: String },
+    /// A table (Feather file) lacks a column, has the wrong type or a bad value.
+    #[error("{}: expected {expected}, found {found}", path.display())]
+    Table { path: PathBuf, expected: String, found: String },
     #[error(transparent)]
     Data(#[from] dggt_data::DataError),
     #[error("cannot serialise {what}: {source}")]

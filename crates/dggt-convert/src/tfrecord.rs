@@ -187,7 +187,8 @@ mod tests {
         let path = write_records(dir.path(), &[b"first", b"second"]);
         let good = std::fs::read(&path).unwrap();
         let second = (FRAMING_BYTES + 5) as usize;
-        let cases: [(&str, Box<dyn Fn(&mut Vec<u8>)>); 4] = [
+        type Damage = Box<dyn Fn(&mut Vec<u8>)>;
+        let cases: [(&str, Damage); 4] = [
             ("payload CRC", Box::new(move |b| b[second + 12] ^= 0x01)),
             ("length CRC", Box::new(move |b| b[second] ^= 0x01)),
             ("truncated record", Box::new(|b| b.truncate(b.len() - 3))),

@@ -169,8 +169,8 @@ fn laser_points(
     let azimuth_offset = l.x_axis.y.atan2(l.x_axis.x);
     let origin = l.transform_point3(DVec3::ZERO);
     let laser_id = (calibration.name - 1) as f32;
-    for row in 0..height {
-        let (sin_incl, cos_incl) = inclinations[row].sin_cos();
+    for (row, inclination) in inclinations.iter().enumerate() {
+        let (sin_incl, cos_incl) = inclination.sin_cos();
         for col in 0..width {
             let pixel = ranges.at(row, col);
             let range = pixel[0] as f64;
