@@ -47,6 +47,10 @@ fn convert_waymo_keeps_going_past_a_damaged_segment_and_skips_finished_ones() {
     let out = dir.path().join("scenes");
     let (input_arg, out_arg) = (input.to_str().unwrap(), out.to_str().unwrap());
 
+    // An interrupted earlier run left a half-written scene: it is started afresh.
+    std::fs::create_dir_all(out.join("001.partial")).unwrap();
+    std::fs::write(out.join("001.partial/stale.txt"), "from an interrupted run").unwrap();
+
     let stopped = dggt(&["convert", "waymo", "--input", input_arg, "--out", out_arg, "--workers", "1"]);
     assert!(!stopped.status.success(), "{}", text(&stopped));
     assert!(text(&stopped).contains("c.tfrecord: record 0"), "{}", text(&stopped));
@@ -64,6 +68,7 @@ fn convert_waymo_keeps_going_past_a_damaged_segment_and_skips_finished_ones() {
         assert!(out.join(scene).join(dggt_convert::DONE_MARKER).is_file(), "{scene}: {report}");
     }
     assert!(!out.join("002").exists() && !out.join("002.partial").join(dggt_convert::DONE_MARKER).exists());
+    assert!(!out.join("001/stale.txt").exists() && !out.join("001.partial").exists());
     let images = std::fs::read_dir(out.join("000/images")).unwrap().count();
     assert_eq!(images, 5);
 
@@ -116,4 +121,31 @@ fn convert_waymo_refuses_unknown_cameras_and_missing_input() {
     assert!(front.status.success(), "{}", text(&front));
     let images: Vec<_> = std::fs::read_dir(out.join("000/images")).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert_eq!(images, ["000_0.jpg"]);
+}
+
+#[test]
+fn convert_argoverse2_turns_a_split_folder_into_numbered_scenes() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("scenes");
+    let split = real_data().join("av2/sensor/val");
+    let run = dggt(&["convert", "argoverse2", "--input", split.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(run.status.success(), "{}", text(&run));
+    assert!(text(&run).contains("converted 1 segments (2 frames)"), "{}", text(&run));
+    let inspect = dggt(&["inspect", out.join("000").to_str().unwrap(), "--json"]);
+    assert!(inspect.status.success(), "{}", text(&inspect));
+    let summary: serde_json::Value = serde_json::from_slice(&inspect.stdout).unwrap();
+    assert_eq!(summary["frames"], 2);
+    assert_eq!(summary["cameras"].as_array().unwrap().len(), 7);
+    assert_eq!(summary["cameras"][0]["name"], "ring_front_center");
+    let unknown = dggt(&[
+        "convert",
+        "argoverse2",
+        "--input",
+        split.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--cameras",
+        "7",
+    ]);
+    assert!(text(&unknown).contains("unknown camera 7: argoverse2 export ids are 0..=6"), "{}", text(&unknown));
 }

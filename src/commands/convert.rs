@@ -1,4 +1,5 @@
-//! `dggt convert`: raw driving datasets into the scene-export layout, one numbered scene folder per segment.
+//! `dggt convert`: raw driving datasets (Waymo, Argoverse 2) into the scene-export layout, one numbered scene
+//! folder per segment.
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -6,8 +7,7 @@ use std::sync::Mutex;
 use std::time::Duration;
 
 use anyhow::{Context, Result};
-use dggt_convert::batch::{self, FailurePolicy, Outcome, Progress, SegmentJob};
-use dggt_convert::waymo::WaymoOptions;
+use dggt_convert::batch::{self, FailurePolicy, Outcome, Progress, ProgressUnit, SegmentJob};
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 
 /// The raw datasets `dggt convert` reads.
@@ -15,13 +15,25 @@ use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 pub enum Dataset {
     /// Waymo Open Dataset v1: one `Frame` TFRecord per segment.
     Waymo,
+    /// Argoverse 2 sensor logs: one log folder, or a split folder of logs.
+    Argoverse2,
+}
+
+impl Dataset {
+    fn converter(self) -> batch::Dataset {
+        match self {
+            Self::Waymo => batch::Dataset::Waymo,
+            Self::Argoverse2 => batch::Dataset::Argoverse2,
+        }
+    }
 }
 
 /// Convert raw driving logs into the scene-export layout (drivestudio's per-dataset variant).
 #[derive(Debug, clap::Args)]
 pub struct Args {
     dataset: Dataset,
-    /// A segment file, or a folder of them (sorted by name; segment i becomes scene {i:03}).
+    /// A segment (Waymo `.tfrecord` file, Argoverse 2 log folder), or a folder of them (sorted by name; segment i
+    /// becomes scene {i:03}).
     #[arg(long)]
     input: PathBuf,
     /// The folder that receives the scene folders.
@@ -30,7 +42,8 @@ pub struct Args {
     /// Only these scene numbers (positions in the sorted input), e.g. `0,3,7`.
     #[arg(long, value_delimiter = ',')]
     scenes: Option<Vec<usize>>,
-    /// Export camera ids to write (Waymo: 0 FRONT, 1 FRONT_LEFT, 2 FRONT_RIGHT, 3 SIDE_LEFT, 4 SIDE_RIGHT).
+    /// Export camera ids to write, all by default (Waymo: 0 FRONT, 1 FRONT_LEFT, 2 FRONT_RIGHT, 3 SIDE_LEFT,
+    /// 4 SIDE_RIGHT; Argoverse 2: 0 ring_front_center .. 6 ring_rear_right).
     #[arg(long, value_delimiter = ',')]
     cameras: Option<Vec<usize>>,
     /// Segments converted at once (default: the machine's cores).
@@ -42,23 +55,19 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let Args { dataset: Dataset::Waymo, input, out, scenes, cameras, workers, keep_going } = args;
-    let options = match cameras {
-        Some(cameras) => {
-            let names = dggt_data::ExportVariant::Waymo.camera_names();
-            if let Some(unknown) = cameras.iter().find(|&&c| c >= names.len()) {
-                anyhow::bail!("unknown camera {unknown}: Waymo export ids are 0..={}", names.len() - 1);
-            }
-            WaymoOptions { cameras }
-        }
-        None => WaymoOptions::default(),
-    };
-    let jobs = batch::waymo_jobs(&input, &out, scenes.as_deref()).context("listing the segments")?;
+    let Args { dataset, input, out, scenes, cameras, workers, keep_going } = args;
+    let dataset = dataset.converter();
+    let names = dataset.variant().camera_names();
+    let cameras = cameras.unwrap_or_else(|| (0..names.len()).collect());
+    if let Some(unknown) = cameras.iter().find(|&&c| c >= names.len()) {
+        anyhow::bail!("unknown camera {unknown}: {} export ids are 0..={}", dataset.variant(), names.len() - 1);
+    }
+    let jobs = batch::jobs(dataset, &input, &out, scenes.as_deref()).context("listing the segments")?;
     let workers = workers.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     let policy = if keep_going { FailurePolicy::KeepGoing } else { FailurePolicy::Stop };
     let bars = Bars::new(jobs.len());
     let started = std::time::Instant::now();
-    let outcomes = batch::convert_waymo_segments(&jobs, &options, workers, policy, &bars)?;
+    let outcomes = batch::convert_segments(dataset, &jobs, &cameras, workers, policy, &bars)?;
     bars.overall.finish_and_clear();
     report(&jobs, &outcomes, started.elapsed())
 }
@@ -116,11 +125,13 @@ impl Bars {
 }
 
 impl Progress for Bars {
-    fn started(&self, job: &SegmentJob, total_bytes: u64) {
-        let bar = self.multi.add(ProgressBar::new(total_bytes));
-        bar.set_style(
-            ProgressStyle::with_template("{prefix:>4} {bar:30} {bytes}/{total_bytes} {msg}").expect("a valid template"),
-        );
+    fn started(&self, job: &SegmentJob, total: u64, unit: ProgressUnit) {
+        let bar = self.multi.add(ProgressBar::new(total));
+        let template = match unit {
+            ProgressUnit::Bytes => "{prefix:>4} {bar:30} {bytes}/{total_bytes} {msg}",
+            ProgressUnit::Sweeps => "{prefix:>4} {bar:30} {pos}/{len} sweeps {msg}",
+        };
+        bar.set_style(ProgressStyle::with_template(template).expect("a valid template"));
         bar.set_prefix(format!("{:03}", job.index));
         bar.set_message(job.input.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default());
         if let Ok(mut segments) = self.segments.lock() {
@@ -128,9 +139,9 @@ impl Progress for Bars {
         }
     }
 
-    fn advanced(&self, job: &SegmentJob, bytes_read: u64) {
+    fn advanced(&self, job: &SegmentJob, done: u64) {
         if let Some(bar) = self.bar(job) {
-            bar.set_position(bytes_read);
+            bar.set_position(done);
         }
     }
 

@@ -1,4 +1,5 @@
-//! Many segments converted in parallel, each into its own numbered scene folder, with finished scenes skipped.
+//! Many segments (Waymo TFRecords, Argoverse 2 logs) converted in parallel, each into its own numbered scene
+//! folder, with finished scenes skipped.
 //!
 //! Segment `i` (position in the sorted input list, as in drivestudio's numbered train lists) becomes
 //! `<out>/{i:03}/`. It is written into `<out>/{i:03}.partial/`, gets its done marker last, and is then renamed
@@ -12,7 +13,85 @@ use rayon::prelude::*;
 
 use crate::error::{ConvertError, Result};
 use crate::marker::{DoneMarker, read_done};
-use crate::waymo::{SegmentSummary, WaymoOptions, convert_segment};
+use crate::waymo::{WaymoOptions, convert_segment};
+
+/// The raw datasets the converters read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Dataset {
+    /// Waymo Open Dataset v1: one `Frame` TFRecord per segment; input a `.tfrecord` file or a folder of them.
+    Waymo,
+    /// Argoverse 2 sensor logs; input one log folder or a split folder of logs.
+    Argoverse2,
+}
+
+/// What a segment's progress counts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ProgressUnit {
+    Bytes,
+    Sweeps,
+}
+
+impl Dataset {
+    /// The export variant written.
+    pub fn variant(self) -> dggt_data::ExportVariant {
+        match self {
+            Self::Waymo => dggt_data::ExportVariant::Waymo,
+            Self::Argoverse2 => dggt_data::ExportVariant::Argoverse2,
+        }
+    }
+
+    pub fn progress_unit(self) -> ProgressUnit {
+        match self {
+            Self::Waymo => ProgressUnit::Bytes,
+            Self::Argoverse2 => ProgressUnit::Sweeps,
+        }
+    }
+
+    /// Whether `path` is one segment of this dataset (a log folder has `calibration/`).
+    fn is_segment(self, path: &Path) -> bool {
+        match self {
+            Self::Waymo => path.is_file() && path.extension().is_some_and(|ext| ext == "tfrecord"),
+            Self::Argoverse2 => path.join("calibration").is_dir(),
+        }
+    }
+
+    /// How much progress converting `input` takes, in [`Self::progress_unit`]s.
+    fn progress_total(self, input: &Path) -> u64 {
+        match self {
+            Self::Waymo => std::fs::metadata(input).map_or(0, |m| m.len()),
+            Self::Argoverse2 => {
+                std::fs::read_dir(input.join("sensors/lidar")).map_or(0, |entries| entries.count() as u64)
+            }
+        }
+    }
+
+    fn convert(
+        self,
+        input: &Path,
+        scene: &Path,
+        cameras: &[usize],
+        progress: &(dyn Fn(u64) + Sync),
+    ) -> Result<Converted> {
+        match self {
+            Self::Waymo => {
+                let summary = convert_segment(input, scene, &WaymoOptions { cameras: cameras.to_vec() }, progress)?;
+                Ok(Converted { scene: summary.scene, frames: summary.frames, instances: summary.instances })
+            }
+            Self::Argoverse2 => {
+                let summary = crate::argoverse2::convert_log(input, scene, cameras, progress)?;
+                Ok(Converted { scene: summary.scene, frames: summary.frames, instances: summary.instances })
+            }
+        }
+    }
+}
+
+/// A converted segment.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Converted {
+    pub scene: PathBuf,
+    pub frames: usize,
+    pub instances: usize,
+}
 
 /// One segment and the scene folder it becomes.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -34,7 +113,7 @@ pub enum FailurePolicy {
 /// What became of one segment.
 #[derive(Debug)]
 pub enum Outcome {
-    Converted(SegmentSummary),
+    Converted(Converted),
     /// A previous run finished it.
     AlreadyDone(DoneMarker),
     Failed(ConvertError),
@@ -44,43 +123,38 @@ pub enum Outcome {
 
 /// Hears about the segments as they run (from worker threads).
 pub trait Progress: Sync {
-    fn started(&self, job: &SegmentJob, total_bytes: u64);
-    fn advanced(&self, job: &SegmentJob, bytes_read: u64);
+    fn started(&self, job: &SegmentJob, total: u64, unit: ProgressUnit);
+    fn advanced(&self, job: &SegmentJob, done: u64);
     fn finished(&self, job: &SegmentJob, outcome: &Outcome);
 }
 
-/// The Waymo segments at `input` (one `.tfrecord` file, or a folder of them, sorted by name), numbered, with
-/// their scene folders under `out`; `scenes` keeps only those numbers.
-pub fn waymo_jobs(input: &Path, out: &Path, scenes: Option<&[usize]>) -> Result<Vec<SegmentJob>> {
-    let files = if input.is_dir() {
-        let entries = std::fs::read_dir(input).map_err(|e| ConvertError::io(input, e))?;
-        let mut files: Vec<PathBuf> = entries
-            .map(|entry| entry.map(|e| e.path()).map_err(|e| ConvertError::io(input, e)))
-            .filter(|path| path.as_ref().map_or(true, |p| p.extension().is_some_and(|ext| ext == "tfrecord")))
-            .collect::<Result<_>>()?;
-        files.sort();
-        files
-    } else if input.is_file() {
+/// The segments of `dataset` at `input` (one segment, or a folder of them sorted by name), numbered, with their
+/// scene folders under `out`; `scenes` keeps only those numbers.
+pub fn jobs(dataset: Dataset, input: &Path, out: &Path, scenes: Option<&[usize]>) -> Result<Vec<SegmentJob>> {
+    let not_found = |what: String| ConvertError::io(input, std::io::Error::new(std::io::ErrorKind::NotFound, what));
+    let segments = if dataset.is_segment(input) {
         vec![input.to_owned()]
+    } else if input.is_dir() {
+        let entries = std::fs::read_dir(input).map_err(|e| ConvertError::io(input, e))?;
+        let mut segments = Vec::new();
+        for entry in entries {
+            let path = entry.map_err(|e| ConvertError::io(input, e))?.path();
+            if dataset.is_segment(&path) {
+                segments.push(path);
+            }
+        }
+        segments.sort();
+        segments
     } else {
-        return Err(ConvertError::io(
-            input,
-            std::io::Error::new(std::io::ErrorKind::NotFound, "no such file or folder"),
-        ));
+        return Err(not_found("no such file or folder".into()));
     };
-    if files.is_empty() {
-        return Err(ConvertError::io(input, std::io::Error::new(std::io::ErrorKind::NotFound, "no .tfrecord files")));
+    if segments.is_empty() {
+        return Err(not_found(format!("no {} segments", dataset.variant())));
     }
-    if let Some(missing) = scenes.and_then(|s| s.iter().find(|&&i| i >= files.len())) {
-        return Err(ConvertError::io(
-            input,
-            std::io::Error::new(
-                std::io::ErrorKind::NotFound,
-                format!("no segment {missing}: {} segments", files.len()),
-            ),
-        ));
+    if let Some(missing) = scenes.and_then(|s| s.iter().find(|&&i| i >= segments.len())) {
+        return Err(not_found(format!("no segment {missing}: {} segments", segments.len())));
     }
-    Ok(files
+    Ok(segments
         .into_iter()
         .enumerate()
         .filter(|(index, _)| scenes.is_none_or(|s| s.contains(index)))
@@ -89,9 +163,10 @@ pub fn waymo_jobs(input: &Path, out: &Path, scenes: Option<&[usize]>) -> Result<
 }
 
 /// Converts every job on `workers` threads; the outcomes come back in job order.
-pub fn convert_waymo_segments(
+pub fn convert_segments(
+    dataset: Dataset,
     jobs: &[SegmentJob],
-    options: &WaymoOptions,
+    cameras: &[usize],
     workers: usize,
     policy: FailurePolicy,
     progress: &dyn Progress,
@@ -108,7 +183,7 @@ pub fn convert_waymo_segments(
                 if stopped.load(Ordering::Relaxed) {
                     return Outcome::NotStarted;
                 }
-                let outcome = convert_one(job, options, progress);
+                let outcome = convert_one(dataset, job, cameras, progress);
                 if matches!(outcome, Outcome::Failed(_)) && policy == FailurePolicy::Stop {
                     stopped.store(true, Ordering::Relaxed);
                 }
@@ -119,24 +194,23 @@ pub fn convert_waymo_segments(
     }))
 }
 
-fn convert_one(job: &SegmentJob, options: &WaymoOptions, progress: &dyn Progress) -> Outcome {
+fn convert_one(dataset: Dataset, job: &SegmentJob, cameras: &[usize], progress: &dyn Progress) -> Outcome {
     if let Some(marker) = read_done(&job.scene) {
         return Outcome::AlreadyDone(marker);
     }
-    match write_scene(job, options, progress) {
+    match write_scene(dataset, job, cameras, progress) {
         Ok(summary) => Outcome::Converted(summary),
         Err(error) => Outcome::Failed(error),
     }
 }
 
-fn write_scene(job: &SegmentJob, options: &WaymoOptions, progress: &dyn Progress) -> Result<SegmentSummary> {
-    let total = std::fs::metadata(&job.input).map_err(|e| ConvertError::io(&job.input, e))?.len();
-    progress.started(job, total);
+fn write_scene(dataset: Dataset, job: &SegmentJob, cameras: &[usize], progress: &dyn Progress) -> Result<Converted> {
+    progress.started(job, dataset.progress_total(&job.input), dataset.progress_unit());
     let partial = job.scene.with_extension("partial");
     if partial.exists() {
         std::fs::remove_dir_all(&partial).map_err(|e| ConvertError::io(&partial, e))?;
     }
-    let mut summary = convert_segment(&job.input, &partial, options, &|bytes| progress.advanced(job, bytes))?;
+    let mut summary = dataset.convert(&job.input, &partial, cameras, &|done| progress.advanced(job, done))?;
     std::fs::rename(&partial, &job.scene).map_err(|e| ConvertError::io(&job.scene, e))?;
     summary.scene = job.scene.clone();
     Ok(summary)
