@@ -47,7 +47,7 @@ impl Dataset {
         }
     }
 
-    /// Whether `path` is one segment of this dataset (a log folder has `calibration/`).
+    /// Whether `path` in a folder of segments is one (a `.tfrecord` file; a log folder with `calibration/`).
     fn is_segment(self, path: &Path) -> bool {
         match self {
             Self::Waymo => path.is_file() && path.extension().is_some_and(|ext| ext == "tfrecord"),
@@ -132,7 +132,7 @@ pub trait Progress: Sync {
 /// scene folders under `out`; `scenes` keeps only those numbers.
 pub fn jobs(dataset: Dataset, input: &Path, out: &Path, scenes: Option<&[usize]>) -> Result<Vec<SegmentJob>> {
     let not_found = |what: String| ConvertError::io(input, std::io::Error::new(std::io::ErrorKind::NotFound, what));
-    let segments = if dataset.is_segment(input) {
+    let segments = if input.is_file() || dataset.is_segment(input) {
         vec![input.to_owned()]
     } else if input.is_dir() {
         let entries = std::fs::read_dir(input).map_err(|e| ConvertError::io(input, e))?;

@@ -59,12 +59,11 @@ impl LogCamera {
     }
 
     /// The pinhole camera drivestudio's export describes (no distortion).
-    fn export_camera(&self) -> Result<EgoCamera> {
+    fn export_camera(&self, log: &Path) -> Result<EgoCamera> {
         let [fx, fy, cx, cy] = self.calibration.pinhole;
-        let invalid = |e: dggt_geom::GeomError| ConvertError::Content {
-            path: PathBuf::from("calibration/intrinsics.feather"),
-            record: self.id,
-            expected: format!("valid intrinsics for {}", self.name),
+        let invalid = |e: dggt_geom::GeomError| ConvertError::Table {
+            path: log.join("calibration/intrinsics.feather"),
+            expected: format!("valid intrinsics for `{}`", self.name),
             found: e.to_string(),
         };
         Ok(EgoCamera {
@@ -140,7 +139,7 @@ pub fn convert_log(log: &Path, scene: &Path, cameras: &[usize], progress: &(dyn 
     let poses = tables::ego_poses(log)?;
     let mut annotations = tables::annotations(log)?;
     let sweeps = timestamps_in(&log.join("sensors/lidar"), "feather")?;
-    let projections = cameras.iter().map(LogCamera::export_camera).collect::<Result<Vec<_>>>()?;
+    let projections = cameras.iter().map(|camera| camera.export_camera(log)).collect::<Result<Vec<_>>>()?;
     let mut instances = InstanceLog::default();
     let mut kept = Vec::new();
     for (index, &sweep) in sweeps.iter().enumerate() {
