@@ -6,20 +6,16 @@
 //!
 //! `cargo bench --workspace --features wgpu --bench waymo_segment`
 
-use std::path::PathBuf;
 use std::time::Instant;
 
 use dggt_convert::tfrecord::{RecordReader, frame_record};
 use dggt_convert::waymo::{WaymoOptions, convert_segment, proto};
 use prost::Message;
 
-fn real_data() -> PathBuf {
-    let dir = std::env::var_os("DGGT_REAL_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/real-data"));
-    assert!(dir.is_dir(), "real driving data not found at {} (set DGGT_REAL_DATA)", dir.display());
-    dir
-}
+#[path = "../tests/common/mod.rs"]
+mod common;
+
+use common::real_data;
 
 /// The process's peak resident memory in MiB (Linux `VmHWM`).
 fn peak_memory_mib() -> Option<f64> {

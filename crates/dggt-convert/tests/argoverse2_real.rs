@@ -10,17 +10,9 @@ use dggt_convert::argoverse2::convert_log;
 use dggt_data::{DynamicMaskKind, ExportLayout, ExportVariant, read_export};
 use image::RgbImage;
 
-fn real_data() -> PathBuf {
-    let dir = std::env::var_os("DGGT_REAL_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/real-data"));
-    assert!(
-        dir.is_dir(),
-        "real driving data not found at {} (set DGGT_REAL_DATA to the shared real-data folder)",
-        dir.display()
-    );
-    dir
-}
+mod common;
+
+use common::real_data;
 
 fn log() -> PathBuf {
     real_data().join("av2/sensor/val/7fab2350-7eaf-3b7e-a39d-6937a4c1bede")

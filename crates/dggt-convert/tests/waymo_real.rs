@@ -11,17 +11,9 @@ use dggt_data::{DynamicMaskKind, ExportLayout, ExportVariant, text};
 use dggt_geom::glam::{DVec2, DVec3};
 use dggt_geom::{Ego, ImageSize, PinholeIntrinsics, Rigid, WaymoCamera};
 
-fn real_data() -> PathBuf {
-    let dir = std::env::var_os("DGGT_REAL_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/real-data"));
-    assert!(
-        dir.is_dir(),
-        "real driving data not found at {} (set DGGT_REAL_DATA to the shared real-data folder)",
-        dir.display()
-    );
-    dir
-}
+mod common;
+
+use common::real_data;
 
 fn one_frame() -> PathBuf {
     real_data().join("waymo/one_frame_5cams.tfrecord")
