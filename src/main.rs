@@ -8,7 +8,7 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 use tracing_subscriber::EnvFilter;
 
-use crate::commands::{bench, devices, eval, inspect, parity, reconstruct, stress, synth, train};
+use crate::commands::{bench, convert, devices, eval, inspect, parity, reconstruct, stress, synth, train};
 
 #[derive(Debug, Parser)]
 #[command(name = "dggt", version, about = "Feedforward 4D reconstruction of dynamic driving scenes")]
@@ -20,6 +20,7 @@ struct Cli {
 #[derive(Debug, Subcommand)]
 enum Command {
     Synth(synth::Args),
+    Convert(convert::Args),
     Inspect(inspect::Args),
     Parity(parity::Args),
     Train(train::Args),
@@ -37,6 +38,7 @@ fn main() -> Result<()> {
         .init();
     match Cli::parse().command {
         Command::Synth(args) => synth::run(args),
+        Command::Convert(args) => convert::run(args),
         Command::Inspect(args) => inspect::run(args),
         Command::Parity(args) => parity::run(args),
         Command::Train(args) => train::run(args),

@@ -3,6 +3,7 @@
 
 pub mod bench;
 pub mod bench_compute;
+pub mod convert;
 pub mod devices;
 pub mod eval;
 pub mod inspect;

@@ -1,0 +1,211 @@
+//! One Argoverse 2 sensor log into one scene folder of drivestudio's Argoverse 2 export
+//! ([`dggt_data::ExportVariant::Argoverse2`]); frame `t` is the `t`-th lidar sweep kept.
+//!
+//! A sweep is kept when every chosen camera has an image within ±25 ms of it and the sweep and each of those
+//! images have an ego pose row (drivestudio's rule). Export camera ids: 0 ring_front_center (portrait),
+//! 1 ring_front_left, 2 ring_front_right, 3 ring_side_left, 4 ring_side_right, 5 ring_rear_left,
+//! 6 ring_rear_right.
+//!
+//! | path | content |
+//! |---|---|
+//! | `images/{t:03}_{cam}.jpg` | the log's JPEG bytes, unchanged (drivestudio re-encodes them) |
+//! | `intrinsics/{cam}.txt` | `fx fy cx cy 0 0 0 0 0`: the radial distortion is dropped, as drivestudio does |
+//! | `extrinsics/{cam}.txt` | 4x4 camera -> ego, OpenCV camera axes |
+//! | `ego_pose/{t:03}.txt` | 4x4 ego -> city at the sweep's time (shared by the cameras) |
+//! | `timestamps.txt` | `t seconds` per frame, seconds since the first kept sweep |
+//! | `lidar/{t:03}.bin` | N x 4 float32: x y z (m, ego frame at the sweep's time), intensity (0-255) |
+//! | `dynamic_masks/{all,human,vehicle}/` | every box of the masked categories ([`MaskRule::EveryBox`]), pinhole cameras |
+//! | `instances/` | those boxes; `obj_to_world` = ego -> city at the sweep · object -> ego |
+//! | [`DONE_MARKER`](crate::marker::DONE_MARKER) | written last |
+
+use std::path::{Path, PathBuf};
+
+use dggt_data::{ExportLayout, ExportVariant, io, text};
+use dggt_geom::{ImageSize, PinholeIntrinsics};
+
+use super::tables::{self, CameraCalibration};
+use crate::camera::{Distortion, EgoCamera};
+use crate::error::{ConvertError, Result};
+use crate::feather::Table;
+use crate::instances::InstanceLog;
+use crate::marker::{DoneMarker, write_done};
+use crate::masks::{DynamicMasks, MaskRule};
+
+/// Largest offset between a sweep and the image paired with it (ns).
+pub const PAIRING_WINDOW_NS: i64 = 25_000_000;
+
+/// What a converted log holds.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LogSummary {
+    pub scene: PathBuf,
+    pub frames: usize,
+    /// Sweeps left out for want of an image or a pose.
+    pub dropped_sweeps: usize,
+    pub instances: usize,
+}
+
+/// One chosen camera.
+struct LogCamera {
+    id: usize,
+    name: &'static str,
+    calibration: CameraCalibration,
+    /// Image timestamps (ns), sorted.
+    images: Vec<i64>,
+}
+
+impl LogCamera {
+    fn image_path(&self, log: &Path, time_ns: i64) -> PathBuf {
+        log.join("sensors/cameras").join(self.name).join(format!("{time_ns}.jpg"))
+    }
+
+    /// The pinhole camera drivestudio's export describes (no distortion).
+    fn export_camera(&self, log: &Path) -> Result<EgoCamera> {
+        let [fx, fy, cx, cy] = self.calibration.pinhole;
+        let invalid = |e: dggt_geom::GeomError| ConvertError::Table {
+            path: log.join("calibration/intrinsics.feather"),
+            expected: format!("valid intrinsics for `{}`", self.name),
+            found: e.to_string(),
+        };
+        Ok(EgoCamera {
+            intrinsics: PinholeIntrinsics::new(fx, fy, cx, cy).map_err(invalid)?,
+            distortion: Distortion::default(),
+            camera_from_ego: self.calibration.ego_from_camera.inverse(),
+            size: ImageSize::new(self.calibration.width, self.calibration.height).map_err(invalid)?,
+        })
+    }
+
+    /// The image nearest `time_ns` within the pairing window.
+    fn pair(&self, time_ns: i64) -> Option<i64> {
+        let after = self.images.partition_point(|&t| t < time_ns);
+        let candidates = [after.checked_sub(1), Some(after)];
+        candidates
+            .into_iter()
+            .flatten()
+            .filter_map(|i| self.images.get(i).copied())
+            .min_by_key(|t| (t - time_ns).abs())
+            .filter(|t| (t - time_ns).abs() <= PAIRING_WINDOW_NS)
+    }
+}
+
+/// The numbers in the file names `<timestamp_ns>.<extension>` of a folder, sorted.
+fn timestamps_in(folder: &Path, extension: &str) -> Result<Vec<i64>> {
+    let entries = std::fs::read_dir(folder).map_err(|e| ConvertError::io(folder, e))?;
+    let mut times = Vec::new();
+    for entry in entries {
+        let path = entry.map_err(|e| ConvertError::io(folder, e))?.path();
+        if path.extension().is_none_or(|ext| ext != extension) {
+            continue;
+        }
+        let time = path.file_stem().and_then(|s| s.to_str()).and_then(|s| s.parse().ok()).ok_or_else(|| {
+            ConvertError::Table {
+                path: path.clone(),
+                expected: "a file named by its timestamp in ns".into(),
+                found: "another name".into(),
+            }
+        })?;
+        times.push(time);
+    }
+    times.sort_unstable();
+    Ok(times)
+}
+
+fn chosen_cameras(log: &Path, cameras: &[usize]) -> Result<Vec<LogCamera>> {
+    let names = ExportVariant::Argoverse2.camera_names();
+    let mut calibrations = tables::camera_calibrations(log)?;
+    cameras
+        .iter()
+        .map(|&id| {
+            let name = *names.get(id).ok_or_else(|| ConvertError::Table {
+                path: log.to_owned(),
+                expected: format!("an Argoverse 2 export camera id 0..={}", names.len() - 1),
+                found: format!("{id}"),
+            })?;
+            let calibration = calibrations.remove(name).ok_or_else(|| ConvertError::Table {
+                path: log.join("calibration/intrinsics.feather"),
+                expected: format!("a row for camera `{name}`"),
+                found: "none".into(),
+            })?;
+            let images = timestamps_in(&log.join("sensors/cameras").join(name), "jpg")?;
+            Ok(LogCamera { id, name, calibration, images })
+        })
+        .collect()
+}
+
+/// Converts the log folder `log` into the scene folder `scene`, the chosen export cameras only; `progress` gets
+/// the number of sweeps handled so far.
+pub fn convert_log(log: &Path, scene: &Path, cameras: &[usize], progress: &(dyn Fn(u64) + Sync)) -> Result<LogSummary> {
+    let layout = ExportLayout::new(scene);
+    let cameras = chosen_cameras(log, cameras)?;
+    let poses = tables::ego_poses(log)?;
+    let mut annotations = tables::annotations(log)?;
+    let sweeps = timestamps_in(&log.join("sensors/lidar"), "feather")?;
+    let projections = cameras.iter().map(|camera| camera.export_camera(log)).collect::<Result<Vec<_>>>()?;
+    let mut instances = InstanceLog::default();
+    let mut kept = Vec::new();
+    for (index, &sweep) in sweeps.iter().enumerate() {
+        progress(index as u64);
+        let pairs: Option<Vec<i64>> = cameras.iter().map(|c| c.pair(sweep).filter(|t| poses.contains_key(t))).collect();
+        let (Some(pairs), Some(world_from_ego)) = (pairs, poses.get(&sweep)) else { continue };
+        let t = kept.len();
+        for ((camera, projection), time) in cameras.iter().zip(&projections).zip(pairs) {
+            let source = camera.image_path(log, time);
+            let bytes = std::fs::read(&source).map_err(|e| ConvertError::io(&source, e))?;
+            io::write_atomically(&layout.image(t, camera.id), &bytes)?;
+            let boxes = annotations.get(&sweep).map(Vec::as_slice).unwrap_or_default();
+            DynamicMasks::draw(projection, boxes, MaskRule::EveryBox).write(&layout, t, camera.id)?;
+        }
+        text::write_rows(&layout.ego_pose(t), &world_from_ego.to_rows())?;
+        write_sweep(&log.join("sensors/lidar").join(format!("{sweep}.feather")), &layout.lidar(t))?;
+        instances.add_frame(t, world_from_ego, &annotations.remove(&sweep).unwrap_or_default());
+        kept.push(sweep);
+    }
+    let Some(&first) = kept.first() else {
+        return Err(ConvertError::Table {
+            path: log.join("sensors/lidar"),
+            expected: "a sweep with an image from every chosen camera within 25 ms, and their poses".into(),
+            found: format!("none of {} sweeps", sweeps.len()),
+        });
+    };
+    for (camera, projection) in cameras.iter().zip(&projections) {
+        let k = projection.intrinsics;
+        text::write_rows(
+            &layout.intrinsics(camera.id),
+            &[k.fx, k.fy, k.cx, k.cy, 0.0, 0.0, 0.0, 0.0, 0.0].map(|v| [v]),
+        )?;
+        text::write_rows(&layout.extrinsics(camera.id), &camera.calibration.ego_from_camera.to_rows())?;
+    }
+    let times: Vec<[f64; 2]> = kept.iter().enumerate().map(|(t, ns)| [t as f64, (ns - first) as f64 * 1e-9]).collect();
+    text::write_rows(&layout.timestamps(), &times)?;
+    instances.write(&layout)?;
+    let marker = DoneMarker {
+        converter: format!("dggt-convert {} (argoverse2)", env!("CARGO_PKG_VERSION")),
+        source: log.to_owned(),
+        frames: kept.len(),
+        cameras: cameras.iter().map(|c| c.id).collect(),
+        instances: instances.len(),
+        lidar_frames: kept.len(),
+    };
+    write_done(scene, &marker)?;
+    progress(sweeps.len() as u64);
+    Ok(LogSummary {
+        scene: scene.to_owned(),
+        frames: kept.len(),
+        dropped_sweeps: sweeps.len() - kept.len(),
+        instances: instances.len(),
+    })
+}
+
+/// A sweep's `x y z intensity` rows (ego frame), as float32.
+fn write_sweep(source: &Path, target: &Path) -> Result<()> {
+    let table = Table::read(source)?;
+    let columns = ["x", "y", "z", "intensity"].map(|name| table.f64_column(name));
+    let [x, y, z, intensity] = columns;
+    let (x, y, z, intensity) = (x?, y?, z?, intensity?);
+    let mut bytes = Vec::with_capacity(x.len() * 16);
+    for row in 0..x.len() {
+        for value in [x[row], y[row], z[row], intensity[row]] {
+            bytes.extend_from_slice(&(value as f32).to_le_bytes());
+        }
+    }
+    Ok(io::write_atomically(target, &bytes)?)
+}

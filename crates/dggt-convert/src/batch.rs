@@ -1,0 +1,217 @@
+//! Many segments (Waymo TFRecords, Argoverse 2 logs) converted in parallel, each into its own numbered scene
+//! folder, with finished scenes skipped.
+//!
+//! Segment `i` (position in the sorted input list, as in drivestudio's numbered train lists) becomes
+//! `<out>/{i:03}/`. It is written into `<out>/{i:03}.partial/`, gets its done marker last, and is then renamed
+//! into place, so `<out>/{i:03}/` only ever holds a finished scene: a re-run skips it, and restarts an
+//! interrupted one from scratch.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use rayon::prelude::*;
+
+use crate::error::{ConvertError, Result};
+use crate::marker::{DoneMarker, read_done};
+use crate::waymo::{WaymoOptions, convert_segment};
+
+/// The raw datasets the converters read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Dataset {
+    /// Waymo Open Dataset v1: one `Frame` TFRecord per segment; input a `.tfrecord` file or a folder of them.
+    Waymo,
+    /// Argoverse 2 sensor logs; input one log folder or a split folder of logs.
+    Argoverse2,
+}
+
+/// What a segment's progress counts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ProgressUnit {
+    Bytes,
+    Sweeps,
+}
+
+impl Dataset {
+    /// The export variant written.
+    pub fn variant(self) -> dggt_data::ExportVariant {
+        match self {
+            Self::Waymo => dggt_data::ExportVariant::Waymo,
+            Self::Argoverse2 => dggt_data::ExportVariant::Argoverse2,
+        }
+    }
+
+    pub fn progress_unit(self) -> ProgressUnit {
+        match self {
+            Self::Waymo => ProgressUnit::Bytes,
+            Self::Argoverse2 => ProgressUnit::Sweeps,
+        }
+    }
+
+    /// Whether `path` in a folder of segments is one (a `.tfrecord` file; a log folder with `calibration/`).
+    fn is_segment(self, path: &Path) -> bool {
+        match self {
+            Self::Waymo => path.is_file() && path.extension().is_some_and(|ext| ext == "tfrecord"),
+            Self::Argoverse2 => path.join("calibration").is_dir(),
+        }
+    }
+
+    /// How much progress converting `input` takes, in [`Self::progress_unit`]s.
+    fn progress_total(self, input: &Path) -> u64 {
+        match self {
+            Self::Waymo => std::fs::metadata(input).map_or(0, |m| m.len()),
+            Self::Argoverse2 => {
+                std::fs::read_dir(input.join("sensors/lidar")).map_or(0, |entries| entries.count() as u64)
+            }
+        }
+    }
+
+    fn convert(
+        self,
+        input: &Path,
+        scene: &Path,
+        cameras: &[usize],
+        progress: &(dyn Fn(u64) + Sync),
+    ) -> Result<Converted> {
+        match self {
+            Self::Waymo => {
+                let summary = convert_segment(input, scene, &WaymoOptions { cameras: cameras.to_vec() }, progress)?;
+                Ok(Converted { scene: summary.scene, frames: summary.frames, instances: summary.instances })
+            }
+            Self::Argoverse2 => {
+                let summary = crate::argoverse2::convert_log(input, scene, cameras, progress)?;
+                Ok(Converted { scene: summary.scene, frames: summary.frames, instances: summary.instances })
+            }
+        }
+    }
+}
+
+/// A converted segment.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Converted {
+    pub scene: PathBuf,
+    pub frames: usize,
+    pub instances: usize,
+}
+
+/// One segment and the scene folder it becomes.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SegmentJob {
+    pub index: usize,
+    pub input: PathBuf,
+    pub scene: PathBuf,
+}
+
+/// What to do when a segment fails.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FailurePolicy {
+    /// Start no further segments (those running finish).
+    Stop,
+    /// Convert every other segment and report the failures at the end.
+    KeepGoing,
+}
+
+/// What became of one segment.
+#[derive(Debug)]
+pub enum Outcome {
+    Converted(Converted),
+    /// A previous run finished it.
+    AlreadyDone(DoneMarker),
+    Failed(ConvertError),
+    /// Not started because an earlier failure stopped the run.
+    NotStarted,
+}
+
+/// Hears about the segments as they run (from worker threads).
+pub trait Progress: Sync {
+    fn started(&self, job: &SegmentJob, total: u64, unit: ProgressUnit);
+    fn advanced(&self, job: &SegmentJob, done: u64);
+    fn finished(&self, job: &SegmentJob, outcome: &Outcome);
+}
+
+/// The segments of `dataset` at `input` (one segment, or a folder of them sorted by name), numbered, with their
+/// scene folders under `out`; `scenes` keeps only those numbers.
+pub fn jobs(dataset: Dataset, input: &Path, out: &Path, scenes: Option<&[usize]>) -> Result<Vec<SegmentJob>> {
+    let not_found = |what: String| ConvertError::io(input, std::io::Error::new(std::io::ErrorKind::NotFound, what));
+    let segments = if input.is_file() || dataset.is_segment(input) {
+        vec![input.to_owned()]
+    } else if input.is_dir() {
+        let entries = std::fs::read_dir(input).map_err(|e| ConvertError::io(input, e))?;
+        let mut segments = Vec::new();
+        for entry in entries {
+            let path = entry.map_err(|e| ConvertError::io(input, e))?.path();
+            if dataset.is_segment(&path) {
+                segments.push(path);
+            }
+        }
+        segments.sort();
+        segments
+    } else {
+        return Err(not_found("no such file or folder".into()));
+    };
+    if segments.is_empty() {
+        return Err(not_found(format!("no {} segments", dataset.variant())));
+    }
+    if let Some(missing) = scenes.and_then(|s| s.iter().find(|&&i| i >= segments.len())) {
+        return Err(not_found(format!("no segment {missing}: {} segments", segments.len())));
+    }
+    Ok(segments
+        .into_iter()
+        .enumerate()
+        .filter(|(index, _)| scenes.is_none_or(|s| s.contains(index)))
+        .map(|(index, input)| SegmentJob { index, input, scene: out.join(format!("{index:03}")) })
+        .collect())
+}
+
+/// Converts every job on `workers` threads; the outcomes come back in job order.
+pub fn convert_segments(
+    dataset: Dataset,
+    jobs: &[SegmentJob],
+    cameras: &[usize],
+    workers: usize,
+    policy: FailurePolicy,
+    progress: &dyn Progress,
+) -> Result<Vec<Outcome>> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(workers.max(1))
+        .build()
+        .map_err(|e| ConvertError::io(Path::new("."), std::io::Error::other(e)))?;
+    let stopped = AtomicBool::new(false);
+    Ok(pool.install(|| {
+        jobs.par_iter()
+            .with_max_len(1)
+            .map(|job| {
+                if stopped.load(Ordering::Relaxed) {
+                    return Outcome::NotStarted;
+                }
+                let outcome = convert_one(dataset, job, cameras, progress);
+                if matches!(outcome, Outcome::Failed(_)) && policy == FailurePolicy::Stop {
+                    stopped.store(true, Ordering::Relaxed);
+                }
+                progress.finished(job, &outcome);
+                outcome
+            })
+            .collect()
+    }))
+}
+
+fn convert_one(dataset: Dataset, job: &SegmentJob, cameras: &[usize], progress: &dyn Progress) -> Outcome {
+    if let Some(marker) = read_done(&job.scene) {
+        return Outcome::AlreadyDone(marker);
+    }
+    match write_scene(dataset, job, cameras, progress) {
+        Ok(summary) => Outcome::Converted(summary),
+        Err(error) => Outcome::Failed(error),
+    }
+}
+
+fn write_scene(dataset: Dataset, job: &SegmentJob, cameras: &[usize], progress: &dyn Progress) -> Result<Converted> {
+    progress.started(job, dataset.progress_total(&job.input), dataset.progress_unit());
+    let partial = job.scene.with_extension("partial");
+    if partial.exists() {
+        std::fs::remove_dir_all(&partial).map_err(|e| ConvertError::io(&partial, e))?;
+    }
+    let mut summary = dataset.convert(&job.input, &partial, cameras, &|done| progress.advanced(job, done))?;
+    std::fs::rename(&partial, &job.scene).map_err(|e| ConvertError::io(&job.scene, e))?;
+    summary.scene = job.scene.clone();
+    Ok(summary)
+}

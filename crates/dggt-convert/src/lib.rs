@@ -1,0 +1,28 @@
+//! Converters from raw driving datasets into the scene-export layout ([`dggt_data::ExportLayout`]), natively:
+//! no Python, no `protoc`, no TensorFlow.
+//!
+//! - [`tfrecord`]: TFRecord framing with both CRC checks, streamed record by record; [`feather`]: Feather v2
+//!   (Arrow IPC) tables.
+//! - [`waymo`]: Waymo Open Dataset v1 segments into drivestudio's Waymo export.
+//! - [`argoverse2`]: Argoverse 2 sensor logs into drivestudio's Argoverse 2 export.
+//! - [`batch`]: many segments in parallel into numbered scene folders, finished ones skipped.
+//! - Shared by the datasets: [`camera`] (projection with lens distortion), [`boxes`] (annotated 3D boxes),
+//!   [`masks`] (dynamic masks from projected boxes), [`instances`] (`instances/`), [`marker`] (the done marker a
+//!   finished scene gets, so that re-runs skip it).
+//!
+//! Every error names the file and the record in it ([`ConvertError`]); bad input never panics.
+
+pub mod argoverse2;
+pub mod batch;
+pub mod boxes;
+pub mod camera;
+mod error;
+pub mod feather;
+pub mod instances;
+pub mod marker;
+pub mod masks;
+pub mod tfrecord;
+pub mod waymo;
+
+pub use error::{ConvertError, RecordAt, Result};
+pub use marker::{DONE_MARKER, DoneMarker, read_done};

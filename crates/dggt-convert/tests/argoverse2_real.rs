@@ -1,0 +1,191 @@
+//! The Argoverse 2 converter on a real log excerpt: its calibration, poses, two lidar sweeps and annotations are
+//! real; its camera images are those sweeps' points drawn into each camera with the log's calibration (depth
+//! colours, 5x5 px dots on grey). So the exported cameras, read back by the project's export reader, must put
+//! each sweep's points on drawn pixels: that checks every axis and pose convention at once. The data lives
+//! beside the repository (`../shared/real-data`, or `$DGGT_REAL_DATA`; non-commercial licence, never copied).
+
+use std::path::PathBuf;
+
+use dggt_convert::argoverse2::convert_log;
+use dggt_data::{DynamicMaskKind, ExportLayout, ExportVariant, read_export};
+use image::RgbImage;
+
+mod common;
+
+use common::real_data;
+
+fn log() -> PathBuf {
+    real_data().join("av2/sensor/val/7fab2350-7eaf-3b7e-a39d-6937a4c1bede")
+}
+
+/// The most frequent colour: the grey the points were drawn on.
+fn background(image: &RgbImage) -> [u8; 3] {
+    let mut counts = std::collections::HashMap::new();
+    for p in image.pixels() {
+        *counts.entry(p.0).or_insert(0usize) += 1;
+    }
+    counts.into_iter().max_by_key(|(_, n)| *n).unwrap().0
+}
+
+/// Whether a pixel within `radius` of (u, v) differs clearly from the background.
+fn drawn_near(image: &RgbImage, grey: [u8; 3], u: f64, v: f64, radius: i64) -> bool {
+    let (col, row) = (u.floor() as i64, v.floor() as i64);
+    (-radius..=radius).any(|dy| {
+        (-radius..=radius).any(|dx| {
+            let (x, y) = (col + dx, row + dy);
+            if x < 0 || y < 0 || x >= image.width() as i64 || y >= image.height() as i64 {
+                return false;
+            }
+            let p = image.get_pixel(x as u32, y as u32).0;
+            p.iter().zip(grey).any(|(&a, b)| a.abs_diff(b) > 40)
+        })
+    })
+}
+
+/// Marks the pixels within `radius` (Chebyshev) of (u, v).
+fn stamp(mask: &mut image::GrayImage, u: f64, v: f64, radius: i64) {
+    let (col, row) = (u.floor() as i64, v.floor() as i64);
+    for y in (row - radius).max(0)..=(row + radius).min(mask.height() as i64 - 1) {
+        for x in (col - radius).max(0)..=(col + radius).min(mask.width() as i64 - 1) {
+            mask.put_pixel(x as u32, y as u32, image::Luma([1]));
+        }
+    }
+}
+
+#[test]
+fn the_log_converts_and_its_lidar_lands_on_the_drawn_pixels() {
+    let out = tempfile::tempdir().unwrap();
+    let scene_dir = out.path().join("000");
+    let summary = convert_log(&log(), &scene_dir, &(0..7).collect::<Vec<_>>(), &|_| {}).unwrap();
+    assert_eq!((summary.frames, summary.dropped_sweeps), (2, 0));
+    assert!(summary.instances > 0);
+    assert_eq!(ExportVariant::detect(&scene_dir).unwrap(), ExportVariant::Argoverse2);
+    let scene = read_export(&scene_dir, &Default::default()).unwrap();
+    assert_eq!((scene.cameras.len(), scene.frames.len()), (7, 2));
+    assert_eq!((scene.cameras[0].size.width, scene.cameras[0].size.height), (1550, 2048), "front centre is portrait");
+    let layout = ExportLayout::new(&scene_dir);
+    let names = ExportVariant::Argoverse2.camera_names();
+    let mut masked_pixels = 0;
+    for c in 0..7 {
+        let mask = dggt_data::images::read_gray(&layout.dynamic_mask(DynamicMaskKind::All, 0, c)).unwrap();
+        assert_eq!(mask.dimensions(), (scene.cameras[c].size.width, scene.cameras[c].size.height));
+        masked_pixels += mask.pixels().filter(|p| p.0[0] == 255).count();
+    }
+    println!("{} instances; {masked_pixels} masked pixels in frame 0", summary.instances);
+    assert!(masked_pixels > 0, "the log's cars and pedestrians are masked");
+    let info: serde_json::Value = serde_json::from_slice(&std::fs::read(layout.instances_info()).unwrap()).unwrap();
+    assert_eq!(info.as_object().unwrap().len(), summary.instances);
+    let first = &info["0"]["frame_annotations"];
+    assert_eq!(first["frame_idx"][0], 0);
+    assert_eq!(first["box_size"][0].as_array().unwrap().len(), 3);
+    for frame in 0..2 {
+        let points = scene.lidar[frame].as_ref().expect("a sweep per frame").read_in_world().unwrap();
+        assert!(points.len() > 90_000, "{}", points.len());
+        for (c, camera) in scene.cameras.iter().enumerate() {
+            let image = dggt_data::images::read_rgb(&layout.image(frame, c)).unwrap();
+            let grey = background(&image);
+            let camera_from_world = scene.view(frame, c).world_from_camera.inverse();
+            let (mut inside, mut on_drawn, mut shifted_on_drawn) = (0usize, 0usize, 0usize);
+            let mut near_a_point = image::GrayImage::new(image.width(), image.height());
+            for &p in &points {
+                let Some(pixel) = camera.intrinsics.project(camera_from_world.transform_point(p)) else { continue };
+                let (w, h) = (camera.size.width as f64, camera.size.height as f64);
+                if pixel.x < 40.0 || pixel.y < 40.0 || pixel.x >= w - 40.0 || pixel.y >= h - 40.0 {
+                    continue;
+                }
+                inside += 1;
+                stamp(&mut near_a_point, pixel.x, pixel.y, 3);
+                on_drawn += drawn_near(&image, grey, pixel.x, pixel.y, 2) as usize;
+                // The same points 30 px off: a convention error of that size would land here.
+                shifted_on_drawn += drawn_near(&image, grey, pixel.x + 30.0, pixel.y - 30.0, 2) as usize;
+            }
+            let share = on_drawn as f64 / inside as f64;
+            let (mut drawn, mut explained) = (0usize, 0usize);
+            for (x, y, p) in image.enumerate_pixels() {
+                let inner = x >= 40 && y >= 40 && x + 40 < image.width() && y + 40 < image.height();
+                if inner && p.0.iter().zip(grey).any(|(&a, b)| a.abs_diff(b) > 40) {
+                    drawn += 1;
+                    explained += (near_a_point.get_pixel(x, y).0[0] > 0) as usize;
+                }
+            }
+            let explained_share = explained as f64 / drawn as f64;
+            let shifted = shifted_on_drawn as f64 / inside as f64;
+            println!(
+                "frame {frame} {}: {inside} points in view, {:.2} % within 2 px of a drawn pixel ({:.2} % when \
+                 shifted 30 px); {:.2} % of the drawn pixels within 3 px of a projected point",
+                names[c],
+                share * 100.0,
+                shifted * 100.0,
+                explained_share * 100.0
+            );
+            assert!(explained_share > 0.98, "{}: {explained_share}", names[c]);
+            assert!(inside > 1000, "{}: {inside}", names[c]);
+            assert!(share > 0.98, "{}: {share}", names[c]);
+            assert!(shifted < 0.9, "{}: the check tells a 30 px error apart ({shifted})", names[c]);
+            let source = log()
+                .join("sensors/cameras")
+                .join(names[c])
+                .join(format!("{}.jpg", [315966265259836000i64, 315966265360032000][frame]));
+            assert!(
+                std::fs::read(layout.image(frame, c)).unwrap() == std::fs::read(source).unwrap(),
+                "JPEG bytes kept"
+            );
+        }
+    }
+}
+
+/// A copy of the log whose files are links to the real ones, except those the test replaces.
+fn linked_log(dir: &std::path::Path) -> PathBuf {
+    let copy = dir.join("log");
+    std::fs::create_dir_all(copy.join("calibration")).unwrap();
+    for name in ["sensors", "annotations.feather", "city_SE3_egovehicle.feather", "calibration/intrinsics.feather"] {
+        std::os::unix::fs::symlink(log().join(name), copy.join(name)).unwrap();
+    }
+    copy
+}
+
+#[test]
+fn a_non_unit_quaternion_and_a_missing_table_are_errors_naming_the_file() {
+    use arrow_array::{Array, ArrayRef, Float64Array, RecordBatch};
+    use std::sync::Arc;
+
+    let dir = tempfile::tempdir().unwrap();
+    let copy = linked_log(dir.path());
+    let source = std::fs::File::open(log().join("calibration/egovehicle_SE3_sensor.feather")).unwrap();
+    let batches: Vec<RecordBatch> =
+        arrow_ipc::reader::FileReader::try_new(source, None).unwrap().map(|b| b.unwrap()).collect();
+    let batch = &batches[0];
+    let qw = batch.column_by_name("qw").unwrap().as_any().downcast_ref::<Float64Array>().unwrap();
+    let scaled: Vec<f64> = (0..qw.len()).map(|i| if i == 2 { qw.value(i) * 2.0 } else { qw.value(i) }).collect();
+    let columns: Vec<ArrayRef> = batch
+        .schema()
+        .fields()
+        .iter()
+        .zip(batch.columns())
+        .map(|(field, column)| {
+            if field.name() == "qw" { Arc::new(Float64Array::from(scaled.clone())) as ArrayRef } else { column.clone() }
+        })
+        .collect();
+    let damaged = RecordBatch::try_new(batch.schema(), columns).unwrap();
+    let target = std::fs::File::create(copy.join("calibration/egovehicle_SE3_sensor.feather")).unwrap();
+    let mut writer = arrow_ipc::writer::FileWriter::try_new(target, &damaged.schema()).unwrap();
+    writer.write(&damaged).unwrap();
+    writer.finish().unwrap();
+
+    let message = convert_log(&copy, &dir.path().join("000"), &[0], &|_| {}).unwrap_err().to_string();
+    assert!(
+        message.contains("egovehicle_SE3_sensor.feather")
+            && message.contains("row 2")
+            && message.contains("unit quaternion"),
+        "{message}"
+    );
+
+    std::fs::remove_file(copy.join("city_SE3_egovehicle.feather")).unwrap();
+    std::fs::copy(
+        log().join("calibration/egovehicle_SE3_sensor.feather"),
+        copy.join("calibration/egovehicle_SE3_sensor.feather"),
+    )
+    .unwrap();
+    let message = convert_log(&copy, &dir.path().join("001"), &[0], &|_| {}).unwrap_err().to_string();
+    assert!(message.contains("city_SE3_egovehicle.feather"), "{message}");
+}

@@ -1,0 +1,167 @@
+//! Range images to lidar rows on a record built here (the public records carry empty range images): a TOP lidar
+//! with uniform beams, with and without per-pixel poses, and a flow image.
+
+use std::f64::consts::PI;
+use std::io::Write;
+
+use dggt_convert::tfrecord::frame_record;
+use dggt_convert::waymo::{WaymoOptions, convert_segment, proto};
+use dggt_data::ExportLayout;
+use flate2::write::ZlibEncoder;
+use prost::Message;
+
+const HEIGHT: usize = 2;
+const WIDTH: usize = 4;
+/// Lidar mounted 1 m forward and 2 m up, turned 90° left (its x axis is the vehicle's y).
+const LIDAR_TO_VEHICLE: [f64; 16] = [0.0, -1.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 2.0, 0.0, 0.0, 0.0, 1.0];
+const IDENTITY: [f64; 16] = [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0];
+
+fn compressed(values: Vec<f32>, channels: i32) -> Vec<u8> {
+    let matrix = proto::MatrixFloat {
+        data: values,
+        shape: Some(proto::MatrixShape { dims: vec![HEIGHT as i32, WIDTH as i32, channels] }),
+    };
+    let mut encoder = ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+    encoder.write_all(&matrix.encode_to_vec()).unwrap();
+    encoder.finish().unwrap()
+}
+
+/// Range `10 + col` m in row 0, no return in row 1 except column 2; intensity `col`, elongation `row`.
+fn range_values() -> Vec<f32> {
+    let mut values = Vec::new();
+    for row in 0..HEIGHT {
+        for col in 0..WIDTH {
+            let range = if row == 0 || col == 2 { 10.0 + col as f32 } else { 0.0 };
+            values.extend([range, col as f32, row as f32, 0.0]);
+        }
+    }
+    values
+}
+
+fn frame(pose_image: Option<Vec<f32>>, flow: Option<Vec<f32>>) -> proto::Frame {
+    let transform = |values: &[f64]| Some(proto::Transform { transform: values.to_vec() });
+    let calibration = proto::CameraCalibration {
+        name: Some(1),
+        intrinsic: vec![1000.0, 1000.0, 960.0, 640.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        extrinsic: transform(&[1.0, 0.0, 0.0, 1.5, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 2.0, 0.0, 0.0, 0.0, 1.0]),
+        width: Some(1920),
+        height: Some(1280),
+    };
+    let laser_calibration = proto::LaserCalibration {
+        name: Some(1),
+        beam_inclinations: vec![],
+        beam_inclination_min: Some(-0.2),
+        beam_inclination_max: Some(0.2),
+        extrinsic: transform(&LIDAR_TO_VEHICLE),
+    };
+    let range_image = proto::RangeImage {
+        range_image_compressed: Some(compressed(range_values(), 4)),
+        range_image_pose_compressed: pose_image.map(|values| compressed(values, 6)),
+        range_image_flow_compressed: flow.map(|values| compressed(values, 4)),
+    };
+    proto::Frame {
+        context: Some(proto::Context {
+            name: Some("built".into()),
+            camera_calibrations: vec![calibration],
+            laser_calibrations: vec![laser_calibration],
+        }),
+        timestamp_micros: Some(1_000_000),
+        pose: transform(&IDENTITY),
+        images: vec![],
+        lasers: vec![proto::Laser { name: Some(1), ri_return1: Some(range_image), ri_return2: None }],
+        laser_labels: vec![],
+        projected_lidar_labels: vec![],
+    }
+}
+
+fn convert_rows(frame: &proto::Frame) -> Vec<[f32; 14]> {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("built.tfrecord");
+    std::fs::write(&input, frame_record(&frame.encode_to_vec())).unwrap();
+    let scene = dir.path().join("000");
+    let options = WaymoOptions { cameras: vec![0] };
+    let summary = convert_segment(&input, &scene, &options, &|_| {}).unwrap();
+    assert_eq!(summary.lidar_frames, 1);
+    let bytes = std::fs::read(ExportLayout::new(&scene).lidar(0)).unwrap();
+    assert_eq!(bytes.len() % (14 * 4), 0);
+    bytes
+        .chunks_exact(14 * 4)
+        .map(|row| std::array::from_fn(|i| f32::from_le_bytes(row[i * 4..i * 4 + 4].try_into().unwrap())))
+        .collect()
+}
+
+/// The expected vehicle-frame point of (row, col) at `range`, worked out from the range-image geometry.
+fn expected_point(row: usize, col: usize, range: f64) -> [f64; 3] {
+    // Uniform beams from -0.2 to 0.2 rad, row 0 the highest: 0.1, then -0.1.
+    let inclination: f64 = if row == 0 { 0.1 } else { -0.1 };
+    // The lidar's x axis points along vehicle y: the azimuth offset is atan2(1, 0) = π/2.
+    let azimuth = ((WIDTH - col) as f64 - 0.5) / WIDTH as f64 * 2.0 * PI - PI - PI / 2.0;
+    let in_lidar = [azimuth.cos() * inclination.cos(), azimuth.sin() * inclination.cos(), f64::sin(inclination)]
+        .map(|v| v * range);
+    // Vehicle = R · lidar + t with R = [[0,-1,0],[1,0,0],[0,0,1]], t = (1, 0, 2).
+    [-in_lidar[1] + 1.0, in_lidar[0], in_lidar[2] + 2.0]
+}
+
+#[test]
+fn range_images_become_rows_in_the_vehicle_frame() {
+    let rows = convert_rows(&frame(None, None));
+    assert_eq!(rows.len(), WIDTH + 1, "returns with range > 0 only");
+    let cells: Vec<(usize, usize)> = (0..WIDTH).map(|col| (0, col)).chain([(1, 2)]).collect();
+    for (row_values, (row, col)) in rows.iter().zip(cells) {
+        let expected = expected_point(row, col, 10.0 + col as f64);
+        for axis in 0..3 {
+            assert!(
+                (row_values[3 + axis] as f64 - expected[axis]).abs() < 1e-4,
+                "({row}, {col}): {row_values:?} vs {expected:?}"
+            );
+        }
+        assert_eq!(&row_values[..3], &[1.0, 0.0, 2.0], "ray origin is the lidar's position");
+        assert_eq!(&row_values[6..10], &[0.0, 0.0, 0.0, -1.0], "no flow image: zero flow, class -1");
+        assert_eq!((row_values[11], row_values[12], row_values[13]), (col as f32, row as f32, 0.0));
+    }
+    // The points' distance from the lidar is their range.
+    let p = &rows[1];
+    let distance = ((p[3] - 1.0).powi(2) + p[4].powi(2) + (p[5] - 2.0).powi(2)).sqrt();
+    assert!((distance - 11.0).abs() < 1e-4);
+}
+
+#[test]
+fn per_pixel_poses_move_points_into_the_frame_pose_and_flow_is_kept() {
+    // Every pixel was taken 0.5 m further along global x and turned 90° (yaw) relative to the frame pose
+    // (the identity): the point p becomes Rz(90°) p + (0.5, 0, 0).
+    let pose_image: Vec<f32> =
+        (0..HEIGHT * WIDTH).flat_map(|_| [0.0, 0.0, std::f32::consts::FRAC_PI_2, 0.5, 0.0, 0.0]).collect();
+    let flow: Vec<f32> = (0..HEIGHT * WIDTH).flat_map(|i| [i as f32, 0.5, -0.5, 1.0]).collect();
+    let rows = convert_rows(&frame(Some(pose_image), Some(flow)));
+    let still = convert_rows(&frame(None, None));
+    for (moved, original) in rows.iter().zip(&still) {
+        let expected = [-original[4] + 0.5, original[3], original[5]];
+        for axis in 0..3 {
+            assert!((moved[3 + axis] - expected[axis]).abs() < 1e-4, "{moved:?} vs {expected:?}");
+        }
+        assert!((moved[0] - 0.5).abs() < 1e-6 && (moved[1] - 1.0).abs() < 1e-6, "the origin moves too: {moved:?}");
+        assert_eq!((moved[7], moved[8], moved[9]), (0.5, -0.5, 1.0));
+    }
+    assert_eq!(rows[4][6], 6.0, "flow of pixel (1, 2), the fifth return");
+}
+
+#[test]
+fn a_non_rigid_pose_and_an_unknown_camera_are_errors_naming_the_record() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut sheared = frame(None, None);
+    sheared.pose.as_mut().unwrap().transform[1] = 0.5;
+    let mut unknown_camera = frame(None, None);
+    unknown_camera.images.push(proto::CameraImage { name: Some(7), image: Some(vec![0xFF, 0xD8, 0xFF, 0xD9]) });
+    for (frame, expected) in [(sheared, "rigid"), (unknown_camera, "camera name 1..=5")] {
+        let input = dir.path().join("bad.tfrecord");
+        let good = frame_record(&self::frame(None, None).encode_to_vec());
+        std::fs::write(&input, [good, frame_record(&frame.encode_to_vec())].concat()).unwrap();
+        let message = convert_segment(&input, &dir.path().join("000"), &WaymoOptions { cameras: vec![0] }, &|_| {})
+            .unwrap_err()
+            .to_string();
+        assert!(
+            message.contains("bad.tfrecord") && message.contains("record 1") && message.contains(expected),
+            "{message}"
+        );
+    }
+}

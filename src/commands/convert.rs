@@ -1,0 +1,154 @@
+//! `dggt convert`: raw driving datasets (Waymo, Argoverse 2) into the scene-export layout, one numbered scene
+//! folder per segment.
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::sync::Mutex;
+use std::time::Duration;
+
+use anyhow::{Context, Result};
+use dggt_convert::batch::{self, FailurePolicy, Outcome, Progress, ProgressUnit, SegmentJob};
+use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
+
+/// The raw datasets `dggt convert` reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Dataset {
+    /// Waymo Open Dataset v1: one `Frame` TFRecord per segment.
+    Waymo,
+    /// Argoverse 2 sensor logs: one log folder, or a split folder of logs.
+    Argoverse2,
+}
+
+impl Dataset {
+    fn converter(self) -> batch::Dataset {
+        match self {
+            Self::Waymo => batch::Dataset::Waymo,
+            Self::Argoverse2 => batch::Dataset::Argoverse2,
+        }
+    }
+}
+
+/// Convert raw driving logs into the scene-export layout (drivestudio's per-dataset variant).
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    dataset: Dataset,
+    /// A segment (Waymo `.tfrecord` file, Argoverse 2 log folder), or a folder of them (sorted by name; segment i
+    /// becomes scene {i:03}).
+    #[arg(long)]
+    input: PathBuf,
+    /// The folder that receives the scene folders.
+    #[arg(long)]
+    out: PathBuf,
+    /// Only these scene numbers (positions in the sorted input), e.g. `0,3,7`.
+    #[arg(long, value_delimiter = ',')]
+    scenes: Option<Vec<usize>>,
+    /// Export camera ids to write, all by default (Waymo: 0 FRONT, 1 FRONT_LEFT, 2 FRONT_RIGHT, 3 SIDE_LEFT,
+    /// 4 SIDE_RIGHT; Argoverse 2: 0 ring_front_center .. 6 ring_rear_right).
+    #[arg(long, value_delimiter = ',')]
+    cameras: Option<Vec<usize>>,
+    /// Segments converted at once (default: the machine's cores).
+    #[arg(long)]
+    workers: Option<usize>,
+    /// Convert every segment that can be converted and list the others, instead of stopping at the first failure.
+    #[arg(long)]
+    keep_going: bool,
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let Args { dataset, input, out, scenes, cameras, workers, keep_going } = args;
+    let dataset = dataset.converter();
+    let names = dataset.variant().camera_names();
+    let cameras = cameras.unwrap_or_else(|| (0..names.len()).collect());
+    if let Some(unknown) = cameras.iter().find(|&&c| c >= names.len()) {
+        anyhow::bail!("unknown camera {unknown}: {} export ids are 0..={}", dataset.variant(), names.len() - 1);
+    }
+    let jobs = batch::jobs(dataset, &input, &out, scenes.as_deref()).context("listing the segments")?;
+    let workers = workers.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let policy = if keep_going { FailurePolicy::KeepGoing } else { FailurePolicy::Stop };
+    let bars = Bars::new(jobs.len());
+    let started = std::time::Instant::now();
+    let outcomes = batch::convert_segments(dataset, &jobs, &cameras, workers, policy, &bars)?;
+    bars.overall.finish_and_clear();
+    report(&jobs, &outcomes, started.elapsed())
+}
+
+/// Prints what became of each segment; fails when any segment did.
+fn report(jobs: &[SegmentJob], outcomes: &[Outcome], elapsed: Duration) -> Result<()> {
+    let mut failures = Vec::new();
+    let (mut converted, mut skipped, mut frames) = (0, 0, 0);
+    for (job, outcome) in jobs.iter().zip(outcomes) {
+        match outcome {
+            Outcome::Converted(summary) => {
+                converted += 1;
+                frames += summary.frames;
+            }
+            Outcome::AlreadyDone(_) => skipped += 1,
+            Outcome::Failed(error) => failures.push(format!("{}: {error}", job.input.display())),
+            Outcome::NotStarted => {}
+        }
+    }
+    println!(
+        "converted {converted} segments ({frames} frames) in {:.1} s; {skipped} already done; {} failed",
+        elapsed.as_secs_f64(),
+        failures.len()
+    );
+    if failures.is_empty() {
+        return Ok(());
+    }
+    for failure in &failures {
+        eprintln!("failed: {failure}");
+    }
+    anyhow::bail!("{} of {} segments failed", failures.len(), jobs.len())
+}
+
+/// An overall bar (segments) and one bar per running segment (bytes read).
+struct Bars {
+    multi: MultiProgress,
+    overall: ProgressBar,
+    segments: Mutex<HashMap<usize, ProgressBar>>,
+}
+
+impl Bars {
+    fn new(segments: usize) -> Self {
+        let multi = MultiProgress::new();
+        let overall = multi.add(ProgressBar::new(segments as u64));
+        overall.set_style(
+            ProgressStyle::with_template("segments {bar:30} {pos}/{len} [{elapsed_precise}]")
+                .expect("a valid template"),
+        );
+        Self { multi, overall, segments: Mutex::new(HashMap::new()) }
+    }
+
+    fn bar(&self, job: &SegmentJob) -> Option<ProgressBar> {
+        self.segments.lock().ok()?.get(&job.index).cloned()
+    }
+}
+
+impl Progress for Bars {
+    fn started(&self, job: &SegmentJob, total: u64, unit: ProgressUnit) {
+        let bar = self.multi.add(ProgressBar::new(total));
+        let template = match unit {
+            ProgressUnit::Bytes => "{prefix:>4} {bar:30} {bytes}/{total_bytes} {msg}",
+            ProgressUnit::Sweeps => "{prefix:>4} {bar:30} {pos}/{len} sweeps {msg}",
+        };
+        bar.set_style(ProgressStyle::with_template(template).expect("a valid template"));
+        bar.set_prefix(format!("{:03}", job.index));
+        bar.set_message(job.input.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default());
+        if let Ok(mut segments) = self.segments.lock() {
+            segments.insert(job.index, bar);
+        }
+    }
+
+    fn advanced(&self, job: &SegmentJob, done: u64) {
+        if let Some(bar) = self.bar(job) {
+            bar.set_position(done);
+        }
+    }
+
+    fn finished(&self, job: &SegmentJob, _outcome: &Outcome) {
+        if let Some(bar) = self.segments.lock().ok().and_then(|mut segments| segments.remove(&job.index)) {
+            bar.finish_and_clear();
+        }
+        self.overall.inc(1);
+    }
+}

@@ -1,0 +1,151 @@
+//! `dggt convert waymo` on real records: parallel segments, the done marker that makes re-runs skip finished
+//! scenes, and `--keep-going` over a damaged segment. The records live beside the repository
+//! (`../shared/real-data`, or `$DGGT_REAL_DATA`; non-commercial licence, never copied into the repository).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn dggt(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_dggt")).args(args).output().expect("the dggt binary runs")
+}
+
+fn real_data() -> PathBuf {
+    let dir = std::env::var_os("DGGT_REAL_DATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/real-data"));
+    assert!(
+        dir.is_dir(),
+        "real driving data not found at {} (set DGGT_REAL_DATA to the shared real-data folder)",
+        dir.display()
+    );
+    dir
+}
+
+/// A folder of three segments: the five-camera frame, the frame without images, and a copy of the first with
+/// one payload byte flipped.
+fn segments(dir: &Path) -> PathBuf {
+    let input = dir.join("segments");
+    std::fs::create_dir(&input).unwrap();
+    let waymo = real_data().join("waymo");
+    std::fs::copy(waymo.join("one_frame_5cams.tfrecord"), input.join("a.tfrecord")).unwrap();
+    std::fs::copy(waymo.join("stripped_frame_no_images.tfrecord"), input.join("b.tfrecord")).unwrap();
+    let mut damaged = std::fs::read(waymo.join("one_frame_5cams.tfrecord")).unwrap();
+    damaged[5000] ^= 0x01;
+    std::fs::write(input.join("c.tfrecord"), damaged).unwrap();
+    std::fs::write(input.join("notes.txt"), "not a segment").unwrap();
+    input
+}
+
+fn text(output: &Output) -> String {
+    format!("{}{}", String::from_utf8_lossy(&output.stdout), String::from_utf8_lossy(&output.stderr))
+}
+
+#[test]
+fn convert_waymo_keeps_going_past_a_damaged_segment_and_skips_finished_ones() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = segments(dir.path());
+    let out = dir.path().join("scenes");
+    let (input_arg, out_arg) = (input.to_str().unwrap(), out.to_str().unwrap());
+
+    // An interrupted earlier run left a half-written scene: it is started afresh.
+    std::fs::create_dir_all(out.join("001.partial")).unwrap();
+    std::fs::write(out.join("001.partial/stale.txt"), "from an interrupted run").unwrap();
+
+    let stopped = dggt(&["convert", "waymo", "--input", input_arg, "--out", out_arg, "--workers", "1"]);
+    assert!(!stopped.status.success(), "{}", text(&stopped));
+    assert!(text(&stopped).contains("c.tfrecord: record 0"), "{}", text(&stopped));
+
+    let kept_going =
+        dggt(&["convert", "waymo", "--input", input_arg, "--out", out_arg, "--workers", "2", "--keep-going"]);
+    let report = text(&kept_going);
+    assert!(!kept_going.status.success(), "a failed segment fails the run: {report}");
+    assert!(
+        report.contains("failed: ") && report.contains("c.tfrecord: record 0") && report.contains("payload CRC"),
+        "{report}"
+    );
+    assert!(report.contains("1 of 3 segments failed"), "{report}");
+    for scene in ["000", "001"] {
+        assert!(out.join(scene).join(dggt_convert::DONE_MARKER).is_file(), "{scene}: {report}");
+    }
+    assert!(!out.join("002").exists() && !out.join("002.partial").join(dggt_convert::DONE_MARKER).exists());
+    assert!(!out.join("001/stale.txt").exists() && !out.join("001.partial").exists());
+    let images = std::fs::read_dir(out.join("000/images")).unwrap().count();
+    assert_eq!(images, 5);
+
+    let again = dggt(&["convert", "waymo", "--input", input_arg, "--out", out_arg, "--scenes", "0,1"]);
+    assert!(again.status.success(), "{}", text(&again));
+    assert!(
+        text(&again).contains("converted 0 segments (0 frames)") && text(&again).contains("2 already done"),
+        "{}",
+        text(&again)
+    );
+
+    let inspect = dggt(&["inspect", out.join("000").to_str().unwrap(), "--json"]);
+    assert!(inspect.status.success(), "{}", text(&inspect));
+    let summary: serde_json::Value = serde_json::from_slice(&inspect.stdout).unwrap();
+    assert_eq!(summary["frames"], 1);
+    assert_eq!(summary["cameras"].as_array().unwrap().len(), 5);
+}
+
+#[test]
+fn convert_waymo_refuses_unknown_cameras_and_missing_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("scenes");
+    let record = real_data().join("waymo/one_frame_5cams.tfrecord");
+    let unknown = dggt(&[
+        "convert",
+        "waymo",
+        "--input",
+        record.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--cameras",
+        "0,7",
+    ]);
+    assert!(!unknown.status.success());
+    assert!(text(&unknown).contains("unknown camera 7"), "{}", text(&unknown));
+    let missing = dggt(&["convert", "waymo", "--input", "/no/such/segments", "--out", out.to_str().unwrap()]);
+    assert!(!missing.status.success());
+    assert!(text(&missing).contains("/no/such/segments"), "{}", text(&missing));
+
+    let front = dggt(&[
+        "convert",
+        "waymo",
+        "--input",
+        record.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--cameras",
+        "0",
+    ]);
+    assert!(front.status.success(), "{}", text(&front));
+    let images: Vec<_> = std::fs::read_dir(out.join("000/images")).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(images, ["000_0.jpg"]);
+}
+
+#[test]
+fn convert_argoverse2_turns_a_split_folder_into_numbered_scenes() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("scenes");
+    let split = real_data().join("av2/sensor/val");
+    let run = dggt(&["convert", "argoverse2", "--input", split.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(run.status.success(), "{}", text(&run));
+    assert!(text(&run).contains("converted 1 segments (2 frames)"), "{}", text(&run));
+    let inspect = dggt(&["inspect", out.join("000").to_str().unwrap(), "--json"]);
+    assert!(inspect.status.success(), "{}", text(&inspect));
+    let summary: serde_json::Value = serde_json::from_slice(&inspect.stdout).unwrap();
+    assert_eq!(summary["frames"], 2);
+    assert_eq!(summary["cameras"].as_array().unwrap().len(), 7);
+    assert_eq!(summary["cameras"][0]["name"], "ring_front_center");
+    let unknown = dggt(&[
+        "convert",
+        "argoverse2",
+        "--input",
+        split.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--cameras",
+        "7",
+    ]);
+    assert!(text(&unknown).contains("unknown camera 7: argoverse2 export ids are 0..=6"), "{}", text(&unknown));
+}
