@@ -9,20 +9,13 @@
 
 use std::collections::HashMap;
 
+use dggt_data::instances::{FrameAnnotations, OrderedMap};
 use dggt_data::{ExportLayout, io};
 use dggt_geom::{Ego, LogWorld, Rigid};
 use serde::Serialize;
-use serde::ser::{SerializeMap, Serializer};
 
 use crate::boxes::AnnotatedBox;
 use crate::error::{ConvertError, Result};
-
-#[derive(Serialize)]
-struct FrameAnnotations {
-    frame_idx: Vec<usize>,
-    obj_to_world: Vec<[[f64; 4]; 4]>,
-    box_size: Vec<[f64; 3]>,
-}
 
 #[derive(Serialize)]
 struct Instance {
@@ -48,7 +41,7 @@ impl InstanceLog {
                 self.instances.push(Instance {
                     id: object.id.clone(),
                     class_name: object.class_name,
-                    frame_annotations: FrameAnnotations { frame_idx: vec![], obj_to_world: vec![], box_size: vec![] },
+                    frame_annotations: FrameAnnotations::default(),
                 });
                 self.instances.len() - 1
             });
@@ -71,25 +64,12 @@ impl InstanceLog {
     /// Writes both files atomically.
     pub fn write(&self, layout: &ExportLayout) -> Result<()> {
         let info =
-            Ordered(self.instances.iter().enumerate().map(|(key, instance)| (key.to_string(), instance)).collect());
+            OrderedMap(self.instances.iter().enumerate().map(|(key, instance)| (key.to_string(), instance)).collect());
         io::write_atomically(&layout.instances_info(), &json_bytes("instances_info.json", &info)?)?;
         let frames =
-            Ordered(self.per_frame.iter().enumerate().map(|(frame, keys)| (frame.to_string(), keys)).collect());
+            OrderedMap(self.per_frame.iter().enumerate().map(|(frame, keys)| (frame.to_string(), keys)).collect());
         io::write_atomically(&layout.frame_instances(), &json_bytes("frame_instances.json", &frames)?)?;
         Ok(())
-    }
-}
-
-/// A JSON object whose keys keep the given order.
-struct Ordered<V>(Vec<(String, V)>);
-
-impl<V: Serialize> Serialize for Ordered<V> {
-    fn serialize<S: Serializer>(&self, serializer: S) -> std::result::Result<S::Ok, S::Error> {
-        let mut map = serializer.serialize_map(Some(self.0.len()))?;
-        for (key, value) in &self.0 {
-            map.serialize_entry(key, value)?;
-        }
-        map.end()
     }
 }
 

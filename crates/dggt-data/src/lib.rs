@@ -22,6 +22,7 @@ mod error;
 pub mod export;
 pub mod images;
 pub mod index;
+pub mod instances;
 pub mod io;
 pub mod kitti;
 pub mod layout;

@@ -33,13 +33,13 @@
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
+use dggt_data::instances::{FrameAnnotations, OrderedMap};
 use dggt_data::lidar::write_lidar;
 use dggt_data::variant::{CameraAxes, CameraMounting, DynamicMaskFolders, FramePoses, nuscenes_lidar_from_ego};
 use dggt_data::{DynamicMaskKind, ExportLayout, ExportVariant, images, io, npy, text};
 use image::GrayImage;
 use rayon::prelude::*;
 use serde::Serialize;
-use serde::ser::{SerializeMap, Serializer};
 
 use crate::config::{FRAME_INTERVAL_S, SynthConfig};
 use crate::error::{Result, SynthError};
@@ -83,26 +83,6 @@ pub fn synthesize(
 ) -> Result<SynthSummary> {
     let scene = generate(config)?;
     write_export(&scene, out_dir, variant, sweeps)
-}
-
-/// A JSON object whose keys keep the given order.
-struct Ordered<V>(Vec<(String, V)>);
-
-impl<V: Serialize> Serialize for Ordered<V> {
-    fn serialize<S: Serializer>(&self, serializer: S) -> std::result::Result<S::Ok, S::Error> {
-        let mut map = serializer.serialize_map(Some(self.0.len()))?;
-        for (key, value) in &self.0 {
-            map.serialize_entry(key, value)?;
-        }
-        map.end()
-    }
-}
-
-#[derive(Serialize)]
-struct FrameAnnotations {
-    frame_idx: Vec<usize>,
-    obj_to_world: Vec<[[f64; 4]; 4]>,
-    box_size: Vec<[f64; 3]>,
 }
 
 #[derive(Serialize)]
@@ -300,10 +280,13 @@ pub fn write_export(
     let moving: Vec<ObjectId> = scene.instances().filter(|o| o.motion().is_some()).map(|o| o.id()).collect();
     let parked: Vec<ObjectId> = scene.instances().filter(|o| o.motion().is_none()).map(|o| o.id()).collect();
     let instance_count = instances.len();
-    io::write_atomically(&layout.instances_info(), &json_bytes("instances_info.json", &Ordered(instances))?)?;
+    io::write_atomically(&layout.instances_info(), &json_bytes("instances_info.json", &OrderedMap(instances))?)?;
     let frame_instances: Vec<(String, Vec<ObjectId>)> =
         present.iter().enumerate().map(|(f, ids)| (f.to_string(), ids.iter().copied().collect())).collect();
-    io::write_atomically(&layout.frame_instances(), &json_bytes("frame_instances.json", &Ordered(frame_instances))?)?;
+    io::write_atomically(
+        &layout.frame_instances(),
+        &json_bytes("frame_instances.json", &OrderedMap(frame_instances))?,
+    )?;
 
     let description = Description {
         generator: "dggt-synth",
