@@ -8,7 +8,7 @@
 
 use std::path::Path;
 
-use burn::module::{Module, ModuleMapper, Param};
+use burn::module::Module;
 use burn::tensor::{Device, FloatDType, Tensor};
 use dggt_geom::PixelConvention;
 
@@ -18,7 +18,7 @@ use crate::config::{DptHeadConfig, HeadActivation, ModelConfig};
 use crate::dpt::{DptHead, DptOutput, DptPrediction};
 use crate::error::ModelError;
 use crate::gaussian_maps::{GAUSSIAN_CHANNELS, GaussianMaps};
-use crate::leaf::replace_value;
+use crate::leaf::CastFloats;
 use crate::sky::SkyModel;
 use crate::weights::{LoadReport, load_checkpoint};
 
@@ -141,13 +141,6 @@ impl Dggt {
     /// ([`crate::constant`]), and outputs come out in `dtype` (cast them back before rendering). The sky model
     /// stays f32: it colours host-projected points from the input images and feeds the f32 rasteriser.
     pub fn with_float_dtype(self, dtype: FloatDType) -> Self {
-        struct CastFloats(FloatDType);
-        impl ModuleMapper for CastFloats {
-            fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
-                let dtype = self.0;
-                replace_value(param, |tensor| tensor.cast(dtype))
-            }
-        }
         let mut cast = CastFloats(dtype);
         let head = |head: Option<DptHead>, cast: &mut CastFloats| head.map(|head| head.map(cast));
         Self {

@@ -12,12 +12,12 @@
 
 use std::path::Path;
 
-use burn::module::{Module, ModuleMapper, Param};
+use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::nn::{GroupNorm, Linear};
 use burn::tensor::activation::silu;
 use burn::tensor::{Device, FloatDType, Tensor, TensorData};
-use dggt_model::leaf::replace_value;
+use dggt_model::leaf::CastFloats;
 
 use crate::config::{UnetConfig, require};
 use crate::error::RefineError;
@@ -153,13 +153,6 @@ impl Unet {
 
     /// The UNet with every float parameter in `dtype` (f32, f16, bf16); its inputs must then be in `dtype`.
     pub fn with_float_dtype(self, dtype: FloatDType) -> Self {
-        struct CastFloats(FloatDType);
-        impl ModuleMapper for CastFloats {
-            fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
-                let dtype = self.0;
-                replace_value(param, |tensor| tensor.cast(dtype))
-            }
-        }
         self.map(&mut CastFloats(dtype))
     }
 

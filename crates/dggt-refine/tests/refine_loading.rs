@@ -10,18 +10,9 @@ use dggt_refine::lora::{LORA_ALPHA, apply_vae_overlay};
 use dggt_refine::weights::{HostTensor, NamedTensors, read_safetensors};
 use dggt_refine::{RefineError, Refiner};
 
-fn vectors_dir() -> PathBuf {
-    let root = std::env::var_os("DGGT_PARITY_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/parity"));
-    let dir = root.join("difix_tiny_s1");
-    assert!(
-        dir.join("model_difix.pkl").is_file(),
-        "refiner parity vectors not found at {} (set DGGT_PARITY_DIR to the shared parity folder)",
-        dir.display()
-    );
-    dir
-}
+mod common;
+
+use common::vectors_dir;
 
 fn random_host(shape: &[usize]) -> HostTensor {
     let data = Tensor::<1>::random([shape.iter().product::<usize>()], Distribution::Normal(0.0, 1.0), &Device::flex())

@@ -6,24 +6,13 @@
 //! The vectors live beside the repository in `shared/parity/difix_tiny_s1` (`$DGGT_PARITY_DIR/difix_tiny_s1`
 //! when set; the variable names the shared `parity` folder). Their README describes the computation.
 
-use std::path::PathBuf;
-
 use burn::tensor::{Device, FloatDType, Tensor};
-use dggt_refine::parity::{Status, compare, is_refiner_folder, read_vectors, run_parity};
+use dggt_refine::parity::{Status, compare, read_vectors, run_parity};
 use dggt_refine::{Latent, Refiner, Trace};
 
-fn vectors_dir() -> PathBuf {
-    let root = std::env::var_os("DGGT_PARITY_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/parity"));
-    let dir = root.join("difix_tiny_s1");
-    assert!(
-        is_refiner_folder(&dir),
-        "refiner parity vectors not found at {} (set DGGT_PARITY_DIR to the shared parity folder)",
-        dir.display()
-    );
-    dir
-}
+mod common;
+
+use common::vectors_dir;
 
 fn both_modes_match_the_reference(device: &Device) {
     let dir = vectors_dir();
