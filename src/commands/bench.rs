@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 use dggt_bench::knobs::parse_opacity;
 use dggt_bench::{
-    BenchOptions, Culling, Knobs, LpipsFiles, PoseSource, Precision, SweepSpec, report, run_bench, write_outputs,
+    BenchOptions, Culling, Knobs, LpipsFiles, PoseSource, Precision, Skips, SweepSpec, report, run_bench, write_outputs,
 };
 
 use crate::backend::DeviceList;
@@ -43,7 +43,7 @@ pub fn run(args: Args) -> Result<()> {
 }
 
 /// Measure run time against error over the knobs that trade speed for accuracy: input width, input frames,
-/// culling threshold, precision, sky. A baseline, the exact render (culling off) and one row per other value
+/// culling threshold, precision, sky, the shortcuts that skip what a scene does not need. A baseline, the exact render (culling off) and one row per other value
 /// of each knob (`--grid` adds every combination).
 #[derive(Debug, Clone, clap::Args)]
 pub struct SweepArgs {
@@ -99,6 +99,13 @@ pub struct SweepArgs {
     /// Sky settings to sweep (`on`, `off`).
     #[arg(long, value_delimiter = ',', default_value = "on,off")]
     pub sky: Vec<String>,
+    /// Baseline shortcuts that leave out what a scene does not need: `none`, `motion` (the motion head only
+    /// on frames that may hold dynamic pixels), `sky` (no sky render behind a covered view), `all`.
+    #[arg(long, default_value = "none")]
+    pub skip: String,
+    /// Shortcuts to sweep.
+    #[arg(long, value_delimiter = ',', default_value = "none,motion,sky,all")]
+    pub skips: Vec<String>,
     /// Also measure every combination of the swept values.
     #[arg(long)]
     pub grid: bool,
@@ -140,12 +147,14 @@ impl SweepArgs {
                 culling: Culling::MinOpacity(parse_opacity(&self.min_opacity)?),
                 precision: Precision::parse(&self.precision)?,
                 sky: !self.no_sky,
+                skips: Skips::parse(&self.skip)?,
             },
             widths: self.widths.clone(),
             input_frames: self.frame_counts.clone(),
             min_opacities: self.min_opacities.iter().map(|t| parse_opacity(t)).collect::<Result<_, _>>()?,
             precisions: self.precisions.iter().map(|t| Precision::parse(t)).collect::<Result<_, _>>()?,
             sky: self.sky.iter().map(|t| parse_sky(t)).collect::<Result<_, _>>()?,
+            skips: self.skips.iter().map(|t| Skips::parse(t)).collect::<Result<_, _>>()?,
             full_grid: self.grid,
         };
         Ok(BenchOptions {

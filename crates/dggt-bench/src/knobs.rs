@@ -99,6 +99,56 @@ pub fn parse_opacity(text: &str) -> Result<f32, BenchError> {
     Ok(value)
 }
 
+/// The shortcuts that leave out what a scene does not need.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Skips {
+    /// Everything runs.
+    Nothing,
+    /// The motion head only on chunks of frames with a pixel that may be dynamic (renders unchanged).
+    StillMotion,
+    /// No sky render behind a view the foreground covers (images change by under 1/255 of the sky's colour).
+    HiddenSky,
+    /// Both.
+    All,
+}
+
+impl Skips {
+    pub const ALL: [Skips; 4] = [Self::Nothing, Self::StillMotion, Self::HiddenSky, Self::All];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Nothing => "none",
+            Self::StillMotion => "motion",
+            Self::HiddenSky => "sky",
+            Self::All => "all",
+        }
+    }
+
+    /// Parses `none`, `motion`, `sky` or `all`.
+    pub fn parse(text: &str) -> Result<Self, BenchError> {
+        Self::ALL.into_iter().find(|s| s.name().eq_ignore_ascii_case(text.trim())).ok_or_else(|| BenchError::Invalid {
+            what: "skips".into(),
+            detail: format!("`{text}`: expected none, motion, sky or all"),
+        })
+    }
+
+    /// Where the motion head runs.
+    pub fn motion(self) -> dggt_infer::MotionPath {
+        match self {
+            Self::StillMotion | Self::All => dggt_infer::MotionPath::WhereDynamic,
+            Self::Nothing | Self::HiddenSky => dggt_infer::MotionPath::Always,
+        }
+    }
+
+    /// Whether a covered sky is rendered.
+    pub fn hidden_sky(self) -> dggt_scene::HiddenSky {
+        match self {
+            Self::HiddenSky | Self::All => dggt_scene::HiddenSky::BELOW_ONE_LEVEL,
+            Self::Nothing | Self::StillMotion => dggt_scene::HiddenSky::Render,
+        }
+    }
+}
+
 /// One configuration of the knobs.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Knobs {
@@ -110,18 +160,20 @@ pub struct Knobs {
     pub precision: Precision,
     /// Composite the sky model's Gaussians behind the scene (else a black background).
     pub sky: bool,
+    pub skips: Skips,
 }
 
 impl Knobs {
-    /// A compact label such as `w112 f8 o1/255 f32 sky`.
+    /// A compact label such as `w112 f8 o1/255 f32 sky skip-none`.
     pub fn label(&self) -> String {
         format!(
-            "w{} f{} o{} {} {}",
+            "w{} f{} o{} {} {} skip-{}",
             self.width,
             self.input_frames,
             self.culling.label(),
             self.precision,
-            if self.sky { "sky" } else { "nosky" }
+            if self.sky { "sky" } else { "nosky" },
+            self.skips.name()
         )
     }
 }
@@ -137,6 +189,7 @@ pub enum Varied {
     MinOpacity,
     Precision,
     Sky,
+    Skips,
     /// A row of the full grid that is not a one-knob variation.
     Grid,
 }
@@ -151,6 +204,7 @@ impl Varied {
             Self::MinOpacity => "min_opacity",
             Self::Precision => "precision",
             Self::Sky => "sky",
+            Self::Skips => "skips",
             Self::Grid => "grid",
         }
     }
@@ -173,13 +227,15 @@ pub struct SweepSpec {
     pub min_opacities: Vec<f32>,
     pub precisions: Vec<Precision>,
     pub sky: Vec<bool>,
+    pub skips: Vec<Skips>,
     /// Also every combination of the values above.
     pub full_grid: bool,
 }
 
 impl Default for SweepSpec {
     /// Width 84 (the tiny model's training width), 8 input frames, the rasteriser's own 1/255 threshold, f32,
-    /// with sky; widths 56-168, 4/8/16 frames, thresholds up to 0.05, f16 and bf16, sky off.
+    /// with sky, nothing skipped; widths 56-168, 4/8/16 frames, thresholds up to 0.05, f16 and bf16, sky off,
+    /// each skip.
     fn default() -> Self {
         Self {
             baseline: Knobs {
@@ -188,12 +244,14 @@ impl Default for SweepSpec {
                 culling: Culling::MinOpacity(dggt_scene::MIN_OPACITY),
                 precision: Precision::F32,
                 sky: true,
+                skips: Skips::Nothing,
             },
             widths: vec![56, 84, 112, 168],
             input_frames: vec![4, 8, 16],
             min_opacities: vec![dggt_scene::MIN_OPACITY, 0.01, 0.05],
             precisions: Precision::ALL.to_vec(),
             sky: vec![true, false],
+            skips: Skips::ALL.to_vec(),
             full_grid: false,
         }
     }
@@ -229,7 +287,10 @@ impl SweepSpec {
     pub fn configurations(&self) -> Vec<Configuration> {
         let base = self.baseline;
         let mut rows = vec![
-            Configuration { varied: Varied::Reference, knobs: Knobs { culling: Culling::Off, ..base } },
+            Configuration {
+                varied: Varied::Reference,
+                knobs: Knobs { culling: Culling::Off, skips: Skips::Nothing, ..base },
+            },
             Configuration { varied: Varied::Baseline, knobs: base },
         ];
         let mut push = |varied: Varied, knobs: Knobs| {
@@ -252,6 +313,9 @@ impl SweepSpec {
         for &sky in &self.sky {
             push(Varied::Sky, Knobs { sky, ..base });
         }
+        for &skips in &self.skips {
+            push(Varied::Skips, Knobs { skips, ..base });
+        }
         if self.full_grid {
             let or_base = |values: &[bool], base: bool| if values.is_empty() { vec![base] } else { values.to_vec() };
             let widths = if self.widths.is_empty() { vec![base.width] } else { self.widths.clone() };
@@ -267,7 +331,8 @@ impl SweepSpec {
                     for &culling in &cullings {
                         for &precision in &precisions {
                             for &sky in &or_base(&self.sky, base.sky) {
-                                push(Varied::Grid, Knobs { width, input_frames, culling, precision, sky });
+                                let knobs = Knobs { width, input_frames, culling, precision, sky, skips: base.skips };
+                                push(Varied::Grid, knobs);
                             }
                         }
                     }

@@ -132,6 +132,7 @@ pub fn short_label(configuration: &Configuration) -> String {
         Varied::MinOpacity => format!("o{}", k.culling.label()),
         Varied::Precision => k.precision.name().into(),
         Varied::Sky => if k.sky { "sky" } else { "no sky" }.into(),
+        Varied::Skips => format!("skip {}", k.skips.name()),
         Varied::Grid => k.label(),
     }
 }
@@ -145,11 +146,12 @@ fn colour(varied: Varied) -> RGBColor {
         Varied::MinOpacity => RGBColor(214, 39, 40),
         Varied::Precision => RGBColor(148, 103, 189),
         Varied::Sky => RGBColor(140, 86, 75),
+        Varied::Skips => RGBColor(23, 190, 207),
         Varied::Grid => RGBColor(127, 127, 127),
     }
 }
 
-const GROUPS: [Varied; 8] = [
+const GROUPS: [Varied; 9] = [
     Varied::Reference,
     Varied::Baseline,
     Varied::Width,
@@ -157,6 +159,7 @@ const GROUPS: [Varied; 8] = [
     Varied::MinOpacity,
     Varied::Precision,
     Varied::Sky,
+    Varied::Skips,
     Varied::Grid,
 ];
 

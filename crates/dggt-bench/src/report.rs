@@ -8,9 +8,9 @@ use crate::error::BenchError;
 use crate::run::{BenchReport, ErrorMetrics, MeasuredRow, RowOutcome};
 
 /// The CSV header; the unit of each column is in its name (`_ms`, `_px`, `_db`) or is none.
-pub const CSV_HEADER: &str = "row,varied,label,width_px,height_px,input_frames,min_opacity,precision,sky,\
+pub const CSV_HEADER: &str = "row,varied,label,width_px,height_px,input_frames,min_opacity,precision,sky,skips,\
 backbone_ms,heads_ms,assembly_ms,raster_ms,total_ms,gaussians_kept_per_view,gaussian_candidates_per_view,\
-sky_gaussians,psnr_vs_exact_db,ssim_vs_exact,lpips_vs_exact,psnr_vs_truth_db,ssim_vs_truth,lpips_vs_truth,\
+sky_gaussians,motion_skipped_frames,sky_skipped_views,psnr_vs_exact_db,ssim_vs_exact,lpips_vs_exact,psnr_vs_truth_db,ssim_vs_truth,lpips_vs_truth,\
 pareto_vs_exact,pareto_vs_truth,status";
 
 /// A CSV field, quoted when it holds a comma, quote or line break.
@@ -49,11 +49,13 @@ pub fn csv_text(report: &BenchReport) -> String {
                     field(&knobs.culling.label()),
                     knobs.precision.name().into(),
                     knobs.sky.to_string(),
+                    knobs.skips.name().into(),
                 ]);
                 fields
                     .extend([t.backbone_ms, t.heads_ms, t.assembly_ms, t.raster_ms, t.total_ms].map(|v| number(v, 2)));
                 fields.extend([number(row.gaussians_kept, 1), number(row.gaussian_candidates, 1)]);
                 fields.push(row.sky_gaussians.to_string());
+                fields.extend([row.skipped.motion_frames.to_string(), row.skipped.sky_views.to_string()]);
                 fields.extend(metrics_fields(&row.vs_exact));
                 fields.extend(metrics_fields(&row.vs_truth));
                 fields.extend([row.pareto_vs_exact.to_string(), row.pareto_vs_truth.to_string(), "measured".into()]);
@@ -65,8 +67,9 @@ pub fn csv_text(report: &BenchReport) -> String {
                     field(&knobs.culling.label()),
                     knobs.precision.name().into(),
                     knobs.sky.to_string(),
+                    knobs.skips.name().into(),
                 ]);
-                fields.extend(std::iter::repeat_n(String::new(), 16));
+                fields.extend(std::iter::repeat_n(String::new(), 18));
                 fields.push(field(&format!("skipped: {reason}")));
             }
         }

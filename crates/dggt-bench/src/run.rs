@@ -17,7 +17,9 @@ use std::time::Instant;
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_data::{PreparedView, Preprocess, Scene, prepare_view};
 use dggt_geom::{ImageSize, PixelConvention, PosedCamera};
-use dggt_infer::{InputCameras, Scene4d, SceneOptions, SkyChoice, ViewSlot, fresh_model, input_views, load_network};
+use dggt_infer::{
+    InputCameras, MotionPath, Scene4d, SceneOptions, SkyChoice, ViewSlot, fresh_model, input_views, load_network,
+};
 use dggt_losses::{ImageShape, Lpips, LpipsKind};
 use dggt_model::{Dggt, ModelConfig};
 use dggt_scene::{AssemblyCounts, AssemblySettings, TargetView, Timeline};
@@ -113,6 +115,15 @@ pub struct ErrorMetrics {
     pub lpips: Option<f64>,
 }
 
+/// What the row's shortcuts ([`Skips`](crate::knobs::Skips)) left out in its last repetition.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct SkipCounts {
+    /// Input frames whose motion head did not run.
+    pub motion_frames: usize,
+    /// Target views rendered without their sky (when there is a sky model).
+    pub sky_views: usize,
+}
+
 /// One measured configuration.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MeasuredRow {
@@ -127,6 +138,7 @@ pub struct MeasuredRow {
     /// Mean over target views of the candidates before culling.
     pub gaussian_candidates: f64,
     pub sky_gaussians: usize,
+    pub skipped: SkipCounts,
     pub vs_exact: ErrorMetrics,
     pub vs_truth: ErrorMetrics,
     pub pareto_vs_exact: bool,
@@ -268,6 +280,7 @@ struct RowRun {
     gaussians_kept: f64,
     gaussian_candidates: f64,
     sky_gaussians: usize,
+    skipped: SkipCounts,
     /// Per target view, `[H, W, 3]` at the row's size, clamped to `[0, 1]`.
     renders: Vec<Vec<f32>>,
 }
@@ -362,6 +375,7 @@ pub fn run_bench(options: &BenchOptions, device: &Device) -> Result<BenchReport,
             gaussians_kept: run.gaussians_kept,
             gaussian_candidates: run.gaussian_candidates,
             sky_gaussians: run.sky_gaussians,
+            skipped: run.skipped,
             vs_exact,
             vs_truth,
             pareto_vs_exact: false,
@@ -513,6 +527,7 @@ impl Runner<'_> {
             gaussians_kept: last.counts.iter().map(|c| c.kept() as f64).sum::<f64>() / views,
             gaussian_candidates: last.counts.iter().map(|c| c.candidates as f64).sum::<f64>() / views,
             sky_gaussians: last.sky_gaussians,
+            skipped: last.skipped,
             renders: last.renders.into_iter().map(|r| r.into_iter().map(|v| v.clamp(0.0, 1.0)).collect()).collect(),
         })
     }
@@ -554,9 +569,11 @@ impl Runner<'_> {
             Culling::Off => AssemblySettings::exact(),
             Culling::MinOpacity(min_opacity) => AssemblySettings { min_opacity, ..AssemblySettings::default() },
         };
+        let assembly = AssemblySettings { hidden_sky: knobs.skips.hidden_sky(), ..assembly };
         let sky = if knobs.sky { SkyChoice::Render } else { SkyChoice::Skip };
         let scene_options = SceneOptions { sky, assembly, ..SceneOptions::default() };
-        Ok(RowSetup { images, size, timeline, input_slots, input_cameras, target_truth, scene_options })
+        let motion = knobs.skips.motion();
+        Ok(RowSetup { images, size, timeline, input_slots, input_cameras, target_truth, scene_options, motion })
     }
 
     /// One timed run of the whole reconstruction: `[backbone, heads, assembly, raster]` milliseconds, and what it
@@ -570,7 +587,7 @@ impl Runner<'_> {
         };
         let images = &setup.images;
         let aggregator = stages::backbone(model, images.clone())?;
-        let prediction = stages::heads(model, aggregator, images.clone(), self.options.chunk_frames)?;
+        let prediction = stages::heads(model, aggregator, images.clone(), self.options.chunk_frames, setup.motion)?;
         settle(&prediction.pose_encoding())?;
         settle(&prediction.depth)?;
         if let Some(dynamic) = &prediction.dynamic_logit {
@@ -605,8 +622,11 @@ impl Runner<'_> {
         let assembly_ms = lap(&mut clock);
 
         let mut renders = Vec::new();
+        let mut skipped = SkipCounts { motion_frames: prediction.motion_skipped_frames, sky_views: 0 };
         for (gaussians, target) in assembled.iter().zip(&targets) {
-            renders.push(stages::rasterise(&scene, gaussians, target)?.rgb);
+            let rendered = stages::rasterise(&scene, gaussians, target)?;
+            skipped.sky_views += usize::from(scene.sky.is_some() && !rendered.sky_rendered);
+            renders.push(rendered.rgb);
         }
         let raster_ms = lap(&mut clock);
 
@@ -624,6 +644,7 @@ impl Runner<'_> {
         let outputs = RepetitionOutputs {
             counts: assembled.iter().map(|a| a.counts).collect(),
             sky_gaussians: scene.sky.as_ref().map_or(0, |s| s.means.dims()[0]),
+            skipped,
             renders,
         };
         Ok(([backbone_ms, heads_ms, assembly_ms, raster_ms], outputs))
@@ -642,12 +663,14 @@ struct RowSetup {
     /// The targets' slots and export cameras.
     target_truth: Vec<(ViewSlot, PosedCamera)>,
     scene_options: SceneOptions,
+    motion: MotionPath,
 }
 
 /// What one repetition rendered.
 struct RepetitionOutputs {
     counts: Vec<AssemblyCounts>,
     sky_gaussians: usize,
+    skipped: SkipCounts,
     /// Per target view, `[H, W, 3]` (not clamped).
     renders: Vec<Vec<f32>>,
 }

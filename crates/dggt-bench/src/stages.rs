@@ -14,7 +14,7 @@
 //! ran made the heads' outputs NaN on wgpu with burn 0.22.1.
 
 use burn::tensor::Tensor;
-use dggt_infer::{Prediction, Scene4d, heads_chunked};
+use dggt_infer::{MotionPath, Prediction, Scene4d, heads_chunked};
 use dggt_model::Dggt;
 use dggt_model::aggregator::AggregatorOutput;
 use dggt_scene::{AssembledGaussians, TargetView};
@@ -50,13 +50,16 @@ pub fn heads(
     aggregator: AggregatorOutput,
     images: Tensor<5>,
     chunk: usize,
+    motion: MotionPath,
 ) -> Result<Prediction, BenchError> {
-    Ok(heads_chunked(model, aggregator, images, chunk)?)
+    Ok(heads_chunked(model, aggregator, images, chunk, motion)?)
 }
 
 /// One rendered target view: `[H, W, 3]` colours (on the host, interleaved, not clamped).
 pub struct Rasterised {
     pub rgb: Vec<f32>,
+    /// Whether the sky was rendered behind the view.
+    pub sky_rendered: bool,
 }
 
 /// Rasterises Gaussians `scene` assembled for `target` and composites them over its sky (black without),
@@ -66,12 +69,13 @@ pub fn rasterise(
     assembled: &AssembledGaussians,
     target: &TargetView,
 ) -> Result<Rasterised, BenchError> {
-    let rgb = scene
-        .render_assembled(assembled, target)?
+    let view = scene.render_assembled(assembled, target)?;
+    let sky_rendered = view.sky.is_some();
+    let rgb = view
         .rgb
         .into_data()
         .convert::<f32>()
         .try_into_vec::<f32>()
         .map_err(|e| BenchError::invalid("render", format!("reading the image back: {e:?}")))?;
-    Ok(Rasterised { rgb })
+    Ok(Rasterised { rgb, sky_rendered })
 }

@@ -6,7 +6,7 @@
 use std::path::PathBuf;
 
 use burn::tensor::{Device, Tensor, TensorData};
-use dggt_bench::knobs::{Culling, Knobs, Precision, SweepSpec, Varied};
+use dggt_bench::knobs::{Culling, Knobs, Precision, Skips, SweepSpec, Varied};
 use dggt_bench::plot::PNG_SIZE;
 use dggt_bench::report::CSV_HEADER;
 use dggt_bench::run::fresh_tiny_config;
@@ -36,6 +36,7 @@ fn bounded_sweep_writes_table_and_plot() {
             culling: Culling::MinOpacity(dggt_scene::MIN_OPACITY),
             precision: Precision::F32,
             sky: true,
+            skips: Skips::Nothing,
         },
         widths: vec![],
         // 40 frames exceed the fixture's 16 non-target frames: skipped with the reason.
@@ -43,6 +44,7 @@ fn bounded_sweep_writes_table_and_plot() {
         min_opacities: vec![0.5],
         precisions: vec![Precision::Bf16],
         sky: vec![],
+        skips: vec![Skips::All],
         full_grid: false,
     };
     let report = run_bench(&options, &device).expect("the sweep runs");
@@ -72,6 +74,17 @@ fn bounded_sweep_writes_table_and_plot() {
         culled.gaussians_kept,
         baseline.gaussians_kept
     );
+
+    let skipping = report
+        .rows
+        .iter()
+        .filter_map(RowOutcome::measured)
+        .find(|r| r.configuration.varied == Varied::Skips)
+        .expect("the skips row is measured");
+    assert_eq!(skipping.configuration.knobs.skips, Skips::All);
+    // The motion skip is lossless and the sky skip changes a colour by under 1/255 of the sky's.
+    assert!(skipping.vs_exact.psnr_db > 48.0, "skipping changed the renders: {:?}", skipping.vs_exact);
+    assert_eq!((baseline.skipped.motion_frames, baseline.skipped.sky_views), (0, 0), "the baseline skips nothing");
 
     let too_many = report
         .rows
@@ -135,9 +148,10 @@ fn split_stages_compute_what_the_pipeline_computes() {
     let pixels: Vec<f32> = (0..frames * 3 * height * width).map(|i| ((i * 37 % 101) as f32) / 100.0).collect();
     let images = Tensor::<5>::from_data(TensorData::new(pixels, [1, frames, 3, height, width]), &device);
 
-    let pipeline = dggt_infer::forward_chunked(&model, images.clone(), 1).expect("pipeline forward");
+    let pipeline = dggt_infer::forward_chunked(&model, images.clone(), 1, dggt_infer::MotionPath::Always)
+        .expect("pipeline forward");
     let aggregator = stages::backbone(&model, images.clone()).expect("backbone");
-    let split = stages::heads(&model, aggregator, images.clone(), 1).expect("heads");
+    let split = stages::heads(&model, aggregator, images.clone(), 1, dggt_infer::MotionPath::Always).expect("heads");
     assert_eq!(values(split.pose_encoding()), values(pipeline.pose_encoding()));
     assert_eq!(values(split.depth.clone()), values(pipeline.depth.clone()));
     assert_eq!(

@@ -12,8 +12,8 @@ fn one_knob_at_a_time_without_duplicates() {
     assert_eq!(rows[0].varied, Varied::Reference);
     assert_eq!(rows[0].knobs.culling, Culling::Off);
     assert_eq!(rows[1].knobs, spec.baseline);
-    // 3 other widths, 2 other frame counts, 2 other thresholds, 2 other precisions, sky off.
-    assert_eq!(rows.len(), 2 + 3 + 2 + 2 + 2 + 1);
+    // 3 other widths, 2 other frame counts, 2 other thresholds, 2 other precisions, sky off, 3 skips.
+    assert_eq!(rows.len(), 2 + 3 + 2 + 2 + 2 + 1 + 3);
     for row in &rows[2..] {
         let b = spec.baseline;
         let k = row.knobs;
@@ -23,6 +23,7 @@ fn one_knob_at_a_time_without_duplicates() {
             k.culling != b.culling,
             k.precision != b.precision,
             k.sky != b.sky,
+            k.skips != b.skips,
         ];
         assert_eq!(differing.iter().filter(|d| **d).count(), 1, "{}", k.label());
     }
@@ -36,6 +37,7 @@ fn full_grid_adds_every_combination_once() {
         min_opacities: vec![0.1],
         precisions: vec![Precision::F32],
         sky: vec![true, false],
+        skips: vec![],
         full_grid: true,
         baseline: Knobs {
             width: 28,
@@ -43,6 +45,7 @@ fn full_grid_adds_every_combination_once() {
             culling: Culling::MinOpacity(0.1),
             precision: Precision::F32,
             sky: true,
+            skips: Skips::Nothing,
         },
     };
     let rows = spec.configurations();
@@ -58,6 +61,8 @@ fn opacities_parse_as_fractions_and_decimals() {
     assert!(parse_opacity("x").is_err());
     assert_eq!(format_opacity(dggt_scene::MIN_OPACITY), "1/255");
     assert_eq!(Precision::parse("BF16").unwrap(), Precision::Bf16);
+    assert_eq!(Skips::parse("Motion").unwrap(), Skips::StillMotion);
+    assert!(Skips::parse("everything").is_err());
     assert!(Precision::parse("f8").is_err());
 }
 

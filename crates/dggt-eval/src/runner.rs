@@ -25,8 +25,8 @@ use burn::tensor::{Device, Tensor, TensorData};
 use dggt_data::{DepthFlowMap, DepthSource, PlanarImage, Preprocess, Scene, images, open_scene, prepare_view};
 use dggt_geom::ImageSize;
 use dggt_infer::{
-    Architecture, GroundTruth, InputCameras, InputSet, LoadedNetwork, Scene4d, SceneOptions, ViewSlot, forward_chunked,
-    input_views, load_network,
+    Architecture, GroundTruth, InputCameras, InputSet, LoadedNetwork, MotionPath, Scene4d, SceneOptions, ViewSlot,
+    forward_chunked, input_views, load_network,
 };
 use dggt_losses::{ImageShape, Lpips, LpipsKind, psnr, ssim};
 use dggt_scene::{TargetView, Timeline};
@@ -426,7 +426,8 @@ fn forward_scene(root: &Path, context: &SceneContext<'_>, watch: &mut Stopwatch)
     watch.add(LOAD, started);
 
     let started = Instant::now();
-    let prediction = forward_chunked(&network.model, batch.clone(), context.options.chunk_frames)?;
+    let prediction =
+        forward_chunked(&network.model, batch.clone(), context.options.chunk_frames, MotionPath::WhereDynamic)?;
     let timeline = Timeline::new(&inputs.frames)?;
     let slots: Vec<ViewSlot> =
         inputs.views.iter().map(|v| ViewSlot { rig_camera: v.camera, time: timeline.time(v.frame as f64) }).collect();

@@ -7,11 +7,17 @@
 //! Gaussian maps and the velocities. The point and semantic heads, unused by DGGT, are not run; the
 //! aggregator's tokens are dropped as soon as the heads are done. Training runs the same pass with one chunk
 //! of all frames, under autodiff.
+//!
+//! The motion head can also be left out where nothing would read it ([`MotionPath::WhereDynamic`]): its
+//! velocities only move dynamic Gaussians, and a chunk whose dynamic logits are all too low
+//! ([`is_still`]) has none the rasteriser would draw (dynamic opacity `o · sigmoid(logit)` with `o <= 1`
+//! stays under its 1/255 threshold), so its velocities are zeros instead and every render is unchanged.
 
 use burn::tensor::{FloatDType, Tensor};
 use dggt_model::Dggt;
 use dggt_model::aggregator::AggregatorOutput;
 use dggt_model::gaussian_maps::GaussianMaps;
+use dggt_splat::constants::ALPHA_THRESHOLD;
 
 use crate::error::InferError;
 
@@ -29,6 +35,26 @@ pub struct Prediction {
     /// `[1, S, H, W, 3]` velocities ([`Dggt::motion_head`], else the Gaussian head's velocity channels), when
     /// the model predicts motion.
     pub velocity: Option<Tensor<5>>,
+    /// Frames whose motion head did not run ([`MotionPath::WhereDynamic`]); their velocities are zeros.
+    pub motion_skipped_frames: usize,
+}
+
+/// Where the motion head runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum MotionPath {
+    /// On every frame (training: a loss may read the velocities of any pixel).
+    #[default]
+    Always,
+    /// Only on chunks of frames with a pixel the instance head may call dynamic: renders are unchanged.
+    WhereDynamic,
+}
+
+/// Whether a chunk whose largest dynamic logit is `max_logit` has no dynamic Gaussian the rasteriser would
+/// draw: the dynamic opacity is at most `sigmoid(logit)`, which must stay under the alpha threshold (with a
+/// relative margin of 1e-3 for the rounding of the tensor sigmoid).
+pub fn is_still(max_logit: f32) -> bool {
+    let probability = 1.0 / (1.0 + (-f64::from(max_logit)).exp());
+    probability < f64::from(ALPHA_THRESHOLD) * (1.0 - 1e-3)
 }
 
 impl Prediction {
@@ -40,13 +66,18 @@ impl Prediction {
 
 /// Runs `model` on `images` (`[1, S, 3, H, W]`, RGB in `[0, 1]`) with the dense heads on `chunk` frames at a
 /// time (at least one).
-pub fn forward_chunked(model: &Dggt, images: Tensor<5>, chunk: usize) -> Result<Prediction, InferError> {
+pub fn forward_chunked(
+    model: &Dggt,
+    images: Tensor<5>,
+    chunk: usize,
+    motion: MotionPath,
+) -> Result<Prediction, InferError> {
     let [batch, ..] = images.dims();
     if batch != 1 {
         return Err(InferError::invalid("images", format!("batch of {batch}, expected 1")));
     }
     let aggregator = model.aggregator.forward(images.clone())?;
-    heads_chunked(model, aggregator, images, chunk)
+    heads_chunked(model, aggregator, images, chunk, motion)
 }
 
 /// The camera head and the dense heads on the aggregator's tokens, the dense heads `chunk` frames at a time;
@@ -57,6 +88,7 @@ pub fn heads_chunked(
     aggregator: AggregatorOutput,
     images: Tensor<5>,
     chunk: usize,
+    motion: MotionPath,
 ) -> Result<Prediction, InferError> {
     let frames = images.dims()[1];
     let chunk = chunk.max(1);
@@ -67,6 +99,7 @@ pub fn heads_chunked(
     let (start, grid) = (aggregator.patch_start_idx, aggregator.grid);
 
     let (mut depth, mut dynamic, mut gaussian_raw, mut velocity) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut motion_skipped_frames = 0;
     for first in (0..frames).step_by(chunk) {
         let count = chunk.min(frames - first);
         let pick = |tokens: Tensor<4>| tokens.narrow(1, first, count);
@@ -74,9 +107,12 @@ pub fn heads_chunked(
         let prediction =
             model.depth_head.predict(|i| pick(aggregator.output_list[i].clone()), start, grid, &chunk_images);
         depth.push(f32(prediction.prediction.narrow(4, 0, 1).squeeze_dim::<4>(4)));
+        let mut still = false;
         if let Some(head) = &model.instance_head {
             let prediction = head.predict(|i| pick(aggregator.dino_token_list[i].clone()), start, grid, &chunk_images);
-            dynamic.push(f32(prediction.prediction.narrow(4, 0, 1).squeeze_dim::<4>(4)));
+            let logits = f32(prediction.prediction.narrow(4, 0, 1).squeeze_dim::<4>(4));
+            still = motion == MotionPath::WhereDynamic && is_still(logits.clone().max().into_scalar());
+            dynamic.push(logits);
         }
         if let Some(head) = &model.gs_head {
             let raw = head.forward(|i| pick(aggregator.output_with_dino_tokens(i)), start, grid, &chunk_images).raw;
@@ -84,8 +120,14 @@ pub fn heads_chunked(
             gaussian_raw.push(raw.cast(FloatDType::F32));
         }
         if let Some(head) = &model.motion_head {
-            let prediction = head.predict(|i| pick(aggregator.output_list[i].clone()), start, grid, &chunk_images);
-            velocity.push(prediction.prediction.narrow(4, 0, 3).cast(FloatDType::F32));
+            if still {
+                let [_, _, _, height, width] = chunk_images.dims();
+                velocity.push(Tensor::zeros([1, count, height, width, 3], &chunk_images.device()));
+                motion_skipped_frames += count;
+            } else {
+                let prediction = head.predict(|i| pick(aggregator.output_list[i].clone()), start, grid, &chunk_images);
+                velocity.push(prediction.prediction.narrow(4, 0, 3).cast(FloatDType::F32));
+            }
         }
     }
     drop(aggregator);
@@ -101,5 +143,6 @@ pub fn heads_chunked(
         dynamic_logit: (!dynamic.is_empty()).then(|| Tensor::cat(dynamic, 1)),
         gaussians,
         velocity,
+        motion_skipped_frames,
     })
 }

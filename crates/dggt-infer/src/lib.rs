@@ -29,7 +29,7 @@ pub mod settings;
 
 pub use cameras::{InputCameras, ViewSlot, decode_cameras, input_views};
 pub use error::InferError;
-pub use forward::{Prediction, forward_chunked, heads_chunked};
+pub use forward::{MotionPath, Prediction, forward_chunked, heads_chunked, is_still};
 pub use inputs::{GroundTruth, InputImage, InputSet};
 pub use network::{
     Architecture, CheckpointInfo, DEFAULT_PRESET, LoadedNetwork, StartingWeights, fresh_model, load_network,

@@ -18,7 +18,8 @@ use std::collections::BTreeMap;
 use burn::tensor::{FloatDType, Int, Tensor, TensorData};
 use dggt_geom::PoseEncoding;
 use dggt_infer::{
-    CameraSource, InputCameras, RenderSection, Scene4d, SceneOptions, SkyChoice, ViewSlot, forward_chunked, input_views,
+    CameraSource, InputCameras, MotionPath, RenderSection, Scene4d, SceneOptions, SkyChoice, ViewSlot, forward_chunked,
+    input_views,
 };
 use dggt_losses::{GramLoss, Lpips, bce_with_logits, l2, lifespan_l1, opacity_loss, psnr};
 use dggt_model::Dggt;
@@ -283,7 +284,7 @@ impl Forward {
     /// `render` chooses.
     pub fn run(model: &Dggt, batch: &StepBatch, render: &RenderSection) -> Result<Self, ObjectiveError> {
         let frames = batch.images.dims()[1];
-        let prediction = forward_chunked(model, batch.images.clone(), frames)?;
+        let prediction = forward_chunked(model, batch.images.clone(), frames, MotionPath::Always)?;
         let cameras = match render.cameras {
             CameraSource::GroundTruth => InputCameras::Given(batch.inputs.iter().map(|v| v.camera).collect()),
             CameraSource::Predicted => InputCameras::Predicted,

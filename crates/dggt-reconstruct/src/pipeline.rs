@@ -33,7 +33,8 @@ use dggt_export::nerfstudio::{NerfstudioFrame, write_transforms};
 use dggt_export::ply::{GaussianCloud, write_ply};
 use dggt_geom::{ImageSize, PosedCamera, WorldFromCamera};
 use dggt_infer::{
-    InputCameras, InputSet, LoadedNetwork, Scene4d, SceneOptions, ViewSlot, forward_chunked, input_views, load_network,
+    InputCameras, InputSet, LoadedNetwork, MotionPath, Scene4d, SceneOptions, ViewSlot, forward_chunked, input_views,
+    load_network,
 };
 use dggt_scene::{AssemblyCounts, InputView, MIN_OPACITY, PixelGaussians, TargetView, Timeline, nearest_view};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -146,7 +147,7 @@ pub fn reconstruct(options: &ReconstructOptions, device: &Device) -> Result<Summ
     stages.done("load images");
 
     let batch = images_tensor(&images, size, device);
-    let prediction = forward_chunked(&network.model, batch.clone(), options.chunk_frames)?;
+    let prediction = forward_chunked(&network.model, batch.clone(), options.chunk_frames, MotionPath::WhereDynamic)?;
     let timeline = Timeline::new(&inputs.frames)?;
     let slots: Vec<ViewSlot> = inputs
         .views

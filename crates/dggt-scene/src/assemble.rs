@@ -46,6 +46,24 @@ pub struct AssemblySettings {
     /// Variance in pixels² added to each projected covariance's diagonal (the rasteriser's `eps2d`; 0.3 in the
     /// release): a low-pass floor under every footprint.
     pub eps2d: f32,
+    /// Whether the sky behind a view that the foreground covers is rendered at all.
+    pub hidden_sky: HiddenSky,
+}
+
+/// Whether the sky is rendered behind a view whose foreground covers it everywhere.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum HiddenSky {
+    /// Always rendered: the exact composite.
+    #[default]
+    Render,
+    /// Not rendered when the foreground's transmittance `1 - alpha` is below `tolerance` at every pixel:
+    /// each colour then differs from the exact composite by less than `tolerance` times the sky's colour.
+    Skip { tolerance: f32 },
+}
+
+impl HiddenSky {
+    /// Skipped below one 8-bit level: the images change by less than `1/255` of the sky's colour.
+    pub const BELOW_ONE_LEVEL: Self = Self::Skip { tolerance: 1.0 / 255.0 };
 }
 
 impl Default for AssemblySettings {
@@ -57,6 +75,7 @@ impl Default for AssemblySettings {
             far_plane: DEFAULT_FAR_PLANE,
             dynamic_blend: DynamicBlend::Nearest,
             eps2d: DEFAULT_EPS2D,
+            hidden_sky: HiddenSky::Render,
         }
     }
 }

@@ -1,6 +1,10 @@
 //! Rendering one target view: its assembled Gaussians as the foreground, composited over the sky Gaussians
 //! rendered from the same camera: `rgb = alpha · foreground + (1 - alpha) · sky` (black without a sky model).
 //!
+//! With [`HiddenSky::Skip`] the sky is not rendered behind a view whose foreground lets (almost) none of it
+//! through; the foreground is then composited over black (`alpha · foreground`), which differs from the exact
+//! composite by `(1 - alpha) · sky`, below the tolerance times the sky's colour.
+//!
 //! The release's inference additionally min-max normalises the sky over all views before [`composite`]
 //! (`dggt_infer::release`); a trained model of this project composites the sky as rendered, in training and
 //! inference alike.
@@ -12,9 +16,10 @@ use dggt_splat::{
     CameraTensors, GaussianTensors, OpacityTensor, RasterSettings, RenderSettings, RenderTensors, render,
 };
 
-use crate::assemble::{AssembledGaussians, AssemblyCounts, AssemblySettings, assemble};
+use crate::assemble::{AssembledGaussians, AssemblyCounts, AssemblySettings, HiddenSky, assemble};
 use crate::error::SceneError;
 use crate::pixels::PixelGaussians;
+use crate::pixels::host_values;
 use crate::timeline::TargetView;
 
 /// One rendered view.
@@ -66,7 +71,15 @@ pub fn render_assembled(
     let foreground =
         render(gaussians, &cameras, &settings).map_err(|source| SceneError::Render { what: what(), source })?;
     let RenderTensors { colors, alpha, depth } = foreground;
+    let hidden = match (sky, assembly.hidden_sky) {
+        (Some(_), HiddenSky::Skip { tolerance }) => !sky_shows_through(&alpha, tolerance)?,
+        _ => false,
+    };
     let (rgb, sky) = match sky {
+        Some(_) if hidden => {
+            tracing::debug!(time = target.time, "sky hidden by the foreground: not rendered");
+            (colors * alpha.clone().unsqueeze_dim::<4>(3), None)
+        }
         Some(sky) => {
             let sky_rgb = render(&sky_splats(sky), &cameras, &settings)
                 .map_err(|source| SceneError::Render { what: format!("the sky of {}", what()), source })?
@@ -77,6 +90,12 @@ pub fn render_assembled(
     };
     let squeeze3 = |t: Tensor<4>| t.squeeze_dim::<3>(0);
     Ok(ViewRender { rgb: squeeze3(rgb), alpha, depth, sky: sky.map(squeeze3), counts })
+}
+
+/// Whether the foreground opacity `alpha` lets at least `tolerance` of the background through at any pixel.
+fn sky_shows_through(alpha: &Tensor<3>, tolerance: f32) -> Result<bool, SceneError> {
+    let least_alpha = host_values(alpha.clone().min().reshape([1]), "foreground alpha")?[0];
+    Ok(!(1.0 - least_alpha < tolerance))
 }
 
 /// `[V, H, W, 3]` foreground colours over the background: `alpha · foreground + (1 - alpha) · background`, with

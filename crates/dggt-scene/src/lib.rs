@@ -18,7 +18,7 @@ mod error;
 pub mod pixels;
 pub mod timeline;
 
-pub use assemble::{AssembledGaussians, AssemblyCounts, AssemblySettings, MIN_OPACITY, assemble};
+pub use assemble::{AssembledGaussians, AssemblyCounts, AssemblySettings, HiddenSky, MIN_OPACITY, assemble};
 pub use compose::{ViewRender, camera_tensors, composite, render_assembled, render_target, sky_splats};
 pub use error::SceneError;
 pub use pixels::{MeansGradient, PixelGaussians};

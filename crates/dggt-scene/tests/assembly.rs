@@ -8,8 +8,8 @@ use dggt_geom::glam::{DQuat, DVec3};
 use dggt_geom::{PinholeIntrinsics, PixelConvention, PosedCamera, WorldFromCamera};
 use dggt_model::gaussian_maps::GaussianMaps;
 use dggt_scene::{
-    AssemblySettings, DynamicBlend, InputView, MeansGradient, PixelGaussians, TargetView, assemble, interpolate_camera,
-    render_target,
+    AssemblySettings, DynamicBlend, HiddenSky, InputView, MeansGradient, PixelGaussians, TargetView, assemble,
+    interpolate_camera, render_target,
 };
 use dggt_splat::OpacityTensor;
 
@@ -365,4 +365,68 @@ fn bad_velocities_are_errors() {
     let error = pixels().with_motion(nan, 1.0).unwrap_err().to_string();
     assert!(error.contains("velocity"), "{error}");
     assert!(pixels().with_motion(velocity(&device), f64::INFINITY).is_err());
+}
+
+#[test]
+fn velocities_of_pixels_too_still_to_draw_change_no_render() {
+    // Dynamic logits at the motion-skip bound: sigmoid(-5.6) < 1/255, so no dynamic Gaussian is drawn, and
+    // zero velocities (a skipped motion head) render exactly as predicted ones.
+    let device = Device::flex();
+    let maps = GaussianMaps::from_raw(raw_maps(&device, 0.0));
+    assert!(below_the_alpha_threshold(-5.6));
+    let place = || placed(&maps, Some(-5.6), views());
+    let predicted = place().with_motion(velocity(&device), 6.0).unwrap();
+    let skipped = place().with_motion(Tensor::zeros([1, S, H, W, 3], &device), 6.0).unwrap();
+    for (time, blend) in [(0.9, DynamicBlend::Nearest), (0.7, DynamicBlend::CrossFade)] {
+        let target = TargetView { rig_camera: 0, time, camera: interpolate_camera(&views(), 0, time).unwrap() };
+        let settings = AssemblySettings { dynamic_blend: blend, ..AssemblySettings::exact() };
+        let a = render_target(&predicted, None, &target, &settings).unwrap();
+        let b = render_target(&skipped, None, &target, &settings).unwrap();
+        assert_eq!(host(a.rgb), host(b.rgb), "t = {time}");
+        assert_eq!(host(a.alpha), host(b.alpha), "t = {time}");
+    }
+}
+
+/// `sigmoid(logit)` under the rasteriser's alpha threshold (the motion-skip rule of `dggt_infer::is_still`).
+fn below_the_alpha_threshold(logit: f32) -> bool {
+    1.0 / (1.0 + (-logit).exp()) < dggt_splat::constants::ALPHA_THRESHOLD
+}
+
+#[test]
+fn a_sky_the_foreground_covers_is_not_rendered_and_changes_the_image_below_the_tolerance() {
+    let device = Device::flex();
+    // Gaussians of opacity logit `logit` and scales ~0.3 (1.5 pixels at their depth): opaque ones cover the view.
+    let raw = raw_maps(&device, 0.0);
+    let [b, s, h, w, _] = raw.dims();
+    let with_opacity = |logit: f32| {
+        let channels = vec![
+            raw.clone().narrow(4, 0, 3),
+            Tensor::full([b, s, h, w, 1], logit, &device),
+            Tensor::full([b, s, h, w, 3], 3.0, &device),
+            raw.clone().narrow(4, 7, 5),
+        ];
+        placed(&GaussianMaps::from_raw(Tensor::<5>::cat(channels, 4)), None, views())
+    };
+    let (covered, faint) = (with_opacity(8.0), with_opacity(-4.0));
+    let sky = dggt_model::sky::SkyGaussians {
+        visible_index: vec![0],
+        rgb_mean: Tensor::zeros([1, 3], &device),
+        field_out: Tensor::zeros([1, 6], &device),
+        means: Tensor::from_data(TensorData::new(vec![0.0f32, 0.0, 50.0], [1, 3]), &device),
+        quats: Tensor::from_data(TensorData::new(vec![1.0f32, 0.0, 0.0, 0.0], [1, 4]), &device),
+        scales: Tensor::full([1, 3], 100.0, &device),
+        opacities: Tensor::full([1], 0.99, &device),
+        colors: Tensor::full([1, 3], 0.8, &device),
+    };
+    let target = TargetView { rig_camera: 0, time: 0.5, camera: camera(0.3, 0.0) };
+    let skip = AssemblySettings { hidden_sky: HiddenSky::BELOW_ONE_LEVEL, ..AssemblySettings::default() };
+    let render = |pixels: &PixelGaussians, settings: &AssemblySettings| {
+        render_target(pixels, Some(&sky), &target, settings).unwrap()
+    };
+    let (exact, skipped) = (render(&covered, &AssemblySettings::default()), render(&covered, &skip));
+    assert!(exact.sky.is_some() && skipped.sky.is_none(), "a covered sky is skipped");
+    let worst = host(exact.rgb).iter().zip(host(skipped.rgb)).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+    assert!(worst < 0.8 / 255.0, "skipping the sky changed a colour by {worst}");
+    // Where the sky shows through, it is rendered whatever the setting.
+    assert!(render(&faint, &skip).sky.is_some());
 }

@@ -10,7 +10,7 @@
 use std::time::Instant;
 
 use burn::tensor::{Device, Distribution, Tensor};
-use dggt_infer::{Prediction, forward_chunked};
+use dggt_infer::{MotionPath, Prediction, forward_chunked};
 use dggt_model::Dggt;
 
 use super::memory::{DeviceMemory, guarded};
@@ -141,7 +141,7 @@ impl Network {
 
 /// One forward pass, blocking until every output is computed.
 fn run_forward(model: &Dggt, images: Tensor<5>, chunk: usize) -> Result<(), BenchError> {
-    let prediction = forward_chunked(model, images, chunk)?;
+    let prediction = forward_chunked(model, images, chunk, MotionPath::Always)?;
     settle(&everything(&prediction))
 }
 
