@@ -13,6 +13,8 @@ use rayon::prelude::*;
 
 use crate::error::{ConvertError, Result};
 use crate::marker::{DoneMarker, read_done};
+use crate::nuscenes::{NuScenesVersion, Tables};
+use crate::sky::SkyMasks;
 use crate::waymo::{WaymoOptions, convert_segment};
 
 /// The raw datasets the converters read.
@@ -22,6 +24,8 @@ pub enum Dataset {
     Waymo,
     /// Argoverse 2 sensor logs; input one log folder or a split folder of logs.
     Argoverse2,
+    /// nuScenes: input the data root; the segments are the rows of the version's `scene` table, in table order.
+    NuScenes(NuScenesVersion),
 }
 
 /// What a segment's progress counts.
@@ -29,6 +33,15 @@ pub enum Dataset {
 pub enum ProgressUnit {
     Bytes,
     Sweeps,
+    Samples,
+}
+
+/// What every segment of a run is converted with.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ConvertOptions {
+    /// Export camera ids.
+    pub cameras: Vec<usize>,
+    pub sky_masks: SkyMasks,
 }
 
 impl Dataset {
@@ -37,6 +50,7 @@ impl Dataset {
         match self {
             Self::Waymo => dggt_data::ExportVariant::Waymo,
             Self::Argoverse2 => dggt_data::ExportVariant::Argoverse2,
+            Self::NuScenes(_) => dggt_data::ExportVariant::NuScenes,
         }
     }
 
@@ -44,6 +58,7 @@ impl Dataset {
         match self {
             Self::Waymo => ProgressUnit::Bytes,
             Self::Argoverse2 => ProgressUnit::Sweeps,
+            Self::NuScenes(_) => ProgressUnit::Samples,
         }
     }
 
@@ -52,35 +67,70 @@ impl Dataset {
         match self {
             Self::Waymo => path.is_file() && path.extension().is_some_and(|ext| ext == "tfrecord"),
             Self::Argoverse2 => path.join("calibration").is_dir(),
+            Self::NuScenes(_) => false,
         }
     }
 
-    /// How much progress converting `input` takes, in [`Self::progress_unit`]s.
-    fn progress_total(self, input: &Path) -> u64 {
-        match self {
-            Self::Waymo => std::fs::metadata(input).map_or(0, |m| m.len()),
-            Self::Argoverse2 => {
-                std::fs::read_dir(input.join("sensors/lidar")).map_or(0, |entries| entries.count() as u64)
+    /// What the conversion of every segment needs read first: nuScenes' tables.
+    fn prepare(self, jobs: &[SegmentJob]) -> Result<Prepared> {
+        let tables = match (self, jobs.first()) {
+            (Self::NuScenes(version), Some(job)) => Some(Tables::read(&job.input, version)?),
+            _ => None,
+        };
+        Ok(Prepared { dataset: self, tables })
+    }
+}
+
+/// A dataset with what its segments share.
+struct Prepared {
+    dataset: Dataset,
+    tables: Option<Tables>,
+}
+
+impl Prepared {
+    /// How much progress converting `job` takes, in [`Dataset::progress_unit`]s.
+    fn progress_total(&self, job: &SegmentJob) -> u64 {
+        match self.dataset {
+            Dataset::Waymo => std::fs::metadata(&job.input).map_or(0, |m| m.len()),
+            Dataset::Argoverse2 => {
+                std::fs::read_dir(job.input.join("sensors/lidar")).map_or(0, |entries| entries.count() as u64)
+            }
+            Dataset::NuScenes(_) => {
+                self.tables.as_ref().and_then(|t| t.scene.rows.get(job.index)).map_or(0, |s| s.nbr_samples as u64)
             }
         }
     }
 
     fn convert(
-        self,
-        input: &Path,
+        &self,
+        job: &SegmentJob,
         scene: &Path,
-        cameras: &[usize],
+        options: &ConvertOptions,
         progress: &(dyn Fn(u64) + Sync),
     ) -> Result<Converted> {
-        match self {
-            Self::Waymo => {
-                let summary = convert_segment(input, scene, &WaymoOptions { cameras: cameras.to_vec() }, progress)?;
+        let input = &job.input;
+        match (self.dataset, &self.tables) {
+            (Dataset::Waymo, _) => {
+                let waymo = WaymoOptions { cameras: options.cameras.clone(), sky_masks: options.sky_masks };
+                let summary = convert_segment(input, scene, &waymo, progress)?;
                 Ok(Converted { scene: summary.scene, frames: summary.frames, instances: summary.instances })
             }
-            Self::Argoverse2 => {
-                let summary = crate::argoverse2::convert_log(input, scene, cameras, progress)?;
+            (Dataset::Argoverse2, _) => {
+                let summary = crate::argoverse2::convert_log(input, scene, options, progress)?;
                 Ok(Converted { scene: summary.scene, frames: summary.frames, instances: summary.instances })
             }
+            (Dataset::NuScenes(_), Some(tables)) => {
+                let summary = crate::nuscenes::convert_scene(
+                    tables,
+                    job.index,
+                    scene,
+                    &options.cameras,
+                    options.sky_masks,
+                    progress,
+                )?;
+                Ok(Converted { scene: scene.to_owned(), frames: summary.frames, instances: summary.instances })
+            }
+            (Dataset::NuScenes(_), None) => unreachable!("prepare reads the nuScenes tables"),
         }
     }
 }
@@ -97,6 +147,7 @@ pub struct Converted {
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct SegmentJob {
     pub index: usize,
+    /// The segment's file or folder; for nuScenes, the data root (the segment is row `index` of its scene table).
     pub input: PathBuf,
     pub scene: PathBuf,
 }
@@ -132,7 +183,10 @@ pub trait Progress: Sync {
 /// scene folders under `out`; `scenes` keeps only those numbers.
 pub fn jobs(dataset: Dataset, input: &Path, out: &Path, scenes: Option<&[usize]>) -> Result<Vec<SegmentJob>> {
     let not_found = |what: String| ConvertError::io(input, std::io::Error::new(std::io::ErrorKind::NotFound, what));
-    let segments = if input.is_file() || dataset.is_segment(input) {
+    let segments = if let Dataset::NuScenes(version) = dataset {
+        let count = crate::nuscenes::tables::scene_count(input, version)?;
+        vec![input.to_owned(); count]
+    } else if input.is_file() || dataset.is_segment(input) {
         vec![input.to_owned()]
     } else if input.is_dir() {
         let entries = std::fs::read_dir(input).map_err(|e| ConvertError::io(input, e))?;
@@ -166,7 +220,7 @@ pub fn jobs(dataset: Dataset, input: &Path, out: &Path, scenes: Option<&[usize]>
 pub fn convert_segments(
     dataset: Dataset,
     jobs: &[SegmentJob],
-    cameras: &[usize],
+    options: &ConvertOptions,
     workers: usize,
     policy: FailurePolicy,
     progress: &dyn Progress,
@@ -175,6 +229,7 @@ pub fn convert_segments(
         .num_threads(workers.max(1))
         .build()
         .map_err(|e| ConvertError::io(Path::new("."), std::io::Error::other(e)))?;
+    let prepared = dataset.prepare(jobs)?;
     let stopped = AtomicBool::new(false);
     Ok(pool.install(|| {
         jobs.par_iter()
@@ -183,7 +238,7 @@ pub fn convert_segments(
                 if stopped.load(Ordering::Relaxed) {
                     return Outcome::NotStarted;
                 }
-                let outcome = convert_one(dataset, job, cameras, progress);
+                let outcome = convert_one(&prepared, job, options, progress);
                 if matches!(outcome, Outcome::Failed(_)) && policy == FailurePolicy::Stop {
                     stopped.store(true, Ordering::Relaxed);
                 }
@@ -194,23 +249,28 @@ pub fn convert_segments(
     }))
 }
 
-fn convert_one(dataset: Dataset, job: &SegmentJob, cameras: &[usize], progress: &dyn Progress) -> Outcome {
+fn convert_one(prepared: &Prepared, job: &SegmentJob, options: &ConvertOptions, progress: &dyn Progress) -> Outcome {
     if let Some(marker) = read_done(&job.scene) {
         return Outcome::AlreadyDone(marker);
     }
-    match write_scene(dataset, job, cameras, progress) {
+    match write_scene(prepared, job, options, progress) {
         Ok(summary) => Outcome::Converted(summary),
         Err(error) => Outcome::Failed(error),
     }
 }
 
-fn write_scene(dataset: Dataset, job: &SegmentJob, cameras: &[usize], progress: &dyn Progress) -> Result<Converted> {
-    progress.started(job, dataset.progress_total(&job.input), dataset.progress_unit());
+fn write_scene(
+    prepared: &Prepared,
+    job: &SegmentJob,
+    options: &ConvertOptions,
+    progress: &dyn Progress,
+) -> Result<Converted> {
+    progress.started(job, prepared.progress_total(job), prepared.dataset.progress_unit());
     let partial = job.scene.with_extension("partial");
     if partial.exists() {
         std::fs::remove_dir_all(&partial).map_err(|e| ConvertError::io(&partial, e))?;
     }
-    let mut summary = dataset.convert(&job.input, &partial, cameras, &|done| progress.advanced(job, done))?;
+    let mut summary = prepared.convert(job, &partial, options, &|done| progress.advanced(job, done))?;
     std::fs::rename(&partial, &job.scene).map_err(|e| ConvertError::io(&job.scene, e))?;
     summary.scene = job.scene.clone();
     Ok(summary)

@@ -79,7 +79,7 @@ fn convert_rows(frame: &proto::Frame) -> Vec<[f32; 14]> {
     let input = dir.path().join("built.tfrecord");
     std::fs::write(&input, frame_record(&frame.encode_to_vec())).unwrap();
     let scene = dir.path().join("000");
-    let options = WaymoOptions { cameras: vec![0] };
+    let options = WaymoOptions { cameras: vec![0], ..Default::default() };
     let summary = convert_segment(&input, &scene, &options, &|_| {}).unwrap();
     assert_eq!(summary.lidar_frames, 1);
     let bytes = std::fs::read(ExportLayout::new(&scene).lidar(0)).unwrap();
@@ -156,9 +156,14 @@ fn a_non_rigid_pose_and_an_unknown_camera_are_errors_naming_the_record() {
         let input = dir.path().join("bad.tfrecord");
         let good = frame_record(&self::frame(None, None).encode_to_vec());
         std::fs::write(&input, [good, frame_record(&frame.encode_to_vec())].concat()).unwrap();
-        let message = convert_segment(&input, &dir.path().join("000"), &WaymoOptions { cameras: vec![0] }, &|_| {})
-            .unwrap_err()
-            .to_string();
+        let message = convert_segment(
+            &input,
+            &dir.path().join("000"),
+            &WaymoOptions { cameras: vec![0], ..Default::default() },
+            &|_| {},
+        )
+        .unwrap_err()
+        .to_string();
         assert!(
             message.contains("bad.tfrecord") && message.contains("record 1") && message.contains(expected),
             "{message}"
