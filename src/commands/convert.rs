@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use anyhow::{Context, Result};
 use dggt_convert::batch::{self, FailurePolicy, Outcome, Progress, ProgressUnit, SegmentJob};
-use dggt_convert::nuscenes::NuScenesVersion;
+use dggt_convert::nuscenes::{FrameRate, NuScenesVersion};
 use dggt_convert::sky;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 
@@ -32,6 +32,35 @@ pub enum Version {
     Trainval,
 }
 
+/// nuScenes frames: the annotated key frames, or drivestudio's `--interpolate_N` frames between them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum NuscenesRate {
+    /// Key frames only (drivestudio's default).
+    #[value(name = "2hz")]
+    KeyFrames,
+    #[value(name = "4hz")]
+    Hz4,
+    #[value(name = "6hz")]
+    Hz6,
+    #[value(name = "8hz")]
+    Hz8,
+    /// Four frames between key frames (drivestudio's documented `--interpolate_N 4`).
+    #[value(name = "10hz")]
+    Hz10,
+}
+
+impl NuscenesRate {
+    fn frame_rate(self) -> FrameRate {
+        match self {
+            Self::KeyFrames => FrameRate::KeyFrames,
+            Self::Hz4 => FrameRate::Interpolated { between: 1 },
+            Self::Hz6 => FrameRate::Interpolated { between: 2 },
+            Self::Hz8 => FrameRate::Interpolated { between: 3 },
+            Self::Hz10 => FrameRate::Interpolated { between: 4 },
+        }
+    }
+}
+
 /// Sky masks to write.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum SkyMasks {
@@ -42,14 +71,17 @@ pub enum SkyMasks {
 }
 
 impl Dataset {
-    fn converter(self, version: Version) -> batch::Dataset {
+    fn converter(self, version: Version, rate: NuscenesRate) -> batch::Dataset {
         match self {
             Self::Waymo => batch::Dataset::Waymo,
             Self::Argoverse2 => batch::Dataset::Argoverse2,
-            Self::Nuscenes => batch::Dataset::NuScenes(match version {
-                Version::Mini => NuScenesVersion::Mini,
-                Version::Trainval => NuScenesVersion::Trainval,
-            }),
+            Self::Nuscenes => batch::Dataset::NuScenes(
+                match version {
+                    Version::Mini => NuScenesVersion::Mini,
+                    Version::Trainval => NuScenesVersion::Trainval,
+                },
+                rate.frame_rate(),
+            ),
         }
     }
 }
@@ -82,14 +114,18 @@ pub struct Args {
     /// nuScenes release under the data root.
     #[arg(long, value_enum, default_value = "v1.0-mini")]
     version: Version,
+    /// nuScenes frame rate: the 2 Hz key frames, or frames between them (nearest camera and lidar readings,
+    /// interpolated boxes).
+    #[arg(long, value_enum, default_value = "2hz")]
+    nuscenes_rate: NuscenesRate,
     /// Sky masks (`lidar`: approximate, from the projected lidar returns; recorded in `sky_masks/SOURCE.txt`).
     #[arg(long, value_enum, default_value = "none")]
     sky_masks: SkyMasks,
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let Args { dataset, input, out, scenes, cameras, workers, keep_going, version, sky_masks } = args;
-    let dataset = dataset.converter(version);
+    let Args { dataset, input, out, scenes, cameras, workers, keep_going, version, nuscenes_rate, sky_masks } = args;
+    let dataset = dataset.converter(version, nuscenes_rate);
     let names = dataset.variant().camera_names();
     let cameras = cameras.unwrap_or_else(|| (0..names.len()).collect());
     if let Some(unknown) = cameras.iter().find(|&&c| c >= names.len()) {

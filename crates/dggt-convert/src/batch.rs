@@ -13,7 +13,7 @@ use rayon::prelude::*;
 
 use crate::error::{ConvertError, Result};
 use crate::marker::{DoneMarker, read_done};
-use crate::nuscenes::{NuScenesVersion, Tables};
+use crate::nuscenes::{FrameRate, NuScenesOptions, NuScenesVersion, Tables};
 use crate::sky::SkyMasks;
 use crate::waymo::{WaymoOptions, convert_segment};
 
@@ -25,7 +25,7 @@ pub enum Dataset {
     /// Argoverse 2 sensor logs; input one log folder or a split folder of logs.
     Argoverse2,
     /// nuScenes: input the data root; the segments are the rows of the version's `scene` table, in table order.
-    NuScenes(NuScenesVersion),
+    NuScenes(NuScenesVersion, FrameRate),
 }
 
 /// What a segment's progress counts.
@@ -50,7 +50,7 @@ impl Dataset {
         match self {
             Self::Waymo => dggt_data::ExportVariant::Waymo,
             Self::Argoverse2 => dggt_data::ExportVariant::Argoverse2,
-            Self::NuScenes(_) => dggt_data::ExportVariant::NuScenes,
+            Self::NuScenes(..) => dggt_data::ExportVariant::NuScenes,
         }
     }
 
@@ -58,7 +58,7 @@ impl Dataset {
         match self {
             Self::Waymo => ProgressUnit::Bytes,
             Self::Argoverse2 => ProgressUnit::Sweeps,
-            Self::NuScenes(_) => ProgressUnit::Samples,
+            Self::NuScenes(..) => ProgressUnit::Samples,
         }
     }
 
@@ -67,14 +67,14 @@ impl Dataset {
         match self {
             Self::Waymo => path.is_file() && path.extension().is_some_and(|ext| ext == "tfrecord"),
             Self::Argoverse2 => path.join("calibration").is_dir(),
-            Self::NuScenes(_) => false,
+            Self::NuScenes(..) => false,
         }
     }
 
     /// What the conversion of every segment needs read first: nuScenes' tables.
     fn prepare(self, jobs: &[SegmentJob]) -> Result<Prepared> {
         let tables = match (self, jobs.first()) {
-            (Self::NuScenes(version), Some(job)) => Some(Tables::read(&job.input, version)?),
+            (Self::NuScenes(version, _), Some(job)) => Some(Tables::read(&job.input, version)?),
             _ => None,
         };
         Ok(Prepared { dataset: self, tables })
@@ -95,9 +95,11 @@ impl Prepared {
             Dataset::Argoverse2 => {
                 std::fs::read_dir(job.input.join("sensors/lidar")).map_or(0, |entries| entries.count() as u64)
             }
-            Dataset::NuScenes(_) => {
-                self.tables.as_ref().and_then(|t| t.scene.rows.get(job.index)).map_or(0, |s| s.nbr_samples as u64)
-            }
+            Dataset::NuScenes(_, rate) => self
+                .tables
+                .as_ref()
+                .and_then(|t| t.scene.rows.get(job.index))
+                .map_or(0, |s| rate.frames(s.nbr_samples) as u64),
         }
     }
 
@@ -119,18 +121,12 @@ impl Prepared {
                 let summary = crate::argoverse2::convert_log(input, scene, options, progress)?;
                 Ok(Converted { scene: summary.scene, frames: summary.frames, instances: summary.instances })
             }
-            (Dataset::NuScenes(_), Some(tables)) => {
-                let summary = crate::nuscenes::convert_scene(
-                    tables,
-                    job.index,
-                    scene,
-                    &options.cameras,
-                    options.sky_masks,
-                    progress,
-                )?;
+            (Dataset::NuScenes(_, rate), Some(tables)) => {
+                let nuscenes = NuScenesOptions { cameras: options.cameras.clone(), sky_masks: options.sky_masks, rate };
+                let summary = crate::nuscenes::convert_scene(tables, job.index, scene, &nuscenes, progress)?;
                 Ok(Converted { scene: scene.to_owned(), frames: summary.frames, instances: summary.instances })
             }
-            (Dataset::NuScenes(_), None) => unreachable!("prepare reads the nuScenes tables"),
+            (Dataset::NuScenes(..), None) => unreachable!("prepare reads the nuScenes tables"),
         }
     }
 }
@@ -183,7 +179,7 @@ pub trait Progress: Sync {
 /// scene folders under `out`; `scenes` keeps only those numbers.
 pub fn jobs(dataset: Dataset, input: &Path, out: &Path, scenes: Option<&[usize]>) -> Result<Vec<SegmentJob>> {
     let not_found = |what: String| ConvertError::io(input, std::io::Error::new(std::io::ErrorKind::NotFound, what));
-    let segments = if let Dataset::NuScenes(version) = dataset {
+    let segments = if let Dataset::NuScenes(version, _) = dataset {
         let count = crate::nuscenes::tables::scene_count(input, version)?;
         vec![input.to_owned(); count]
     } else if input.is_file() || dataset.is_segment(input) {

@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use dggt_convert::nuscenes::{NuScenesVersion, Tables, convert_scene};
+use dggt_convert::nuscenes::{FrameRate, NuScenesOptions, NuScenesVersion, Tables, convert_scene};
 use dggt_convert::sky::SkyMasks;
 use dggt_data::{DynamicMaskKind, ExportLayout, text};
 use dggt_geom::glam::{DMat4, DVec3};
@@ -15,8 +15,13 @@ mod nuscenes_scene;
 use nuscenes_scene::*;
 
 fn convert(root: &Path, out: &Path, cameras: &[usize]) -> Result<usize, String> {
+    convert_at(root, out, cameras, FrameRate::KeyFrames)
+}
+
+fn convert_at(root: &Path, out: &Path, cameras: &[usize], rate: FrameRate) -> Result<usize, String> {
     let tables = Tables::read(root, NuScenesVersion::Mini).map_err(|e| e.to_string())?;
-    convert_scene(&tables, 0, out, cameras, SkyMasks::Lidar, &|_| {}).map(|s| s.frames).map_err(|e| e.to_string())
+    let options = NuScenesOptions { cameras: cameras.to_vec(), sky_masks: SkyMasks::Lidar, rate };
+    convert_scene(&tables, 0, out, &options, &|_| {}).map(|s| s.frames).map_err(|e| e.to_string())
 }
 
 fn read_matrix(path: &Path) -> DMat4 {
@@ -112,6 +117,34 @@ fn a_synthetic_scene_converts_to_the_hand_computed_poses_points_and_masks() {
     assert!(scene.views.iter().all(|v| v.files.sky_mask.is_some()));
 }
 
+#[test]
+fn interpolated_frames_take_the_nearest_readings_and_interpolated_boxes() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = write_root(dir.path(), |_| {});
+    let out = dir.path().join("000");
+    // 4 Hz: one frame between the two key frames, at 1.25 s, where the non-key-frame readings are.
+    assert_eq!(convert_at(&root, &out, &[0, 5], FrameRate::Interpolated { between: 1 }), Ok(3));
+    let layout = ExportLayout::new(&out);
+    let times = std::fs::read_to_string(layout.timestamps()).unwrap();
+    assert_eq!(text::parse_numbers(Path::new("t"), &times).unwrap(), vec![0.0, 0.0, 1.0, 0.25, 2.0, 0.5]);
+    for (frame, position) in [(0, 0.0), (1, 0.5), (2, 1.0)] {
+        let camera = world_from(ego_pose_at(position, 5)) * world_from(camera_calibration(5));
+        assert_close(read_matrix(&layout.extrinsics_at(frame, 5)), camera, &format!("CAM_BACK at frame {frame}"));
+        let lidar = world_from(ego_pose_at(position, 6)) * world_from(lidar_calibration());
+        assert_close(read_matrix(&layout.lidar_pose(frame)), lidar, &format!("lidar at frame {frame}"));
+    }
+    // The car's box halfway between its two annotations (same heading: the translation's midpoint).
+    let info: Value = serde_json::from_slice(&std::fs::read(layout.instances_info()).unwrap()).unwrap();
+    assert_eq!(info["0"]["frame_annotations"]["frame_idx"], json!([0, 1, 2]));
+    let rows: [[f64; 4]; 4] =
+        serde_json::from_value(info["0"]["frame_annotations"]["obj_to_world"][1].clone()).unwrap();
+    let (a, b) = (car_pose(0), car_pose(1));
+    let midpoint = DVec3::from_array(a.1).lerp(DVec3::from_array(b.1), 0.5).to_array();
+    assert_close(DMat4::from_cols_array_2d(&rows).transpose(), world_from((a.0, midpoint)), "car at frame 1");
+    let scene = dggt_data::read_export(&out, &Default::default()).unwrap();
+    assert_eq!((scene.frames.len(), scene.views.len()), (3, 6));
+}
+
 fn error_of(edit: impl FnOnce(&mut Vec<(&'static str, Value)>), cameras: &[usize]) -> String {
     let dir = tempfile::tempdir().unwrap();
     let root = write_root(dir.path(), edit);
@@ -124,6 +157,7 @@ fn rows<'a>(tables: &'a mut [(&'static str, Value)], name: &str) -> &'a mut Vec<
 
 #[test]
 fn bad_tables_fail_naming_the_table_row_or_file() {
+    // Rows: s0 sensors 0..7, then the in-between readings, then s1.
     let missing_file = {
         let dir = tempfile::tempdir().unwrap();
         let root = write_root(dir.path(), |_| {});

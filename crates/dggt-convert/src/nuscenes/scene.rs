@@ -1,15 +1,15 @@
 //! One nuScenes scene (a row of the `scene` table) into one scene folder of drivestudio's nuScenes export
-//! ([`dggt_data::ExportVariant::NuScenes`]), key frames only: frame `t` is the scene's `t`-th sample (2 Hz),
-//! drivestudio's default (its `--interpolate_N 0`).
+//! ([`dggt_data::ExportVariant::NuScenes`]). Frame `t` is the scene's `t`-th sample (2 Hz, drivestudio's default),
+//! or with [`FrameRate::Interpolated`] the `t`-th of the key frames and the frames between them ([`super::frames`]).
 //!
 //! | path | content |
 //! |---|---|
-//! | `images/{t:03}_{cam}.jpg` | a copy of the camera's key-frame JPEG |
+//! | `images/{t:03}_{cam}.jpg` | a copy of the camera's JPEG (the key frame's, or the nearest in time) |
 //! | `intrinsics/{cam}.txt` | `K00 K11 K02 K12 0 0 0 0 0`, one per line (the images are undistorted) |
 //! | `extrinsics/{t:03}_{cam}.txt` | 4x4 camera -> global, OpenCV axes: `global_from_ego(the camera's own ego_pose) · ego_from_camera` |
 //! | `lidar_pose/{t:03}.txt` | 4x4 LIDAR_TOP -> global: `global_from_ego(the lidar's ego_pose) · ego_from_lidar` |
 //! | `lidar/{t:03}.bin` | N x 4 float32 `x y z intensity` in the **LIDAR_TOP frame** (x right, y forward, z up) |
-//! | `timestamps.txt` | `t seconds` per frame, since the first sample |
+//! | `timestamps.txt` | `t seconds` per frame (its target time), since the first sample |
 //! | `dynamic_masks/{all,human,vehicle}/{t:03}_{cam}.png` | every annotated box of the class ([`MaskRule::EveryBox`]), moved from global into the camera's ego frame |
 //! | `instances/` | the annotations' instances ([`crate::instances`]); `obj_to_world` in the global frame |
 //! | `sky_masks/` | with [`SkyMasks::Lidar`] only ([`crate::sky`]) |
@@ -25,8 +25,9 @@ use dggt_data::{ExportLayout, ExportVariant, io, text};
 use dggt_geom::glam::DVec3;
 use dggt_geom::{Camera, Ego, ImageSize, LogWorld, PinholeIntrinsics, Rigid, Sweep};
 
-use super::tables::{AnnotationRow, SampleDataRow, SampleRow, Tables};
-use crate::boxes::{AnnotatedBox, ObjectBox, ObjectClass};
+use super::frames::{FrameRate, PlannedFrame, plan};
+use super::tables::{SampleDataRow, Tables};
+use crate::boxes::AnnotatedBox;
 use crate::camera::{Distortion, EgoCamera};
 use crate::error::{ConvertError, Result};
 use crate::instances::InstanceLog;
@@ -42,53 +43,6 @@ pub struct SceneSummary {
     pub instances: usize,
 }
 
-/// The categories that masks and `instances/` keep, and their class (drivestudio's nuScenes lists).
-const MASKED_CATEGORIES: &[(&str, ObjectClass)] = &[
-    ("animal", ObjectClass::Human),
-    ("human.pedestrian.adult", ObjectClass::Human),
-    ("human.pedestrian.child", ObjectClass::Human),
-    ("human.pedestrian.construction_worker", ObjectClass::Human),
-    ("human.pedestrian.personal_mobility", ObjectClass::Human),
-    ("human.pedestrian.police_officer", ObjectClass::Human),
-    ("human.pedestrian.stroller", ObjectClass::Human),
-    ("human.pedestrian.wheelchair", ObjectClass::Human),
-    ("vehicle.bicycle", ObjectClass::Human),
-    ("vehicle.motorcycle", ObjectClass::Human),
-    ("vehicle.bus.bendy", ObjectClass::Vehicle),
-    ("vehicle.bus.rigid", ObjectClass::Vehicle),
-    ("vehicle.car", ObjectClass::Vehicle),
-    ("vehicle.construction", ObjectClass::Vehicle),
-    ("vehicle.emergency.ambulance", ObjectClass::Vehicle),
-    ("vehicle.emergency.police", ObjectClass::Vehicle),
-    ("vehicle.trailer", ObjectClass::Vehicle),
-    ("vehicle.truck", ObjectClass::Vehicle),
-];
-
-/// A box of a masked class in the global frame.
-struct GlobalBox {
-    id: String,
-    class_name: &'static str,
-    class: ObjectClass,
-    global_from_box: Rigid<LogWorld, ObjectBox>,
-    /// Length, width, height.
-    size: DVec3,
-}
-
-impl GlobalBox {
-    /// The box in the ego frame whose pose in the global frame is `global_from_ego`.
-    fn in_ego(&self, global_from_ego: &Rigid<LogWorld, Ego>) -> AnnotatedBox {
-        AnnotatedBox {
-            id: self.id.clone(),
-            class_name: self.class_name,
-            class: self.class,
-            ego_from_box: global_from_ego.inverse() * self.global_from_box,
-            size: self.size,
-            speed: 0.0,
-            has_points: true,
-        }
-    }
-}
-
 /// A sensor reading with its poses: `global_from_ego` at the reading's own time, and the sensor's mounting.
 struct Reading<'a, S> {
     data: &'a SampleDataRow,
@@ -97,8 +51,8 @@ struct Reading<'a, S> {
 }
 
 impl<'a, S: dggt_geom::frames::Frame> Reading<'a, S> {
-    fn of(tables: &'a Tables, sample: &SampleRow, channel: &str) -> Result<Self> {
-        let data = tables.key_frame(sample, channel)?;
+    fn of(tables: &'a Tables, frame: &PlannedFrame<'a>, channel: &str) -> Result<Self> {
+        let data = frame.readings[channel];
         let referrer = format!("sample_data `{}`", data.token);
         let pose = tables.ego_pose.get(&data.ego_pose_token, &referrer)?;
         let calibration = tables.calibrated_sensor.get(&data.calibrated_sensor_token, &referrer)?;
@@ -148,45 +102,6 @@ fn camera_projection(tables: &Tables, reading: &Reading<Camera>) -> Result<EgoCa
     })
 }
 
-/// The sample's annotations of the masked classes.
-fn global_boxes(tables: &Tables, sample: &SampleRow) -> Result<Vec<GlobalBox>> {
-    let mut boxes = Vec::new();
-    for annotation in tables.annotations(sample) {
-        let referrer = format!("sample_annotation `{}`", annotation.token);
-        let instance = tables.instance.get(&annotation.instance_token, &referrer)?;
-        let category = tables.category.get(&instance.category_token, &format!("instance `{}`", instance.token))?;
-        let Some(&(class_name, class)) = MASKED_CATEGORIES.iter().find(|(name, _)| *name == category.name) else {
-            continue;
-        };
-        boxes.push(global_box(tables, annotation, class_name, class)?);
-    }
-    Ok(boxes)
-}
-
-fn global_box(
-    tables: &Tables,
-    annotation: &AnnotationRow,
-    class_name: &'static str,
-    class: ObjectClass,
-) -> Result<GlobalBox> {
-    let table = &tables.sample_annotation;
-    let [width, length, height] = annotation.size;
-    if !annotation.size.iter().all(|v| v.is_finite() && *v > 0.0) {
-        return Err(table.error(
-            &annotation.token,
-            "a positive finite size (w, l, h)",
-            format!("{:?}", annotation.size),
-        ));
-    }
-    Ok(GlobalBox {
-        id: annotation.instance_token.clone(),
-        class_name,
-        class,
-        global_from_box: table.rigid(&annotation.token, annotation.rotation, annotation.translation)?,
-        size: DVec3::new(length, width, height),
-    })
-}
-
 /// A `.pcd.bin` sweep: N x 5 float32 (x, y, z, intensity, ring) in the lidar frame.
 fn sweep_points(tables: &Tables, reading: &Reading<Sweep>) -> Result<Vec<[f32; 5]>> {
     let bytes = reading.bytes(tables)?;
@@ -203,32 +118,30 @@ fn sweep_points(tables: &Tables, reading: &Reading<Sweep>) -> Result<Vec<[f32; 5
         .collect())
 }
 
-/// Writes one sample as frame `t`; returns the boxes in the lidar's ego frame and that ego's global pose.
-fn write_frame(
-    tables: &Tables,
-    sample: &SampleRow,
+/// Writes frame `t`; returns the boxes in the lidar's ego frame and that ego's global pose.
+fn write_frame<'a>(
+    tables: &'a Tables,
+    frame: &PlannedFrame<'a>,
     t: usize,
-    cameras: &[usize],
-    sky_masks: SkyMasks,
+    options: &NuScenesOptions,
     layout: &ExportLayout,
 ) -> Result<(Vec<AnnotatedBox>, Rigid<LogWorld, Ego>)> {
-    let lidar = Reading::<Sweep>::of(tables, sample, "LIDAR_TOP")?;
+    let lidar = Reading::<Sweep>::of(tables, frame, LIDAR)?;
     let points = sweep_points(tables, &lidar)?;
     let rows: Vec<u8> = points.iter().flat_map(|p| p[..4].iter().flat_map(|v| v.to_le_bytes())).collect();
     io::write_atomically(&layout.lidar(t), &rows)?;
     let global_from_lidar = lidar.global_from_sensor();
     text::write_rows(&layout.lidar_pose(t), &global_from_lidar.to_rows())?;
-    let boxes = global_boxes(tables, sample)?;
+    let boxes = &frame.boxes;
     let names = ExportVariant::NuScenes.camera_names();
-    for &id in cameras {
-        let channel = names[id];
-        let reading = Reading::<Camera>::of(tables, sample, channel)?;
+    for &id in &options.cameras {
+        let reading = Reading::<Camera>::of(tables, frame, names[id])?;
         let camera = camera_projection(tables, &reading)?;
         io::write_atomically(&layout.image(t, id), &reading.bytes(tables)?)?;
         text::write_rows(&layout.extrinsics_at(t, id), &reading.global_from_sensor().to_rows())?;
         let in_ego: Vec<AnnotatedBox> = boxes.iter().map(|b| b.in_ego(&reading.global_from_ego)).collect();
         DynamicMasks::draw(&camera, &in_ego, MaskRule::EveryBox).write(layout, t, id)?;
-        if sky_masks == SkyMasks::Lidar {
+        if options.sky_masks == SkyMasks::Lidar {
             let ego_from_lidar = reading.global_from_ego.inverse() * global_from_lidar;
             let in_ego = points
                 .iter()
@@ -244,19 +157,30 @@ fn write_frame(
     Ok((boxes_in_lidar_ego, lidar.global_from_ego))
 }
 
-/// Converts scene number `index` of `tables` into the scene folder `scene`, the chosen export cameras only;
-/// `progress` gets the number of samples written so far.
+/// The lidar channel exported.
+const LIDAR: &str = "LIDAR_TOP";
+
+/// What to export of each scene.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct NuScenesOptions {
+    /// Export camera ids (0 CAM_FRONT .. 5 CAM_BACK).
+    pub cameras: Vec<usize>,
+    pub sky_masks: SkyMasks,
+    pub rate: FrameRate,
+}
+
+/// Converts scene number `index` of `tables` into the scene folder `scene`; `progress` gets the number of frames
+/// written so far.
 pub fn convert_scene(
     tables: &Tables,
     index: usize,
     scene: &Path,
-    cameras: &[usize],
-    sky_masks: SkyMasks,
+    options: &NuScenesOptions,
     progress: &(dyn Fn(u64) + Sync),
 ) -> Result<SceneSummary> {
     let layout = ExportLayout::new(scene);
     let names = ExportVariant::NuScenes.camera_names();
-    if let Some(unknown) = cameras.iter().find(|&&id| id >= names.len()) {
+    if let Some(unknown) = options.cameras.iter().find(|&&id| id >= names.len()) {
         return Err(ConvertError::Table {
             path: tables.sensor.path.clone(),
             expected: format!("a nuScenes export camera id 0..={} ({})", names.len() - 1, names.join(", ")),
@@ -264,26 +188,28 @@ pub fn convert_scene(
         });
     }
     let (scene_row, samples) = tables.scene_samples(index)?;
+    let channels: Vec<&str> = std::iter::once(LIDAR).chain(options.cameras.iter().map(|&id| names[id])).collect();
+    let frames = plan(tables, &samples, &channels, options.rate)?;
     let mut instances = InstanceLog::default();
-    for (t, sample) in samples.iter().enumerate() {
+    for (t, frame) in frames.iter().enumerate() {
         progress(t as u64);
-        let (boxes, global_from_ego) = write_frame(tables, sample, t, cameras, sky_masks, &layout)?;
+        let (boxes, global_from_ego) = write_frame(tables, frame, t, options, &layout)?;
         instances.add_frame(t, &global_from_ego, &boxes);
     }
-    let first = samples[0].timestamp;
+    let first = frames[0].time_us;
     let times: Vec<[f64; 2]> =
-        samples.iter().enumerate().map(|(t, s)| [t as f64, (s.timestamp - first) as f64 * 1e-6]).collect();
+        frames.iter().enumerate().map(|(t, f)| [t as f64, (f.time_us - first) as f64 * 1e-6]).collect();
     text::write_rows(&layout.timestamps(), &times)?;
     instances.write(&layout)?;
     let marker = DoneMarker {
         converter: format!("dggt-convert {} (nuscenes)", env!("CARGO_PKG_VERSION")),
         source: tables.root.join(&scene_row.name),
-        frames: samples.len(),
-        cameras: cameras.to_vec(),
+        frames: frames.len(),
+        cameras: options.cameras.clone(),
         instances: instances.len(),
-        lidar_frames: samples.len(),
+        lidar_frames: frames.len(),
     };
     write_done(scene, &marker)?;
-    progress(samples.len() as u64);
-    Ok(SceneSummary { name: scene_row.name.clone(), frames: samples.len(), instances: instances.len() })
+    progress(frames.len() as u64);
+    Ok(SceneSummary { name: scene_row.name.clone(), frames: frames.len(), instances: instances.len() })
 }

@@ -62,6 +62,8 @@ pub struct SampleDataRow {
     pub filename: String,
     pub timestamp: i64,
     pub is_key_frame: bool,
+    /// The channel's next reading's token, empty at the log's end.
+    pub next: String,
     /// Image size in pixels (0 for lidar rows).
     pub width: u32,
     pub height: u32,
@@ -284,6 +286,20 @@ impl Tables {
             return Err(self.scene.error(&scene.token, "a first sample", "an empty first_sample_token"));
         }
         Ok((scene, samples))
+    }
+
+    /// The readings of `first`'s channel from `first` on, following `next`.
+    pub fn channel_chain<'a>(&'a self, first: &'a SampleDataRow) -> Result<Vec<&'a SampleDataRow>> {
+        let mut chain = vec![first];
+        let mut current = first;
+        while !current.next.is_empty() {
+            if chain.len() > self.sample_data.rows.len() {
+                return Err(self.sample_data.error(&current.token, "a `next` chain that ends", "a cycle"));
+            }
+            current = self.sample_data.get(&current.next, &format!("sample_data `{}` next", current.token))?;
+            chain.push(current);
+        }
+        Ok(chain)
     }
 
     /// Where a `sample_data` row's file is.

@@ -37,9 +37,18 @@ pub fn matrix(rotation: [f64; 4], translation: [f64; 3]) -> DMat4 {
 /// The ego pose of every reading: facing world +y (yaw 90°), 5 m further along y per sample, with a small
 /// offset per sensor (readings at different times).
 pub fn ego_pose(sample: usize, sensor: usize) -> ([f64; 4], [f64; 3]) {
-    let yaw = DQuat::from_rotation_z(std::f64::consts::FRAC_PI_2);
-    (wxyz(yaw), [100.0 - 0.1 * sensor as f64, 200.0 + 5.0 * sample as f64, 0.0])
+    ego_pose_at(sample as f64, sensor)
 }
+
+/// [`ego_pose`] at a position between samples (0.5: the non-key-frame reading between them).
+pub fn ego_pose_at(position: f64, sensor: usize) -> ([f64; 4], [f64; 3]) {
+    let yaw = DQuat::from_rotation_z(std::f64::consts::FRAC_PI_2);
+    (wxyz(yaw), [100.0 - 0.1 * sensor as f64, 200.0 + 5.0 * position, 0.0])
+}
+
+/// The readings of every sensor: key frames of samples 0 and 1 and one non-key-frame reading between them
+/// (whose sample is the next one, as in nuScenes), chained by `next`: (label, position, sample, key frame).
+pub const READINGS: [(&str, f64, usize, bool); 3] = [("s0", 0.0, 0, true), ("m", 0.5, 1, false), ("s1", 1.0, 1, true)];
 
 pub fn lidar_calibration() -> ([f64; 4], [f64; 3]) {
     (wxyz(DQuat::from_rotation_z(-std::f64::consts::FRAC_PI_2)), [0.9, 0.0, 1.8])
@@ -95,23 +104,28 @@ pub fn tables() -> Vec<(&'static str, Value)> {
         calibrated.push(json!({"token": format!("cal-{c}"), "sensor_token": format!("sensor-{c}"), "translation": t, "rotation": r, "camera_intrinsic": k}));
     }
     let (mut samples, mut data, mut poses, mut annotations) = (vec![], vec![], vec![], vec![]);
+    for (i, (label, position, sample, key)) in READINGS.into_iter().enumerate() {
+        let time = 1_000_000 + (500_000.0 * position) as i64;
+        let folder = if key { "samples" } else { "sweeps" };
+        for sensor in 0..7 {
+            let (r, t) = ego_pose_at(position, sensor);
+            let token = format!("{label}-{sensor}");
+            let next = READINGS.get(i + 1).map_or(String::new(), |(next, ..)| format!("data-{next}-{sensor}"));
+            poses.push(json!({"token": format!("pose-{token}"), "translation": t, "rotation": r, "timestamp": time}));
+            let (filename, calibration, width, height) = if sensor == 6 {
+                (format!("{folder}/LIDAR_TOP/log__LIDAR_TOP__{time}.pcd.bin"), "cal-lidar".to_string(), 0, 0)
+            } else {
+                let channel = CHANNELS[sensor];
+                (format!("{folder}/{channel}/log__{channel}__{time}.jpg"), format!("cal-{sensor}"), WIDTH, HEIGHT)
+            };
+            data.push(json!({"token": format!("data-{token}"), "sample_token": format!("sample-{sample}"), "ego_pose_token": format!("pose-{token}"), "calibrated_sensor_token": calibration, "filename": filename, "fileformat": "", "width": width, "height": height, "timestamp": time, "is_key_frame": key, "next": next, "prev": ""}));
+        }
+    }
     for s in 0..2 {
         let time = 1_000_000 + 500_000 * s as i64;
         let next = if s == 0 { "sample-1".to_string() } else { String::new() };
         let prev = if s == 1 { "sample-0".to_string() } else { String::new() };
         samples.push(json!({"token": format!("sample-{s}"), "timestamp": time, "scene_token": "scene-0", "next": next, "prev": prev}));
-        for sensor in 0..7 {
-            let (r, t) = ego_pose(s, sensor);
-            let token = format!("s{s}-{sensor}");
-            poses.push(json!({"token": format!("pose-{token}"), "translation": t, "rotation": r, "timestamp": time}));
-            let (filename, calibration, width, height) = if sensor == 6 {
-                (format!("samples/LIDAR_TOP/log__LIDAR_TOP__{time}.pcd.bin"), "cal-lidar".to_string(), 0, 0)
-            } else {
-                let channel = CHANNELS[sensor];
-                (format!("samples/{channel}/log__{channel}__{time}.jpg"), format!("cal-{sensor}"), WIDTH, HEIGHT)
-            };
-            data.push(json!({"token": format!("data-{token}"), "sample_token": format!("sample-{s}"), "ego_pose_token": format!("pose-{token}"), "calibrated_sensor_token": calibration, "filename": filename, "fileformat": "", "width": width, "height": height, "timestamp": time, "is_key_frame": true, "next": "", "prev": ""}));
-        }
         let (r, t) = car_pose(s);
         annotations.push(json!({"token": format!("ann-{s}"), "sample_token": format!("sample-{s}"), "instance_token": "inst-car", "translation": t, "size": [2.0, 4.0, 1.5], "rotation": r, "num_lidar_pts": 10, "attribute_tokens": [], "visibility_token": "4"}));
     }
