@@ -112,11 +112,11 @@ pub fn tables() -> Vec<(&'static str, Value)> {
             let token = format!("{label}-{sensor}");
             let next = READINGS.get(i + 1).map_or(String::new(), |(next, ..)| format!("data-{next}-{sensor}"));
             poses.push(json!({"token": format!("pose-{token}"), "translation": t, "rotation": r, "timestamp": time}));
-            let (filename, calibration, width, height) = if sensor == 6 {
-                (format!("{folder}/LIDAR_TOP/log__LIDAR_TOP__{time}.pcd.bin"), "cal-lidar".to_string(), 0, 0)
-            } else {
-                let channel = CHANNELS[sensor];
-                (format!("{folder}/{channel}/log__{channel}__{time}.jpg"), format!("cal-{sensor}"), WIDTH, HEIGHT)
+            let (filename, calibration, width, height) = match CHANNELS.get(sensor) {
+                None => (format!("{folder}/LIDAR_TOP/log__LIDAR_TOP__{time}.pcd.bin"), "cal-lidar".to_string(), 0, 0),
+                Some(channel) => {
+                    (format!("{folder}/{channel}/log__{channel}__{time}.jpg"), format!("cal-{sensor}"), WIDTH, HEIGHT)
+                }
             };
             data.push(json!({"token": format!("data-{token}"), "sample_token": format!("sample-{sample}"), "ego_pose_token": format!("pose-{token}"), "calibrated_sensor_token": calibration, "filename": filename, "fileformat": "", "width": width, "height": height, "timestamp": time, "is_key_frame": key, "next": next, "prev": ""}));
         }
