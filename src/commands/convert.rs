@@ -157,7 +157,7 @@ fn report(jobs: &[SegmentJob], outcomes: &[Outcome], elapsed: Duration) -> Resul
                 frames += summary.frames;
             }
             Outcome::AlreadyDone(_) => skipped += 1,
-            Outcome::Failed(error) => failures.push(format!("{}: {error}", job.input.display())),
+            Outcome::Failed(error) => failures.push(format!("{}: {error}", job.describe())),
             Outcome::NotStarted => {}
         }
     }
@@ -208,7 +208,7 @@ impl Progress for Bars {
         };
         bar.set_style(ProgressStyle::with_template(template).expect("a valid template"));
         bar.set_prefix(format!("{:03}", job.index));
-        bar.set_message(job.input.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default());
+        bar.set_message(job.name.clone());
         if let Ok(mut segments) = self.segments.lock() {
             segments.insert(job.index, bar);
         }

@@ -145,7 +145,21 @@ pub struct SegmentJob {
     pub index: usize,
     /// The segment's file or folder; for nuScenes, the data root (the segment is row `index` of its scene table).
     pub input: PathBuf,
+    /// What progress and failure reports call it: the file or folder name, or the nuScenes scene name.
+    pub name: String,
     pub scene: PathBuf,
+}
+
+impl SegmentJob {
+    /// The segment for messages: its path, and for nuScenes the scene's name after the data root.
+    pub fn describe(&self) -> String {
+        let file_name = self.input.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        if file_name == self.name {
+            self.input.display().to_string()
+        } else {
+            format!("{} {}", self.input.display(), self.name)
+        }
+    }
 }
 
 /// What to do when a segment fails.
@@ -179,18 +193,19 @@ pub trait Progress: Sync {
 /// scene folders under `out`; `scenes` keeps only those numbers.
 pub fn jobs(dataset: Dataset, input: &Path, out: &Path, scenes: Option<&[usize]>) -> Result<Vec<SegmentJob>> {
     let not_found = |what: String| ConvertError::io(input, std::io::Error::new(std::io::ErrorKind::NotFound, what));
-    let segments = if let Dataset::NuScenes(version, _) = dataset {
-        let count = crate::nuscenes::tables::scene_count(input, version)?;
-        vec![input.to_owned(); count]
+    let file_name = |path: &Path| path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let segments: Vec<(PathBuf, String)> = if let Dataset::NuScenes(version, _) = dataset {
+        let names = crate::nuscenes::tables::scene_names(input, version)?;
+        names.into_iter().map(|name| (input.to_owned(), name)).collect()
     } else if input.is_file() || dataset.is_segment(input) {
-        vec![input.to_owned()]
+        vec![(input.to_owned(), file_name(input))]
     } else if input.is_dir() {
         let entries = std::fs::read_dir(input).map_err(|e| ConvertError::io(input, e))?;
         let mut segments = Vec::new();
         for entry in entries {
             let path = entry.map_err(|e| ConvertError::io(input, e))?.path();
             if dataset.is_segment(&path) {
-                segments.push(path);
+                segments.push((path.clone(), file_name(&path)));
             }
         }
         segments.sort();
@@ -208,7 +223,7 @@ pub fn jobs(dataset: Dataset, input: &Path, out: &Path, scenes: Option<&[usize]>
         .into_iter()
         .enumerate()
         .filter(|(index, _)| scenes.is_none_or(|s| s.contains(index)))
-        .map(|(index, input)| SegmentJob { index, input, scene: out.join(format!("{index:03}")) })
+        .map(|(index, (input, name))| SegmentJob { index, input, name, scene: out.join(format!("{index:03}")) })
         .collect())
 }
 

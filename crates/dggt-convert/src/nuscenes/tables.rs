@@ -182,9 +182,10 @@ impl<Row> Table<Row> {
     }
 }
 
-/// The number of rows of the `scene` table of `version` under the data root `root`.
-pub fn scene_count(root: &Path, version: NuScenesVersion) -> Result<usize> {
-    Ok(Table::read(&root.join(version.folder()), "scene", |r: &SceneRow| &r.token)?.rows.len())
+/// The scene names of the `scene` table of `version` under the data root `root`, in table order.
+pub fn scene_names(root: &Path, version: NuScenesVersion) -> Result<Vec<String>> {
+    let table = Table::read(&root.join(version.folder()), "scene", |r: &SceneRow| &r.token)?;
+    Ok(table.rows.into_iter().map(|row| row.name).collect())
 }
 
 /// Every table the converter reads.
