@@ -1,6 +1,7 @@
 //! `dggt convert` on real Waymo records and Argoverse 2 logs and on a synthetic nuScenes root: parallel segments,
-//! the done marker that makes re-runs skip finished scenes, and `--keep-going` over a damaged segment. The records live beside the repository
-//! (`../shared/real-data`, or `$DGGT_REAL_DATA`; non-commercial licence, never copied into the repository).
+//! the done marker that makes re-runs skip finished scenes, and `--keep-going` over a damaged segment. The real
+//! data lives beside the repository (`../shared/real-data`, or `$DGGT_REAL_DATA`; non-commercial licence, never
+//! copied into the repository).
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
