@@ -85,6 +85,11 @@ fn an_argoverse2_export_with_lidar_sky_masks_trains_with_the_sky_term() {
     let scene = convert("argoverse2", &log, dir.path(), &["--sky-masks", "lidar", "--cameras", "0,1"]);
     let summary = inspect(&scene);
     assert_eq!(summary["sky_masks"].as_bool(), Some(true), "{summary}");
+    // ring_front_left sees sky along its top row and none along its bottom row (road and the ego car).
+    let sky = image::open(scene.join("sky_masks/000_1.png")).unwrap().to_luma8();
+    let share =
+        |row: u32| (0..sky.width()).filter(|&c| sky.get_pixel(c, row).0[0] == 255).count() as f64 / sky.width() as f64;
+    assert!(share(0) > 0.5 && share(sky.height() - 1) == 0.0, "{} {}", share(0), share(sky.height() - 1));
     let record = train_one_step(&scene, dir.path());
     assert!(record["terms"]["opacity_bce"].as_f64().is_some_and(f64::is_finite), "{record}");
 }
