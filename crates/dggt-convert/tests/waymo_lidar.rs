@@ -170,3 +170,19 @@ fn a_non_rigid_pose_and_an_unknown_camera_are_errors_naming_the_record() {
         );
     }
 }
+
+#[test]
+fn lidar_sky_masks_are_written_per_view_and_mark_no_sky_without_returns_in_view() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("built.tfrecord");
+    std::fs::write(&input, frame_record(&frame(None, None).encode_to_vec())).unwrap();
+    let scene = dir.path().join("000");
+    let options = WaymoOptions { cameras: vec![0], sky_masks: dggt_convert::sky::SkyMasks::Lidar };
+    convert_segment(&input, &scene, &options, &|_| {}).unwrap();
+    // The four columns of returns lie at ±45° and ±135° azimuth, outside FRONT's ±43.8° field of view.
+    let mask = image::open(ExportLayout::new(&scene).sky_mask(0, 0)).unwrap().to_luma8();
+    assert_eq!(mask.dimensions(), (1920, 1280));
+    assert!(mask.pixels().all(|p| p.0[0] == 0));
+    let note = std::fs::read_to_string(scene.join("sky_masks/SOURCE.txt")).unwrap();
+    assert!(note.contains("Approximate"), "{note}");
+}
