@@ -111,6 +111,10 @@ fn a_synthetic_scene_converts_to_the_hand_computed_poses_points_and_masks() {
     let times = std::fs::read_to_string(layout.timestamps()).unwrap();
     assert_eq!(text::parse_numbers(Path::new("t"), &times).unwrap(), vec![0.0, 0.0, 1.0, 0.5]);
 
+    let marker = dggt_convert::read_done(&out).unwrap();
+    assert_eq!((marker.frames, marker.lidar_frames, marker.instances), (2, 2, 1));
+    assert!(marker.converter.contains("scene-0061, singapore-onenorth, 2 Hz key frames"), "{}", marker.converter);
+
     // The export reads back as a nuScenes scene.
     let scene = dggt_data::read_export(&out, &Default::default()).unwrap();
     assert_eq!((scene.frames.len(), scene.cameras.len(), scene.views.len()), (2, 6, 12));
@@ -184,6 +188,9 @@ fn bad_tables_fail_naming_the_table_row_or_file() {
             && no_intrinsics.contains("3x3"),
         "{no_intrinsics}"
     );
+
+    let no_log = error_of(|t| rows(t, "log")[0]["token"] = json!("log-other"), &[0]);
+    assert!(no_log.contains("log.json") && no_log.contains("log-0") && no_log.contains("scene `scene-0`"), "{no_log}");
 
     let unknown_camera = error_of(|_| {}, &[6]);
     assert!(unknown_camera.contains("camera 6") && unknown_camera.contains("CAM_BACK"), "{unknown_camera}");

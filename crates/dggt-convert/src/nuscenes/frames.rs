@@ -36,6 +36,14 @@ impl FrameRate {
         }
     }
 
+    /// `2 Hz key frames`, `10 Hz (4 between key frames)`.
+    pub fn describe(self) -> String {
+        match self {
+            Self::KeyFrames => "2 Hz key frames".into(),
+            Self::Interpolated { between } => format!("{} Hz ({between} between key frames)", 2 * (between + 1)),
+        }
+    }
+
     /// The frames exported for a scene of `key_frames` samples.
     pub fn frames(self, key_frames: usize) -> usize {
         key_frames.saturating_sub(1) * self.steps() + key_frames.min(1)

@@ -188,6 +188,7 @@ pub fn convert_scene(
         });
     }
     let (scene_row, samples) = tables.scene_samples(index)?;
+    let log = tables.log.get(&scene_row.log_token, &format!("scene `{}`", scene_row.token))?;
     let channels: Vec<&str> = std::iter::once(LIDAR).chain(options.cameras.iter().map(|&id| names[id])).collect();
     let frames = plan(tables, &samples, &channels, options.rate)?;
     let mut instances = InstanceLog::default();
@@ -202,8 +203,14 @@ pub fn convert_scene(
     text::write_rows(&layout.timestamps(), &times)?;
     instances.write(&layout)?;
     let marker = DoneMarker {
-        converter: format!("dggt-convert {} (nuscenes)", env!("CARGO_PKG_VERSION")),
-        source: tables.root.join(&scene_row.name),
+        converter: format!(
+            "dggt-convert {} (nuscenes {}, {}, {})",
+            env!("CARGO_PKG_VERSION"),
+            scene_row.name,
+            log.location,
+            options.rate.describe()
+        ),
+        source: tables.root.clone(),
         frames: frames.len(),
         cameras: options.cameras.clone(),
         instances: instances.len(),

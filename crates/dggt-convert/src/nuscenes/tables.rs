@@ -39,6 +39,7 @@ impl NuScenesVersion {
 pub struct SceneRow {
     pub token: String,
     pub name: String,
+    pub log_token: String,
     pub first_sample_token: String,
     pub nbr_samples: usize,
 }
@@ -109,6 +110,14 @@ pub struct AnnotationRow {
 pub struct InstanceRow {
     pub token: String,
     pub category_token: String,
+}
+
+/// The drive a scene was cut from.
+#[derive(Debug, Clone, Deserialize)]
+pub struct LogRow {
+    pub token: String,
+    /// e.g. `singapore-onenorth`, `boston-seaport`.
+    pub location: String,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -201,6 +210,7 @@ pub struct Tables {
     pub sample_annotation: Table<AnnotationRow>,
     pub instance: Table<InstanceRow>,
     pub category: Table<CategoryRow>,
+    pub log: Table<LogRow>,
     /// Key-frame `sample_data` rows by (sample token, sensor channel).
     key_frames: HashMap<(String, String), usize>,
     /// Annotation rows by sample token, in table order.
@@ -222,6 +232,7 @@ impl Tables {
             sample_annotation: Table::read(&dir, "sample_annotation", |r: &AnnotationRow| &r.token)?,
             instance: Table::read(&dir, "instance", |r: &InstanceRow| &r.token)?,
             category: Table::read(&dir, "category", |r: &CategoryRow| &r.token)?,
+            log: Table::read(&dir, "log", |r: &LogRow| &r.token)?,
             key_frames: HashMap::new(),
             annotations_of_sample: HashMap::new(),
         };
