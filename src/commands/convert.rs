@@ -204,7 +204,7 @@ impl Progress for Bars {
         let template = match unit {
             ProgressUnit::Bytes => "{prefix:>4} {bar:30} {bytes}/{total_bytes} {msg}",
             ProgressUnit::Sweeps => "{prefix:>4} {bar:30} {pos}/{len} sweeps {msg}",
-            ProgressUnit::Samples => "{prefix:>4} {bar:30} {pos}/{len} samples {msg}",
+            ProgressUnit::Frames => "{prefix:>4} {bar:30} {pos}/{len} frames {msg}",
         };
         bar.set_style(ProgressStyle::with_template(template).expect("a valid template"));
         bar.set_prefix(format!("{:03}", job.index));

@@ -33,7 +33,7 @@ pub enum Dataset {
 pub enum ProgressUnit {
     Bytes,
     Sweeps,
-    Samples,
+    Frames,
 }
 
 /// What every segment of a run is converted with.
@@ -54,14 +54,6 @@ impl Dataset {
         }
     }
 
-    pub fn progress_unit(self) -> ProgressUnit {
-        match self {
-            Self::Waymo => ProgressUnit::Bytes,
-            Self::Argoverse2 => ProgressUnit::Sweeps,
-            Self::NuScenes(..) => ProgressUnit::Samples,
-        }
-    }
-
     /// Whether `path` in a folder of segments is one (a `.tfrecord` file; a log folder with `calibration/`).
     fn is_segment(self, path: &Path) -> bool {
         match self {
@@ -71,35 +63,48 @@ impl Dataset {
         }
     }
 
-    /// What the conversion of every segment needs read first: nuScenes' tables.
+    /// What the conversion of every segment needs read first: nuScenes' tables (jobs share the data root).
     fn prepare(self, jobs: &[SegmentJob]) -> Result<Prepared> {
-        let tables = match (self, jobs.first()) {
-            (Self::NuScenes(version, _), Some(job)) => Some(Tables::read(&job.input, version)?),
-            _ => None,
-        };
-        Ok(Prepared { dataset: self, tables })
+        Ok(match (self, jobs.first()) {
+            (Self::Waymo, _) => Prepared::Waymo,
+            (Self::Argoverse2, _) => Prepared::Argoverse2,
+            (Self::NuScenes(version, rate), Some(job)) => {
+                Prepared::NuScenes(Box::new(Tables::read(&job.input, version)?), rate)
+            }
+            (Self::NuScenes(..), None) => Prepared::Nothing,
+        })
     }
 }
 
 /// A dataset with what its segments share.
-struct Prepared {
-    dataset: Dataset,
-    tables: Option<Tables>,
+enum Prepared {
+    Waymo,
+    Argoverse2,
+    NuScenes(Box<Tables>, FrameRate),
+    /// No segments to convert.
+    Nothing,
 }
 
 impl Prepared {
-    /// How much progress converting `job` takes, in [`Dataset::progress_unit`]s.
+    /// What a segment's progress counts.
+    fn progress_unit(&self) -> ProgressUnit {
+        match self {
+            Self::Waymo | Self::Nothing => ProgressUnit::Bytes,
+            Self::Argoverse2 => ProgressUnit::Sweeps,
+            Self::NuScenes(..) => ProgressUnit::Frames,
+        }
+    }
+
+    /// How much progress converting `job` takes, in [`Self::progress_unit`]s.
     fn progress_total(&self, job: &SegmentJob) -> u64 {
-        match self.dataset {
-            Dataset::Waymo => std::fs::metadata(&job.input).map_or(0, |m| m.len()),
-            Dataset::Argoverse2 => {
+        match self {
+            Self::Waymo | Self::Nothing => std::fs::metadata(&job.input).map_or(0, |m| m.len()),
+            Self::Argoverse2 => {
                 std::fs::read_dir(job.input.join("sensors/lidar")).map_or(0, |entries| entries.count() as u64)
             }
-            Dataset::NuScenes(_, rate) => self
-                .tables
-                .as_ref()
-                .and_then(|t| t.scene.rows.get(job.index))
-                .map_or(0, |s| rate.frames(s.nbr_samples) as u64),
+            Self::NuScenes(tables, rate) => {
+                tables.scene.rows.get(job.index).map_or(0, |s| rate.frames(s.nbr_samples) as u64)
+            }
         }
     }
 
@@ -111,23 +116,25 @@ impl Prepared {
         progress: &(dyn Fn(u64) + Sync),
     ) -> Result<Converted> {
         let input = &job.input;
-        match (self.dataset, &self.tables) {
-            (Dataset::Waymo, _) => {
+        let summary = match self {
+            Self::Waymo => {
                 let waymo = WaymoOptions { cameras: options.cameras.clone(), sky_masks: options.sky_masks };
                 let summary = convert_segment(input, scene, &waymo, progress)?;
-                Ok(Converted { scene: summary.scene, frames: summary.frames, instances: summary.instances })
+                (summary.frames, summary.instances)
             }
-            (Dataset::Argoverse2, _) => {
+            Self::Argoverse2 => {
                 let summary = crate::argoverse2::convert_log(input, scene, options, progress)?;
-                Ok(Converted { scene: summary.scene, frames: summary.frames, instances: summary.instances })
+                (summary.frames, summary.instances)
             }
-            (Dataset::NuScenes(_, rate), Some(tables)) => {
-                let nuscenes = NuScenesOptions { cameras: options.cameras.clone(), sky_masks: options.sky_masks, rate };
+            Self::NuScenes(tables, rate) => {
+                let nuscenes =
+                    NuScenesOptions { cameras: options.cameras.clone(), sky_masks: options.sky_masks, rate: *rate };
                 let summary = crate::nuscenes::convert_scene(tables, job.index, scene, &nuscenes, progress)?;
-                Ok(Converted { scene: scene.to_owned(), frames: summary.frames, instances: summary.instances })
+                (summary.frames, summary.instances)
             }
-            (Dataset::NuScenes(..), None) => unreachable!("prepare reads the nuScenes tables"),
-        }
+            Self::Nothing => (0, 0),
+        };
+        Ok(Converted { scene: scene.to_owned(), frames: summary.0, instances: summary.1 })
     }
 }
 
@@ -276,7 +283,7 @@ fn write_scene(
     options: &ConvertOptions,
     progress: &dyn Progress,
 ) -> Result<Converted> {
-    progress.started(job, prepared.progress_total(job), prepared.dataset.progress_unit());
+    progress.started(job, prepared.progress_total(job), prepared.progress_unit());
     let partial = job.scene.with_extension("partial");
     if partial.exists() {
         std::fs::remove_dir_all(&partial).map_err(|e| ConvertError::io(&partial, e))?;
