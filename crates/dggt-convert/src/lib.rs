@@ -8,8 +8,8 @@
 //! - [`nuscenes`]: nuScenes devkit tables and files into drivestudio's nuScenes export.
 //! - [`batch`]: many segments in parallel into numbered scene folders, finished ones skipped.
 //! - Shared by the datasets: [`camera`] (projection with lens distortion), [`boxes`] (annotated 3D boxes),
-//!   [`masks`] (dynamic masks from projected boxes), [`sky`] (approximate sky masks from lidar), [`instances`] (`instances/`), [`marker`] (the done marker a
-//!   finished scene gets, so that re-runs skip it).
+//!   [`masks`] (dynamic masks from projected boxes), [`sky`] (approximate sky masks from lidar), [`instances`]
+//!   (`instances/`), [`marker`] (the done marker a finished scene gets, so that re-runs skip it).
 //!
 //! Every error names the file and the record in it ([`ConvertError`]); bad input never panics.
 
