@@ -1,9 +1,14 @@
-//! `dggt convert waymo` on real records: parallel segments, the done marker that makes re-runs skip finished
-//! scenes, and `--keep-going` over a damaged segment. The records live beside the repository
-//! (`../shared/real-data`, or `$DGGT_REAL_DATA`; non-commercial licence, never copied into the repository).
+//! `dggt convert` on real Waymo records and Argoverse 2 logs and on a synthetic nuScenes root: parallel segments,
+//! the done marker that makes re-runs skip finished scenes, and `--keep-going` over a damaged segment. The real
+//! data lives beside the repository (`../shared/real-data`, or `$DGGT_REAL_DATA`; non-commercial licence, never
+//! copied into the repository).
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
+
+#[allow(dead_code)]
+#[path = "../crates/dggt-convert/tests/nuscenes_scene/mod.rs"]
+mod nuscenes_scene;
 
 fn dggt(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_dggt")).args(args).output().expect("the dggt binary runs")
@@ -148,4 +153,42 @@ fn convert_argoverse2_turns_a_split_folder_into_numbered_scenes() {
         "7",
     ]);
     assert!(text(&unknown).contains("unknown camera 7: argoverse2 export ids are 0..=6"), "{}", text(&unknown));
+}
+
+#[test]
+fn convert_nuscenes_numbers_the_scene_table_and_names_a_failed_scene() {
+    let dir = tempfile::tempdir().unwrap();
+    // A second scene row whose first sample belongs to the first scene.
+    let root = nuscenes_scene::write_root(dir.path(), |tables| {
+        let scenes = tables.iter_mut().find(|(name, _)| *name == "scene").unwrap().1.as_array_mut().unwrap();
+        let mut broken = scenes[0].clone();
+        broken["token"] = "scene-1".into();
+        broken["name"] = "scene-0062".into();
+        broken["first_sample_token"] = "sample-1".into();
+        scenes.push(broken);
+    });
+    let out = dir.path().join("scenes");
+    let args = ["convert", "nuscenes", "--input", root.to_str().unwrap(), "--out", out.to_str().unwrap()];
+    let run = dggt(&[&args[..], &["--keep-going", "--sky-masks", "lidar"]].concat());
+    let report = text(&run);
+    assert!(!run.status.success(), "{report}");
+    assert!(report.contains("1 of 2 segments failed"), "{report}");
+    assert!(report.contains("scene-0062") && report.contains("sample.json") && report.contains("sample-1"), "{report}");
+    assert!(out.join("000").join(dggt_convert::DONE_MARKER).is_file(), "{report}");
+    assert_eq!(std::fs::read_dir(out.join("000/sky_masks")).unwrap().count(), 2 * 6 + 1, "masks and the note");
+    assert!(!out.join("001").exists());
+
+    let again = dggt(&[&args[..], &["--scenes", "0", "--version", "v1.0-mini"]].concat());
+    assert!(again.status.success() && text(&again).contains("1 already done"), "{}", text(&again));
+    let missing = dggt(&[
+        "convert",
+        "nuscenes",
+        "--input",
+        root.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--version",
+        "v1.0-trainval",
+    ]);
+    assert!(!missing.status.success() && text(&missing).contains("v1.0-trainval/scene.json"), "{}", text(&missing));
 }

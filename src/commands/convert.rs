@@ -1,4 +1,4 @@
-//! `dggt convert`: raw driving datasets (Waymo, Argoverse 2) into the scene-export layout, one numbered scene
+//! `dggt convert`: raw driving datasets (Waymo, Argoverse 2, nuScenes) into the scene-export layout, one numbered scene
 //! folder per segment.
 
 use std::collections::HashMap;
@@ -8,6 +8,8 @@ use std::time::Duration;
 
 use anyhow::{Context, Result};
 use dggt_convert::batch::{self, FailurePolicy, Outcome, Progress, ProgressUnit, SegmentJob};
+use dggt_convert::nuscenes::{FrameRate, NuScenesVersion};
+use dggt_convert::sky;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 
 /// The raw datasets `dggt convert` reads.
@@ -17,13 +19,69 @@ pub enum Dataset {
     Waymo,
     /// Argoverse 2 sensor logs: one log folder, or a split folder of logs.
     Argoverse2,
+    /// nuScenes: the data root; every row of the version's scene table is a segment (key frames, 2 Hz).
+    Nuscenes,
+}
+
+/// The nuScenes releases (folders under the data root).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Version {
+    #[value(name = "v1.0-mini")]
+    Mini,
+    #[value(name = "v1.0-trainval")]
+    Trainval,
+}
+
+/// nuScenes frames: the annotated key frames, or drivestudio's `--interpolate_N` frames between them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum NuscenesRate {
+    /// Key frames only (drivestudio's default).
+    #[value(name = "2hz")]
+    KeyFrames,
+    #[value(name = "4hz")]
+    Hz4,
+    #[value(name = "6hz")]
+    Hz6,
+    #[value(name = "8hz")]
+    Hz8,
+    /// Four frames between key frames (drivestudio's documented `--interpolate_N 4`).
+    #[value(name = "10hz")]
+    Hz10,
+}
+
+impl NuscenesRate {
+    fn frame_rate(self) -> FrameRate {
+        match self {
+            Self::KeyFrames => FrameRate::KeyFrames,
+            Self::Hz4 => FrameRate::Interpolated { between: 1 },
+            Self::Hz6 => FrameRate::Interpolated { between: 2 },
+            Self::Hz8 => FrameRate::Interpolated { between: 3 },
+            Self::Hz10 => FrameRate::Interpolated { between: 4 },
+        }
+    }
+}
+
+/// Sky masks to write.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum SkyMasks {
+    /// None (the trainer then skips the sky-opacity term).
+    None,
+    /// Approximate masks from the lidar: rows above the highest projected return of each column.
+    Lidar,
 }
 
 impl Dataset {
-    fn converter(self) -> batch::Dataset {
+    fn converter(self, version: Version, rate: NuscenesRate) -> batch::Dataset {
         match self {
             Self::Waymo => batch::Dataset::Waymo,
             Self::Argoverse2 => batch::Dataset::Argoverse2,
+            Self::Nuscenes => batch::Dataset::NuScenes(
+                match version {
+                    Version::Mini => NuScenesVersion::Mini,
+                    Version::Trainval => NuScenesVersion::Trainval,
+                },
+                rate.frame_rate(),
+            ),
         }
     }
 }
@@ -33,7 +91,7 @@ impl Dataset {
 pub struct Args {
     dataset: Dataset,
     /// A segment (Waymo `.tfrecord` file, Argoverse 2 log folder), or a folder of them (sorted by name; segment i
-    /// becomes scene {i:03}).
+    /// becomes scene {i:03}); for nuScenes the data root (scene i = row i of the scene table).
     #[arg(long)]
     input: PathBuf,
     /// The folder that receives the scene folders.
@@ -43,7 +101,8 @@ pub struct Args {
     #[arg(long, value_delimiter = ',')]
     scenes: Option<Vec<usize>>,
     /// Export camera ids to write, all by default (Waymo: 0 FRONT, 1 FRONT_LEFT, 2 FRONT_RIGHT, 3 SIDE_LEFT,
-    /// 4 SIDE_RIGHT; Argoverse 2: 0 ring_front_center .. 6 ring_rear_right).
+    /// 4 SIDE_RIGHT; Argoverse 2: 0 ring_front_center .. 6 ring_rear_right; nuScenes: 0 CAM_FRONT, 1 CAM_FRONT_LEFT,
+    /// 2 CAM_FRONT_RIGHT, 3 CAM_BACK_LEFT, 4 CAM_BACK_RIGHT, 5 CAM_BACK).
     #[arg(long, value_delimiter = ',')]
     cameras: Option<Vec<usize>>,
     /// Segments converted at once (default: the machine's cores).
@@ -52,11 +111,21 @@ pub struct Args {
     /// Convert every segment that can be converted and list the others, instead of stopping at the first failure.
     #[arg(long)]
     keep_going: bool,
+    /// nuScenes release under the data root.
+    #[arg(long, value_enum, default_value = "v1.0-mini")]
+    version: Version,
+    /// nuScenes frame rate: the 2 Hz key frames, or frames between them (nearest camera and lidar readings,
+    /// interpolated boxes).
+    #[arg(long, value_enum, default_value = "2hz")]
+    nuscenes_rate: NuscenesRate,
+    /// Sky masks (`lidar`: approximate, from the projected lidar returns; recorded in `sky_masks/SOURCE.txt`).
+    #[arg(long, value_enum, default_value = "none")]
+    sky_masks: SkyMasks,
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let Args { dataset, input, out, scenes, cameras, workers, keep_going } = args;
-    let dataset = dataset.converter();
+    let Args { dataset, input, out, scenes, cameras, workers, keep_going, version, nuscenes_rate, sky_masks } = args;
+    let dataset = dataset.converter(version, nuscenes_rate);
     let names = dataset.variant().camera_names();
     let cameras = cameras.unwrap_or_else(|| (0..names.len()).collect());
     if let Some(unknown) = cameras.iter().find(|&&c| c >= names.len()) {
@@ -67,7 +136,12 @@ pub fn run(args: Args) -> Result<()> {
     let policy = if keep_going { FailurePolicy::KeepGoing } else { FailurePolicy::Stop };
     let bars = Bars::new(jobs.len());
     let started = std::time::Instant::now();
-    let outcomes = batch::convert_segments(dataset, &jobs, &cameras, workers, policy, &bars)?;
+    let sky_masks = match sky_masks {
+        SkyMasks::None => sky::SkyMasks::None,
+        SkyMasks::Lidar => sky::SkyMasks::Lidar,
+    };
+    let options = batch::ConvertOptions { cameras, sky_masks };
+    let outcomes = batch::convert_segments(dataset, &jobs, &options, workers, policy, &bars)?;
     bars.overall.finish_and_clear();
     report(&jobs, &outcomes, started.elapsed())
 }
@@ -83,7 +157,7 @@ fn report(jobs: &[SegmentJob], outcomes: &[Outcome], elapsed: Duration) -> Resul
                 frames += summary.frames;
             }
             Outcome::AlreadyDone(_) => skipped += 1,
-            Outcome::Failed(error) => failures.push(format!("{}: {error}", job.input.display())),
+            Outcome::Failed(error) => failures.push(format!("{}: {error}", job.describe())),
             Outcome::NotStarted => {}
         }
     }
@@ -130,10 +204,11 @@ impl Progress for Bars {
         let template = match unit {
             ProgressUnit::Bytes => "{prefix:>4} {bar:30} {bytes}/{total_bytes} {msg}",
             ProgressUnit::Sweeps => "{prefix:>4} {bar:30} {pos}/{len} sweeps {msg}",
+            ProgressUnit::Frames => "{prefix:>4} {bar:30} {pos}/{len} frames {msg}",
         };
         bar.set_style(ProgressStyle::with_template(template).expect("a valid template"));
         bar.set_prefix(format!("{:03}", job.index));
-        bar.set_message(job.input.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default());
+        bar.set_message(job.name.clone());
         if let Ok(mut segments) = self.segments.lock() {
             segments.insert(job.index, bar);
         }

@@ -13,6 +13,8 @@ use rayon::prelude::*;
 
 use crate::error::{ConvertError, Result};
 use crate::marker::{DoneMarker, read_done};
+use crate::nuscenes::{FrameRate, NuScenesOptions, NuScenesVersion, Tables};
+use crate::sky::SkyMasks;
 use crate::waymo::{WaymoOptions, convert_segment};
 
 /// The raw datasets the converters read.
@@ -22,6 +24,8 @@ pub enum Dataset {
     Waymo,
     /// Argoverse 2 sensor logs; input one log folder or a split folder of logs.
     Argoverse2,
+    /// nuScenes: input the data root; the segments are the rows of the version's `scene` table, in table order.
+    NuScenes(NuScenesVersion, FrameRate),
 }
 
 /// What a segment's progress counts.
@@ -29,6 +33,15 @@ pub enum Dataset {
 pub enum ProgressUnit {
     Bytes,
     Sweeps,
+    Frames,
+}
+
+/// What every segment of a run is converted with.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ConvertOptions {
+    /// Export camera ids.
+    pub cameras: Vec<usize>,
+    pub sky_masks: SkyMasks,
 }
 
 impl Dataset {
@@ -37,13 +50,7 @@ impl Dataset {
         match self {
             Self::Waymo => dggt_data::ExportVariant::Waymo,
             Self::Argoverse2 => dggt_data::ExportVariant::Argoverse2,
-        }
-    }
-
-    pub fn progress_unit(self) -> ProgressUnit {
-        match self {
-            Self::Waymo => ProgressUnit::Bytes,
-            Self::Argoverse2 => ProgressUnit::Sweeps,
+            Self::NuScenes(..) => dggt_data::ExportVariant::NuScenes,
         }
     }
 
@@ -52,36 +59,82 @@ impl Dataset {
         match self {
             Self::Waymo => path.is_file() && path.extension().is_some_and(|ext| ext == "tfrecord"),
             Self::Argoverse2 => path.join("calibration").is_dir(),
+            Self::NuScenes(..) => false,
         }
     }
 
-    /// How much progress converting `input` takes, in [`Self::progress_unit`]s.
-    fn progress_total(self, input: &Path) -> u64 {
+    /// What the conversion of every segment needs read first: nuScenes' tables (jobs share the data root).
+    fn prepare(self, jobs: &[SegmentJob]) -> Result<Prepared> {
+        Ok(match (self, jobs.first()) {
+            (Self::Waymo, _) => Prepared::Waymo,
+            (Self::Argoverse2, _) => Prepared::Argoverse2,
+            (Self::NuScenes(version, rate), Some(job)) => {
+                Prepared::NuScenes(Box::new(Tables::read(&job.input, version)?), rate)
+            }
+            (Self::NuScenes(..), None) => Prepared::Nothing,
+        })
+    }
+}
+
+/// A dataset with what its segments share.
+enum Prepared {
+    Waymo,
+    Argoverse2,
+    NuScenes(Box<Tables>, FrameRate),
+    /// No segments to convert.
+    Nothing,
+}
+
+impl Prepared {
+    /// What a segment's progress counts.
+    fn progress_unit(&self) -> ProgressUnit {
         match self {
-            Self::Waymo => std::fs::metadata(input).map_or(0, |m| m.len()),
+            Self::Waymo | Self::Nothing => ProgressUnit::Bytes,
+            Self::Argoverse2 => ProgressUnit::Sweeps,
+            Self::NuScenes(..) => ProgressUnit::Frames,
+        }
+    }
+
+    /// How much progress converting `job` takes, in [`Self::progress_unit`]s.
+    fn progress_total(&self, job: &SegmentJob) -> u64 {
+        match self {
+            Self::Waymo | Self::Nothing => std::fs::metadata(&job.input).map_or(0, |m| m.len()),
             Self::Argoverse2 => {
-                std::fs::read_dir(input.join("sensors/lidar")).map_or(0, |entries| entries.count() as u64)
+                std::fs::read_dir(job.input.join("sensors/lidar")).map_or(0, |entries| entries.count() as u64)
+            }
+            Self::NuScenes(tables, rate) => {
+                tables.scene.rows.get(job.index).map_or(0, |s| rate.frames(s.nbr_samples) as u64)
             }
         }
     }
 
     fn convert(
-        self,
-        input: &Path,
+        &self,
+        job: &SegmentJob,
         scene: &Path,
-        cameras: &[usize],
+        options: &ConvertOptions,
         progress: &(dyn Fn(u64) + Sync),
     ) -> Result<Converted> {
-        match self {
+        let input = &job.input;
+        let summary = match self {
             Self::Waymo => {
-                let summary = convert_segment(input, scene, &WaymoOptions { cameras: cameras.to_vec() }, progress)?;
-                Ok(Converted { scene: summary.scene, frames: summary.frames, instances: summary.instances })
+                let waymo = WaymoOptions { cameras: options.cameras.clone(), sky_masks: options.sky_masks };
+                let summary = convert_segment(input, scene, &waymo, progress)?;
+                (summary.frames, summary.instances)
             }
             Self::Argoverse2 => {
-                let summary = crate::argoverse2::convert_log(input, scene, cameras, progress)?;
-                Ok(Converted { scene: summary.scene, frames: summary.frames, instances: summary.instances })
+                let summary = crate::argoverse2::convert_log(input, scene, options, progress)?;
+                (summary.frames, summary.instances)
             }
-        }
+            Self::NuScenes(tables, rate) => {
+                let nuscenes =
+                    NuScenesOptions { cameras: options.cameras.clone(), sky_masks: options.sky_masks, rate: *rate };
+                let summary = crate::nuscenes::convert_scene(tables, job.index, scene, &nuscenes, progress)?;
+                (summary.frames, summary.instances)
+            }
+            Self::Nothing => (0, 0),
+        };
+        Ok(Converted { scene: scene.to_owned(), frames: summary.0, instances: summary.1 })
     }
 }
 
@@ -97,8 +150,23 @@ pub struct Converted {
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct SegmentJob {
     pub index: usize,
+    /// The segment's file or folder; for nuScenes, the data root (the segment is row `index` of its scene table).
     pub input: PathBuf,
+    /// What progress and failure reports call it: the file or folder name, or the nuScenes scene name.
+    pub name: String,
     pub scene: PathBuf,
+}
+
+impl SegmentJob {
+    /// The segment for messages: its path, and for nuScenes the scene's name after the data root.
+    pub fn describe(&self) -> String {
+        let file_name = self.input.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        if file_name == self.name {
+            self.input.display().to_string()
+        } else {
+            format!("{} {}", self.input.display(), self.name)
+        }
+    }
 }
 
 /// What to do when a segment fails.
@@ -132,15 +200,19 @@ pub trait Progress: Sync {
 /// scene folders under `out`; `scenes` keeps only those numbers.
 pub fn jobs(dataset: Dataset, input: &Path, out: &Path, scenes: Option<&[usize]>) -> Result<Vec<SegmentJob>> {
     let not_found = |what: String| ConvertError::io(input, std::io::Error::new(std::io::ErrorKind::NotFound, what));
-    let segments = if input.is_file() || dataset.is_segment(input) {
-        vec![input.to_owned()]
+    let file_name = |path: &Path| path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let segments: Vec<(PathBuf, String)> = if let Dataset::NuScenes(version, _) = dataset {
+        let names = crate::nuscenes::tables::scene_names(input, version)?;
+        names.into_iter().map(|name| (input.to_owned(), name)).collect()
+    } else if input.is_file() || dataset.is_segment(input) {
+        vec![(input.to_owned(), file_name(input))]
     } else if input.is_dir() {
         let entries = std::fs::read_dir(input).map_err(|e| ConvertError::io(input, e))?;
         let mut segments = Vec::new();
         for entry in entries {
             let path = entry.map_err(|e| ConvertError::io(input, e))?.path();
             if dataset.is_segment(&path) {
-                segments.push(path);
+                segments.push((path.clone(), file_name(&path)));
             }
         }
         segments.sort();
@@ -158,7 +230,7 @@ pub fn jobs(dataset: Dataset, input: &Path, out: &Path, scenes: Option<&[usize]>
         .into_iter()
         .enumerate()
         .filter(|(index, _)| scenes.is_none_or(|s| s.contains(index)))
-        .map(|(index, input)| SegmentJob { index, input, scene: out.join(format!("{index:03}")) })
+        .map(|(index, (input, name))| SegmentJob { index, input, name, scene: out.join(format!("{index:03}")) })
         .collect())
 }
 
@@ -166,7 +238,7 @@ pub fn jobs(dataset: Dataset, input: &Path, out: &Path, scenes: Option<&[usize]>
 pub fn convert_segments(
     dataset: Dataset,
     jobs: &[SegmentJob],
-    cameras: &[usize],
+    options: &ConvertOptions,
     workers: usize,
     policy: FailurePolicy,
     progress: &dyn Progress,
@@ -175,6 +247,7 @@ pub fn convert_segments(
         .num_threads(workers.max(1))
         .build()
         .map_err(|e| ConvertError::io(Path::new("."), std::io::Error::other(e)))?;
+    let prepared = dataset.prepare(jobs)?;
     let stopped = AtomicBool::new(false);
     Ok(pool.install(|| {
         jobs.par_iter()
@@ -183,7 +256,7 @@ pub fn convert_segments(
                 if stopped.load(Ordering::Relaxed) {
                     return Outcome::NotStarted;
                 }
-                let outcome = convert_one(dataset, job, cameras, progress);
+                let outcome = convert_one(&prepared, job, options, progress);
                 if matches!(outcome, Outcome::Failed(_)) && policy == FailurePolicy::Stop {
                     stopped.store(true, Ordering::Relaxed);
                 }
@@ -194,23 +267,28 @@ pub fn convert_segments(
     }))
 }
 
-fn convert_one(dataset: Dataset, job: &SegmentJob, cameras: &[usize], progress: &dyn Progress) -> Outcome {
+fn convert_one(prepared: &Prepared, job: &SegmentJob, options: &ConvertOptions, progress: &dyn Progress) -> Outcome {
     if let Some(marker) = read_done(&job.scene) {
         return Outcome::AlreadyDone(marker);
     }
-    match write_scene(dataset, job, cameras, progress) {
+    match write_scene(prepared, job, options, progress) {
         Ok(summary) => Outcome::Converted(summary),
         Err(error) => Outcome::Failed(error),
     }
 }
 
-fn write_scene(dataset: Dataset, job: &SegmentJob, cameras: &[usize], progress: &dyn Progress) -> Result<Converted> {
-    progress.started(job, dataset.progress_total(&job.input), dataset.progress_unit());
+fn write_scene(
+    prepared: &Prepared,
+    job: &SegmentJob,
+    options: &ConvertOptions,
+    progress: &dyn Progress,
+) -> Result<Converted> {
+    progress.started(job, prepared.progress_total(job), prepared.progress_unit());
     let partial = job.scene.with_extension("partial");
     if partial.exists() {
         std::fs::remove_dir_all(&partial).map_err(|e| ConvertError::io(&partial, e))?;
     }
-    let mut summary = dataset.convert(&job.input, &partial, cameras, &|done| progress.advanced(job, done))?;
+    let mut summary = prepared.convert(job, &partial, options, &|done| progress.advanced(job, done))?;
     std::fs::rename(&partial, &job.scene).map_err(|e| ConvertError::io(&job.scene, e))?;
     summary.scene = job.scene.clone();
     Ok(summary)

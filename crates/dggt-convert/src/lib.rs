@@ -5,10 +5,11 @@
 //!   (Arrow IPC) tables.
 //! - [`waymo`]: Waymo Open Dataset v1 segments into drivestudio's Waymo export.
 //! - [`argoverse2`]: Argoverse 2 sensor logs into drivestudio's Argoverse 2 export.
+//! - [`nuscenes`]: nuScenes devkit tables and files into drivestudio's nuScenes export.
 //! - [`batch`]: many segments in parallel into numbered scene folders, finished ones skipped.
 //! - Shared by the datasets: [`camera`] (projection with lens distortion), [`boxes`] (annotated 3D boxes),
-//!   [`masks`] (dynamic masks from projected boxes), [`instances`] (`instances/`), [`marker`] (the done marker a
-//!   finished scene gets, so that re-runs skip it).
+//!   [`masks`] (dynamic masks from projected boxes), [`sky`] (approximate sky masks from lidar), [`instances`]
+//!   (`instances/`), [`marker`] (the done marker a finished scene gets, so that re-runs skip it).
 //!
 //! Every error names the file and the record in it ([`ConvertError`]); bad input never panics.
 
@@ -21,6 +22,8 @@ pub mod feather;
 pub mod instances;
 pub mod marker;
 pub mod masks;
+pub mod nuscenes;
+pub mod sky;
 pub mod tfrecord;
 pub mod waymo;
 

@@ -7,6 +7,8 @@
 use std::path::PathBuf;
 
 use dggt_convert::argoverse2::convert_log;
+use dggt_convert::batch::ConvertOptions;
+use dggt_convert::sky::SkyMasks;
 use dggt_data::{DynamicMaskKind, ExportLayout, ExportVariant, read_export};
 use image::RgbImage;
 
@@ -56,7 +58,7 @@ fn stamp(mask: &mut image::GrayImage, u: f64, v: f64, radius: i64) {
 fn the_log_converts_and_its_lidar_lands_on_the_drawn_pixels() {
     let out = tempfile::tempdir().unwrap();
     let scene_dir = out.path().join("000");
-    let summary = convert_log(&log(), &scene_dir, &(0..7).collect::<Vec<_>>(), &|_| {}).unwrap();
+    let summary = convert_log(&log(), &scene_dir, &cameras(&[0, 1, 2, 3, 4, 5, 6]), &|_| {}).unwrap();
     assert_eq!((summary.frames, summary.dropped_sweeps), (2, 0));
     assert!(summary.instances > 0);
     assert_eq!(ExportVariant::detect(&scene_dir).unwrap(), ExportVariant::Argoverse2);
@@ -172,7 +174,7 @@ fn a_non_unit_quaternion_and_a_missing_table_are_errors_naming_the_file() {
     writer.write(&damaged).unwrap();
     writer.finish().unwrap();
 
-    let message = convert_log(&copy, &dir.path().join("000"), &[0], &|_| {}).unwrap_err().to_string();
+    let message = convert_log(&copy, &dir.path().join("000"), &cameras(&[0]), &|_| {}).unwrap_err().to_string();
     assert!(
         message.contains("egovehicle_SE3_sensor.feather")
             && message.contains("row 2")
@@ -186,6 +188,10 @@ fn a_non_unit_quaternion_and_a_missing_table_are_errors_naming_the_file() {
         copy.join("calibration/egovehicle_SE3_sensor.feather"),
     )
     .unwrap();
-    let message = convert_log(&copy, &dir.path().join("001"), &[0], &|_| {}).unwrap_err().to_string();
+    let message = convert_log(&copy, &dir.path().join("001"), &cameras(&[0]), &|_| {}).unwrap_err().to_string();
     assert!(message.contains("city_SE3_egovehicle.feather"), "{message}");
+}
+
+fn cameras(ids: &[usize]) -> ConvertOptions {
+    ConvertOptions { cameras: ids.to_vec(), sky_masks: SkyMasks::None }
 }

@@ -79,7 +79,7 @@ fn convert_rows(frame: &proto::Frame) -> Vec<[f32; 14]> {
     let input = dir.path().join("built.tfrecord");
     std::fs::write(&input, frame_record(&frame.encode_to_vec())).unwrap();
     let scene = dir.path().join("000");
-    let options = WaymoOptions { cameras: vec![0] };
+    let options = WaymoOptions { cameras: vec![0], ..Default::default() };
     let summary = convert_segment(&input, &scene, &options, &|_| {}).unwrap();
     assert_eq!(summary.lidar_frames, 1);
     let bytes = std::fs::read(ExportLayout::new(&scene).lidar(0)).unwrap();
@@ -156,12 +156,33 @@ fn a_non_rigid_pose_and_an_unknown_camera_are_errors_naming_the_record() {
         let input = dir.path().join("bad.tfrecord");
         let good = frame_record(&self::frame(None, None).encode_to_vec());
         std::fs::write(&input, [good, frame_record(&frame.encode_to_vec())].concat()).unwrap();
-        let message = convert_segment(&input, &dir.path().join("000"), &WaymoOptions { cameras: vec![0] }, &|_| {})
-            .unwrap_err()
-            .to_string();
+        let message = convert_segment(
+            &input,
+            &dir.path().join("000"),
+            &WaymoOptions { cameras: vec![0], ..Default::default() },
+            &|_| {},
+        )
+        .unwrap_err()
+        .to_string();
         assert!(
             message.contains("bad.tfrecord") && message.contains("record 1") && message.contains(expected),
             "{message}"
         );
     }
+}
+
+#[test]
+fn lidar_sky_masks_are_written_per_view_and_mark_no_sky_without_returns_in_view() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("built.tfrecord");
+    std::fs::write(&input, frame_record(&frame(None, None).encode_to_vec())).unwrap();
+    let scene = dir.path().join("000");
+    let options = WaymoOptions { cameras: vec![0], sky_masks: dggt_convert::sky::SkyMasks::Lidar };
+    convert_segment(&input, &scene, &options, &|_| {}).unwrap();
+    // The four columns of returns lie at ±45° and ±135° azimuth, outside FRONT's ±43.8° field of view.
+    let mask = image::open(ExportLayout::new(&scene).sky_mask(0, 0)).unwrap().to_luma8();
+    assert_eq!(mask.dimensions(), (1920, 1280));
+    assert!(mask.pixels().all(|p| p.0[0] == 0));
+    let note = std::fs::read_to_string(scene.join("sky_masks/SOURCE.txt")).unwrap();
+    assert!(note.contains("Approximate"), "{note}");
 }

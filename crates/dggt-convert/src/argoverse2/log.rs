@@ -15,21 +15,25 @@
 //! | `timestamps.txt` | `t seconds` per frame, seconds since the first kept sweep |
 //! | `lidar/{t:03}.bin` | N x 4 float32: x y z (m, ego frame at the sweep's time), intensity (0-255) |
 //! | `dynamic_masks/{all,human,vehicle}/` | every box of the masked categories ([`MaskRule::EveryBox`]), pinhole cameras |
+//! | `sky_masks/` | with [`SkyMasks::Lidar`] only ([`crate::sky`]) |
 //! | `instances/` | those boxes; `obj_to_world` = ego -> city at the sweep · object -> ego |
 //! | [`DONE_MARKER`](crate::marker::DONE_MARKER) | written last |
 
 use std::path::{Path, PathBuf};
 
 use dggt_data::{ExportLayout, ExportVariant, io, text};
+use dggt_geom::glam::DVec3;
 use dggt_geom::{ImageSize, PinholeIntrinsics};
 
 use super::tables::{self, CameraCalibration};
+use crate::batch::ConvertOptions;
 use crate::camera::{Distortion, EgoCamera};
 use crate::error::{ConvertError, Result};
 use crate::feather::Table;
 use crate::instances::InstanceLog;
 use crate::marker::{DoneMarker, write_done};
 use crate::masks::{DynamicMasks, MaskRule};
+use crate::sky::{self, SkyMasks};
 
 /// Largest offset between a sweep and the image paired with it (ns).
 pub const PAIRING_WINDOW_NS: i64 = 25_000_000;
@@ -133,9 +137,14 @@ fn chosen_cameras(log: &Path, cameras: &[usize]) -> Result<Vec<LogCamera>> {
 
 /// Converts the log folder `log` into the scene folder `scene`, the chosen export cameras only; `progress` gets
 /// the number of sweeps handled so far.
-pub fn convert_log(log: &Path, scene: &Path, cameras: &[usize], progress: &(dyn Fn(u64) + Sync)) -> Result<LogSummary> {
+pub fn convert_log(
+    log: &Path,
+    scene: &Path,
+    options: &ConvertOptions,
+    progress: &(dyn Fn(u64) + Sync),
+) -> Result<LogSummary> {
     let layout = ExportLayout::new(scene);
-    let cameras = chosen_cameras(log, cameras)?;
+    let cameras = chosen_cameras(log, &options.cameras)?;
     let poses = tables::ego_poses(log)?;
     let mut annotations = tables::annotations(log)?;
     let sweeps = timestamps_in(&log.join("sensors/lidar"), "feather")?;
@@ -147,15 +156,19 @@ pub fn convert_log(log: &Path, scene: &Path, cameras: &[usize], progress: &(dyn 
         let pairs: Option<Vec<i64>> = cameras.iter().map(|c| c.pair(sweep).filter(|t| poses.contains_key(t))).collect();
         let (Some(pairs), Some(world_from_ego)) = (pairs, poses.get(&sweep)) else { continue };
         let t = kept.len();
+        let points = write_sweep(&log.join("sensors/lidar").join(format!("{sweep}.feather")), &layout.lidar(t))?;
         for ((camera, projection), time) in cameras.iter().zip(&projections).zip(pairs) {
             let source = camera.image_path(log, time);
             let bytes = std::fs::read(&source).map_err(|e| ConvertError::io(&source, e))?;
             io::write_atomically(&layout.image(t, camera.id), &bytes)?;
             let boxes = annotations.get(&sweep).map(Vec::as_slice).unwrap_or_default();
             DynamicMasks::draw(projection, boxes, MaskRule::EveryBox).write(&layout, t, camera.id)?;
+            if options.sky_masks == SkyMasks::Lidar {
+                let mask = sky::lidar_sky_mask(projection, points.iter().copied());
+                sky::write_lidar_sky_mask(&layout, t, camera.id, &mask)?;
+            }
         }
         text::write_rows(&layout.ego_pose(t), &world_from_ego.to_rows())?;
-        write_sweep(&log.join("sensors/lidar").join(format!("{sweep}.feather")), &layout.lidar(t))?;
         instances.add_frame(t, world_from_ego, &annotations.remove(&sweep).unwrap_or_default());
         kept.push(sweep);
     }
@@ -195,8 +208,8 @@ pub fn convert_log(log: &Path, scene: &Path, cameras: &[usize], progress: &(dyn 
     })
 }
 
-/// A sweep's `x y z intensity` rows (ego frame), as float32.
-fn write_sweep(source: &Path, target: &Path) -> Result<()> {
+/// Writes a sweep's `x y z intensity` rows (ego frame) as float32; returns its points.
+fn write_sweep(source: &Path, target: &Path) -> Result<Vec<DVec3>> {
     let table = Table::read(source)?;
     let columns = ["x", "y", "z", "intensity"].map(|name| table.f64_column(name));
     let [x, y, z, intensity] = columns;
@@ -207,5 +220,6 @@ fn write_sweep(source: &Path, target: &Path) -> Result<()> {
             bytes.extend_from_slice(&(value as f32).to_le_bytes());
         }
     }
-    Ok(io::write_atomically(target, &bytes)?)
+    io::write_atomically(target, &bytes)?;
+    Ok((0..x.len()).map(|row| DVec3::new(x[row], y[row], z[row])).collect())
 }

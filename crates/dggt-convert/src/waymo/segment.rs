@@ -11,6 +11,7 @@
 //! | `lidar/{t:03}.bin` | N x 14 float32 ([`lidar`](super::lidar)), for frames whose lasers have range images |
 //! | `dynamic_masks/{all,human,vehicle}/{t:03}_{cam}.png` | [`MaskRule::SeenAndFasterThan`] 1 m/s, calibrated size |
 //! | `instances/` | every vehicle, pedestrian and cyclist ([`crate::instances`]) |
+//! | `sky_masks/` | with [`SkyMasks::Lidar`] only ([`crate::sky`]) |
 //! | [`DONE_MARKER`](crate::marker::DONE_MARKER) | written last |
 //!
 //! Matrices are written with full `f64` precision from the stored doubles. Camera ids are `CameraName - 1`.
@@ -26,19 +27,22 @@ use crate::error::{ConvertError, RecordAt, Result};
 use crate::instances::InstanceLog;
 use crate::marker::{DoneMarker, write_done};
 use crate::masks::{DynamicMasks, MaskRule};
+use crate::sky::{self, SkyMasks};
+use dggt_geom::glam::DVec3;
 
 /// Horizontal speed above which a Waymo box counts as moving (m/s).
 pub const MOVING_SPEED_M_S: f64 = 1.0;
 
-/// Which cameras to export (export ids, `CameraName - 1`).
+/// Which cameras to export (export ids, `CameraName - 1`), and whether to write sky masks.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct WaymoOptions {
     pub cameras: Vec<usize>,
+    pub sky_masks: SkyMasks,
 }
 
 impl Default for WaymoOptions {
     fn default() -> Self {
-        Self { cameras: (0..CAMERA_COUNT).collect() }
+        Self { cameras: (0..CAMERA_COUNT).collect(), sky_masks: SkyMasks::None }
     }
 }
 
@@ -89,7 +93,8 @@ pub fn convert_segment(
         times_us.push(frame.timestamp_micros.ok_or_else(|| at.content("timestamp_micros", "none"))?);
         images += write_images(at, &frame, options, &layout)?;
         let global_from_vehicle = lidar::matrix(&pose_rows);
-        if let Some(mut rows) = lidar::frame_points(at, &frame, &calibration.lasers, &global_from_vehicle)? {
+        let lidar_rows = lidar::frame_points(at, &frame, &calibration.lasers, &global_from_vehicle)?;
+        if let Some(mut rows) = lidar_rows.clone() {
             ground::mark_ground(&mut rows);
             write_lidar_rows(&layout.lidar(record), &rows)?;
             lidar_frames += 1;
@@ -98,6 +103,11 @@ pub fn convert_segment(
         for camera in calibration.cameras.iter().filter(|c| options.cameras.contains(&c.id)) {
             let masks = DynamicMasks::draw(&camera.camera, &boxes, MaskRule::SeenAndFasterThan(MOVING_SPEED_M_S));
             masks.write(&layout, record, camera.id)?;
+            if options.sky_masks == SkyMasks::Lidar {
+                // Points in columns 3..6, vehicle frame; a frame without lidar gets a mask without sky.
+                let points = lidar_rows.iter().flatten().map(|r| DVec3::new(r[3].into(), r[4].into(), r[5].into()));
+                sky::write_lidar_sky_mask(&layout, record, camera.id, &sky::lidar_sky_mask(&camera.camera, points))?;
+            }
         }
         instances.add_frame(record, &world_from_ego, &boxes);
         progress(reader.bytes_read());

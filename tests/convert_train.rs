@@ -1,0 +1,107 @@
+//! Every converter's export goes through `dggt inspect` and one training step of the tiny model: Waymo (the real
+//! five-camera frame, no lidar, so no sky masks: the sky-opacity term is left out), Argoverse 2 (the real log,
+//! with approximate sky masks from its lidar: the term is in) and nuScenes (the synthetic scene the converter's
+//! tests write). The real data lives beside the repository (`../shared/real-data`, or `$DGGT_REAL_DATA`).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use dggt_train::TrainConfig;
+
+#[allow(dead_code)]
+#[path = "../crates/dggt-convert/tests/nuscenes_scene/mod.rs"]
+mod nuscenes_scene;
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn real_data() -> PathBuf {
+    let dir =
+        std::env::var_os("DGGT_REAL_DATA").map(PathBuf::from).unwrap_or_else(|| repo().join("../shared/real-data"));
+    assert!(dir.is_dir(), "real driving data not found at {} (set DGGT_REAL_DATA)", dir.display());
+    dir
+}
+
+fn dggt(args: &[&str]) -> Output {
+    let output = Command::new(env!("CARGO_BIN_EXE_dggt")).args(args).output().expect("the dggt binary runs");
+    let text = format!("{}{}", String::from_utf8_lossy(&output.stdout), String::from_utf8_lossy(&output.stderr));
+    assert!(output.status.success(), "dggt {args:?}: {text}");
+    output
+}
+
+/// `dggt convert <dataset> --input <input> --out <dir>/scenes <extra>`; returns scene 000.
+fn convert(dataset: &str, input: &Path, dir: &Path, extra: &[&str]) -> PathBuf {
+    let out = dir.join("scenes");
+    let mut args = vec!["convert", dataset, "--input", input.to_str().unwrap(), "--out", out.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    dggt(&args);
+    out.join("000")
+}
+
+fn inspect(scene: &Path) -> serde_json::Value {
+    serde_json::from_slice(&dggt(&["inspect", scene.to_str().unwrap(), "--json"]).stdout).unwrap()
+}
+
+/// One step of the tiny model on one frame of camera 0; returns the step's record.
+fn train_one_step(scene: &Path, dir: &Path) -> serde_json::Value {
+    let mut config = TrainConfig::load(&repo().join("configs/tiny-overfit.toml")).unwrap();
+    config.data.scene = scene.to_owned();
+    config.data.frames = None;
+    config.data.preprocess.target_width = 56;
+    config.sampler.min_inputs = 1;
+    config.sampler.max_inputs = 1;
+    config.sampler.window = 1;
+    config.optim.warmup_steps = 1;
+    let mut config = config.unattended(&dir.join("run"));
+    config.run.steps = 1;
+    let path = dir.join("train.toml");
+    std::fs::write(&path, toml::to_string(&config).unwrap()).unwrap();
+    dggt(&["train", "--config", path.to_str().unwrap(), "--out", dir.join("run").to_str().unwrap()]);
+    let text = std::fs::read_to_string(dir.join("run/metrics.jsonl")).unwrap();
+    let record =
+        text.lines().map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()).find(|r| r["kind"] == "train");
+    let record = record.expect("a training step was logged");
+    assert!(record["loss"].as_f64().is_some_and(f64::is_finite), "{record}");
+    record
+}
+
+#[test]
+fn a_waymo_export_without_sky_masks_trains_without_the_sky_term() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = real_data().join("waymo/one_frame_5cams.tfrecord");
+    let scene = convert("waymo", &input, dir.path(), &[]);
+    let summary = inspect(&scene);
+    assert_eq!((summary["frames"].as_u64(), summary["sky_masks"].as_bool()), (Some(1), Some(false)), "{summary}");
+    let record = train_one_step(&scene, dir.path());
+    assert!(record["terms"].get("opacity_bce").is_none(), "{record}");
+    assert!(record["terms"]["rgb_l2"].as_f64().is_some_and(f64::is_finite), "{record}");
+}
+
+#[test]
+fn an_argoverse2_export_with_lidar_sky_masks_trains_with_the_sky_term() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = real_data().join("av2/sensor/val/7fab2350-7eaf-3b7e-a39d-6937a4c1bede");
+    let scene = convert("argoverse2", &log, dir.path(), &["--sky-masks", "lidar", "--cameras", "0,1"]);
+    let summary = inspect(&scene);
+    assert_eq!(summary["sky_masks"].as_bool(), Some(true), "{summary}");
+    // ring_front_left sees sky along its top row and none along its bottom row (road and the ego car).
+    let sky = image::open(scene.join("sky_masks/000_1.png")).unwrap().to_luma8();
+    let share =
+        |row: u32| (0..sky.width()).filter(|&c| sky.get_pixel(c, row).0[0] == 255).count() as f64 / sky.width() as f64;
+    assert!(share(0) > 0.5 && share(sky.height() - 1) == 0.0, "{} {}", share(0), share(sky.height() - 1));
+    let record = train_one_step(&scene, dir.path());
+    assert!(record["terms"]["opacity_bce"].as_f64().is_some_and(f64::is_finite), "{record}");
+}
+
+#[test]
+fn a_nuscenes_export_inspects_and_trains() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = nuscenes_scene::write_root(dir.path(), |_| {});
+    let scene = convert("nuscenes", &root, dir.path(), &["--version", "v1.0-mini"]);
+    let summary = inspect(&scene);
+    assert_eq!((summary["frames"].as_u64(), summary["sky_masks"].as_bool()), (Some(2), Some(false)), "{summary}");
+    assert_eq!(summary["cameras"].as_array().map(Vec::len), Some(6), "{summary}");
+    let record = train_one_step(&scene, dir.path());
+    assert!(record["terms"].get("opacity_bce").is_none(), "{record}");
+}
