@@ -667,7 +667,8 @@ fn truncate_metrics(path: &Path, step: u64) -> Result<(), TrainError> {
         .map_err(|e| TrainError::Invalid { what: path.display().to_string(), detail: e.to_string() })
 }
 
-fn progress_bar(visible: bool, position: u64, total: u64) -> ProgressBar {
+/// The trainer's step bar at `position` of `total`, drawn on stderr when `visible`.
+pub fn progress_bar(visible: bool, position: u64, total: u64) -> ProgressBar {
     let target = if visible { ProgressDrawTarget::stderr() } else { ProgressDrawTarget::hidden() };
     let bar = styled_bar("{elapsed_precise} [{bar:30}] {pos}/{len} ({eta}) {msg}", target, Some(total));
     bar.set_position(position);
