@@ -19,8 +19,8 @@ pub struct RefineTrainConfig {
     pub model: ModelSection,
     pub pairs: PairsSection,
     pub loss: LossSection,
-    #[serde(default = "difix_optim")]
-    pub optim: OptimSection,
+    #[serde(default)]
+    pub optim: OptimSettings,
     #[serde(default)]
     pub run: RunSection,
 }
@@ -102,22 +102,51 @@ impl Default for RunSection {
     }
 }
 
-/// AdamW as Difix trains: rate 2e-5 held constant, betas (0.9, 0.999), weight decay 1e-2, epsilon 1e-8,
-/// gradient norm clipped to 1, no parameter groups.
-pub fn difix_optim() -> OptimSection {
-    OptimSection {
-        lr: 2e-5,
-        groups: Default::default(),
-        frozen: Vec::new(),
-        weight_decay: 1e-2,
-        beta1: 0.9,
-        beta2: 0.999,
-        epsilon: 1e-8,
-        warmup_steps: 0,
-        min_lr_ratio: 1.0,
-        clip_grad_norm: Some(1.0),
-        accumulation: 1,
-        pose_warmup_steps: 0,
+/// AdamW as Difix trains, each setting defaulting to the paper's and its release's: rate 2e-5 held constant
+/// after `warmup_steps` (0), betas (0.9, 0.999), weight decay 1e-2, epsilon 1e-8, gradient norm clipped to 1.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OptimSettings {
+    pub lr: f64,
+    pub weight_decay: f64,
+    pub beta1: f64,
+    pub beta2: f64,
+    pub epsilon: f64,
+    pub warmup_steps: u64,
+    pub clip_grad_norm: Option<f64>,
+}
+
+impl Default for OptimSettings {
+    fn default() -> Self {
+        Self {
+            lr: 2e-5,
+            weight_decay: 1e-2,
+            beta1: 0.9,
+            beta2: 0.999,
+            epsilon: 1e-8,
+            warmup_steps: 0,
+            clip_grad_norm: Some(1.0),
+        }
+    }
+}
+
+impl OptimSettings {
+    /// The trainer's optimiser section: no groups, nothing frozen by name, the rate constant after warm-up.
+    pub fn section(&self) -> OptimSection {
+        OptimSection {
+            lr: self.lr,
+            groups: Default::default(),
+            frozen: Vec::new(),
+            weight_decay: self.weight_decay,
+            beta1: self.beta1,
+            beta2: self.beta2,
+            epsilon: self.epsilon,
+            warmup_steps: self.warmup_steps,
+            min_lr_ratio: 1.0,
+            clip_grad_norm: self.clip_grad_norm,
+            accumulation: 1,
+            pose_warmup_steps: 0,
+        }
     }
 }
 
@@ -185,8 +214,7 @@ impl RefineTrainConfig {
         check(self.run.batch > 0, "run.batch", "must be at least 1")?;
         check(self.run.checkpoint_every > 0, "run.checkpoint_every", "must be at least 1")?;
         check(self.optim.lr > 0.0, "optim.lr", "must be positive")?;
-        check(self.optim.groups.is_empty(), "optim.groups", "the refiner has no parameter groups")?;
-        check(self.optim.accumulation == 1, "optim.accumulation", "use run.batch")?;
+        check(self.optim.beta1 < 1.0 && self.optim.beta2 < 1.0, "optim.beta1/beta2", "must be below 1")?;
         let weights = [self.loss.l2, self.loss.lpips, self.loss.gram];
         check(weights.iter().all(|w| w.is_finite() && *w >= 0.0), "loss", "weights must be finite and >= 0")
     }

@@ -72,7 +72,7 @@ impl RefineTrainer {
         let loss = RefineLoss::load(&config.loss, &device)?;
         let images = read_images(&config.pairs.images, &config.pairs.tensors)?;
         let pairs = synthetic_pairs(&images, config.pairs.variants, config.pairs.held_out)?;
-        let optimizer = Optimizer::ungrouped(&config.optim);
+        let optimizer = Optimizer::ungrouped(&config.optim.section());
         let state = RunState {
             step: 0,
             seed: config.run.seed,
@@ -107,7 +107,7 @@ impl RefineTrainer {
     }
 
     fn schedule(&self) -> WarmupCosine {
-        let optim = &self.config.optim;
+        let optim = self.config.optim.section();
         WarmupCosine {
             peak: optim.lr,
             warmup: optim.warmup_steps,
@@ -200,6 +200,16 @@ impl RefineTrainer {
         }
         let count = self.pairs.held_out.len().max(1) as f64;
         Ok(Validation { step: self.state.step, refined_psnr: refined_sum / count, render_psnr: render_sum / count })
+    }
+
+    /// Writes the trained refiner to `path` for the refiner's loader ([`crate::export`]).
+    pub fn export(&self, path: &Path) -> Result<(), RefineTrainError> {
+        crate::export::write(&crate::export::to_checkpoint(&self.model)?, path)
+    }
+
+    /// The run's configuration.
+    pub fn config(&self) -> &RefineTrainConfig {
+        &self.config
     }
 
     /// The refined image of `image` from the posterior mean, on the host.

@@ -10,7 +10,7 @@ use burn::module::ParamId;
 use burn::tensor::{Device, TensorData};
 use dggt_losses::LpipsKind;
 use dggt_refine::Latent;
-use dggt_refine_train::config::{LossSection, ModelSection, PairsSection, RunSection, difix_optim};
+use dggt_refine_train::config::{LossSection, ModelSection, OptimSettings, PairsSection, RunSection};
 use dggt_refine_train::export::{load_refiner, to_checkpoint, write};
 use dggt_refine_train::model::param_values;
 use dggt_refine_train::pairs::batch;
@@ -55,7 +55,7 @@ fn tiny_config(out_dir: &Path, steps: u64) -> RefineTrainConfig {
             lpips_weights: root.join("metrics/lpips_alex.safetensors"),
             gram_vgg: root.join("metrics/vgg16_features.safetensors"),
         },
-        optim: dggt_train::config::OptimSection { lr: 3e-3, ..difix_optim() },
+        optim: OptimSettings { lr: 3e-3, ..OptimSettings::default() },
         run: RunSection {
             steps,
             seed: 7,
