@@ -40,13 +40,19 @@ pub struct ModelSection {
     pub prompt_tokens_file: Option<PathBuf>,
 }
 
-/// Where the pairs come from.
+/// Where the pairs come from: a file of pairs rendered by a reconstruction (`rendered`,
+/// [`crate::render_pairs`]), or clean images degraded synthetically (`images` with `tensors`,
+/// [`crate::pairs`]). Exactly one of the two.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PairsSection {
+    #[serde(default)]
+    pub rendered: Option<PathBuf>,
     /// A safetensors file of clean images: its tensors `tensors` (`[3, H, W]` or `[N, 3, H, W]` float32 in
-    /// [0, 1]); each image gives `variants` pairs with synthetic degradations ([`crate::pairs`]).
-    pub images: PathBuf,
+    /// [0, 1]); each image gives `variants` pairs with synthetic degradations.
+    #[serde(default)]
+    pub images: Option<PathBuf>,
+    #[serde(default)]
     pub tensors: Vec<String>,
     #[serde(default = "default_variants")]
     pub variants: usize,
@@ -194,7 +200,9 @@ impl RefineTrainConfig {
         if let Some(file) = &mut self.model.prompt_tokens_file {
             resolve(file);
         }
-        resolve(&mut self.pairs.images);
+        for file in [&mut self.pairs.images, &mut self.pairs.rendered].into_iter().flatten() {
+            resolve(file);
+        }
         resolve(&mut self.loss.lpips_weights);
         resolve(&mut self.loss.gram_vgg);
         resolve(&mut self.run.out_dir);
@@ -210,6 +218,12 @@ impl RefineTrainConfig {
             "model.prompt_tokens",
             "give exactly one of prompt_tokens and prompt_tokens_file",
         )?;
+        check(
+            self.pairs.images.is_some() != self.pairs.rendered.is_some(),
+            "pairs",
+            "give exactly one of `rendered` (a pairs file) and `images` (synthetic pairs)",
+        )?;
+        check(self.pairs.images.is_none() || !self.pairs.tensors.is_empty(), "pairs.tensors", "name the images")?;
         check(self.pairs.variants > 0, "pairs.variants", "must be at least 1")?;
         check(self.run.batch > 0, "run.batch", "must be at least 1")?;
         check(self.run.checkpoint_every > 0, "run.checkpoint_every", "must be at least 1")?;

@@ -17,6 +17,7 @@ pub mod export;
 pub mod loss;
 pub mod model;
 pub mod pairs;
+pub mod render_pairs;
 pub mod trainer;
 
 pub use config::RefineTrainConfig;

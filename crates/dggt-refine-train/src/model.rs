@@ -122,9 +122,14 @@ impl TrainableRefiner {
         })
     }
 
-    /// Refines `image` `[batch, 3, h, w]` in [0, 1] as [`Refiner::refine`] does (single-view mode), through
-    /// the unmerged LoRA factors.
-    pub fn refine(&self, image: Tensor<4>, latent: Latent) -> Result<Tensor<4>, RefineTrainError> {
+    /// Refines `image` `[batch, 3, h, w]` in [0, 1] as [`Refiner::refine`] does (with `reference` the
+    /// reference-view mode), through the unmerged LoRA factors.
+    pub fn refine(
+        &self,
+        image: Tensor<4>,
+        reference: Option<Tensor<4>>,
+        latent: Latent,
+    ) -> Result<Tensor<4>, RefineTrainError> {
         let refiner = Refiner::from_parts(RefinerParts {
             vae: self.weights.vae.clone(),
             unet: self.weights.unet.clone(),
@@ -132,7 +137,7 @@ impl TrainableRefiner {
             step: self.step,
             scaling_factor: self.scaling_factor,
         });
-        Ok(refiner.refine(image, None, latent, &mut Trace::default())?)
+        Ok(refiner.refine(image, reference, latent, &mut Trace::default())?)
     }
 
     /// Replaces the weights with `loaded` (the same modules, as read from a checkpoint, which restores the

@@ -22,11 +22,13 @@ pub struct Image {
     pub values: Vec<f32>,
 }
 
-/// A frame with artifacts and its ground truth, the same size.
+/// A frame with artifacts and its ground truth, the same size, with the reference view (an input view)
+/// the refiner may attend to.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Pair {
     pub render: Image,
     pub target: Image,
+    pub reference: Option<Image>,
 }
 
 /// The pairs trained on and those held out for validation.
@@ -76,14 +78,22 @@ pub fn read_images(path: &Path, names: &[String]) -> Result<Vec<Image>, RefineTr
 
 /// `variants` degraded copies of each image (seeds `0..variants` per image), the last `held_out` pairs held out.
 pub fn synthetic_pairs(images: &[Image], variants: usize, held_out: usize) -> Result<PairSet, RefineTrainError> {
-    let mut pairs: Vec<Pair> = images
+    let pairs: Vec<Pair> = images
         .iter()
         .enumerate()
         .flat_map(|(i, image)| {
-            (0..variants)
-                .map(move |v| Pair { render: degrade(image, (i * variants + v) as u64), target: image.clone() })
+            (0..variants).map(move |v| Pair {
+                render: degrade(image, (i * variants + v) as u64),
+                target: image.clone(),
+                reference: None,
+            })
         })
         .collect();
+    split_held_out(pairs, held_out)
+}
+
+/// The last `held_out` of `pairs` held out, the rest to train on.
+pub fn split_held_out(mut pairs: Vec<Pair>, held_out: usize) -> Result<PairSet, RefineTrainError> {
     if held_out >= pairs.len() {
         return Err(RefineTrainError::invalid(
             "pairs.held_out",
@@ -124,6 +134,18 @@ pub fn degrade(image: &Image, seed: u64) -> Image {
 pub fn step_indices(seed: u64, step: u64, batch: usize, count: usize) -> Vec<usize> {
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ step.wrapping_mul(0x9E37_79B9_7F4A_7C15));
     (0..batch).map(|_| rng.random_range(0..count)).collect()
+}
+
+/// The `[N, 3, H, W]` renders, targets and (when every pair has one) references of `pairs` on `device`.
+pub fn batch_pairs(
+    pairs: &[&Pair],
+    device: &Device,
+) -> Result<(Tensor<4>, Tensor<4>, Option<Tensor<4>>), RefineTrainError> {
+    let render = batch(&pairs.iter().map(|p| &p.render).collect::<Vec<_>>(), device)?;
+    let target = batch(&pairs.iter().map(|p| &p.target).collect::<Vec<_>>(), device)?;
+    let references: Option<Vec<&Image>> = pairs.iter().map(|p| p.reference.as_ref()).collect();
+    let reference = references.map(|r| batch(&r, device)).transpose()?;
+    Ok((render, target, reference))
 }
 
 /// Images of one size as a `[N, 3, H, W]` tensor on `device`.

@@ -25,11 +25,12 @@ use dggt_train::schedule::WarmupCosine;
 use dggt_train::trainer::progress_bar;
 use serde::Serialize;
 
-use crate::config::RefineTrainConfig;
+use crate::config::{PairsSection, RefineTrainConfig};
 use crate::error::RefineTrainError;
 use crate::loss::RefineLoss;
 use crate::model::TrainableRefiner;
-use crate::pairs::{Image, PairSet, batch, read_images, step_indices, synthetic_pairs};
+use crate::pairs::{Image, PairSet, batch, batch_pairs, read_images, split_held_out, step_indices, synthetic_pairs};
+use crate::render_pairs::read_pairs;
 
 /// What one step did.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -70,8 +71,7 @@ impl RefineTrainer {
         let tokens = prompt_tokens(&config)?;
         let model = TrainableRefiner::load(&config.model.base_dir, &config.model.checkpoint, &tokens, &device)?;
         let loss = RefineLoss::load(&config.loss, &device)?;
-        let images = read_images(&config.pairs.images, &config.pairs.tensors)?;
-        let pairs = synthetic_pairs(&images, config.pairs.variants, config.pairs.held_out)?;
+        let pairs = load_pairs(&config.pairs)?;
         let optimizer = Optimizer::ungrouped(&config.optim.section());
         let state = RunState {
             step: 0,
@@ -121,9 +121,8 @@ impl RefineTrainer {
         let step = self.state.step;
         let indices = step_indices(self.state.seed, step, self.config.run.batch, self.pairs.train.len());
         let chosen: Vec<_> = indices.iter().map(|&i| &self.pairs.train[i]).collect();
-        let render = batch(&chosen.iter().map(|p| &p.render).collect::<Vec<_>>(), &self.device)?;
-        let target = batch(&chosen.iter().map(|p| &p.target).collect::<Vec<_>>(), &self.device)?;
-        let refined = self.model.refine(render, Latent::Sampled { seed: self.state.seed ^ step })?;
+        let (render, target, reference) = batch_pairs(&chosen, &self.device)?;
+        let refined = self.model.refine(render, reference, Latent::Sampled { seed: self.state.seed ^ step })?;
         let value = self.loss.compute(refined, target)?;
         let loss: f32 = value.total.clone().into_scalar();
         let mut record =
@@ -189,8 +188,8 @@ impl RefineTrainer {
     pub fn validate(&self) -> Result<Validation, RefineTrainError> {
         let (mut refined_sum, mut render_sum) = (0.0, 0.0);
         for pair in &self.pairs.held_out {
-            let render = batch(&[&pair.render], &self.device)?;
-            let refined = self.model.refine(render, Latent::PosteriorMean)?.detach();
+            let (render, _, reference) = batch_pairs(&[pair], &self.device)?;
+            let refined = self.model.refine(render, reference, Latent::PosteriorMean)?.detach();
             let refined: Vec<f32> = refined
                 .into_data()
                 .try_into_vec()
@@ -212,9 +211,10 @@ impl RefineTrainer {
         &self.config
     }
 
-    /// The refined image of `image` from the posterior mean, on the host.
-    pub fn refine_host(&self, image: &Image) -> Result<Vec<f32>, RefineTrainError> {
-        let refined = self.model.refine(batch(&[image], &self.device)?, Latent::PosteriorMean)?;
+    /// The refined image of `image` (attending to `reference` when given) from the posterior mean, on the host.
+    pub fn refine_host(&self, image: &Image, reference: Option<&Image>) -> Result<Vec<f32>, RefineTrainError> {
+        let reference = reference.map(|r| batch(&[r], &self.device)).transpose()?;
+        let refined = self.model.refine(batch(&[image], &self.device)?, reference, Latent::PosteriorMean)?;
         refined
             .into_data()
             .try_into_vec()
@@ -260,6 +260,20 @@ impl RefineTrainer {
             .map_err(|e| RefineTrainError::invalid(path.display().to_string(), e.to_string()))?;
         tracing::info!(checkpoint = %dir.display(), step = self.state.step, "resumed");
         Ok(())
+    }
+}
+
+/// The configured pairs: rendered ones from their file, or synthetic ones from clean images.
+fn load_pairs(section: &PairsSection) -> Result<PairSet, RefineTrainError> {
+    match (&section.rendered, &section.images) {
+        (Some(file), _) => {
+            let pairs = read_pairs(file)?.into_iter().map(|rendered| rendered.pair).collect();
+            split_held_out(pairs, section.held_out)
+        }
+        (None, Some(images)) => {
+            synthetic_pairs(&read_images(images, &section.tensors)?, section.variants, section.held_out)
+        }
+        (None, None) => Err(RefineTrainError::invalid("pairs", "neither `rendered` nor `images` given")),
     }
 }
 

@@ -4,73 +4,19 @@
 //! one; the encoder gets no update; the exported, merged refiner equals the trained, unmerged one.
 
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
 
 use burn::module::ParamId;
 use burn::tensor::{Device, TensorData};
-use dggt_losses::LpipsKind;
 use dggt_refine::Latent;
-use dggt_refine_train::config::{LossSection, ModelSection, OptimSettings, PairsSection, RunSection};
+use dggt_refine_train::RefineTrainer;
 use dggt_refine_train::export::{load_refiner, to_checkpoint, write};
 use dggt_refine_train::model::param_values;
 use dggt_refine_train::pairs::batch;
-use dggt_refine_train::{RefineTrainConfig, RefineTrainer};
 use dggt_train::Start;
 
-fn parity_dir() -> PathBuf {
-    let root = std::env::var_os("DGGT_PARITY_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/parity"));
-    let refiner = root.join("difix_tiny_s1");
-    assert!(
-        refiner.join("model_difix.pkl").is_file() && root.join("metrics/vgg16_features.safetensors").is_file(),
-        "parity data not found under {} (set DGGT_PARITY_DIR to the shared parity folder)",
-        root.display()
-    );
-    root
-}
+mod common;
 
-/// The tiny run: learning rate raised from the paper's 2e-5 so that a few steps show progress.
-fn tiny_config(out_dir: &Path, steps: u64) -> RefineTrainConfig {
-    let root = parity_dir();
-    let refiner = root.join("difix_tiny_s1");
-    RefineTrainConfig {
-        model: ModelSection {
-            base_dir: refiner.join("base"),
-            checkpoint: refiner.join("model_difix.pkl"),
-            prompt_tokens: Vec::new(),
-            prompt_tokens_file: Some(refiner.join("inputs.safetensors")),
-        },
-        pairs: PairsSection {
-            images: refiner.join("inputs.safetensors"),
-            tensors: vec!["image".into(), "ref_image".into()],
-            variants: 3,
-            held_out: 1,
-        },
-        loss: LossSection {
-            l2: 1.0,
-            lpips: 1.0,
-            gram: 0.5,
-            lpips_kind: LpipsKind::Alex,
-            lpips_weights: root.join("metrics/lpips_alex.safetensors"),
-            gram_vgg: root.join("metrics/vgg16_features.safetensors"),
-        },
-        optim: OptimSettings { lr: 3e-3, ..OptimSettings::default() },
-        run: RunSection {
-            steps,
-            seed: 7,
-            batch: 1,
-            out_dir: out_dir.to_path_buf(),
-            checkpoint_every: 1000,
-            keep_checkpoints: 2,
-            validate_every: 0,
-        },
-    }
-}
-
-fn device() -> Device {
-    Device::flex().autodiff()
-}
+use common::{device, tiny_config};
 
 fn values_of(trainer: &RefineTrainer) -> HashMap<ParamId, TensorData> {
     param_values(&trainer.model().weights)
@@ -166,7 +112,7 @@ fn the_exported_merged_refiner_equals_the_trained_unmerged_one() {
         trainer.step().unwrap();
     }
     let image = &trainer.pairs().held_out[0].render;
-    let unmerged = trainer.refine_host(image).unwrap();
+    let unmerged = trainer.refine_host(image, None).unwrap();
 
     let path = out.path().join("refiner.safetensors");
     write(&to_checkpoint(trainer.model()).unwrap(), &path).unwrap();

@@ -204,6 +204,11 @@ impl Trainer {
         WarmupCosine { peak: 1.0, warmup: o.warmup_steps, total: self.config.run.steps, min_ratio: o.min_lr_ratio }
     }
 
+    /// The objective that renders the run's views.
+    pub fn objective(&self) -> &Objective {
+        &self.objective
+    }
+
     /// The run's scene index.
     pub fn index(&self) -> &DatasetIndex {
         &self.sampling.index
