@@ -9,7 +9,7 @@ use clap::{Parser, Subcommand};
 use tracing_subscriber::EnvFilter;
 
 use crate::commands::{
-    bench, convert, devices, eval, inspect, parity, reconstruct, refine_train, stress, synth, train,
+    bench, convert, devices, eval, inspect, parity, reconstruct, refine_pairs, refine_train, stress, synth, train,
 };
 
 #[derive(Debug, Parser)]
@@ -27,6 +27,7 @@ enum Command {
     Parity(parity::Args),
     Train(train::Args),
     Reconstruct(reconstruct::Args),
+    RefinePairs(refine_pairs::Args),
     RefineTrain(refine_train::Args),
     Stress(stress::Args),
     Eval(eval::Args),
@@ -46,6 +47,7 @@ fn main() -> Result<()> {
         Command::Parity(args) => parity::run(args),
         Command::Train(args) => train::run(args),
         Command::Reconstruct(args) => reconstruct::run(args),
+        Command::RefinePairs(args) => refine_pairs::run(args),
         Command::RefineTrain(args) => refine_train::run(args),
         Command::Stress(args) => stress::run(args),
         Command::Eval(args) => eval::run(args),
