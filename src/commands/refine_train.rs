@@ -43,7 +43,7 @@ pub fn run(args: Args) -> Result<()> {
     }
     config.validate().map_err(|e| anyhow::anyhow!("{}: {e}", args.config.display()))?;
     let start = if args.resume { Start::Resume } else { Start::Fresh };
-    let mut trainer = RefineTrainer::new(config, args.device.device()?.autodiff(), start)?;
+    let mut trainer = RefineTrainer::new(config, args.device.device()?, start)?;
     let first_step = trainer.state().step;
     let before = trainer.validate()?;
     let after = trainer.run(std::io::IsTerminal::is_terminal(&std::io::stderr()))?;

@@ -140,6 +140,11 @@ impl TrainableRefiner {
         Ok(refiner.refine(image, reference, latent, &mut Trace::default())?)
     }
 
+    /// The refiner on the device without autodiff (for validation and export: no graph is built).
+    pub fn valid(&self) -> Self {
+        Self { weights: self.weights.valid(), prompt_embeds: self.prompt_embeds.clone().inner(), ..self.clone() }
+    }
+
     /// Replaces the weights with `loaded` (the same modules, as read from a checkpoint, which restores the
     /// parameter ids it was saved with) and follows the ids in the index.
     pub fn with_loaded_weights(mut self, loaded: RefinerWeights) -> Self {

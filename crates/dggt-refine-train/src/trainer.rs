@@ -6,7 +6,8 @@
 //! with the seed `seed ^ step`, and steps AdamW on the loss; everything is a function of the seed, the step
 //! and the saved weights and moments, so a resumed run continues exactly. Validation refines the held-out
 //! pairs from the posterior mean and reports their PSNR against the targets (and that of the unrefined
-//! renders). Records go to `out_dir/metrics.jsonl`, one JSON object a line.
+//! renders). Records go to `out_dir/metrics.jsonl`, one JSON object a line with its `kind` and `step`, as the
+//! project's trainer writes them (a resumed run first drops the records it is about to write again).
 
 use std::fs;
 use std::io::Write;
@@ -22,7 +23,7 @@ use dggt_train::Start;
 use dggt_train::checkpoint::{RunState, optimizer_file, prune, save_model};
 use dggt_train::optimizer::Optimizer;
 use dggt_train::schedule::WarmupCosine;
-use dggt_train::trainer::progress_bar;
+use dggt_train::trainer::{progress_bar, truncate_metrics};
 use serde::Serialize;
 
 use crate::config::{PairsSection, RefineTrainConfig};
@@ -61,13 +62,18 @@ pub struct RefineTrainer {
     loss: RefineLoss,
     pairs: PairSet,
     state: RunState,
+    /// The training device (with autodiff).
     device: Device,
+    /// The same device without autodiff (validation).
+    plain_device: Device,
 }
 
 impl RefineTrainer {
-    /// Loads the refiner, the losses and the pairs on `device` (an autodiff device), resuming from the newest
-    /// checkpoint under `run.out_dir` when `start` says so and there is one.
-    pub fn new(config: RefineTrainConfig, device: Device, start: Start) -> Result<Self, RefineTrainError> {
+    /// Loads the refiner, the losses and the pairs to train on `device` (given without autodiff, which the
+    /// trainer adds), resuming from the newest checkpoint under `run.out_dir` when `start` says so and there is
+    /// one.
+    pub fn new(config: RefineTrainConfig, plain_device: Device, start: Start) -> Result<Self, RefineTrainError> {
+        let device = plain_device.clone().autodiff();
         let tokens = prompt_tokens(&config)?;
         let model = TrainableRefiner::load(&config.model.base_dir, &config.model.checkpoint, &tokens, &device)?;
         let loss = RefineLoss::load(&config.loss, &device)?;
@@ -81,7 +87,7 @@ impl RefineTrainer {
             bad_samples: 0,
             samples_per_step: config.run.batch as u64,
         };
-        let mut trainer = Self { config, model, optimizer, loss, pairs, state, device };
+        let mut trainer = Self { config, model, optimizer, loss, pairs, state, device, plain_device };
         if start == Start::Resume
             && let Some(dir) = latest(&trainer.checkpoints()).map_err(dggt_train::TrainError::from)?
         {
@@ -150,11 +156,12 @@ impl RefineTrainer {
         let started = Instant::now();
         let elapsed_before = self.state.elapsed_s;
         let mut last = None;
+        truncate_metrics(&self.metrics_path(), self.state.step)?;
         while self.state.step < run.steps {
             let record = self.step()?;
             bar.set_message(format!("loss {:.4}", record.loss));
             bar.inc(1);
-            self.append_metrics(&serde_json::json!({ "kind": "train", "record": record }))?;
+            self.append_metrics("train", &record)?;
             let step = self.state.step;
             self.state.elapsed_s = elapsed_before + started.elapsed().as_secs_f64();
             if run.validate_every > 0 && step % run.validate_every == 0 && step < run.steps {
@@ -180,16 +187,17 @@ impl RefineTrainer {
             render_psnr = validation.render_psnr,
             "held-out pairs"
         );
-        self.append_metrics(&serde_json::json!({ "kind": "validation", "record": validation }))?;
+        self.append_metrics("validation", &validation)?;
         Ok(validation)
     }
 
     /// PSNR of the held-out pairs, refined from the posterior mean, and of the renders as they are.
     pub fn validate(&self) -> Result<Validation, RefineTrainError> {
         let (mut refined_sum, mut render_sum) = (0.0, 0.0);
+        let model = self.model.valid();
         for pair in &self.pairs.held_out {
-            let (render, _, reference) = batch_pairs(&[pair], &self.device)?;
-            let refined = self.model.refine(render, reference, Latent::PosteriorMean)?.detach();
+            let (render, _, reference) = batch_pairs(&[pair], &self.plain_device)?;
+            let refined = model.refine(render, reference, Latent::PosteriorMean)?;
             let refined: Vec<f32> = refined
                 .into_data()
                 .try_into_vec()
@@ -213,16 +221,25 @@ impl RefineTrainer {
 
     /// The refined image of `image` (attending to `reference` when given) from the posterior mean, on the host.
     pub fn refine_host(&self, image: &Image, reference: Option<&Image>) -> Result<Vec<f32>, RefineTrainError> {
-        let reference = reference.map(|r| batch(&[r], &self.device)).transpose()?;
-        let refined = self.model.refine(batch(&[image], &self.device)?, reference, Latent::PosteriorMean)?;
+        let reference = reference.map(|r| batch(&[r], &self.plain_device)).transpose()?;
+        let image = batch(&[image], &self.plain_device)?;
+        let refined = self.model.valid().refine(image, reference, Latent::PosteriorMean)?;
         refined
             .into_data()
             .try_into_vec()
             .map_err(|e| RefineTrainError::invalid("refine", format!("refined image not readable: {e:?}")))
     }
 
-    fn append_metrics(&self, record: &serde_json::Value) -> Result<(), RefineTrainError> {
-        let path = self.config.run.out_dir.join("metrics.jsonl");
+    fn metrics_path(&self) -> PathBuf {
+        self.config.run.out_dir.join("metrics.jsonl")
+    }
+
+    /// Appends `record` with its `kind` as one JSON line to `out_dir/metrics.jsonl`.
+    fn append_metrics(&self, kind: &str, record: &impl Serialize) -> Result<(), RefineTrainError> {
+        let mut line = serde_json::to_value(record).expect("records serialise");
+        line["kind"] = kind.into();
+        let record = line;
+        let path = self.metrics_path();
         let io = |source| RefineTrainError::Io { path: path.clone(), source };
         fs::create_dir_all(&self.config.run.out_dir).map_err(io)?;
         let mut file = fs::OpenOptions::new().create(true).append(true).open(&path).map_err(io)?;

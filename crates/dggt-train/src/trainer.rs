@@ -650,8 +650,9 @@ fn next_sample(stream: &mut Prefetcher<LoadedSample>) -> Result<LoadedSample, Tr
     }
 }
 
-/// Drops records of steps at or after `step` (a resumed run writes them again).
-fn truncate_metrics(path: &Path, step: u64) -> Result<(), TrainError> {
+/// Drops the records (JSON lines with a `step`) of steps at or after `step` from a metrics file: a resumed run
+/// writes them again.
+pub fn truncate_metrics(path: &Path, step: u64) -> Result<(), TrainError> {
     if !path.exists() {
         return Ok(());
     }

@@ -60,6 +60,7 @@ pub fn tiny_config(out_dir: &Path, steps: u64) -> RefineTrainConfig {
     }
 }
 
+/// The device the trainer is given (it adds autodiff itself).
 pub fn device() -> Device {
-    Device::flex().autodiff()
+    Device::flex()
 }
