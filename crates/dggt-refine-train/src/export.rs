@@ -15,7 +15,7 @@ use burn::module::ParamId;
 use burn::tensor::{Device, TensorData};
 use dggt_refine::checkpoint::DifixCheckpoint;
 use dggt_refine::lora::lora_names;
-use dggt_refine::weights::{HostTensor, NamedTensors, ParamNames, StoredLayout, read_safetensors};
+use dggt_refine::weights::{HostTensor, NamedTensors, StoredLayout, read_safetensors};
 use dggt_refine::{LoadReport, Refiner};
 
 use crate::error::RefineTrainError;
@@ -46,7 +46,11 @@ pub fn to_checkpoint(model: &TrainableRefiner) -> Result<DifixCheckpoint, Refine
     }
     for (target, adapter) in &index.adapters {
         let (a, b) = (host(&adapter.a, StoredLayout::AsFile, target)?, host(&adapter.b, StoredLayout::AsFile, target)?);
-        let (down, up) = peft_factors(a, b, adapter.layout, index.vae.get(&format!("{target}.weight")), &values);
+        let weight = index.vae.get(&format!("{target}.weight")).and_then(|(id, _)| values.get(id));
+        let kernel = weight.map(|w| w.shape().to_vec()).ok_or_else(|| {
+            RefineTrainError::invalid(target.as_str(), "a LoRA target without its weight in the refiner")
+        })?;
+        let (down, up) = peft_factors(a, b, adapter.layout, &kernel);
         let [down_name, up_name] = lora_names(target);
         vae.insert(down_name, down);
         vae.insert(up_name, up);
@@ -54,21 +58,15 @@ pub fn to_checkpoint(model: &TrainableRefiner) -> Result<DifixCheckpoint, Refine
     Ok(DifixCheckpoint { lora_targets: index.adapters.keys().cloned().collect(), lora_rank: index.rank, unet, vae })
 }
 
-/// burn's factors `a`, `b` back to peft's `lora_A` (down) and `lora_B` (up), in the target's shapes.
-fn peft_factors(
-    a: HostTensor,
-    b: HostTensor,
-    layout: StoredLayout,
-    target: Option<&(ParamId, StoredLayout)>,
-    values: &HashMap<ParamId, TensorData>,
-) -> (HostTensor, HostTensor) {
+/// burn's factors `a`, `b` back to peft's `lora_A` (down) and `lora_B` (up); `kernel`: the target weight's
+/// shape.
+fn peft_factors(a: HostTensor, b: HostTensor, layout: StoredLayout, kernel: &[usize]) -> (HostTensor, HostTensor) {
     match layout {
         StoredLayout::AsFile => {
             // a = lora_B [out, r] -> [out, r, 1, 1]; b = lora_A flattened [r, in k k] -> the kernel's shape.
-            let kernel = target.and_then(|(id, _)| values.get(id)).map(|d| d.shape().to_vec()).unwrap_or_default();
             let rank = a.shape[1];
             let mut down = b;
-            down.shape = std::iter::once(rank).chain(kernel.into_iter().skip(1)).collect();
+            down.shape = std::iter::once(rank).chain(kernel.iter().skip(1).copied()).collect();
             let mut up = a;
             up.shape = vec![up.shape[0], rank, 1, 1];
             (down, up)
@@ -165,9 +163,4 @@ pub fn load_refiner(
     device: &Device,
 ) -> Result<(Refiner, LoadReport), RefineTrainError> {
     Ok(Refiner::from_checkpoint(base_dir, read_checkpoint(exported)?, exported, prompt_tokens, device)?)
-}
-
-/// The names of a module's parameters (by [`ParamNames`]) that the checkpoint does not carry: none expected.
-pub fn missing(names: &ParamNames, tensors: &NamedTensors) -> Vec<String> {
-    names.keys().filter(|n| !tensors.contains_key(*n)).cloned().collect()
 }

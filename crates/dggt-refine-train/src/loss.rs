@@ -41,14 +41,9 @@ impl RefineLoss {
             let value: f32 = t.clone().into_scalar();
             value.into()
         };
-        let value = LossValue {
-            l2: scalar(&l2_term),
-            lpips: scalar(&lpips_term),
-            gram: scalar(&gram_term),
-            total: l2_term.clone(),
-        };
+        let (l2, lpips, gram) = (scalar(&l2_term), scalar(&lpips_term), scalar(&gram_term));
         let [w_l2, w_lpips, w_gram] = self.weights;
         let total = l2_term * w_l2 + lpips_term * w_lpips + gram_term * w_gram;
-        Ok(LossValue { total, ..value })
+        Ok(LossValue { total, l2, lpips, gram })
     }
 }

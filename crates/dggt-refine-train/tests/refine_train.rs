@@ -147,3 +147,23 @@ fn the_exported_merged_refiner_equals_the_trained_unmerged_one() {
     let moved = untrained.iter().zip(&merged).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
     assert!(moved > 1e-3, "training changed nothing the export carries ({moved})");
 }
+
+#[test]
+fn bad_checkpoints_and_pair_files_are_errors_naming_the_file_and_the_part() {
+    let out = tempfile::tempdir().unwrap();
+    let config = tiny_config(out.path(), 1);
+    let trainer = RefineTrainer::new(config.clone(), device(), Start::Fresh).unwrap();
+    let mut checkpoint = to_checkpoint(trainer.model()).unwrap();
+    let target = "decoder.conv_in";
+    checkpoint.vae.remove(&format!("{target}.lora_B.vae_skip.weight")).expect("the export names peft's factors");
+    let path = out.path().join("broken.safetensors");
+    write(&checkpoint, &path).unwrap();
+    let mut broken = config.clone();
+    broken.model.checkpoint = path.clone();
+    let error = RefineTrainer::new(broken, device(), Start::Fresh).err().expect("a missing factor").to_string();
+    assert!(error.contains("broken.safetensors") && error.contains(target), "{error}");
+
+    let images = config.pairs.images.clone().unwrap();
+    let error = dggt_refine_train::render_pairs::read_pairs(&images).unwrap_err().to_string();
+    assert!(error.contains("inputs.safetensors") && error.contains("views"), "{error}");
+}
