@@ -31,8 +31,13 @@ pub struct RefineTrainConfig {
 #[serde(deny_unknown_fields)]
 pub struct ModelSection {
     pub base_dir: PathBuf,
-    /// `model_difix.pkl` (torch) or a file this crate exported ([`crate::export`], `.safetensors`).
-    pub checkpoint: PathBuf,
+    /// `model_difix.pkl` (torch) or a file this crate exported ([`crate::export`], `.safetensors`); without
+    /// one, training starts from the base model with fresh skip convolutions and LoRA ([`crate::fresh`]).
+    #[serde(default)]
+    pub checkpoint: Option<PathBuf>,
+    /// The LoRA rank of a fresh start (Difix's is 4).
+    #[serde(default = "default_rank")]
+    pub lora_rank: usize,
     /// The prompt's token ids, or `prompt_tokens_file`: a safetensors file with an integer `input_ids`.
     #[serde(default)]
     pub prompt_tokens: Vec<i64>,
@@ -169,6 +174,10 @@ fn default_lpips_kind() -> LpipsKind {
     LpipsKind::Vgg
 }
 
+fn default_rank() -> usize {
+    4
+}
+
 fn default_variants() -> usize {
     4
 }
@@ -196,8 +205,7 @@ impl RefineTrainConfig {
             }
         };
         resolve(&mut self.model.base_dir);
-        resolve(&mut self.model.checkpoint);
-        if let Some(file) = &mut self.model.prompt_tokens_file {
+        for file in [&mut self.model.checkpoint, &mut self.model.prompt_tokens_file].into_iter().flatten() {
             resolve(file);
         }
         for file in [&mut self.pairs.images, &mut self.pairs.rendered].into_iter().flatten() {
@@ -224,6 +232,7 @@ impl RefineTrainConfig {
             "give exactly one of `rendered` (a pairs file) and `images` (synthetic pairs)",
         )?;
         check(self.pairs.images.is_none() || !self.pairs.tensors.is_empty(), "pairs.tensors", "name the images")?;
+        check(self.model.lora_rank > 0, "model.lora_rank", "must be at least 1")?;
         check(self.pairs.variants > 0, "pairs.variants", "must be at least 1")?;
         check(self.run.batch > 0, "run.batch", "must be at least 1")?;
         check(self.run.checkpoint_every > 0, "run.checkpoint_every", "must be at least 1")?;

@@ -76,7 +76,18 @@ impl TrainableRefiner {
         prompt_tokens: &[i64],
         device: &Device,
     ) -> Result<Self, RefineTrainError> {
-        let mut checkpoint = read_checkpoint(checkpoint_path)?;
+        Self::from_checkpoint(base_dir, read_checkpoint(checkpoint_path)?, checkpoint_path, prompt_tokens, device)
+    }
+
+    /// [`TrainableRefiner::load`] with the checkpoint given (`source` names it in messages), for example a
+    /// fresh one ([`crate::fresh`]).
+    pub fn from_checkpoint(
+        base_dir: &Path,
+        mut checkpoint: DifixCheckpoint,
+        checkpoint_path: &Path,
+        prompt_tokens: &[i64],
+        device: &Device,
+    ) -> Result<Self, RefineTrainError> {
         let (plain, mut pairs) = split_lora_pairs(std::mem::take(&mut checkpoint.vae));
         let targets = std::mem::take(&mut checkpoint.lora_targets);
         let rank = checkpoint.lora_rank;

@@ -28,6 +28,7 @@ use serde::Serialize;
 
 use crate::config::{PairsSection, RefineTrainConfig};
 use crate::error::RefineTrainError;
+use crate::fresh::fresh_checkpoint;
 use crate::loss::RefineLoss;
 use crate::model::TrainableRefiner;
 use crate::pairs::{Image, PairSet, batch, batch_pairs, read_images, split_held_out, step_indices, synthetic_pairs};
@@ -75,7 +76,7 @@ impl RefineTrainer {
     pub fn new(config: RefineTrainConfig, plain_device: Device, start: Start) -> Result<Self, RefineTrainError> {
         let device = plain_device.clone().autodiff();
         let tokens = prompt_tokens(&config)?;
-        let model = TrainableRefiner::load(&config.model.base_dir, &config.model.checkpoint, &tokens, &device)?;
+        let model = load_model_of(&config, &tokens, &device)?;
         let loss = RefineLoss::load(&config.loss, &device)?;
         let pairs = load_pairs(&config.pairs)?;
         let optimizer = Optimizer::ungrouped(&config.optim.section());
@@ -277,6 +278,22 @@ impl RefineTrainer {
             .map_err(|e| RefineTrainError::invalid(path.display().to_string(), e.to_string()))?;
         tracing::info!(checkpoint = %dir.display(), step = self.state.step, "resumed");
         Ok(())
+    }
+}
+
+/// The refiner to train: the configured checkpoint over the base, or a fresh start from the base.
+fn load_model_of(
+    config: &RefineTrainConfig,
+    tokens: &[i64],
+    device: &Device,
+) -> Result<TrainableRefiner, RefineTrainError> {
+    let model = &config.model;
+    match &model.checkpoint {
+        Some(path) => TrainableRefiner::load(&model.base_dir, path, tokens, device),
+        None => {
+            let checkpoint = fresh_checkpoint(&model.base_dir, model.lora_rank, config.run.seed)?;
+            TrainableRefiner::from_checkpoint(&model.base_dir, checkpoint, &model.base_dir, tokens, device)
+        }
     }
 }
 

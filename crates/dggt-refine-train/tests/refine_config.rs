@@ -37,7 +37,8 @@ fn unset_loss_weights_and_rate_are_the_papers_and_bad_settings_name_themselves()
     assert_eq!((config.loss.l2, config.loss.lpips, config.loss.gram), (1.0, 1.0, 0.5));
     assert_eq!(config.optim.lr, 2e-5);
     assert_eq!(config.loss.lpips_kind, dggt_losses::LpipsKind::Vgg, "the release's LPIPS network");
-    assert_eq!(config.model.checkpoint, dir.path().join("c.pkl"), "relative to the file");
+    assert_eq!(config.model.checkpoint, Some(dir.path().join("c.pkl")), "relative to the file");
+    assert_eq!(config.model.lora_rank, 4, "Difix's rank");
 
     std::fs::write(&path, text("[run]\nbatch = 0\n")).unwrap();
     let error = RefineTrainConfig::load(&path).unwrap_err().to_string();

@@ -136,14 +136,15 @@ fn the_exported_merged_refiner_equals_the_trained_unmerged_one() {
     let worst = unmerged.iter().zip(&merged).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
     println!("max |merged - unmerged| = {worst:e}");
     assert!(worst <= 1e-5, "merged and unmerged refiners differ by {worst}");
-    let untrained = dggt_refine::Refiner::load(&config.model.base_dir, &config.model.checkpoint, &tokens, &cpu)
-        .unwrap()
-        .0
-        .refine(batch(&[image], &cpu).unwrap(), None, Latent::PosteriorMean, &mut Default::default())
-        .unwrap()
-        .into_data()
-        .try_to_vec::<f32>()
-        .unwrap();
+    let untrained =
+        dggt_refine::Refiner::load(&config.model.base_dir, config.model.checkpoint.as_ref().unwrap(), &tokens, &cpu)
+            .unwrap()
+            .0
+            .refine(batch(&[image], &cpu).unwrap(), None, Latent::PosteriorMean, &mut Default::default())
+            .unwrap()
+            .into_data()
+            .try_to_vec::<f32>()
+            .unwrap();
     let moved = untrained.iter().zip(&merged).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
     assert!(moved > 1e-3, "training changed nothing the export carries ({moved})");
 }
@@ -159,11 +160,42 @@ fn bad_checkpoints_and_pair_files_are_errors_naming_the_file_and_the_part() {
     let path = out.path().join("broken.safetensors");
     write(&checkpoint, &path).unwrap();
     let mut broken = config.clone();
-    broken.model.checkpoint = path.clone();
+    broken.model.checkpoint = Some(path.clone());
     let error = RefineTrainer::new(broken, device(), Start::Fresh).err().expect("a missing factor").to_string();
     assert!(error.contains("broken.safetensors") && error.contains(target), "{error}");
 
     let images = config.pairs.images.clone().unwrap();
     let error = dggt_refine_train::render_pairs::read_pairs(&images).unwrap_err().to_string();
     assert!(error.contains("inputs.safetensors") && error.contains("views"), "{error}");
+}
+
+#[test]
+fn a_fresh_start_from_the_base_has_difixs_targets_and_shapes_zero_lora_b_and_trains() {
+    use dggt_refine::checkpoint::DifixCheckpoint;
+    use dggt_refine_train::fresh::{SKIP_INIT, fresh_checkpoint};
+    let out = tempfile::tempdir().unwrap();
+    let mut config = tiny_config(out.path(), 2);
+    let released = DifixCheckpoint::read(config.model.checkpoint.as_ref().unwrap()).unwrap();
+    let fresh = fresh_checkpoint(&config.model.base_dir, 4, 1).unwrap();
+    let sorted = |mut names: Vec<String>| {
+        names.sort();
+        names
+    };
+    assert_eq!(sorted(fresh.lora_targets.clone()), sorted(released.lora_targets.clone()), "Difix's target rule");
+    let shapes = |c: &DifixCheckpoint| c.vae.iter().map(|(n, t)| (n.clone(), t.shape.clone())).collect::<Vec<_>>();
+    assert_eq!(shapes(&fresh), shapes(&released), "the released checkpoint's tensors and shapes");
+    for (name, tensor) in &fresh.vae {
+        if name.contains("lora_B") {
+            assert!(tensor.values.iter().all(|&v| v == 0.0), "{name} starts at zero");
+        } else if name.contains("skip_conv") && name.ends_with("base_layer.weight") {
+            assert!(tensor.values.iter().all(|&v| v == SKIP_INIT), "{name}");
+        }
+    }
+
+    config.model.checkpoint = None;
+    let mut trainer = RefineTrainer::new(config, device(), Start::Fresh).unwrap();
+    for _ in 0..2 {
+        let record = trainer.step().unwrap();
+        assert!(record.loss.is_finite() && record.grad_norm.is_some(), "{record:?}");
+    }
 }

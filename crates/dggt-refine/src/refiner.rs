@@ -267,7 +267,7 @@ fn check_vae(config: &VaeConfig, path: &Path) -> Result<(), RefineError> {
 }
 
 /// `<stem>.safetensors` in `dir`, or its `.fp16` variant.
-fn weights_file(dir: &Path, stem: &str) -> Result<PathBuf, RefineError> {
+pub fn weights_file(dir: &Path, stem: &str) -> Result<PathBuf, RefineError> {
     let candidates = [format!("{stem}.safetensors"), format!("{stem}.fp16.safetensors")];
     candidates
         .iter()

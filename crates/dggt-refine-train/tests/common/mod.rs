@@ -28,7 +28,8 @@ pub fn tiny_config(out_dir: &Path, steps: u64) -> RefineTrainConfig {
     RefineTrainConfig {
         model: ModelSection {
             base_dir: refiner.join("base"),
-            checkpoint: refiner.join("model_difix.pkl"),
+            checkpoint: Some(refiner.join("model_difix.pkl")),
+            lora_rank: 4,
             prompt_tokens: Vec::new(),
             prompt_tokens_file: Some(refiner.join("inputs.safetensors")),
         },
