@@ -11,10 +11,8 @@ use std::path::Path;
 use dggt_refine::checkpoint::DifixCheckpoint;
 use dggt_refine::config::{VaeConfig, read_json};
 use dggt_refine::lora::lora_names;
-use dggt_refine::refiner::weights_file;
+use dggt_refine::refiner::{standard_normal_values, weights_file};
 use dggt_refine::weights::{HostTensor, NamedTensors, read_safetensors};
-use rand::rngs::Xoshiro256PlusPlus;
-use rand::{RngExt, SeedableRng};
 
 use crate::error::RefineTrainError;
 
@@ -25,7 +23,7 @@ pub const SKIP_INIT: f32 = 1e-5;
 const TARGET_ENDINGS: [&str; 10] =
     ["conv_in", "conv1", "conv2", "conv_shortcut", "conv", "conv_out", "to_q", "to_k", "to_v", "to_out.0"];
 
-/// The checkpoint described in the module's doc, its random factors drawn from `seed`.
+/// The checkpoint described in the module's doc; target `k`'s `lora_A` is drawn from seed `seed + k`.
 pub fn fresh_checkpoint(base_dir: &Path, rank: usize, seed: u64) -> Result<DifixCheckpoint, RefineTrainError> {
     if rank == 0 {
         return Err(RefineTrainError::invalid("model.lora_rank", "must be at least 1"));
@@ -49,10 +47,10 @@ pub fn fresh_checkpoint(base_dir: &Path, rank: usize, seed: u64) -> Result<Difix
         vae.insert(format!("{module}.base_layer.weight"), host(shape.clone(), vec![SKIP_INIT; count], &file));
         targets.push((module, shape));
     }
-    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
-    for (module, shape) in &targets {
+    for (k, (module, shape)) in targets.iter().enumerate() {
         let down_shape: Vec<usize> = std::iter::once(rank).chain(shape[1..].iter().copied()).collect();
-        let down = (0..down_shape.iter().product()).map(|_| normal(&mut rng) / rank as f32).collect();
+        let normal = standard_normal_values(down_shape.iter().product(), seed.wrapping_add(k as u64));
+        let down = normal.into_iter().map(|v| v / rank as f32).collect();
         let up_shape: Vec<usize> = [shape[0], rank].into_iter().chain(shape[2..].iter().map(|_| 1)).collect();
         let up = vec![0.0; up_shape.iter().product()];
         let [down_name, up_name] = lora_names(module);
@@ -79,11 +77,4 @@ fn skip_shapes(config: &VaeConfig) -> Vec<Vec<usize>> {
 
 fn host(shape: Vec<usize>, values: Vec<f32>, file: &Path) -> HostTensor {
     HostTensor { shape, values, file: file.to_path_buf() }
-}
-
-/// A standard normal value (Box-Muller).
-fn normal(rng: &mut Xoshiro256PlusPlus) -> f32 {
-    let u1: f64 = 1.0 - rng.random::<f64>();
-    let u2: f64 = rng.random::<f64>();
-    ((-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()) as f32
 }

@@ -234,19 +234,23 @@ fn pad_to_multiple(x: Tensor<4>, multiple: usize) -> Tensor<4> {
     x.pad([(0, extra(height)), (0, extra(width))], PadMode::Edge)
 }
 
-/// Standard normal values shaped like `like`, from `seed` (Box-Muller over a xoshiro256++ stream).
+/// Standard normal values shaped like `like`, from `seed` ([`standard_normal_values`]).
 fn standard_normal(like: &Tensor<4>, seed: u64) -> Tensor<4> {
     let shape = like.dims();
-    let count: usize = shape.iter().product();
+    let values = standard_normal_values(shape.iter().product(), seed);
+    Tensor::from_data(TensorData::new(values, shape), &like.device())
+}
+
+/// `count` standard normal values from `seed` (Box-Muller over a xoshiro256++ stream).
+pub fn standard_normal_values(count: usize, seed: u64) -> Vec<f32> {
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
-    let values: Vec<f32> = (0..count)
+    (0..count)
         .map(|_| {
             let u1: f64 = 1.0 - rng.random::<f64>();
             let u2: f64 = rng.random::<f64>();
             ((-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()) as f32
         })
-        .collect();
-    Tensor::from_data(TensorData::new(values, shape), &like.device())
+        .collect()
 }
 
 /// The text encoder's output for the prompt, and the text-encoder tensors it did not use.
