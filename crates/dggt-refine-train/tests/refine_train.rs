@@ -136,6 +136,23 @@ fn the_exported_merged_refiner_equals_the_trained_unmerged_one() {
     let worst = unmerged.iter().zip(&merged).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
     println!("max |merged - unmerged| = {worst:e}");
     assert!(worst <= 1e-5, "merged and unmerged refiners differ by {worst}");
+
+    // The reference-view mode alike.
+    let reference = &trainer.pairs().train[0].target;
+    let unmerged = trainer.refine_host(image, Some(reference)).unwrap();
+    let merged = refiner
+        .refine(
+            batch(&[image], &cpu).unwrap(),
+            Some(batch(&[reference], &cpu).unwrap()),
+            Latent::PosteriorMean,
+            &mut Default::default(),
+        )
+        .unwrap()
+        .into_data()
+        .try_to_vec::<f32>()
+        .unwrap();
+    let worst = unmerged.iter().zip(&merged).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+    assert!(worst <= 1e-5, "with a reference view, merged and unmerged refiners differ by {worst}");
     let untrained =
         dggt_refine::Refiner::load(&config.model.base_dir, config.model.checkpoint.as_ref().unwrap(), &tokens, &cpu)
             .unwrap()
