@@ -70,10 +70,11 @@ pub struct RefineTrainer {
 }
 
 impl RefineTrainer {
-    /// Loads the refiner, the losses and the pairs to train on `device` (given without autodiff, which the
+    /// Checks `config`, then loads the refiner, the losses and the pairs to train on `device` (given without autodiff, which the
     /// trainer adds), resuming from the newest checkpoint under `run.out_dir` when `start` says so and there is
     /// one.
     pub fn new(config: RefineTrainConfig, plain_device: Device, start: Start) -> Result<Self, RefineTrainError> {
+        config.validate()?;
         let device = plain_device.clone().autodiff();
         let tokens = prompt_tokens(&config)?;
         let model = load_model_of(&config, &tokens, &device)?;
