@@ -8,7 +8,9 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 use tracing_subscriber::EnvFilter;
 
-use crate::commands::{bench, convert, devices, eval, inspect, parity, reconstruct, stress, synth, train};
+use crate::commands::{
+    bench, convert, devices, eval, inspect, parity, reconstruct, refine_pairs, refine_train, stress, synth, train,
+};
 
 #[derive(Debug, Parser)]
 #[command(name = "dggt", version, about = "Feedforward 4D reconstruction of dynamic driving scenes")]
@@ -25,6 +27,8 @@ enum Command {
     Parity(parity::Args),
     Train(train::Args),
     Reconstruct(reconstruct::Args),
+    RefinePairs(refine_pairs::Args),
+    RefineTrain(refine_train::Args),
     Stress(stress::Args),
     Eval(eval::Args),
     Bench(bench::Args),
@@ -43,6 +47,8 @@ fn main() -> Result<()> {
         Command::Parity(args) => parity::run(args),
         Command::Train(args) => train::run(args),
         Command::Reconstruct(args) => reconstruct::run(args),
+        Command::RefinePairs(args) => refine_pairs::run(args),
+        Command::RefineTrain(args) => refine_train::run(args),
         Command::Stress(args) => stress::run(args),
         Command::Eval(args) => eval::run(args),
         Command::Bench(args) => bench::run(args),

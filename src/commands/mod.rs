@@ -9,6 +9,8 @@ pub mod eval;
 pub mod inspect;
 pub mod parity;
 pub mod reconstruct;
+pub mod refine_pairs;
+pub mod refine_train;
 pub mod stress;
 pub mod synth;
 pub mod train;

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use burn::module::Module;
 use burn::store::ModuleRecord;
 use burn::tensor::Bytes;
-use dggt_model::{Dggt, ModelConfig};
+use dggt_model::ModelConfig;
 
 use crate::error::InferError;
 
@@ -67,8 +67,9 @@ pub fn read_model_config(dir: &Path) -> Result<ModelConfig, InferError> {
     serde_json::from_slice(&read(&path)?).map_err(|e| InferError::checkpoint(&path, e))
 }
 
-/// Loads the network of a checkpoint folder into `model` (built from the stored configuration).
-pub fn load_model(dir: &Path, model: Dggt) -> Result<Dggt, InferError> {
+/// Loads the network of a checkpoint folder into `model` (built from the stored configuration); any module
+/// saved the same way loads alike.
+pub fn load_model<M: Module>(dir: &Path, model: M) -> Result<M, InferError> {
     let path = dir.join(MODEL_FILE);
     let record = ModuleRecord::from_bytes(Bytes::from_bytes_vec(read(&path)?))
         .map_err(|e| InferError::checkpoint(&path, format!("{e:?}")))?;

@@ -10,7 +10,7 @@ use burn::tensor::module::interpolate;
 use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
 
 use crate::error::RefineError;
-use crate::weights::Weights;
+use crate::weights::{StoredLayout, Weights};
 
 /// Whether a layer has an additive bias.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -50,11 +50,12 @@ pub fn conv(weights: &mut Weights, prefix: &str, shape: ConvShape, bias: Bias) -
     let ConvShape { channels_in, channels_out, kernel, stride, padding } = shape;
     let weight = weights.take(&format!("{prefix}.weight"), [channels_out, channels_in, kernel, kernel])?;
     let bias = match bias {
-        Bias::With => Some(Param::from_tensor(weights.take(&format!("{prefix}.bias"), [channels_out])?)),
+        Bias::With => Some(taken(weights, &format!("{prefix}.bias"), [channels_out])?),
         Bias::Without => None,
     };
+    let weight = recorded(weights, &format!("{prefix}.weight"), weight, StoredLayout::AsFile);
     Ok(Conv2d {
-        weight: Param::from_tensor(weight),
+        weight,
         bias,
         stride: [stride, stride],
         kernel_size: [kernel, kernel],
@@ -73,10 +74,11 @@ pub fn linear(
 ) -> Result<Linear, RefineError> {
     let weight = weights.take(&format!("{prefix}.weight"), [features_out, features_in])?.transpose();
     let bias = match bias {
-        Bias::With => Some(Param::from_tensor(weights.take(&format!("{prefix}.bias"), [features_out])?)),
+        Bias::With => Some(taken(weights, &format!("{prefix}.bias"), [features_out])?),
         Bias::Without => None,
     };
-    Ok(Linear { weight: Param::from_tensor(weight), bias })
+    let weight = recorded(weights, &format!("{prefix}.weight"), weight, StoredLayout::Transposed);
+    Ok(Linear { weight, bias })
 }
 
 pub fn group_norm(
@@ -86,11 +88,9 @@ pub fn group_norm(
     channels: usize,
     epsilon: f64,
 ) -> Result<GroupNorm, RefineError> {
-    let gamma = weights.take(&format!("{prefix}.weight"), [channels])?;
-    let beta = weights.take(&format!("{prefix}.bias"), [channels])?;
     Ok(GroupNorm {
-        gamma: Some(Param::from_tensor(gamma)),
-        beta: Some(Param::from_tensor(beta)),
+        gamma: Some(taken(weights, &format!("{prefix}.weight"), [channels])?),
+        beta: Some(taken(weights, &format!("{prefix}.bias"), [channels])?),
         num_groups: groups,
         num_channels: channels,
         epsilon,
@@ -100,9 +100,31 @@ pub fn group_norm(
 
 pub fn layer_norm(weights: &mut Weights, prefix: &str, dim: usize, epsilon: f64) -> Result<LayerNorm, RefineError> {
     let mut norm = LayerNormConfig::new(dim).with_epsilon(epsilon).init(weights.device());
-    norm.gamma = Param::from_tensor(weights.take(&format!("{prefix}.weight"), [dim])?);
-    norm.beta = Some(Param::from_tensor(weights.take(&format!("{prefix}.bias"), [dim])?));
+    norm.gamma = taken(weights, &format!("{prefix}.weight"), [dim])?;
+    norm.beta = Some(taken(weights, &format!("{prefix}.bias"), [dim])?);
     Ok(norm)
+}
+
+/// The parameter of file tensor `name`, recorded in `weights` under that name.
+fn taken<const D: usize>(
+    weights: &mut Weights,
+    name: &str,
+    shape: [usize; D],
+) -> Result<Param<Tensor<D>>, RefineError> {
+    let tensor = weights.take(name, shape)?;
+    Ok(recorded(weights, name, tensor, StoredLayout::AsFile))
+}
+
+/// `tensor` as a parameter, recorded in `weights` under `name`.
+fn recorded<const D: usize>(
+    weights: &mut Weights,
+    name: &str,
+    tensor: Tensor<D>,
+    layout: StoredLayout,
+) -> Param<Tensor<D>> {
+    let param = Param::from_tensor(tensor);
+    weights.record(name, param.id, layout);
+    param
 }
 
 /// Nearest-neighbour resize of `[batch, channels, h, w]` to `size` (`[height, width]`): source index

@@ -30,5 +30,5 @@ pub mod vae;
 pub mod weights;
 
 pub use error::RefineError;
-pub use refiner::{Latent, LoadReport, Refiner, TIMESTEP};
+pub use refiner::{Latent, LoadReport, Refiner, RefinerParts, TIMESTEP};
 pub use trace::Trace;

@@ -15,6 +15,40 @@ use crate::weights::{HostTensor, NamedTensors};
 /// peft's default `lora_alpha`, which Difix's configuration keeps.
 pub const LORA_ALPHA: f32 = 8.0;
 
+/// The adapter name of Difix's VAE LoRA in peft's tensor names.
+pub const LORA_ADAPTER: &str = "vae_skip";
+
+/// One module's LoRA factors as a checkpoint holds them: `down` (peft's `lora_A`, `[rank, rest...]`) and `up`
+/// (`lora_B`, `[out, rank, (1, 1)]`); `None` where the checkpoint lacks one.
+#[derive(Debug, Clone, Default)]
+pub struct LoraPair {
+    pub down: Option<HostTensor>,
+    pub up: Option<HostTensor>,
+}
+
+/// peft's names of `module`'s LoRA factors: `[lora_A, lora_B]`.
+pub fn lora_names(module: &str) -> [String; 2] {
+    [format!("{module}.lora_A.{LORA_ADAPTER}.weight"), format!("{module}.lora_B.{LORA_ADAPTER}.weight")]
+}
+
+/// Splits a checkpoint's VAE tensors into plain tensors, by VAE name (a wrapped module's
+/// `.base_layer.` dropped), and LoRA pairs, by module.
+pub fn split_lora_pairs(checkpoint: NamedTensors) -> (NamedTensors, BTreeMap<String, LoraPair>) {
+    let mut pairs: BTreeMap<String, LoraPair> = BTreeMap::new();
+    let mut plain = NamedTensors::new();
+    for (name, tensor) in checkpoint {
+        let half = |marker: &str| name.split_once(marker).map(|(module, _)| module.to_string());
+        if let Some(module) = half(".lora_A.") {
+            pairs.entry(module).or_default().down = Some(tensor);
+        } else if let Some(module) = half(".lora_B.") {
+            pairs.entry(module).or_default().up = Some(tensor);
+        } else {
+            plain.insert(name.replace(".base_layer.", "."), tensor);
+        }
+    }
+    (plain, pairs)
+}
+
 /// What the checkpoint changed in the VAE.
 #[derive(Debug, Clone, Default)]
 pub struct VaeOverlay {
@@ -38,23 +72,15 @@ pub fn apply_vae_overlay(
         module: module.to_string(),
         message,
     };
-    let mut pairs: BTreeMap<String, (Option<HostTensor>, Option<HostTensor>)> = BTreeMap::new();
+    let (plain, mut pairs) = split_lora_pairs(checkpoint);
     let mut overlay = VaeOverlay::default();
-    for (name, tensor) in checkpoint {
-        let half = |marker: &str| name.split_once(marker).map(|(module, _)| module.to_string());
-        if let Some(module) = half(".lora_A.") {
-            pairs.entry(module).or_default().0 = Some(tensor);
-        } else if let Some(module) = half(".lora_B.") {
-            pairs.entry(module).or_default().1 = Some(tensor);
-        } else {
-            let name = name.replace(".base_layer.", ".");
-            overlay.replaced.push(name.clone());
-            base.insert(name, tensor);
-        }
+    for (name, tensor) in plain {
+        overlay.replaced.push(name.clone());
+        base.insert(name, tensor);
     }
     let scale = LORA_ALPHA / rank as f32;
     for target in targets {
-        let Some((Some(down), Some(up))) = pairs.remove(target) else {
+        let Some(LoraPair { down: Some(down), up: Some(up) }) = pairs.remove(target) else {
             return Err(lora_error(target, "lora_A or lora_B is missing from state_dict_vae".into()));
         };
         let weight_name = format!("{target}.weight");

@@ -25,7 +25,7 @@ use crate::trace::Trace;
 use crate::transformer::ViewAttention;
 use crate::unet::Unet;
 use crate::vae::Vae;
-use crate::weights::{Weights, read_safetensors};
+use crate::weights::{ParamNames, Weights, read_safetensors};
 
 /// The timestep the refiner denoises at.
 pub const TIMESTEP: usize = 199;
@@ -53,6 +53,20 @@ pub struct LoadReport {
     pub vae: VaeOverlay,
     /// Tensors no module took, as `component: name`.
     pub unused: Vec<String>,
+    /// The VAE's parameters by their diffusers names (after the checkpoint's overlay).
+    pub vae_params: ParamNames,
+    /// The UNet's parameters by their diffusers names.
+    pub unet_params: ParamNames,
+}
+
+/// A refiner's modules and constants, for code that trains or transforms them ([`Refiner::into_parts`]).
+pub struct RefinerParts {
+    pub vae: Vae,
+    pub unet: Unet,
+    /// `[1, tokens, context_dim]`.
+    pub prompt_embeds: Tensor<3>,
+    pub step: SingleStep,
+    pub scaling_factor: f32,
 }
 
 pub struct Refiner {
@@ -73,8 +87,17 @@ impl Refiner {
         prompt_tokens: &[i64],
         device: &Device,
     ) -> Result<(Self, LoadReport), RefineError> {
-        let checkpoint_path = checkpoint;
-        let checkpoint = DifixCheckpoint::read(checkpoint_path)?;
+        Self::from_checkpoint(model_dir, DifixCheckpoint::read(checkpoint)?, checkpoint, prompt_tokens, device)
+    }
+
+    /// [`Refiner::load`] with the checkpoint already read; `checkpoint_path` names it in messages.
+    pub fn from_checkpoint(
+        model_dir: &Path,
+        checkpoint: DifixCheckpoint,
+        checkpoint_path: &Path,
+        prompt_tokens: &[i64],
+        device: &Device,
+    ) -> Result<(Self, LoadReport), RefineError> {
         let mut report = LoadReport::default();
 
         let vae_config_path = model_dir.join("vae/config.json");
@@ -91,6 +114,7 @@ impl Refiner {
         )?;
         let mut vae_weights = Weights::new(vae_tensors, sources(&vae_file, checkpoint_path), device);
         let vae = Vae::load(&mut vae_weights, &vae_config)?;
+        report.vae_params = vae_weights.params().clone();
 
         let unet_config_path = model_dir.join("unet/config.json");
         let unet_config: UnetConfig = read_json(&unet_config_path)?;
@@ -101,6 +125,7 @@ impl Refiner {
         unet_tensors.extend(checkpoint.unet);
         let mut unet_weights = Weights::new(unet_tensors, sources(&unet_file, checkpoint_path), device);
         let unet = Unet::load(&mut unet_weights, &unet_config, &unet_config_path)?;
+        report.unet_params = unet_weights.params().clone();
 
         let (prompt_embeds, text_unused) = encode_prompt(&model_dir.join("text_encoder"), prompt_tokens, device)?;
 
@@ -115,6 +140,18 @@ impl Refiner {
             .collect();
         let refiner = Self { vae, unet, prompt_embeds, step, scaling_factor: vae_config.scaling_factor };
         Ok((refiner, report))
+    }
+
+    /// The refiner's modules and constants.
+    pub fn into_parts(self) -> RefinerParts {
+        let Self { vae, unet, prompt_embeds, step, scaling_factor } = self;
+        RefinerParts { vae, unet, prompt_embeds, step, scaling_factor }
+    }
+
+    /// The refiner made of `parts` (as [`Refiner::into_parts`] gave them, possibly trained since).
+    pub fn from_parts(parts: RefinerParts) -> Self {
+        let RefinerParts { vae, unet, prompt_embeds, step, scaling_factor } = parts;
+        Self { vae, unet, prompt_embeds, step, scaling_factor }
     }
 
     /// The refiner with its UNet computing in `dtype` (f32, f16, bf16). The VAE stays in f32 (sd-turbo's VAE
@@ -197,19 +234,23 @@ fn pad_to_multiple(x: Tensor<4>, multiple: usize) -> Tensor<4> {
     x.pad([(0, extra(height)), (0, extra(width))], PadMode::Edge)
 }
 
-/// Standard normal values shaped like `like`, from `seed` (Box-Muller over a xoshiro256++ stream).
+/// Standard normal values shaped like `like`, from `seed` ([`standard_normal_values`]).
 fn standard_normal(like: &Tensor<4>, seed: u64) -> Tensor<4> {
     let shape = like.dims();
-    let count: usize = shape.iter().product();
+    let values = standard_normal_values(shape.iter().product(), seed);
+    Tensor::from_data(TensorData::new(values, shape), &like.device())
+}
+
+/// `count` standard normal values from `seed` (Box-Muller over a xoshiro256++ stream).
+pub fn standard_normal_values(count: usize, seed: u64) -> Vec<f32> {
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
-    let values: Vec<f32> = (0..count)
+    (0..count)
         .map(|_| {
             let u1: f64 = 1.0 - rng.random::<f64>();
             let u2: f64 = rng.random::<f64>();
             ((-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()) as f32
         })
-        .collect();
-    Tensor::from_data(TensorData::new(values, shape), &like.device())
+        .collect()
 }
 
 /// The text encoder's output for the prompt, and the text-encoder tensors it did not use.
@@ -230,7 +271,7 @@ fn check_vae(config: &VaeConfig, path: &Path) -> Result<(), RefineError> {
 }
 
 /// `<stem>.safetensors` in `dir`, or its `.fp16` variant.
-fn weights_file(dir: &Path, stem: &str) -> Result<PathBuf, RefineError> {
+pub fn weights_file(dir: &Path, stem: &str) -> Result<PathBuf, RefineError> {
     let candidates = [format!("{stem}.safetensors"), format!("{stem}.fp16.safetensors")];
     candidates
         .iter()

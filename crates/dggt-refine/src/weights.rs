@@ -9,6 +9,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
+use burn::module::ParamId;
 use burn::tensor::{DType, Device, Tensor, TensorData};
 use safetensors::Dtype;
 
@@ -43,6 +44,18 @@ impl HostTensor {
 /// Tensors by checkpoint name.
 pub type NamedTensors = BTreeMap<String, HostTensor>;
 
+/// How a parameter holds the tensor of the file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StoredLayout {
+    /// As in the file.
+    AsFile,
+    /// The file's `[out, in]` linear weight transposed to burn's `[in, out]`.
+    Transposed,
+}
+
+/// Parameters by the name of the file tensor they were loaded from.
+pub type ParamNames = BTreeMap<String, (ParamId, StoredLayout)>;
+
 /// Every tensor of a safetensors file.
 pub fn read_safetensors(path: &Path) -> Result<NamedTensors, RefineError> {
     let bytes = std::fs::read(path).map_err(|e| RefineError::io(path, e))?;
@@ -70,6 +83,8 @@ pub fn read_safetensors(path: &Path) -> Result<NamedTensors, RefineError> {
 pub struct Weights {
     tensors: NamedTensors,
     taken: BTreeSet<String>,
+    /// The parameter each taken weight became, by file name (see [`Weights::record`]).
+    params: ParamNames,
     source: String,
     device: Device,
 }
@@ -77,7 +92,13 @@ pub struct Weights {
 impl Weights {
     /// `source`: the files the tensors came from, as error messages name them.
     pub fn new(tensors: NamedTensors, source: impl Into<String>, device: &Device) -> Self {
-        Self { tensors, taken: BTreeSet::new(), source: source.into(), device: device.clone() }
+        Self {
+            tensors,
+            taken: BTreeSet::new(),
+            params: ParamNames::new(),
+            source: source.into(),
+            device: device.clone(),
+        }
     }
 
     pub fn device(&self) -> &Device {
@@ -112,6 +133,17 @@ impl Weights {
     }
 
     /// Names of the tensors no module took.
+    /// Notes that the tensor `name` became the parameter `id`, stored in `layout`.
+    pub fn record(&mut self, name: &str, id: ParamId, layout: StoredLayout) {
+        self.params.insert(name.to_string(), (id, layout));
+    }
+
+    /// Every recorded parameter by its file name: what lets a trainer find a module's parameter by the name
+    /// checkpoints use.
+    pub fn params(&self) -> &ParamNames {
+        &self.params
+    }
+
     pub fn unused(&self) -> Vec<String> {
         self.tensors.keys().filter(|name| !self.taken.contains(*name)).cloned().collect()
     }

@@ -82,10 +82,10 @@ pub fn save(
     Ok(dir)
 }
 
-/// Writes the network's parameters as a burnpack file readable by [`load_model`], one tensor at a time: each
+/// Writes a module's (the network's) parameters as a burnpack file readable by [`load_model`], one tensor at a time: each
 /// is read back from its device only when the writer reaches it, so saving never holds a host copy of the
 /// whole network.
-pub fn save_model(path: &Path, model: &Dggt) -> Result<(), TrainError> {
+pub fn save_model<M: Module>(path: &Path, model: &M) -> Result<(), TrainError> {
     let mut collect = DeferredParameters::default();
     model.visit(&mut collect);
     burn_pack::Writer::new(collect.tensors).write_to_file(path).map_err(|e| checkpoint_error(path, e))
@@ -114,7 +114,8 @@ impl ModuleVisitor for DeferredParameters {
     }
 }
 
-fn prune(root: &Path, keep: usize) -> Result<(), TrainError> {
+/// Removes all but the newest `keep` `step-*` folders under `root`.
+pub fn prune(root: &Path, keep: usize) -> Result<(), TrainError> {
     let mut steps: Vec<PathBuf> = fs::read_dir(root)
         .map_err(|e| checkpoint_error(root, e))?
         .filter_map(|entry| entry.ok().map(|e| e.path()))

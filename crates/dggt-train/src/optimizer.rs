@@ -95,22 +95,34 @@ pub struct StepReport {
 
 impl Optimizer {
     pub fn new(config: &OptimSection, model: &Dggt) -> Self {
+        let group_rates = config
+            .groups
+            .iter()
+            .flat_map(|(name, &rate)| module_ids(model, name).into_iter().map(move |id| (id, rate)))
+            .collect();
+        Self { group_rates, ..Self::ungrouped(config) }
+    }
+
+    /// The optimiser of any module, every parameter at `config.lr` (`config.groups` and `config.frozen` name
+    /// the network's modules and are not consulted).
+    pub fn ungrouped(config: &OptimSection) -> Self {
         let adamw = AdamWConfig::new()
             .with_beta_1(config.beta1 as f32)
             .with_beta_2(config.beta2 as f32)
             .with_epsilon(config.epsilon as f32)
             .with_weight_decay(config.weight_decay as f32)
             .build();
-        let group_rates = config
-            .groups
-            .iter()
-            .flat_map(|(name, &rate)| module_ids(model, name).into_iter().map(move |id| (id, rate)))
-            .collect();
-        Self { adamw, states: HashMap::new(), base_rate: config.lr, group_rates, clip_norm: config.clip_grad_norm }
+        Self {
+            adamw,
+            states: HashMap::new(),
+            base_rate: config.lr,
+            group_rates: HashMap::new(),
+            clip_norm: config.clip_grad_norm,
+        }
     }
 
     /// Global L2 norm of `grads` over `model`'s parameters.
-    pub fn grad_norm(model: &Dggt, grads: &GradientsParams) -> f64 {
+    pub fn grad_norm<M: Module>(model: &M, grads: &GradientsParams) -> f64 {
         let mut norm = SquaredNorm { grads, sum: 0.0 };
         model.visit(&mut norm);
         norm.sum.sqrt()
@@ -119,7 +131,7 @@ impl Optimizer {
     /// Applies one step at schedule factor `factor` (the fraction of each peak rate). Returns `None` and leaves
     /// the model untouched when the gradient norm is not finite. Parameters of a group whose rate is zero are
     /// not stepped.
-    pub fn step(&mut self, model: Dggt, mut grads: GradientsParams, factor: f64) -> (Dggt, Option<StepReport>) {
+    pub fn step<M: Module>(&mut self, model: M, mut grads: GradientsParams, factor: f64) -> (M, Option<StepReport>) {
         let grad_norm = Self::grad_norm(&model, &grads);
         if !grad_norm.is_finite() {
             return (model, None);

@@ -204,6 +204,11 @@ impl Trainer {
         WarmupCosine { peak: 1.0, warmup: o.warmup_steps, total: self.config.run.steps, min_ratio: o.min_lr_ratio }
     }
 
+    /// The objective that renders the run's views.
+    pub fn objective(&self) -> &Objective {
+        &self.objective
+    }
+
     /// The run's scene index.
     pub fn index(&self) -> &DatasetIndex {
         &self.sampling.index
@@ -645,8 +650,9 @@ fn next_sample(stream: &mut Prefetcher<LoadedSample>) -> Result<LoadedSample, Tr
     }
 }
 
-/// Drops records of steps at or after `step` (a resumed run writes them again).
-fn truncate_metrics(path: &Path, step: u64) -> Result<(), TrainError> {
+/// Drops the records (JSON lines with a `step`) of steps at or after `step` from a metrics file: a resumed run
+/// writes them again.
+pub fn truncate_metrics(path: &Path, step: u64) -> Result<(), TrainError> {
     if !path.exists() {
         return Ok(());
     }
@@ -667,7 +673,8 @@ fn truncate_metrics(path: &Path, step: u64) -> Result<(), TrainError> {
         .map_err(|e| TrainError::Invalid { what: path.display().to_string(), detail: e.to_string() })
 }
 
-fn progress_bar(visible: bool, position: u64, total: u64) -> ProgressBar {
+/// The trainer's step bar at `position` of `total`, drawn on stderr when `visible`.
+pub fn progress_bar(visible: bool, position: u64, total: u64) -> ProgressBar {
     let target = if visible { ProgressDrawTarget::stderr() } else { ProgressDrawTarget::hidden() };
     let bar = styled_bar("{elapsed_precise} [{bar:30}] {pos}/{len} ({eta}) {msg}", target, Some(total));
     bar.set_position(position);

@@ -1,0 +1,27 @@
+//! Errors of training the refiner: each names the file, tensor or setting at fault.
+
+use std::path::PathBuf;
+
+use thiserror::Error;
+
+#[derive(Debug, Error)]
+pub enum RefineTrainError {
+    #[error("{0}")]
+    Refine(#[from] dggt_refine::RefineError),
+    #[error("{0}")]
+    Train(#[from] dggt_train::TrainError),
+    #[error("{0}")]
+    Loss(#[from] dggt_losses::LossError),
+    #[error("{path}: {source}")]
+    Io { path: PathBuf, source: std::io::Error },
+    #[error("configuration {path}: {detail}")]
+    Config { path: PathBuf, detail: String },
+    #[error("{what}: {detail}")]
+    Invalid { what: String, detail: String },
+}
+
+impl RefineTrainError {
+    pub(crate) fn invalid(what: impl Into<String>, detail: impl Into<String>) -> Self {
+        Self::Invalid { what: what.into(), detail: detail.into() }
+    }
+}

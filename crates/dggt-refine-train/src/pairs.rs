@@ -1,0 +1,163 @@
+//! Training pairs: a frame with artifacts (the refiner's input) and its ground truth (the loss's target).
+//!
+//! Images are host `[3, H, W]` RGB in [0, 1], channel-major. Where no reconstruction renders are at hand,
+//! [`degrade`] makes the artifacts the refiner removes from a clean image, reproducibly from a seed: ghosting
+//! (a blend with a shifted copy, as from misplaced Gaussians), a hole (a dark rectangle, as from
+//! disocclusion) and pixel noise. The pairs of a step are a pure function of `(seed, step)`
+//! ([`step_indices`]), so a resumed run draws what an uninterrupted one would.
+
+use std::path::Path;
+
+use burn::tensor::{Device, Tensor, TensorData};
+use rand::rngs::Xoshiro256PlusPlus;
+use rand::{RngExt, SeedableRng};
+
+use crate::error::RefineTrainError;
+
+/// A host image `[3, height, width]`, values in [0, 1].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Image {
+    pub height: usize,
+    pub width: usize,
+    pub values: Vec<f32>,
+}
+
+/// A frame with artifacts and its ground truth, the same size, with the reference view (an input view)
+/// the refiner may attend to.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Pair {
+    pub render: Image,
+    pub target: Image,
+    pub reference: Option<Image>,
+}
+
+/// The pairs trained on and those held out for validation.
+#[derive(Debug, Clone)]
+pub struct PairSet {
+    pub train: Vec<Pair>,
+    pub held_out: Vec<Pair>,
+}
+
+/// The tensors `names` of a safetensors file (`[3, H, W]` or `[N, 3, H, W]` float32, values in [0, 1]) as
+/// images, in that order.
+pub fn read_images(path: &Path, names: &[String]) -> Result<Vec<Image>, RefineTrainError> {
+    let bytes = std::fs::read(path).map_err(|source| RefineTrainError::Io { path: path.into(), source })?;
+    let file = safetensors::SafeTensors::deserialize(&bytes)
+        .map_err(|e| RefineTrainError::invalid(path.display().to_string(), format!("not a safetensors file: {e}")))?;
+    let mut images = Vec::new();
+    for name in names {
+        let what = || format!("{}: tensor '{name}'", path.display());
+        let view = file.tensor(name).map_err(|_| RefineTrainError::invalid(what(), "missing"))?;
+        if view.dtype() != safetensors::Dtype::F32 {
+            return Err(RefineTrainError::invalid(what(), format!("{:?}, expected float32", view.dtype())));
+        }
+        let shape = view.shape().to_vec();
+        let (height, width) = match shape.as_slice() {
+            [3, h, w] => (*h, *w),
+            [_, 3, h, w] => (*h, *w),
+            _ => {
+                return Err(RefineTrainError::invalid(
+                    what(),
+                    format!("shape {shape:?}, expected [3, H, W] or [N, 3, H, W]"),
+                ));
+            }
+        };
+        let values: Vec<f32> =
+            view.data().chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+        if values.iter().any(|v| !(0.0..=1.0).contains(v)) {
+            return Err(RefineTrainError::invalid(what(), "values outside [0, 1]"));
+        }
+        let size = 3 * height * width;
+        images.extend(values.chunks_exact(size).map(|v| Image { height, width, values: v.to_vec() }));
+    }
+    if images.is_empty() {
+        return Err(RefineTrainError::invalid(path.display().to_string(), "no image tensor named"));
+    }
+    Ok(images)
+}
+
+/// `variants` degraded copies of each image (seeds `0..variants` per image), the last `held_out` pairs held out.
+pub fn synthetic_pairs(images: &[Image], variants: usize, held_out: usize) -> Result<PairSet, RefineTrainError> {
+    let pairs: Vec<Pair> = images
+        .iter()
+        .enumerate()
+        .flat_map(|(i, image)| {
+            (0..variants).map(move |v| Pair {
+                render: degrade(image, (i * variants + v) as u64),
+                target: image.clone(),
+                reference: None,
+            })
+        })
+        .collect();
+    split_held_out(pairs, held_out)
+}
+
+/// The last `held_out` of `pairs` held out, the rest to train on.
+pub fn split_held_out(mut pairs: Vec<Pair>, held_out: usize) -> Result<PairSet, RefineTrainError> {
+    if held_out >= pairs.len() {
+        return Err(RefineTrainError::invalid(
+            "pairs.held_out",
+            format!("{held_out} held out of {} pairs leaves none to train on", pairs.len()),
+        ));
+    }
+    let held_out = pairs.split_off(pairs.len() - held_out);
+    Ok(PairSet { train: pairs, held_out })
+}
+
+/// `image` with ghosting, a hole and noise drawn from `seed` (see the module's doc).
+pub fn degrade(image: &Image, seed: u64) -> Image {
+    let Image { height, width, ref values } = *image;
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+    let shift = (1 + rng.random_range(0..3usize), rng.random_range(0..3usize));
+    let ghost = 0.3 + 0.2 * rng.random::<f32>();
+    let hole_h = (height / 4).max(1);
+    let hole_w = (width / 4).max(1);
+    let hole_y = rng.random_range(0..=height - hole_h);
+    let hole_x = rng.random_range(0..=width - hole_w);
+    let mut out = values.clone();
+    for c in 0..3 {
+        for y in 0..height {
+            for x in 0..width {
+                let at = |yy: usize, xx: usize| values[(c * height + yy) * width + xx];
+                let shifted = at(y.saturating_sub(shift.1), x.saturating_sub(shift.0));
+                let in_hole = (hole_y..hole_y + hole_h).contains(&y) && (hole_x..hole_x + hole_w).contains(&x);
+                let noise = 0.04 * (rng.random::<f32>() - 0.5);
+                let value = if in_hole { 0.05 } else { (1.0 - ghost) * at(y, x) + ghost * shifted + noise };
+                out[(c * height + y) * width + x] = value.clamp(0.0, 1.0);
+            }
+        }
+    }
+    Image { height, width, values: out }
+}
+
+/// The indices (into `count` training pairs) of step `step`'s `batch` pairs.
+pub fn step_indices(seed: u64, step: u64, batch: usize, count: usize) -> Vec<usize> {
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ step.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+    (0..batch).map(|_| rng.random_range(0..count)).collect()
+}
+
+/// The `[N, 3, H, W]` renders, targets and (when every pair has one) references of `pairs` on `device`.
+pub fn batch_pairs(
+    pairs: &[&Pair],
+    device: &Device,
+) -> Result<(Tensor<4>, Tensor<4>, Option<Tensor<4>>), RefineTrainError> {
+    let render = batch(&pairs.iter().map(|p| &p.render).collect::<Vec<_>>(), device)?;
+    let target = batch(&pairs.iter().map(|p| &p.target).collect::<Vec<_>>(), device)?;
+    let references: Option<Vec<&Image>> = pairs.iter().map(|p| p.reference.as_ref()).collect();
+    let reference = references.map(|r| batch(&r, device)).transpose()?;
+    Ok((render, target, reference))
+}
+
+/// Images of one size as a `[N, 3, H, W]` tensor on `device`.
+pub fn batch(images: &[&Image], device: &Device) -> Result<Tensor<4>, RefineTrainError> {
+    let first = images.first().ok_or_else(|| RefineTrainError::invalid("batch", "no image"))?;
+    let (height, width) = (first.height, first.width);
+    if let Some(other) = images.iter().find(|i| (i.height, i.width) != (height, width)) {
+        return Err(RefineTrainError::invalid(
+            "batch",
+            format!("images of {height}x{width} and {}x{} in one batch", other.height, other.width),
+        ));
+    }
+    let values: Vec<f32> = images.iter().flat_map(|i| i.values.iter().copied()).collect();
+    Ok(Tensor::from_data(TensorData::new(values, [images.len(), 3, height, width]), device))
+}

@@ -1,0 +1,328 @@
+//! The refiner's training loop on `dggt-train`'s machinery: its AdamW ([`Optimizer`]) with clipping, its
+//! schedule ([`WarmupCosine`]), its checkpoint folders (`checkpoints/step-NNNNNNNN/` with `model.bpk`,
+//! `optimizer.bpk` and `state.json`, the `latest` pointer written last) and its run state.
+//!
+//! A step refines `run.batch` training pairs drawn from `(seed, step)` at timestep 199 from a latent sampled
+//! with the seed `seed ^ step`, and steps AdamW on the loss; everything is a function of the seed, the step
+//! and the saved weights and moments, so a resumed run continues exactly. Validation refines the held-out
+//! pairs from the posterior mean and reports their PSNR against the targets (and that of the unrefined
+//! renders). Records go to `out_dir/metrics.jsonl`, one JSON object a line with its `kind` and `step`, as the
+//! project's trainer writes them (a resumed run first drops the records it is about to write again).
+
+use std::fs;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use burn::optim::GradientsParams;
+use burn::tensor::Device;
+use dggt_infer::checkpoint::{LATEST, MODEL_FILE, STATE_FILE, latest, load_model};
+use dggt_losses::psnr;
+use dggt_refine::Latent;
+use dggt_train::Start;
+use dggt_train::checkpoint::{RunState, optimizer_file, prune, save_model};
+use dggt_train::optimizer::Optimizer;
+use dggt_train::schedule::WarmupCosine;
+use dggt_train::trainer::{progress_bar, truncate_metrics};
+use serde::Serialize;
+
+use crate::config::{PairsSection, RefineTrainConfig};
+use crate::error::RefineTrainError;
+use crate::fresh::fresh_checkpoint;
+use crate::loss::RefineLoss;
+use crate::model::TrainableRefiner;
+use crate::pairs::{Image, PairSet, batch, batch_pairs, read_images, split_held_out, step_indices, synthetic_pairs};
+use crate::render_pairs::read_pairs;
+
+/// What one step did.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct StepRecord {
+    pub step: u64,
+    pub loss: f64,
+    pub l2: f64,
+    pub lpips: f64,
+    pub gram: f64,
+    /// `None` for a skipped (non-finite) step.
+    pub grad_norm: Option<f64>,
+}
+
+/// PSNR of the held-out pairs.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Validation {
+    pub step: u64,
+    /// Mean PSNR (dB) of the refined renders against their targets.
+    pub refined_psnr: f64,
+    /// Mean PSNR (dB) of the renders as they are.
+    pub render_psnr: f64,
+}
+
+pub struct RefineTrainer {
+    config: RefineTrainConfig,
+    model: TrainableRefiner,
+    optimizer: Optimizer,
+    loss: RefineLoss,
+    pairs: PairSet,
+    state: RunState,
+    /// The training device (with autodiff).
+    device: Device,
+    /// The same device without autodiff (validation).
+    plain_device: Device,
+}
+
+impl RefineTrainer {
+    /// Checks `config`, then loads the refiner, the losses and the pairs to train on `device` (given without autodiff, which the
+    /// trainer adds), resuming from the newest checkpoint under `run.out_dir` when `start` says so and there is
+    /// one.
+    pub fn new(config: RefineTrainConfig, plain_device: Device, start: Start) -> Result<Self, RefineTrainError> {
+        config.validate()?;
+        let device = plain_device.clone().autodiff();
+        let tokens = prompt_tokens(&config)?;
+        let model = load_model_of(&config, &tokens, &device)?;
+        let loss = RefineLoss::load(&config.loss, &device)?;
+        let pairs = load_pairs(&config.pairs)?;
+        let optimizer = Optimizer::ungrouped(&config.optim.section());
+        let state = RunState {
+            step: 0,
+            seed: config.run.seed,
+            skipped_steps: 0,
+            elapsed_s: 0.0,
+            bad_samples: 0,
+            samples_per_step: config.run.batch as u64,
+        };
+        let mut trainer = Self { config, model, optimizer, loss, pairs, state, device, plain_device };
+        if start == Start::Resume
+            && let Some(dir) = latest(&trainer.checkpoints()).map_err(dggt_train::TrainError::from)?
+        {
+            trainer.resume_from(&dir)?;
+        }
+        Ok(trainer)
+    }
+
+    pub fn model(&self) -> &TrainableRefiner {
+        &self.model
+    }
+
+    pub fn state(&self) -> &RunState {
+        &self.state
+    }
+
+    pub fn pairs(&self) -> &PairSet {
+        &self.pairs
+    }
+
+    fn checkpoints(&self) -> PathBuf {
+        self.config.run.out_dir.join("checkpoints")
+    }
+
+    fn schedule(&self) -> WarmupCosine {
+        let optim = self.config.optim.section();
+        WarmupCosine {
+            peak: optim.lr,
+            warmup: optim.warmup_steps,
+            total: self.config.run.steps,
+            min_ratio: optim.min_lr_ratio,
+        }
+    }
+
+    /// One optimiser step. A non-finite loss or gradient leaves the weights untouched (counted as skipped).
+    pub fn step(&mut self) -> Result<StepRecord, RefineTrainError> {
+        let step = self.state.step;
+        let indices = step_indices(self.state.seed, step, self.config.run.batch, self.pairs.train.len());
+        let chosen: Vec<_> = indices.iter().map(|&i| &self.pairs.train[i]).collect();
+        let (render, target, reference) = batch_pairs(&chosen, &self.device)?;
+        let refined = self.model.refine(render, reference, Latent::Sampled { seed: self.state.seed ^ step })?;
+        let value = self.loss.compute(refined, target)?;
+        let loss: f32 = value.total.clone().into_scalar();
+        let mut record =
+            StepRecord { step, loss: loss.into(), l2: value.l2, lpips: value.lpips, gram: value.gram, grad_norm: None };
+        if loss.is_finite() {
+            let grads = GradientsParams::from_grads(value.total.backward(), &self.model.weights);
+            let factor = self.schedule().factor(step);
+            let (weights, report) = self.optimizer.step(self.model.weights.clone(), grads, factor);
+            self.model.weights = weights;
+            record.grad_norm = report.map(|r| r.grad_norm);
+        }
+        if record.grad_norm.is_none() {
+            self.state.skipped_steps += 1;
+            tracing::warn!(step, "non-finite loss or gradient: step skipped, weights untouched");
+        }
+        self.state.step += 1;
+        Ok(record)
+    }
+
+    /// Trains to `run.steps` with a progress bar (when `progress`), validating and checkpointing on the
+    /// configured cadence and at the end. Returns the last validation.
+    pub fn run(&mut self, progress: bool) -> Result<Validation, RefineTrainError> {
+        let run = self.config.run.clone();
+        let bar = progress_bar(progress, self.state.step, run.steps);
+        let started = Instant::now();
+        let elapsed_before = self.state.elapsed_s;
+        let mut last = None;
+        truncate_metrics(&self.metrics_path(), self.state.step)?;
+        while self.state.step < run.steps {
+            let record = self.step()?;
+            bar.set_message(format!("loss {:.4}", record.loss));
+            bar.inc(1);
+            self.append_metrics("train", &record)?;
+            let step = self.state.step;
+            self.state.elapsed_s = elapsed_before + started.elapsed().as_secs_f64();
+            if run.validate_every > 0 && step % run.validate_every == 0 && step < run.steps {
+                last = Some(self.validate_and_record()?);
+            }
+            if step % run.checkpoint_every == 0 && step < run.steps {
+                self.save_checkpoint()?;
+            }
+        }
+        bar.finish_and_clear();
+        if last.is_none_or(|v: Validation| v.step != self.state.step) {
+            last = Some(self.validate_and_record()?);
+        }
+        self.save_checkpoint()?;
+        Ok(last.expect("validated above"))
+    }
+
+    fn validate_and_record(&self) -> Result<Validation, RefineTrainError> {
+        let validation = self.validate()?;
+        tracing::info!(
+            step = validation.step,
+            refined_psnr = validation.refined_psnr,
+            render_psnr = validation.render_psnr,
+            "held-out pairs"
+        );
+        self.append_metrics("validation", &validation)?;
+        Ok(validation)
+    }
+
+    /// PSNR of the held-out pairs, refined from the posterior mean, and of the renders as they are.
+    pub fn validate(&self) -> Result<Validation, RefineTrainError> {
+        let (mut refined_sum, mut render_sum) = (0.0, 0.0);
+        let model = self.model.valid();
+        for pair in &self.pairs.held_out {
+            let (render, _, reference) = batch_pairs(&[pair], &self.plain_device)?;
+            let refined = model.refine(render, reference, Latent::PosteriorMean)?;
+            let refined: Vec<f32> = refined
+                .into_data()
+                .try_into_vec()
+                .map_err(|e| RefineTrainError::invalid("validation", format!("refined image not readable: {e:?}")))?;
+            refined_sum += psnr(&refined, &pair.target.values)?;
+            render_sum += psnr(&pair.render.values, &pair.target.values)?;
+        }
+        let count = self.pairs.held_out.len().max(1) as f64;
+        Ok(Validation { step: self.state.step, refined_psnr: refined_sum / count, render_psnr: render_sum / count })
+    }
+
+    /// Writes the trained refiner to `path` for the refiner's loader ([`crate::export`]).
+    pub fn export(&self, path: &Path) -> Result<(), RefineTrainError> {
+        crate::export::write(&crate::export::to_checkpoint(&self.model)?, path)
+    }
+
+    /// The run's configuration.
+    pub fn config(&self) -> &RefineTrainConfig {
+        &self.config
+    }
+
+    /// The refined image of `image` (attending to `reference` when given) from the posterior mean, on the host.
+    pub fn refine_host(&self, image: &Image, reference: Option<&Image>) -> Result<Vec<f32>, RefineTrainError> {
+        let reference = reference.map(|r| batch(&[r], &self.plain_device)).transpose()?;
+        let image = batch(&[image], &self.plain_device)?;
+        let refined = self.model.valid().refine(image, reference, Latent::PosteriorMean)?;
+        refined
+            .into_data()
+            .try_into_vec()
+            .map_err(|e| RefineTrainError::invalid("refine", format!("refined image not readable: {e:?}")))
+    }
+
+    fn metrics_path(&self) -> PathBuf {
+        self.config.run.out_dir.join("metrics.jsonl")
+    }
+
+    /// Appends `record` with its `kind` as one JSON line to `out_dir/metrics.jsonl`.
+    fn append_metrics(&self, kind: &str, record: &impl Serialize) -> Result<(), RefineTrainError> {
+        let mut line = serde_json::to_value(record).expect("records serialise");
+        line["kind"] = kind.into();
+        let record = line;
+        let path = self.metrics_path();
+        let io = |source| RefineTrainError::Io { path: path.clone(), source };
+        fs::create_dir_all(&self.config.run.out_dir).map_err(io)?;
+        let mut file = fs::OpenOptions::new().create(true).append(true).open(&path).map_err(io)?;
+        writeln!(file, "{record}").map_err(io)
+    }
+
+    /// Writes `checkpoints/step-NNNNNNNN/` and points `latest` at it; keeps the newest `run.keep_checkpoints`.
+    pub fn save_checkpoint(&self) -> Result<PathBuf, RefineTrainError> {
+        let root = self.checkpoints();
+        let name = format!("step-{:08}", self.state.step);
+        let dir = root.join(&name);
+        let io = |path: &Path, e: String| RefineTrainError::invalid(path.display().to_string(), e);
+        fs::create_dir_all(&dir).map_err(|e| io(&dir, e.to_string()))?;
+        let _ = fs::remove_file(dir.join(STATE_FILE));
+        save_model(&dir.join(MODEL_FILE), &self.model.weights)?;
+        self.optimizer.save(&optimizer_file(&dir))?;
+        let state = serde_json::to_string_pretty(&self.state).expect("states serialise");
+        let write = |path: PathBuf, bytes: &[u8]| {
+            dggt_data::io::write_atomically(&path, bytes).map_err(|e| io(&path, e.to_string()))
+        };
+        write(dir.join(STATE_FILE), state.as_bytes())?;
+        write(root.join(LATEST), name.as_bytes())?;
+        prune(&root, self.config.run.keep_checkpoints.max(1))?;
+        Ok(dir)
+    }
+
+    /// Continues from the checkpoint folder `dir`: weights, AdamW moments and run state.
+    fn resume_from(&mut self, dir: &Path) -> Result<(), RefineTrainError> {
+        let loaded = load_model(dir, self.model.weights.clone()).map_err(dggt_train::TrainError::from)?;
+        self.model = self.model.clone().with_loaded_weights(loaded);
+        self.optimizer.load(&optimizer_file(dir), &self.device)?;
+        let path = dir.join(STATE_FILE);
+        let text = fs::read(&path).map_err(|source| RefineTrainError::Io { path: path.clone(), source })?;
+        self.state = serde_json::from_slice(&text)
+            .map_err(|e| RefineTrainError::invalid(path.display().to_string(), e.to_string()))?;
+        tracing::info!(checkpoint = %dir.display(), step = self.state.step, "resumed");
+        Ok(())
+    }
+}
+
+/// The refiner to train: the configured checkpoint over the base, or a fresh start from the base.
+fn load_model_of(
+    config: &RefineTrainConfig,
+    tokens: &[i64],
+    device: &Device,
+) -> Result<TrainableRefiner, RefineTrainError> {
+    let model = &config.model;
+    match &model.checkpoint {
+        Some(path) => TrainableRefiner::load(&model.base_dir, path, tokens, device),
+        None => {
+            let checkpoint = fresh_checkpoint(&model.base_dir, model.lora_rank, config.run.seed)?;
+            TrainableRefiner::from_checkpoint(&model.base_dir, checkpoint, &model.base_dir, tokens, device)
+        }
+    }
+}
+
+/// The configured pairs: rendered ones from their file, or synthetic ones from clean images.
+fn load_pairs(section: &PairsSection) -> Result<PairSet, RefineTrainError> {
+    match (&section.rendered, &section.images) {
+        (Some(file), _) => {
+            let pairs = read_pairs(file)?.into_iter().map(|rendered| rendered.pair).collect();
+            split_held_out(pairs, section.held_out)
+        }
+        (None, Some(images)) => {
+            synthetic_pairs(&read_images(images, &section.tensors)?, section.variants, section.held_out)
+        }
+        (None, None) => Err(RefineTrainError::invalid("pairs", "neither `rendered` nor `images` given")),
+    }
+}
+
+/// The prompt's token ids from the configuration.
+fn prompt_tokens(config: &RefineTrainConfig) -> Result<Vec<i64>, RefineTrainError> {
+    let Some(path) = &config.model.prompt_tokens_file else {
+        return Ok(config.model.prompt_tokens.clone());
+    };
+    let invalid = |detail: String| RefineTrainError::invalid(path.display().to_string(), detail);
+    let bytes = fs::read(path).map_err(|source| RefineTrainError::Io { path: path.clone(), source })?;
+    let file = safetensors::SafeTensors::deserialize(&bytes).map_err(|e| invalid(e.to_string()))?;
+    let ids = file.tensor("input_ids").map_err(|_| invalid("no tensor 'input_ids'".into()))?;
+    if ids.dtype() != safetensors::Dtype::I64 {
+        return Err(invalid(format!("'input_ids' is {:?}, expected int64", ids.dtype())));
+    }
+    Ok(ids.data().chunks_exact(8).map(|b| i64::from_le_bytes(b.try_into().expect("8 bytes"))).collect())
+}

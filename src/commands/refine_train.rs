@@ -1,0 +1,64 @@
+//! `dggt refine-train`: trains the diffusion refiner as a TOML configuration describes
+//! (`configs/refine-tiny.toml`), with progress, checkpoints and resume, and writes the trained refiner where
+//! the refiner's loader reads it (`dggt_refine_train::export::load_refiner`).
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+use dggt_refine_train::{RefineTrainConfig, RefineTrainer};
+use dggt_train::Start;
+
+use crate::backend::DeviceSpec;
+
+/// Train the single-step diffusion refiner (Difix) on pairs of frames with artifacts and their ground truth.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The configuration file.
+    #[arg(long)]
+    config: PathBuf,
+    /// Continue from the newest checkpoint in the run's output folder.
+    #[arg(long)]
+    resume: bool,
+    /// The device to train on (`cpu`, `wgpu`, `cuda:0`).
+    #[arg(long, default_value = "cpu")]
+    device: DeviceSpec,
+    /// Override `run.steps`.
+    #[arg(long)]
+    steps: Option<u64>,
+    /// Override `run.out_dir`.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Where to write the trained refiner (default `OUT/refiner.safetensors`).
+    #[arg(long)]
+    export: Option<PathBuf>,
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let mut config = RefineTrainConfig::load(&args.config)?;
+    if let Some(steps) = args.steps {
+        config.run.steps = steps;
+    }
+    if let Some(out) = args.out {
+        config.run.out_dir = out;
+    }
+    config.validate().map_err(|e| anyhow::anyhow!("{}: {e}", args.config.display()))?;
+    let start = if args.resume { Start::Resume } else { Start::Fresh };
+    let mut trainer = RefineTrainer::new(config, args.device.device()?, start)?;
+    let first_step = trainer.state().step;
+    let before = trainer.validate()?;
+    let after = trainer.run(std::io::IsTerminal::is_terminal(&std::io::stderr()))?;
+    let out = trainer.config().run.out_dir.clone();
+    let export = args.export.unwrap_or_else(|| out.join("refiner.safetensors"));
+    trainer.export(&export)?;
+    println!(
+        "trained steps {first_step}..{} ({} skipped); held-out PSNR {:.2} -> {:.2} dB (renders as they are: {:.2} dB)",
+        trainer.state().step,
+        trainer.state().skipped_steps,
+        before.refined_psnr,
+        after.refined_psnr,
+        after.render_psnr
+    );
+    println!("metrics: {}", out.join("metrics.jsonl").display());
+    println!("refiner: {}", export.display());
+    Ok(())
+}

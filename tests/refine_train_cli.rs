@@ -1,0 +1,50 @@
+//! `dggt refine-train` on `configs/refine-tiny.toml` (the tiny random refiner of the shared parity folder):
+//! trains a few steps, writes metrics, checkpoints and the refiner file, resumes where it stopped, and refuses
+//! a bad configuration naming the file and the setting.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn dggt(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_dggt")).args(args).output().expect("the dggt binary runs")
+}
+
+fn config() -> PathBuf {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs/refine-tiny.toml");
+    let parity = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/parity/difix_tiny_s1");
+    assert!(parity.is_dir(), "the configuration's refiner is missing: {}", parity.display());
+    path
+}
+
+fn stdout(output: &Output) -> String {
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    String::from_utf8_lossy(&output.stdout).into_owned()
+}
+
+#[test]
+fn refine_train_trains_checkpoints_exports_and_resumes() {
+    let out = tempfile::tempdir().unwrap();
+    let out_dir = out.path().to_str().unwrap();
+    let config = config();
+    let config = config.to_str().unwrap();
+    let first = stdout(&dggt(&["refine-train", "--config", config, "--steps", "3", "--out", out_dir]));
+    assert!(first.contains("trained steps 0..3"), "{first}");
+    assert!(out.path().join("refiner.safetensors").is_file() && out.path().join("checkpoints/latest").is_file());
+    let resumed = stdout(&dggt(&["refine-train", "--config", config, "--steps", "5", "--out", out_dir, "--resume"]));
+    assert!(resumed.contains("trained steps 3..5"), "{resumed}");
+    let metrics = std::fs::read_to_string(out.path().join("metrics.jsonl")).unwrap();
+    let train_steps = metrics.lines().filter(|l| l.contains("\"train\"")).count();
+    assert_eq!(train_steps, 5, "one record per step:\n{metrics}");
+}
+
+#[test]
+fn refine_train_refuses_a_bad_configuration_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.toml");
+    let text = std::fs::read_to_string(config()).unwrap().replace("batch = 1", "batch = 0");
+    std::fs::write(&bad, text).unwrap();
+    let output = dggt(&["refine-train", "--config", bad.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success());
+    assert!(stderr.contains("bad.toml") && stderr.contains("run.batch"), "{stderr}");
+}
