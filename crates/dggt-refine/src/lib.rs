@@ -6,7 +6,7 @@
 //!   through skip convolutions; decoder LoRA merged at load ([`lora`]);
 //! - [`unet`]: the SD 2.1-layout denoiser with its spatial transformers ([`transformer`]) and residual
 //!   blocks ([`resnet`]);
-//! - [`text_encoder`]: the CLIP text encoder for the fixed prompt, run once;
+//! - [`text_encoder`]: the CLIP text encoder for the fixed prompt, run once; [`tokenizer`]: its tokenizer;
 //! - [`scheduler`]: the noise schedule and the step to the clean latent;
 //! - [`refiner`]: the whole computation, and loading a diffusers model folder ([`config`], [`weights`]) with
 //!   a Difix checkpoint ([`checkpoint`]) over it.
@@ -23,6 +23,7 @@ pub mod refiner;
 pub mod resnet;
 pub mod scheduler;
 pub mod text_encoder;
+pub mod tokenizer;
 pub mod trace;
 pub mod transformer;
 pub mod unet;
@@ -31,4 +32,5 @@ pub mod weights;
 
 pub use error::RefineError;
 pub use refiner::{Latent, LoadReport, Refiner, TIMESTEP};
+pub use tokenizer::{DEFAULT_PROMPT, Prompt};
 pub use trace::Trace;

@@ -18,9 +18,10 @@ use rand::{RngExt, SeedableRng};
 use crate::checkpoint::DifixCheckpoint;
 use crate::config::{SchedulerConfig, TextEncoderConfig, UnetConfig, VaeConfig, read_json, require};
 use crate::error::RefineError;
-use crate::lora::{VaeOverlay, apply_vae_overlay};
+use crate::lora::{VaeOverlay, apply_vae_overlay_scaled};
 use crate::scheduler::{SingleStep, alphas_cumprod};
 use crate::text_encoder::TextEncoder;
+use crate::tokenizer::Prompt;
 use crate::trace::Trace;
 use crate::transformer::ViewAttention;
 use crate::unet::Unet;
@@ -66,7 +67,8 @@ pub struct Refiner {
 
 impl Refiner {
     /// Loads the base model folder (diffusers layout: `vae/`, `unet/`, `text_encoder/`, `scheduler/`) with a
-    /// Difix checkpoint over it, and encodes the prompt given as token ids.
+    /// Difix checkpoint over it (its `.pkl` or the `.safetensors` converted from it), and encodes the prompt
+    /// given as token ids.
     pub fn load(
         model_dir: &Path,
         checkpoint: &Path,
@@ -82,11 +84,12 @@ impl Refiner {
         check_vae(&vae_config, &vae_config_path)?;
         let vae_file = weights_file(&model_dir.join("vae"), "diffusion_pytorch_model")?;
         let mut vae_tensors = read_safetensors(&vae_file)?;
-        report.vae = apply_vae_overlay(
+        report.vae = apply_vae_overlay_scaled(
             &mut vae_tensors,
             checkpoint.vae,
             &checkpoint.lora_targets,
             checkpoint.lora_rank,
+            checkpoint.lora_alpha,
             checkpoint_path,
         )?;
         let mut vae_weights = Weights::new(vae_tensors, sources(&vae_file, checkpoint_path), device);
@@ -115,6 +118,17 @@ impl Refiner {
             .collect();
         let refiner = Self { vae, unet, prompt_embeds, step, scaling_factor: vae_config.scaling_factor };
         Ok((refiner, report))
+    }
+
+    /// [`Refiner::load`] with the prompt as text (tokenised by `model_dir/tokenizer/`; an error naming the
+    /// missing file when the folder has none) or as token ids.
+    pub fn load_prompt(
+        model_dir: &Path,
+        checkpoint: &Path,
+        prompt: &Prompt,
+        device: &Device,
+    ) -> Result<(Self, LoadReport), RefineError> {
+        Self::load(model_dir, checkpoint, &prompt.token_ids(model_dir)?, device)
     }
 
     /// The refiner with its UNet computing in `dtype` (f32, f16, bf16). The VAE stays in f32 (sd-turbo's VAE

@@ -6,7 +6,7 @@
 //! them before they become parameters: checkpoint overlays replace base tensors and LoRA pairs are merged
 //! into their targets ([`crate::lora`]).
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 
 use burn::tensor::{DType, Device, Tensor, TensorData};
@@ -45,9 +45,16 @@ pub type NamedTensors = BTreeMap<String, HostTensor>;
 
 /// Every tensor of a safetensors file.
 pub fn read_safetensors(path: &Path) -> Result<NamedTensors, RefineError> {
+    Ok(read_safetensors_with_metadata(path)?.0)
+}
+
+/// Every tensor of a safetensors file, and the file's text metadata (empty when it has none).
+pub fn read_safetensors_with_metadata(path: &Path) -> Result<(NamedTensors, HashMap<String, String>), RefineError> {
     let bytes = std::fs::read(path).map_err(|e| RefineError::io(path, e))?;
-    let file = safetensors::SafeTensors::deserialize(&bytes)
-        .map_err(|e| RefineError::file(path, format!("not a safetensors file: {e}")))?;
+    let invalid = |e: safetensors::SafeTensorError| RefineError::file(path, format!("not a safetensors file: {e}"));
+    let (_, header) = safetensors::SafeTensors::read_metadata(&bytes).map_err(invalid)?;
+    let metadata = header.metadata().clone().unwrap_or_default();
+    let file = safetensors::SafeTensors::deserialize(&bytes).map_err(invalid)?;
     let mut tensors = NamedTensors::new();
     for (name, view) in file.tensors() {
         let dtype = match view.dtype() {
@@ -62,7 +69,28 @@ pub fn read_safetensors(path: &Path) -> Result<NamedTensors, RefineError> {
         let data = TensorData::from_bytes_vec(view.data().to_vec(), view.shape().to_vec(), dtype);
         tensors.insert(name.clone(), HostTensor::from_data(data, path, &name)?);
     }
-    Ok(tensors)
+    Ok((tensors, metadata))
+}
+
+/// Writes `tensors` (f32) and `metadata` as a safetensors file.
+pub fn write_safetensors(
+    path: &Path,
+    tensors: &NamedTensors,
+    metadata: HashMap<String, String>,
+) -> Result<(), RefineError> {
+    let bytes: Vec<(&String, Vec<u8>, &Vec<usize>)> = tensors
+        .iter()
+        .map(|(name, t)| (name, t.values.iter().flat_map(|v| v.to_le_bytes()).collect(), &t.shape))
+        .collect();
+    let views = bytes
+        .iter()
+        .map(|(name, data, shape)| {
+            safetensors::tensor::TensorView::new(Dtype::F32, shape.to_vec(), data)
+                .map(|view| (name.to_string(), view))
+                .map_err(|e| RefineError::file(path, format!("tensor '{name}': {e}")))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    safetensors::serialize_to_file(views, Some(metadata), path).map_err(|e| RefineError::file(path, e.to_string()))
 }
 
 /// The tensors a module tree is built from, on the device its parameters go to. Taking a tensor marks it
