@@ -8,7 +8,7 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 use tracing_subscriber::EnvFilter;
 
-use crate::commands::{bench, convert, devices, eval, inspect, parity, reconstruct, stress, synth, train};
+use crate::commands::{bench, convert, devices, eval, inspect, parity, reconstruct, refine, stress, synth, train};
 
 #[derive(Debug, Parser)]
 #[command(name = "dggt", version, about = "Feedforward 4D reconstruction of dynamic driving scenes")]
@@ -29,6 +29,7 @@ enum Command {
     Eval(eval::Args),
     Bench(bench::Args),
     Devices(devices::Args),
+    Refine(refine::Args),
 }
 
 fn main() -> Result<()> {
@@ -47,5 +48,6 @@ fn main() -> Result<()> {
         Command::Eval(args) => eval::run(args),
         Command::Bench(args) => bench::run(args),
         Command::Devices(args) => devices::run(args),
+        Command::Refine(args) => refine::run(args),
     }
 }

@@ -9,6 +9,7 @@ pub mod eval;
 pub mod inspect;
 pub mod parity;
 pub mod reconstruct;
+pub mod refine;
 pub mod stress;
 pub mod synth;
 pub mod train;

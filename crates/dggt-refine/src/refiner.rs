@@ -201,6 +201,71 @@ impl Refiner {
     }
 }
 
+impl Refiner {
+    /// Refines `frames` `[n, 3, h, w]` in [0, 1] in batches of `batch` frames (the reference-view mode when
+    /// `reference` `[n, 3, h, w]` is given, frame `i` attending to reference `i`), calling `progress` with the
+    /// number of frames done after each batch. A sampled latent draws batch `k`'s noise from `seed + k`, so
+    /// results are reproducible for the same seed and batch size.
+    pub fn refine_frames(
+        &self,
+        frames: Tensor<4>,
+        reference: Option<Tensor<4>>,
+        latent: Latent,
+        batch: usize,
+        mut progress: impl FnMut(usize),
+    ) -> Result<Tensor<4>, RefineError> {
+        let count = frames.dims()[0];
+        if batch == 0 || count == 0 {
+            return Err(RefineError::Input(format!("{count} frames in batches of {batch}: nothing to refine")));
+        }
+        if let Some(reference) = &reference
+            && reference.dims() != frames.dims()
+        {
+            return Err(RefineError::Input(format!(
+                "references of shape {:?}, expected the frames' {:?}",
+                reference.dims(),
+                frames.dims()
+            )));
+        }
+        let mut refined = Vec::with_capacity(count.div_ceil(batch));
+        for (k, start) in (0..count).step_by(batch).enumerate() {
+            let rows = batch.min(count - start);
+            let latent = match latent {
+                Latent::Sampled { seed } => Latent::Sampled { seed: seed.wrapping_add(k as u64) },
+                mean => mean,
+            };
+            let part = reference.as_ref().map(|r| r.clone().narrow(0, start, rows));
+            refined.push(self.refine(frames.clone().narrow(0, start, rows), part, latent, &mut Trace::Off)?);
+            progress(start + rows);
+        }
+        Ok(Tensor::cat(refined, 0))
+    }
+}
+
+/// `[1, 3, h, w]` from interleaved RGB `[h, w, 3]` (a decoded image's layout).
+pub fn frame_from_interleaved(
+    rgb: &[f32],
+    height: usize,
+    width: usize,
+    device: &Device,
+) -> Result<Tensor<4>, RefineError> {
+    if rgb.len() != 3 * height * width {
+        return Err(RefineError::Input(format!("{} RGB values for a {width} x {height} frame", rgb.len())));
+    }
+    let hwc = Tensor::<3>::from_data(TensorData::new(rgb.to_vec(), [height, width, 3]), device);
+    Ok(hwc.permute([2, 0, 1]).unsqueeze_dim(0))
+}
+
+/// Interleaved RGB `[h, w, 3]` of frame `index` of `frames` `[n, 3, h, w]`.
+pub fn frame_to_interleaved(frames: &Tensor<4>, index: usize) -> Result<Vec<f32>, RefineError> {
+    let [_, channels, height, width] = frames.dims();
+    let hwc = frames.clone().narrow(0, index, 1).reshape([channels, height, width]).permute([1, 2, 0]);
+    hwc.into_data()
+        .convert::<f32>()
+        .try_into_vec::<f32>()
+        .map_err(|e| RefineError::Input(format!("frame {index}: {e:?}")))
+}
+
 /// Pads the bottom and right of `x` with copies of its edge pixels to sides that are multiples of `multiple`.
 fn pad_to_multiple(x: Tensor<4>, multiple: usize) -> Tensor<4> {
     let [_, _, height, width] = x.dims();

@@ -153,3 +153,36 @@ fn a_reduced_precision_unet_stays_close_to_f32() {
         assert!(image_error < bound && eps_error < 2.0 * bound, "{dtype:?}: {image_error} / {eps_error}");
     }
 }
+
+/// Frames refined in batches (with references) are the frames refined one by one, and progress counts them.
+#[test]
+fn frames_refined_in_batches_equal_frames_refined_one_by_one() {
+    let (refiner, image) = load_refiner(&Device::flex());
+    let frames = Tensor::cat(vec![image.clone(), image.clone().flip([3]), image.clone().flip([2])], 0);
+    let references = frames.clone().flip([0]);
+    let mut done = Vec::new();
+    let batched = refiner
+        .refine_frames(frames.clone(), Some(references.clone()), Latent::PosteriorMean, 2, |n| done.push(n))
+        .unwrap();
+    assert_eq!(done, [2, 3]);
+    assert_eq!(batched.dims(), frames.dims());
+    for i in 0..3 {
+        let single = refiner
+            .refine(
+                frames.clone().narrow(0, i, 1),
+                Some(references.clone().narrow(0, i, 1)),
+                Latent::PosteriorMean,
+                &mut Trace::Off,
+            )
+            .unwrap();
+        let error =
+            compare("frame", Some(&batched.clone().narrow(0, i, 1).into_data()), &single.into_data()).max_abs.unwrap();
+        assert!(error < 1e-5, "frame {i} differs by {error} batched");
+    }
+    assert!(
+        refiner
+            .refine_frames(frames.clone(), Some(references.narrow(0, 0, 2)), Latent::PosteriorMean, 2, |_| ())
+            .is_err()
+    );
+    assert!(refiner.refine_frames(frames, None, Latent::PosteriorMean, 0, |_| ()).is_err());
+}
