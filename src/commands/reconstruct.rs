@@ -10,7 +10,7 @@ use dggt_reconstruct::{ReconstructOptions, TimeRequest, reconstruct};
 
 use crate::backend::DeviceList;
 use crate::commands::parse_range;
-use crate::commands::refine::{RefineArgs, RefineJob, refine_files};
+use crate::commands::refine::{RefineArgs, RefineJob, load_refiner, refine_files};
 
 /// Reconstruct a driving scene from unposed images with one forward pass: cameras (JSON, COLMAP, nerfstudio),
 /// depth, dynamic and sky maps, Gaussians as PLY (static, sky, dynamic per time) and renders.
@@ -65,7 +65,8 @@ pub const REFINED_RENDERS: &str = "renders_refined";
 /// render into `renders_refined/` under the same name.
 pub fn run(args: Args) -> Result<()> {
     let device = args.device.single()?;
-    let refiner = args.refine.load(&device)?;
+    let refine = args.refine.spec()?;
+    let refiner = refine.as_ref().map(|spec| load_refiner(spec, &device)).transpose()?;
     let mut options = ReconstructOptions::new(args.images, args.checkpoint, args.out);
     options.architecture = match (args.config, args.preset) {
         (Some(path), _) => Some(Architecture::Config(path)),
@@ -85,7 +86,7 @@ pub fn run(args: Args) -> Result<()> {
     tracing::info!("reconstructing {} with {} on {device:?}", options.images.display(), options.checkpoint.display());
     let summary = reconstruct(&options, &device)?;
     println!("{summary}");
-    if let Some(refiner) = refiner {
+    if let (Some(refiner), Some(spec)) = (refiner, refine) {
         let jobs: Vec<RefineJob> = summary
             .renders
             .iter()
@@ -98,7 +99,7 @@ pub fn run(args: Args) -> Result<()> {
                 }
             })
             .collect();
-        refine_files(&refiner, &jobs, args.refine.latent(), &device)?;
+        refine_files(&refiner, &jobs, spec.latent, &device)?;
         println!(
             "refined {} renders into {} (unrefined kept in renders/)",
             jobs.len(),

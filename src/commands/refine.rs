@@ -9,7 +9,7 @@ use burn::tensor::Device;
 use clap::Subcommand;
 use dggt_export::images::{read_rgb_png, write_rgb_png};
 use dggt_refine::checkpoint::DifixCheckpoint;
-use dggt_refine::{Latent, Prompt, Refiner, frame_from_interleaved, frame_to_interleaved};
+use dggt_refine::{Latent, Prompt, Refiner, RefinerSpec, frame_from_interleaved, frame_to_interleaved};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::backend::DeviceList;
@@ -103,7 +103,8 @@ fn images(args: ImagesArgs) -> Result<()> {
     );
     let device = args.device.single()?;
     let latent = if args.sample_latent { Latent::Sampled { seed: args.seed } } else { Latent::PosteriorMean };
-    let refiner = load_refiner(&args.model, args.checkpoint.as_deref(), args.prompt_ids, &device)?;
+    let spec = refiner_spec(&args.model, args.checkpoint.as_deref(), args.prompt_ids, latent)?;
+    let refiner = load_refiner(&spec, &device)?;
     let jobs: Vec<RefineJob> = args
         .images
         .iter()
@@ -139,27 +140,22 @@ pub struct RefineArgs {
 }
 
 impl RefineArgs {
-    /// The refiner these arguments name, if any, loaded on `device`.
-    pub fn load(&self, device: &Device) -> Result<Option<Refiner>> {
-        self.refine_model
-            .as_ref()
-            .map(|model| load_refiner(model, self.refine_checkpoint.as_deref(), self.refine_prompt_ids.clone(), device))
-            .transpose()
-    }
-
-    pub fn latent(&self) -> Latent {
-        self.refine_seed.map_or(Latent::PosteriorMean, |seed| Latent::Sampled { seed })
+    /// The refiner these arguments name, if any.
+    pub fn spec(&self) -> Result<Option<RefinerSpec>> {
+        let Some(model) = &self.refine_model else { return Ok(None) };
+        let latent = self.refine_seed.map_or(Latent::PosteriorMean, |seed| Latent::Sampled { seed });
+        Ok(Some(refiner_spec(model, self.refine_checkpoint.as_deref(), self.refine_prompt_ids.clone(), latent)?))
     }
 }
 
-/// Loads the refiner of `model` with `checkpoint` (see [`RefineArgs::refine_checkpoint`] for the default) and the
+/// The refiner of `model` with `checkpoint` (see [`RefineArgs::refine_checkpoint`] for the default) and the
 /// prompt as token ids when given, else the default prompt through the folder's tokenizer.
-pub fn load_refiner(
+pub fn refiner_spec(
     model: &Path,
     checkpoint: Option<&Path>,
     prompt_ids: Option<Vec<i64>>,
-    device: &Device,
-) -> Result<Refiner> {
+    latent: Latent,
+) -> Result<RefinerSpec> {
     let checkpoint = match checkpoint {
         Some(path) => path.to_path_buf(),
         None => ["model_difix.safetensors", "model_difix.pkl"]
@@ -169,9 +165,13 @@ pub fn load_refiner(
             .with_context(|| format!("no model_difix.safetensors or model_difix.pkl in {}", model.display()))?,
     };
     let prompt = prompt_ids.map_or_else(Prompt::default, Prompt::Tokens);
-    tracing::info!("loading the refiner of {} with {} on {device:?}", model.display(), checkpoint.display());
-    let (refiner, report) = Refiner::load_prompt(model, &checkpoint, &prompt, device)
-        .with_context(|| format!("loading the refiner of {} with {}", model.display(), checkpoint.display()))?;
+    Ok(RefinerSpec { model_dir: model.to_path_buf(), checkpoint, prompt, latent })
+}
+
+/// Loads the refiner `spec` names on `device`, warning about tensors it did not use.
+pub fn load_refiner(spec: &RefinerSpec, device: &Device) -> Result<Refiner> {
+    tracing::info!("loading the refiner {} on {device:?}", spec.describe());
+    let (refiner, report) = spec.load(device).with_context(|| format!("loading the refiner {}", spec.describe()))?;
     if !report.unused.is_empty() {
         tracing::warn!("{} refiner tensors unused: {}", report.unused.len(), report.unused.join(", "));
     }

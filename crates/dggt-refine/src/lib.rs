@@ -31,6 +31,6 @@ pub mod vae;
 pub mod weights;
 
 pub use error::RefineError;
-pub use refiner::{Latent, LoadReport, Refiner, TIMESTEP, frame_from_interleaved, frame_to_interleaved};
+pub use refiner::{Latent, LoadReport, Refiner, RefinerSpec, TIMESTEP, frame_from_interleaved, frame_to_interleaved};
 pub use tokenizer::{DEFAULT_PROMPT, Prompt};
 pub use trace::Trace;

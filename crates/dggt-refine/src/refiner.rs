@@ -56,6 +56,33 @@ pub struct LoadReport {
     pub unused: Vec<String>,
 }
 
+/// Where a refiner comes from and how it draws its latent: what a command that refines its renders carries
+/// until it loads the refiner on its device.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RefinerSpec {
+    /// The base model folder (diffusers layout).
+    pub model_dir: PathBuf,
+    /// The Difix checkpoint, `.pkl` or converted `.safetensors`.
+    pub checkpoint: PathBuf,
+    pub prompt: Prompt,
+    pub latent: Latent,
+}
+
+impl RefinerSpec {
+    pub fn load(&self, device: &Device) -> Result<(Refiner, LoadReport), RefineError> {
+        Refiner::load_prompt(&self.model_dir, &self.checkpoint, &self.prompt, device)
+    }
+
+    /// One line naming the folder, the checkpoint and the latent.
+    pub fn describe(&self) -> String {
+        let latent = match self.latent {
+            Latent::PosteriorMean => "posterior mean".to_string(),
+            Latent::Sampled { seed } => format!("sampled latent, seed {seed}"),
+        };
+        format!("{} with {} ({latent})", self.model_dir.display(), self.checkpoint.display())
+    }
+}
+
 pub struct Refiner {
     vae: Vae,
     unet: Unet,
