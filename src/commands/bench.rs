@@ -12,6 +12,7 @@ use dggt_bench::{
 
 use crate::backend::DeviceList;
 use crate::commands::bench_compute;
+use crate::commands::refine::RefineArgs;
 
 /// Benchmarks: without a suite, run time against error over the reconstruction's knobs on a scene; `compute`
 /// times the network, a training step and the rasteriser at the release's scale.
@@ -120,6 +121,10 @@ pub struct SweepArgs {
     /// Output folder.
     #[arg(long)]
     pub out: PathBuf,
+    /// With `--refine MODEL_DIR`, every row's renders are also refined: its time and its error against the
+    /// truth beside the unrefined one.
+    #[command(flatten)]
+    pub refine: RefineArgs,
 }
 
 fn parse_sky(text: &str) -> Result<bool> {
@@ -165,6 +170,7 @@ impl SweepArgs {
             },
             seed: self.seed,
             chunk_frames: self.chunk,
+            refine: self.refine.spec()?,
         })
     }
 }

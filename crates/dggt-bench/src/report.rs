@@ -11,7 +11,7 @@ use crate::run::{BenchReport, ErrorMetrics, MeasuredRow, RowOutcome};
 pub const CSV_HEADER: &str = "row,varied,label,width_px,height_px,input_frames,min_opacity,precision,sky,\
 backbone_ms,heads_ms,assembly_ms,raster_ms,total_ms,gaussians_kept_per_view,gaussian_candidates_per_view,\
 sky_gaussians,psnr_vs_exact_db,ssim_vs_exact,lpips_vs_exact,psnr_vs_truth_db,ssim_vs_truth,lpips_vs_truth,\
-pareto_vs_exact,pareto_vs_truth,status";
+refine_ms,psnr_refined_vs_truth_db,ssim_refined_vs_truth,lpips_refined_vs_truth,pareto_vs_exact,pareto_vs_truth,status";
 
 /// A CSV field, quoted when it holds a comma, quote or line break.
 fn field(text: &str) -> String {
@@ -56,6 +56,13 @@ pub fn csv_text(report: &BenchReport) -> String {
                 fields.push(row.sky_gaussians.to_string());
                 fields.extend(metrics_fields(&row.vs_exact));
                 fields.extend(metrics_fields(&row.vs_truth));
+                match &row.refined {
+                    Some(refined) => {
+                        fields.push(number(refined.refine_ms, 2));
+                        fields.extend(metrics_fields(&refined.vs_truth));
+                    }
+                    None => fields.extend(std::iter::repeat_n(String::new(), 4)),
+                }
                 fields.extend([row.pareto_vs_exact.to_string(), row.pareto_vs_truth.to_string(), "measured".into()]);
             }
             RowOutcome::Skipped { reason, .. } => {
@@ -66,7 +73,7 @@ pub fn csv_text(report: &BenchReport) -> String {
                     knobs.precision.name().into(),
                     knobs.sky.to_string(),
                 ]);
-                fields.extend(std::iter::repeat_n(String::new(), 16));
+                fields.extend(std::iter::repeat_n(String::new(), 20));
                 fields.push(field(&format!("skipped: {reason}")));
             }
         }
@@ -100,8 +107,18 @@ pub fn table_text(report: &BenchReport) -> String {
     let mut text = String::new();
     let _ = writeln!(
         text,
-        "{:<28} {:>9} {:>8} {:>9} {:>8} {:>9} {:>9} {:>9} {:>9} front",
-        "configuration", "backbone", "heads", "assembly", "raster", "total ms", "kept/view", "dB exact", "dB truth",
+        "{:<28} {:>9} {:>8} {:>9} {:>8} {:>9} {:>9} {:>9} {:>9} {:>10} {:>10} front",
+        "configuration",
+        "backbone",
+        "heads",
+        "assembly",
+        "raster",
+        "total ms",
+        "kept/view",
+        "dB exact",
+        "dB truth",
+        "refine ms",
+        "dB refined",
     );
     for outcome in &report.rows {
         match outcome {
@@ -123,7 +140,7 @@ fn table_line(row: &MeasuredRow) -> String {
         (false, false) => "",
     };
     format!(
-        "{:<28} {:>9.1} {:>8.1} {:>9.1} {:>8.1} {:>9.1} {:>9.0} {:>9} {:>9} {front}\n",
+        "{:<28} {:>9.1} {:>8.1} {:>9.1} {:>8.1} {:>9.1} {:>9.0} {:>9} {:>9} {:>10} {:>10} {front}\n",
         row.configuration.knobs.label(),
         t.backbone_ms,
         t.heads_ms,
@@ -133,6 +150,8 @@ fn table_line(row: &MeasuredRow) -> String {
         row.gaussians_kept,
         number(row.vs_exact.psnr_db, 2),
         number(row.vs_truth.psnr_db, 2),
+        row.refined.map_or_else(|| "-".into(), |r| number(r.refine_ms, 1)),
+        row.refined.map_or_else(|| "-".into(), |r| number(r.vs_truth.psnr_db, 2)),
     )
 }
 
