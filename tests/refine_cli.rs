@@ -112,3 +112,14 @@ fn a_model_folder_without_tokenizer_or_checkpoint_is_named_in_the_error() {
     let out = dggt(&["reconstruct", "--images", "x", "--checkpoint", "y", "--out", "z", "--refine-checkpoint", "c"]);
     assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("--refine"));
 }
+
+#[test]
+fn the_refiner_benchmark_times_frames_at_a_folders_sizes() {
+    let base = vectors().join("base");
+    let args = ["bench", "refiner", "--model", path(&base), "--height", "20", "--width", "30", "--repeat", "2"];
+    let text = succeeded(&dggt(&[&args[..], &["--reference-view"]].concat()));
+    for expected in ["frame: 30 x 20 (ReferenceView)", "per frame: median", "of 2 runs", "peak memory: "] {
+        assert!(text.contains(expected), "{expected} missing from\n{text}");
+    }
+    assert!(!text.contains("unknown"), "peak memory is read on Linux:\n{text}");
+}

@@ -3,6 +3,7 @@
 
 pub mod bench;
 pub mod bench_compute;
+pub mod bench_refiner;
 pub mod convert;
 pub mod devices;
 pub mod eval;

@@ -12,7 +12,8 @@
 //! the refinement's time and the refined renders' error against the truth sit beside the unrefined ones.
 //!
 //! [`compute`] is the other suite (`dggt bench compute`): the network, a training step and the rasteriser at
-//! the release's scale, with the reference implementations' figures beside ours.
+//! the release's scale, with the reference implementations' figures beside ours; [`refiner`] times the
+//! diffusion refiner per frame (`dggt bench refiner`).
 
 pub mod compute;
 mod error;
@@ -21,6 +22,7 @@ pub mod knobs;
 pub mod pareto;
 pub mod plot;
 pub mod precision;
+pub mod refiner;
 pub mod report;
 pub mod run;
 pub mod stages;

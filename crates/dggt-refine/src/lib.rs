@@ -9,7 +9,7 @@
 //! - [`text_encoder`]: the CLIP text encoder for the fixed prompt, run once; [`tokenizer`]: its tokenizer;
 //! - [`scheduler`]: the noise schedule and the step to the clean latent;
 //! - [`refiner`]: the whole computation, and loading a diffusers model folder ([`config`], [`weights`]) with
-//!   a Difix checkpoint ([`checkpoint`]) over it.
+//!   a Difix checkpoint ([`checkpoint`]) over it; [`random`]: made-up weights at full size, for timing.
 //!
 //! Tensors carry no backend type: the [`burn::tensor::Device`] the refiner is loaded on selects it.
 
@@ -19,6 +19,7 @@ mod error;
 pub mod layers;
 pub mod lora;
 pub mod parity;
+pub mod random;
 pub mod refiner;
 pub mod resnet;
 pub mod scheduler;

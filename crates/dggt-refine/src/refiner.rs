@@ -84,12 +84,12 @@ impl RefinerSpec {
 }
 
 pub struct Refiner {
-    vae: Vae,
-    unet: Unet,
+    pub(crate) vae: Vae,
+    pub(crate) unet: Unet,
     /// `[1, tokens, context_dim]`.
-    prompt_embeds: Tensor<3>,
-    step: SingleStep,
-    scaling_factor: f32,
+    pub(crate) prompt_embeds: Tensor<3>,
+    pub(crate) step: SingleStep,
+    pub(crate) scaling_factor: f32,
 }
 
 impl Refiner {
@@ -329,7 +329,7 @@ fn encode_prompt(dir: &Path, tokens: &[i64], device: &Device) -> Result<(Tensor<
 }
 
 /// Settings of the VAE configuration this implementation does not cover are errors.
-fn check_vae(config: &VaeConfig, path: &Path) -> Result<(), RefineError> {
+pub(crate) fn check_vae(config: &VaeConfig, path: &Path) -> Result<(), RefineError> {
     require(!config.block_out_channels.is_empty(), path, || "block_out_channels is empty".into())?;
     require(config.mid_block_add_attention, path, || "mid_block_add_attention false".into())?;
     require(config.use_quant_conv && config.use_post_quant_conv, path, || "quant convolutions turned off".into())

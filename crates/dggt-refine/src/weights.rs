@@ -9,7 +9,7 @@
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 
-use burn::tensor::{DType, Device, Tensor, TensorData};
+use burn::tensor::{DType, Device, Distribution, Tensor, TensorData};
 use safetensors::Dtype;
 
 use crate::error::RefineError;
@@ -93,6 +93,15 @@ pub fn write_safetensors(
     safetensors::serialize_to_file(views, Some(metadata), path).map_err(|e| RefineError::file(path, e.to_string()))
 }
 
+/// Where [`Weights::take`] gets a tensor's values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Fill {
+    /// From the tensors read from files.
+    Stored,
+    /// Made up for the requested shape (see [`Weights::random`]).
+    Random,
+}
+
 /// The tensors a module tree is built from, on the device its parameters go to. Taking a tensor marks it
 /// used; [`Weights::unused`] lists the rest.
 pub struct Weights {
@@ -100,12 +109,21 @@ pub struct Weights {
     taken: BTreeSet<String>,
     source: String,
     device: Device,
+    fill: Fill,
 }
 
 impl Weights {
     /// `source`: the files the tensors came from, as error messages name them.
     pub fn new(tensors: NamedTensors, source: impl Into<String>, device: &Device) -> Self {
-        Self { tensors, taken: BTreeSet::new(), source: source.into(), device: device.clone() }
+        Self { tensors, taken: BTreeSet::new(), source: source.into(), device: device.clone(), fill: Fill::Stored }
+    }
+
+    /// Weights that give every requested tensor made-up values of its shape, made on the device (no host
+    /// copy), for timing and memory at a size whose weights are not at hand: matrices and kernels uniform with
+    /// the variance `1 / fan_in` (fan-in: the product of the dimensions after the first), vectors ones for
+    /// normalisation weights (a name containing `norm`) and zeros otherwise.
+    pub fn random(device: &Device) -> Self {
+        Self { fill: Fill::Random, ..Self::new(NamedTensors::new(), "random weights", device) }
     }
 
     pub fn device(&self) -> &Device {
@@ -118,6 +136,10 @@ impl Weights {
 
     /// The tensor `name`, which must have `shape`, as a parameter tensor.
     pub fn take<const D: usize>(&mut self, name: &str, shape: [usize; D]) -> Result<Tensor<D>, RefineError> {
+        if self.fill == Fill::Random {
+            self.taken.insert(name.to_string());
+            return Ok(random_tensor(name, shape, &self.device));
+        }
         let tensor = self.checked(name, &shape)?;
         Ok(Tensor::from_data(TensorData::new(tensor.values.clone(), shape), &self.device))
     }
@@ -143,4 +165,14 @@ impl Weights {
     pub fn unused(&self) -> Vec<String> {
         self.tensors.keys().filter(|name| !self.taken.contains(*name)).cloned().collect()
     }
+}
+
+/// See [`Weights::random`].
+fn random_tensor<const D: usize>(name: &str, shape: [usize; D], device: &Device) -> Tensor<D> {
+    if D == 1 {
+        return if name.contains("norm") { Tensor::ones(shape, device) } else { Tensor::zeros(shape, device) };
+    }
+    let fan_in: usize = shape[1..].iter().product();
+    let bound = (3.0 / fan_in.max(1) as f64).sqrt();
+    Tensor::random(shape, Distribution::Uniform(-bound, bound), device)
 }
