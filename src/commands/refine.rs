@@ -186,7 +186,8 @@ pub struct RefineJob {
     pub out: PathBuf,
 }
 
-/// Refines every job's image (8-bit PNG out), one frame at a time, with a progress bar.
+/// Refines every job's image (8-bit PNG out), one frame at a time, with a progress bar. A sampled latent
+/// draws job `i`'s noise from `seed + i`.
 pub fn refine_files(refiner: &Refiner, jobs: &[RefineJob], latent: Latent, device: &Device) -> Result<()> {
     let bar = ProgressBar::new(jobs.len() as u64);
     bar.set_style(ProgressStyle::with_template("refining {bar:30} {pos}/{len} [{elapsed_precise}]")?);
@@ -194,14 +195,14 @@ pub fn refine_files(refiner: &Refiner, jobs: &[RefineJob], latent: Latent, devic
         let (size, rgb) = read_rgb_png(path)?;
         Ok((size, frame_from_interleaved(&rgb, size.height as usize, size.width as usize, device)?))
     };
-    for job in jobs {
+    for (index, job) in jobs.iter().enumerate() {
         let (size, frame) = read(&job.image)?;
         let reference = match &job.reference {
             Some(path) => Some(read(path)?.1),
             None => None,
         };
         let refined = refiner
-            .refine_frames(frame, reference, latent, 1, |_| ())
+            .refine_frames(frame, reference, latent.nth(index), 1, |_| ())
             .with_context(|| format!("refining {}", job.image.display()))?;
         if let Some(parent) = job.out.parent() {
             std::fs::create_dir_all(parent).with_context(|| format!("creating {}", parent.display()))?;

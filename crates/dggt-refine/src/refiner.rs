@@ -43,6 +43,17 @@ pub enum Latent {
     Sampled { seed: u64 },
 }
 
+impl Latent {
+    /// The latent of the `k`-th of several refinements: a sampled latent's seed advanced by `k`, so that each
+    /// draws its own noise.
+    pub fn nth(self, k: usize) -> Self {
+        match self {
+            Self::Sampled { seed } => Self::Sampled { seed: seed.wrapping_add(k as u64) },
+            mean => mean,
+        }
+    }
+}
+
 /// What loading took from where.
 #[derive(Debug, Clone, Default)]
 pub struct LoadReport {
@@ -257,12 +268,8 @@ impl Refiner {
         let mut refined = Vec::with_capacity(count.div_ceil(batch));
         for (k, start) in (0..count).step_by(batch).enumerate() {
             let rows = batch.min(count - start);
-            let latent = match latent {
-                Latent::Sampled { seed } => Latent::Sampled { seed: seed.wrapping_add(k as u64) },
-                mean => mean,
-            };
             let part = reference.as_ref().map(|r| r.clone().narrow(0, start, rows));
-            refined.push(self.refine(frames.clone().narrow(0, start, rows), part, latent, &mut Trace::Off)?);
+            refined.push(self.refine(frames.clone().narrow(0, start, rows), part, latent.nth(k), &mut Trace::Off)?);
             progress(start + rows);
         }
         Ok(Tensor::cat(refined, 0))
