@@ -1,6 +1,7 @@
 //! `dggt refine` on the tiny random refiner of the parity vectors (random weights: plumbing, shapes and
 //! determinism are checked, not quality): `convert` writes a safetensors checkpoint that `dggt parity`
-//! passes with, and `images` writes one refined image per input, reproducibly, in both modes.
+//! passes with, `images` writes one refined image per input, reproducibly, in both modes, `reconstruct
+//! --refine` writes refined renders beside the unrefined, and `bench refiner` times frames.
 //!
 //! The vectors are `$DGGT_PARITY_DIR/difix_tiny_s1` when that variable names the shared parity folder, else
 //! `<repo>/../shared/parity/difix_tiny_s1`.
@@ -122,4 +123,52 @@ fn the_refiner_benchmark_times_frames_at_a_folders_sizes() {
         assert!(text.contains(expected), "{expected} missing from\n{text}");
     }
     assert!(!text.contains("unknown"), "peak memory is read on Linux:\n{text}");
+}
+
+/// `dggt reconstruct --refine`: a tiny network trained one step renders two frames of the fixture; each render
+/// is refined into `renders_refined/` under its name and size, the unrefined one kept.
+#[test]
+fn reconstruct_writes_refined_renders_beside_the_unrefined() {
+    let dir = vectors();
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let work = tempfile::tempdir().unwrap();
+    let (run, out) = (work.path().join("run"), work.path().join("reconstruction"));
+    let config = repo.join("configs/tiny-overfit.toml");
+    succeeded(&dggt(&["train", "--config", path(&config), "--steps", "1", "--out", path(&run)]));
+    let (base, checkpoint) = (dir.join("base"), dir.join("model_difix.pkl"));
+    let text = succeeded(&dggt(&[
+        "reconstruct",
+        "--images",
+        path(&repo.join("data-fixtures/synth-s0")),
+        "--checkpoint",
+        path(&run),
+        "--cameras",
+        "0",
+        "--frames",
+        "0..2",
+        "--width",
+        "56",
+        "--out",
+        path(&out),
+        "--refine",
+        path(&base),
+        "--refine-checkpoint",
+        path(&checkpoint),
+        "--refine-prompt-ids",
+        "5,7,9",
+    ]));
+    assert!(text.contains("refined 2 renders into") && text.contains("unrefined kept in renders/"), "{text}");
+    let names = |folder: &str| {
+        let mut names: Vec<_> = std::fs::read_dir(out.join(folder)).unwrap().map(|e| e.unwrap().file_name()).collect();
+        names.sort();
+        names
+    };
+    assert_eq!(names("renders").len(), 2);
+    assert_eq!(names("renders"), names("renders_refined"));
+    for name in names("renders") {
+        let (size, render) = read_rgb_png(&out.join("renders").join(&name)).unwrap();
+        let (refined_size, refined) = read_rgb_png(&out.join("renders_refined").join(&name)).unwrap();
+        assert_eq!(size, refined_size);
+        assert_ne!(render, refined, "{name:?} unchanged by the refiner");
+    }
 }
