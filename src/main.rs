@@ -9,7 +9,8 @@ use clap::{Parser, Subcommand};
 use tracing_subscriber::EnvFilter;
 
 use crate::commands::{
-    bench, convert, devices, eval, inspect, parity, reconstruct, refine_pairs, refine_train, stress, synth, train,
+    bench, convert, devices, eval, inspect, parity, reconstruct, refine, refine_pairs, refine_train, stress, synth,
+    train,
 };
 
 #[derive(Debug, Parser)]
@@ -33,6 +34,7 @@ enum Command {
     Eval(eval::Args),
     Bench(bench::Args),
     Devices(devices::Args),
+    Refine(refine::Args),
 }
 
 fn main() -> Result<()> {
@@ -53,5 +55,6 @@ fn main() -> Result<()> {
         Command::Eval(args) => eval::run(args),
         Command::Bench(args) => bench::run(args),
         Command::Devices(args) => devices::run(args),
+        Command::Refine(args) => refine::run(args),
     }
 }

@@ -11,7 +11,8 @@ use dggt_bench::{
 };
 
 use crate::backend::DeviceList;
-use crate::commands::bench_compute;
+use crate::commands::refine::RefineArgs;
+use crate::commands::{bench_compute, bench_refiner};
 
 /// Benchmarks: without a suite, run time against error over the reconstruction's knobs on a scene; `compute`
 /// times the network, a training step and the rasteriser at the release's scale.
@@ -30,6 +31,8 @@ enum Suite {
     Compute(bench_compute::Args),
     /// The compute suite's table from record files (ours in parts, and the references').
     Table(bench_compute::TableArgs),
+    /// The diffusion refiner's time per frame and peak memory (made-up weights, sd-turbo's size by default).
+    Refiner(bench_refiner::Args),
 }
 
 /// Runs the suite the arguments name.
@@ -37,6 +40,7 @@ pub fn run(args: Args) -> Result<()> {
     match (args.suite, args.sweep) {
         (Some(Suite::Compute(compute)), _) => bench_compute::run(compute),
         (Some(Suite::Table(table)), _) => bench_compute::run_table(table),
+        (Some(Suite::Refiner(refiner)), _) => bench_refiner::run(refiner),
         (None, Some(sweep)) => run_sweep(sweep),
         (None, None) => anyhow::bail!("dggt bench needs --scene and --out (the sweep), or a suite (`compute`)"),
     }
@@ -127,6 +131,10 @@ pub struct SweepArgs {
     /// Output folder.
     #[arg(long)]
     pub out: PathBuf,
+    /// With `--refine MODEL_DIR`, every row's renders are also refined: its time and its error against the
+    /// truth beside the unrefined one.
+    #[command(flatten)]
+    pub refine: RefineArgs,
 }
 
 fn parse_sky(text: &str) -> Result<bool> {
@@ -174,6 +182,7 @@ impl SweepArgs {
             },
             seed: self.seed,
             chunk_frames: self.chunk,
+            refine: self.refine.spec()?,
         })
     }
 }

@@ -14,6 +14,7 @@ use dggt_model::Preset;
 
 use crate::backend::DeviceList;
 use crate::commands::parse_range;
+use crate::commands::refine::RefineArgs;
 
 /// Which protocol `--protocol` names.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -72,6 +73,9 @@ pub struct Args {
     /// Output folder of eval.json and eval.md.
     #[arg(long)]
     pub out: PathBuf,
+    /// With `--refine MODEL_DIR`, every render is also scored after the diffusion refiner, side by side.
+    #[command(flatten)]
+    pub refine: RefineArgs,
 }
 
 impl Args {
@@ -112,6 +116,7 @@ impl Args {
             linear: linear.clone(),
             alexnet: self.alexnet.clone().unwrap_or_else(|| linear.clone()),
         });
+        options.refine = self.refine.spec()?;
         Ok(options)
     }
 }

@@ -3,12 +3,14 @@
 
 pub mod bench;
 pub mod bench_compute;
+pub mod bench_refiner;
 pub mod convert;
 pub mod devices;
 pub mod eval;
 pub mod inspect;
 pub mod parity;
 pub mod reconstruct;
+pub mod refine;
 pub mod refine_pairs;
 pub mod refine_train;
 pub mod stress;

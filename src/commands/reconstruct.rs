@@ -1,7 +1,7 @@
 //! `dggt reconstruct`: one forward pass over unposed images, written as cameras, maps, Gaussians and renders.
 
 use std::ops::Range;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use dggt_infer::Architecture;
@@ -10,6 +10,7 @@ use dggt_reconstruct::{ReconstructOptions, TimeRequest, reconstruct};
 
 use crate::backend::DeviceList;
 use crate::commands::parse_range;
+use crate::commands::refine::{RefineArgs, RefineJob, load_refiner, refine_files};
 
 /// Reconstruct a driving scene from unposed images with one forward pass: cameras (JSON, COLMAP, nerfstudio),
 /// depth, dynamic and sky maps, Gaussians as PLY (static, sky, dynamic per time) and renders.
@@ -53,11 +54,19 @@ pub struct Args {
     /// Output folder.
     #[arg(long)]
     out: PathBuf,
+    #[command(flatten)]
+    refine: RefineArgs,
 }
 
-/// Runs the reconstruction with progress on stderr and prints its summary.
+/// Where the refined renders go (the unrefined ones stay in `renders/`).
+pub const REFINED_RENDERS: &str = "renders_refined";
+
+/// Runs the reconstruction with progress on stderr and prints its summary; with `--refine`, refines every
+/// render into `renders_refined/` under the same name.
 pub fn run(args: Args) -> Result<()> {
     let device = args.device.single()?;
+    let refine = args.refine.spec()?;
+    let refiner = refine.as_ref().map(|spec| load_refiner(spec, &device)).transpose()?;
     let mut options = ReconstructOptions::new(args.images, args.checkpoint, args.out);
     options.architecture = match (args.config, args.preset) {
         (Some(path), _) => Some(Architecture::Config(path)),
@@ -77,6 +86,26 @@ pub fn run(args: Args) -> Result<()> {
     tracing::info!("reconstructing {} with {} on {device:?}", options.images.display(), options.checkpoint.display());
     let summary = reconstruct(&options, &device)?;
     println!("{summary}");
+    if let (Some(refiner), Some(spec)) = (refiner, refine) {
+        let jobs: Vec<RefineJob> = summary
+            .renders
+            .iter()
+            .map(|render| {
+                let name = Path::new(&render.file).file_name().unwrap_or_default();
+                RefineJob {
+                    image: options.out.join(&render.file),
+                    reference: None,
+                    out: options.out.join(REFINED_RENDERS).join(name),
+                }
+            })
+            .collect();
+        refine_files(&refiner, &jobs, spec.latent, &device)?;
+        println!(
+            "refined {} renders into {} (unrefined kept in renders/)",
+            jobs.len(),
+            options.out.join(REFINED_RENDERS).display()
+        );
+    }
     println!("outputs: {} (summary.json)", options.out.display());
     Ok(())
 }

@@ -8,10 +8,12 @@
 //! against the scene's ground-truth images. The outputs ([`report`], [`plot`]) are `bench.csv`, `bench.png` /
 //! `bench.svg` (error against total time with the Pareto front, [`pareto`]) and `bench-notes.txt`.
 //!
-//! There is no diffusion refiner in this project, so refinement is not a knob.
+//! With a diffusion refiner ([`BenchOptions::refine`], `dggt-refine`), every row's renders are also refined:
+//! the refinement's time and the refined renders' error against the truth sit beside the unrefined ones.
 //!
 //! [`compute`] is the other suite (`dggt bench compute`): the network, a training step and the rasteriser at
-//! the release's scale, with the reference implementations' figures beside ours.
+//! the release's scale, with the reference implementations' figures beside ours; [`refiner`] times the
+//! diffusion refiner per frame (`dggt bench refiner`).
 
 pub mod compute;
 mod error;
@@ -20,6 +22,7 @@ pub mod knobs;
 pub mod pareto;
 pub mod plot;
 pub mod precision;
+pub mod refiner;
 pub mod report;
 pub mod run;
 pub mod stages;
@@ -29,7 +32,7 @@ use std::path::{Path, PathBuf};
 pub use error::BenchError;
 pub use knobs::{Configuration, Culling, Knobs, Precision, Skips, SweepSpec, Varied};
 pub use pareto::pareto_front;
-pub use run::{BenchOptions, BenchReport, LpipsFiles, MeasuredRow, PoseSource, RowOutcome, run_bench};
+pub use run::{BenchOptions, BenchReport, LpipsFiles, MeasuredRow, PoseSource, RefinedRow, RowOutcome, run_bench};
 
 /// The files [`write_outputs`] wrote.
 #[derive(Debug, Clone, PartialEq)]

@@ -10,8 +10,9 @@ use crate::run::{BenchReport, ErrorMetrics, MeasuredRow, RowOutcome};
 /// The CSV header; the unit of each column is in its name (`_ms`, `_px`, `_db`) or is none.
 pub const CSV_HEADER: &str = "row,varied,label,width_px,height_px,input_frames,min_opacity,precision,sky,skips,\
 backbone_ms,heads_ms,assembly_ms,raster_ms,total_ms,gaussians_kept_per_view,gaussian_candidates_per_view,\
-sky_gaussians,motion_skipped_frames,sky_skipped_views,psnr_vs_exact_db,ssim_vs_exact,lpips_vs_exact,psnr_vs_truth_db,ssim_vs_truth,lpips_vs_truth,\
-pareto_vs_exact,pareto_vs_truth,status";
+sky_gaussians,motion_skipped_frames,sky_skipped_views,psnr_vs_exact_db,ssim_vs_exact,lpips_vs_exact,\
+psnr_vs_truth_db,ssim_vs_truth,lpips_vs_truth,refine_ms,psnr_refined_vs_truth_db,ssim_refined_vs_truth,\
+lpips_refined_vs_truth,pareto_vs_exact,pareto_vs_truth,status";
 
 /// A CSV field, quoted when it holds a comma, quote or line break.
 fn field(text: &str) -> String {
@@ -58,6 +59,13 @@ pub fn csv_text(report: &BenchReport) -> String {
                 fields.extend([row.skipped.motion_frames.to_string(), row.skipped.sky_views.to_string()]);
                 fields.extend(metrics_fields(&row.vs_exact));
                 fields.extend(metrics_fields(&row.vs_truth));
+                match &row.refined {
+                    Some(refined) => {
+                        fields.push(number(refined.refine_ms, 2));
+                        fields.extend(metrics_fields(&refined.vs_truth));
+                    }
+                    None => fields.extend(std::iter::repeat_n(String::new(), 4)),
+                }
                 fields.extend([row.pareto_vs_exact.to_string(), row.pareto_vs_truth.to_string(), "measured".into()]);
             }
             RowOutcome::Skipped { reason, .. } => {
@@ -69,7 +77,7 @@ pub fn csv_text(report: &BenchReport) -> String {
                     knobs.sky.to_string(),
                     knobs.skips.name().into(),
                 ]);
-                fields.extend(std::iter::repeat_n(String::new(), 18));
+                fields.extend(std::iter::repeat_n(String::new(), 22));
                 fields.push(field(&format!("skipped: {reason}")));
             }
         }
@@ -103,8 +111,18 @@ pub fn table_text(report: &BenchReport) -> String {
     let mut text = String::new();
     let _ = writeln!(
         text,
-        "{:<28} {:>9} {:>8} {:>9} {:>8} {:>9} {:>9} {:>9} {:>9} front",
-        "configuration", "backbone", "heads", "assembly", "raster", "total ms", "kept/view", "dB exact", "dB truth",
+        "{:<28} {:>9} {:>8} {:>9} {:>8} {:>9} {:>9} {:>9} {:>9} {:>10} {:>10} front",
+        "configuration",
+        "backbone",
+        "heads",
+        "assembly",
+        "raster",
+        "total ms",
+        "kept/view",
+        "dB exact",
+        "dB truth",
+        "refine ms",
+        "dB refined",
     );
     for outcome in &report.rows {
         match outcome {
@@ -126,7 +144,7 @@ fn table_line(row: &MeasuredRow) -> String {
         (false, false) => "",
     };
     format!(
-        "{:<28} {:>9.1} {:>8.1} {:>9.1} {:>8.1} {:>9.1} {:>9.0} {:>9} {:>9} {front}\n",
+        "{:<28} {:>9.1} {:>8.1} {:>9.1} {:>8.1} {:>9.1} {:>9.0} {:>9} {:>9} {:>10} {:>10} {front}\n",
         row.configuration.knobs.label(),
         t.backbone_ms,
         t.heads_ms,
@@ -136,6 +154,8 @@ fn table_line(row: &MeasuredRow) -> String {
         row.gaussians_kept,
         number(row.vs_exact.psnr_db, 2),
         number(row.vs_truth.psnr_db, 2),
+        row.refined.map_or_else(|| "-".into(), |r| number(r.refine_ms, 1)),
+        row.refined.map_or_else(|| "-".into(), |r| number(r.vs_truth.psnr_db, 2)),
     )
 }
 

@@ -22,6 +22,7 @@ use dggt_infer::{
 };
 use dggt_losses::{ImageShape, Lpips, LpipsKind};
 use dggt_model::{Dggt, ModelConfig};
+use dggt_refine::{Latent, Refiner, RefinerSpec, frame_from_interleaved, frame_to_interleaved};
 use dggt_scene::{AssemblyCounts, AssemblySettings, TargetView, Timeline};
 
 use crate::error::BenchError;
@@ -68,6 +69,8 @@ pub struct BenchOptions {
     pub seed: u64,
     /// Frames per chunk of the dense heads.
     pub chunk_frames: usize,
+    /// A diffusion refiner: every measured row's renders are also refined, timed and scored against the truth.
+    pub refine: Option<RefinerSpec>,
 }
 
 impl BenchOptions {
@@ -85,6 +88,7 @@ impl BenchOptions {
             lpips: None,
             seed: 0,
             chunk_frames: 4,
+            refine: None,
         }
     }
 }
@@ -143,6 +147,16 @@ pub struct MeasuredRow {
     pub vs_truth: ErrorMetrics,
     pub pareto_vs_exact: bool,
     pub pareto_vs_truth: bool,
+    /// The renders after the diffusion refiner, when one was given.
+    pub refined: Option<RefinedRow>,
+}
+
+/// A row's renders refined: the time it took and the error against the ground truth.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RefinedRow {
+    /// Median over the repetitions of refining every target view (one frame at a time), milliseconds.
+    pub refine_ms: f64,
+    pub vs_truth: ErrorMetrics,
 }
 
 /// A configuration's outcome.
@@ -316,6 +330,10 @@ pub fn run_bench(options: &BenchOptions, device: &Device) -> Result<BenchReport,
         Some(files) => Some(Lpips::load(LpipsKind::Alex, &files.backbone, &files.linear, device)?),
         None => None,
     };
+    let refiner = match &options.refine {
+        Some(spec) => Some(spec.load(device).map_err(|e| BenchError::invalid("refiner", e.to_string()))?.0),
+        None => None,
+    };
     let cache =
         ViewCache { scene: &scene, patch_size: patch, crop_to_square: network.crop_to_square, views: HashMap::new() };
     let truth_meaningful = network.trained;
@@ -367,6 +385,16 @@ pub fn run_bench(options: &BenchOptions, device: &Device) -> Result<BenchReport,
         let vs_exact = compare(&at_reference, exact, reference_size, lpips.as_ref(), device)?;
         let truth: Vec<Vec<f32>> = targets.iter().map(|t| t.truth.clone()).collect();
         let vs_truth = compare(&at_reference, &truth, reference_size, lpips.as_ref(), device)?;
+        let refined = match (&refiner, &options.refine) {
+            (Some(refiner), Some(spec)) => {
+                let (refine_ms, images) = refine_renders(refiner, spec.latent, &run, options.repeat, device)?;
+                let at_reference: Vec<Vec<f32>> =
+                    images.iter().map(|image| resize_rgb(image, run.size, reference_size)).collect();
+                let vs_truth = compare(&at_reference, &truth, reference_size, lpips.as_ref(), device)?;
+                Some(RefinedRow { refine_ms, vs_truth })
+            }
+            _ => None,
+        };
         rows.push(RowOutcome::Measured(MeasuredRow {
             configuration,
             size: run.size,
@@ -380,6 +408,7 @@ pub fn run_bench(options: &BenchOptions, device: &Device) -> Result<BenchReport,
             vs_truth,
             pareto_vs_exact: false,
             pareto_vs_truth: false,
+            refined,
         }));
     }
     mark_pareto(&mut rows);
@@ -450,8 +479,17 @@ fn mark_pareto(rows: &mut [RowOutcome]) {
 
 fn standing_notes(options: &BenchOptions, reference_size: ImageSize) -> Vec<String> {
     let base = options.sweep.baseline;
+    let refinement = match &options.refine {
+        None => "refinement: no diffusion refiner given (--refine MODEL_DIR): renders are scored unrefined".into(),
+        Some(spec) => format!(
+            "refinement: every row's target renders also refined by {} one frame at a time at the row's render \
+             size (refine_ms: median of the repetitions, not in total_ms), scored against the truth at the \
+             reference size",
+            spec.describe()
+        ),
+    };
     vec![
-        "refinement: this project has no diffusion refiner, so refinement is not a knob of this sweep".into(),
+        refinement,
         format!(
             "culling: the assembly has one opacity threshold (AssemblySettings::min_opacity), compared with each \
              Gaussian's opacity after the lifespan fade at the target time, so it is also the lifespan cutoff; there \
@@ -673,6 +711,35 @@ struct RepetitionOutputs {
     skipped: SkipCounts,
     /// Per target view, `[H, W, 3]` (not clamped).
     renders: Vec<Vec<f32>>,
+}
+
+/// Refines every render of `run` (`[H, W, 3]` at `run.size`) `repeat` times: the median milliseconds of a
+/// pass, and the refined images.
+fn refine_renders(
+    refiner: &Refiner,
+    latent: Latent,
+    run: &RowRun,
+    repeat: usize,
+    device: &Device,
+) -> Result<(f64, Vec<Vec<f32>>), BenchError> {
+    let refine_error = |e: dggt_refine::RefineError| BenchError::invalid("refining a render", e.to_string());
+    let (h, w) = (run.size.height as usize, run.size.width as usize);
+    let mut times = Vec::new();
+    let mut refined = Vec::new();
+    for _ in 0..repeat.max(1) {
+        let started = Instant::now();
+        refined = run
+            .renders
+            .iter()
+            .map(|rgb| {
+                let frame = frame_from_interleaved(rgb, h, w, device)?;
+                frame_to_interleaved(&refiner.refine_frames(frame, None, latent, 1, |_| ())?, 0)
+            })
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(refine_error)?;
+        times.push(started.elapsed().as_secs_f64() * 1e3);
+    }
+    Ok((median(times), refined))
 }
 
 /// The median (the mean of the middle two for an even count); NaN for none.

@@ -13,6 +13,7 @@ use dggt_bench::run::fresh_tiny_config;
 use dggt_bench::{BenchOptions, RowOutcome, run_bench, stages, write_outputs};
 use dggt_geom::{PinholeIntrinsics, PosedCamera, WorldFromCamera};
 use dggt_infer::Scene4d;
+use dggt_refine::{Latent, Prompt, RefinerSpec};
 use dggt_scene::{AssemblySettings, InputView, MeansGradient, PixelGaussians, TargetView, render_target};
 
 fn fixture() -> PathBuf {
@@ -47,7 +48,22 @@ fn bounded_sweep_writes_table_and_plot() {
         skips: vec![Skips::All],
         full_grid: false,
     };
+    // The tiny random refiner of the parity vectors (plumbing only: its images mean nothing).
+    let refiner = std::env::var_os("DGGT_PARITY_DIR")
+        .map_or_else(|| fixture().join("../../../shared/parity"), PathBuf::from)
+        .join("difix_tiny_s1");
+    options.refine = Some(RefinerSpec {
+        model_dir: refiner.join("base"),
+        checkpoint: refiner.join("model_difix.pkl"),
+        prompt: Prompt::Tokens(vec![5, 7, 9]),
+        latent: Latent::PosteriorMean,
+    });
     let report = run_bench(&options, &device).expect("the sweep runs");
+    for row in report.rows.iter().filter_map(RowOutcome::measured) {
+        let refined = row.refined.expect("every measured row refined");
+        assert!(refined.refine_ms > 0.0 && refined.vs_truth.psnr_db.is_finite(), "{refined:?}");
+        assert_ne!(refined.vs_truth.psnr_db, row.vs_truth.psnr_db, "the refiner changed nothing");
+    }
     let configurations = options.sweep.configurations();
     assert_eq!(report.rows.len(), configurations.len());
     assert!(!report.truth_meaningful, "a fresh model's ground-truth error is flagged as meaningless");
@@ -114,7 +130,7 @@ fn bounded_sweep_writes_table_and_plot() {
             panic!("the device declares bf16 but the row was skipped: {reason}")
         }
     }
-    assert!(report.notes.iter().any(|n| n.contains("no diffusion refiner")));
+    assert!(report.notes.iter().any(|n| n.contains("refinement: every row's target renders also refined")));
 
     let out = tempfile::tempdir().expect("a temporary folder");
     let files = write_outputs(&report, out.path()).expect("the outputs are written");

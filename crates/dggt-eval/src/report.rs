@@ -52,6 +52,18 @@ pub struct ViewRecord {
     /// Scene-flow metrics of the predicted motion; absent when not evaluated (see the scene's notes).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub motion: Option<FlowMetrics>,
+    /// The image metrics of the render after the diffusion refiner; absent without one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub refined: Option<ImageScores>,
+}
+
+/// PSNR (dB), SSIM and LPIPS (absent without weights) of one image against the truth.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ImageScores {
+    pub psnr: f64,
+    pub ssim: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lpips: Option<f64>,
 }
 
 /// Means of one split (of one scene, or over scenes).
@@ -72,6 +84,17 @@ pub struct SplitSummary {
     pub angle_error_rad: Option<f64>,
     /// Views (or scenes) with motion metrics.
     pub motion_count: usize,
+    /// The image metrics after the diffusion refiner; absent without one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub refined: Option<RefinedSummary>,
+}
+
+/// Means of the refined renders' image metrics.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RefinedSummary {
+    pub psnr: Option<f64>,
+    pub ssim: Option<f64>,
+    pub lpips: Option<f64>,
 }
 
 /// Seconds spent in one stage.
@@ -110,6 +133,9 @@ pub struct EvalReport {
     /// Why LPIPS is absent, when it is.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub lpips_note: Option<String>,
+    /// The diffusion refiner the renders were also scored after, when one was given.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub refiner: Option<String>,
     pub scenes: Vec<SceneReport>,
     /// Per split, the mean over scenes.
     pub overall: Vec<SplitSummary>,
@@ -137,6 +163,16 @@ pub fn summarise_views(views: &[ViewRecord], split: Split) -> SplitSummary {
         acc10: motion(|m| Some(m.acc10)).0,
         angle_error_rad: motion(|m| m.angle_error_rad).0,
         motion_count,
+        refined: views.iter().any(|v| v.refined.is_some()).then(|| {
+            let refined = |f: fn(&ImageScores) -> Option<f64>| {
+                mean_present(views.iter().map(|v| v.refined.as_ref().and_then(f))).0
+            };
+            RefinedSummary {
+                psnr: refined(|r| Some(r.psnr)),
+                ssim: refined(|r| Some(r.ssim)),
+                lpips: refined(|r| r.lpips),
+            }
+        }),
     }
 }
 
@@ -161,6 +197,12 @@ pub fn summarise_scenes(scenes: &[SceneReport], splits: &[Split]) -> Vec<SplitSu
                 acc10: mean(|r| r.acc10).0,
                 angle_error_rad: mean(|r| r.angle_error_rad).0,
                 motion_count: mean(|r| r.epe3d).1,
+                refined: rows.iter().any(|r| r.refined.is_some()).then(|| {
+                    let refined = |f: fn(&RefinedSummary) -> Option<f64>| {
+                        mean_present(rows.iter().map(|r| r.refined.as_ref().and_then(f))).0
+                    };
+                    RefinedSummary { psnr: refined(|r| r.psnr), ssim: refined(|r| r.ssim), lpips: refined(|r| r.lpips) }
+                }),
             }
         })
         .collect()
@@ -188,6 +230,20 @@ fn row(label: &str, count: String, s: &SplitSummary) -> String {
     )
 }
 
+/// A row of the with/without refinement table.
+fn refined_row(label: &str, count: String, s: &SplitSummary) -> String {
+    let refined = s.refined.as_ref();
+    format!(
+        "| {label} | {count} | {} | {} | {} | {} | {} | {} |\n",
+        cell(s.psnr, 2),
+        cell(refined.and_then(|r| r.psnr), 2),
+        cell(s.ssim, 4),
+        cell(refined.and_then(|r| r.ssim), 4),
+        cell(s.lpips, 4),
+        cell(refined.and_then(|r| r.lpips), 4),
+    )
+}
+
 impl EvalReport {
     /// The report as Markdown: settings, one table per split (a row per scene and the mean over scenes),
     /// then the notes and stage times.
@@ -211,6 +267,9 @@ impl EvalReport {
         if let Some(note) = &self.lpips_note {
             let _ = writeln!(md, "- LPIPS: {note}");
         }
+        if let Some(refiner) = &self.refiner {
+            let _ = writeln!(md, "- refiner: {refiner}");
+        }
         for summary in &self.overall {
             let _ = writeln!(md, "\n## {}\n", summary.split.title());
             md.push_str(
@@ -223,7 +282,20 @@ impl EvalReport {
                 }
             }
             let scenes = if summary.count == 1 { "1 scene".to_string() } else { format!("{} scenes", summary.count) };
-            md.push_str(&row("**mean over scenes**", scenes, summary));
+            md.push_str(&row("**mean over scenes**", scenes.clone(), summary));
+            if summary.refined.is_some() {
+                md.push_str("\n### without and with the refiner\n\n");
+                md.push_str(
+                    "| scene | views | PSNR (dB) | PSNR refined | SSIM | SSIM refined | LPIPS | LPIPS refined |\n",
+                );
+                md.push_str("|---|---|---|---|---|---|---|---|\n");
+                for scene in &self.scenes {
+                    if let Some(s) = scene.splits.iter().find(|s| s.split == summary.split) {
+                        md.push_str(&refined_row(&scene.name, s.count.to_string(), s));
+                    }
+                }
+                md.push_str(&refined_row("**mean over scenes**", scenes, summary));
+            }
         }
         let notes: Vec<String> = self
             .scenes

@@ -29,13 +29,16 @@ use dggt_infer::{
     forward_chunked, input_views, load_network,
 };
 use dggt_losses::{ImageShape, Lpips, LpipsKind, psnr, ssim};
+use dggt_refine::{Refiner, RefinerSpec, frame_from_interleaved, frame_to_interleaved};
 use dggt_scene::{TargetView, Timeline};
 
 use crate::error::EvalError;
 use crate::grid::{CellMapping, cell_has_sky};
 use crate::metrics::{MetricError, aligned_depth_rmse, scene_flow_metrics};
 use crate::protocol::Protocol;
-use crate::report::{EvalReport, MOTION_HELD, SceneReport, StageTime, ViewRecord, summarise_scenes, summarise_views};
+use crate::report::{
+    EvalReport, ImageScores, MOTION_HELD, SceneReport, StageTime, ViewRecord, summarise_scenes, summarise_views,
+};
 
 /// Motion is scored only in windows where some true flow is longer than this (STORM's rule; m/s for
 /// velocity-valued exports).
@@ -96,6 +99,9 @@ pub struct EvalOptions {
     pub chunk_frames: usize,
     /// LPIPS-Alex weights; without them LPIPS is not computed.
     pub lpips: Option<LpipsWeights>,
+    /// A diffusion refiner: every render is also refined and scored again (image metrics only; depth and
+    /// motion come from the Gaussians). Its time counts in the `render` stage.
+    pub refine: Option<RefinerSpec>,
     /// Output folder of `eval.json` and `eval.md`.
     pub out: PathBuf,
 }
@@ -111,6 +117,7 @@ impl EvalOptions {
             width: None,
             chunk_frames: 4,
             lpips: None,
+            refine: None,
             out: out.into(),
         }
     }
@@ -165,6 +172,15 @@ pub fn evaluate(options: &EvalOptions, device: &Device) -> Result<EvalReport, Ev
         Some(weights) => (Some(Lpips::load(LpipsKind::Alex, &weights.alexnet, &weights.linear, device)?), None),
         None => (None, Some("not computed: no weights given (--lpips-weights alex.pth --alexnet FILE)".to_string())),
     };
+    let refiner = match &options.refine {
+        Some(spec) => {
+            let (refiner, _) = spec
+                .load(device)
+                .map_err(|e| EvalError::invalid(format!("refiner {}", spec.describe()), e.to_string()))?;
+            Some(refiner)
+        }
+        None => None,
+    };
     total.add(LOAD, started);
     if network.model.sky_model.is_none() {
         warnings.push("the network has no sky model: renders have a black sky".into());
@@ -174,7 +190,15 @@ pub fn evaluate(options: &EvalOptions, device: &Device) -> Result<EvalReport, Ev
     let mut reports = Vec::new();
     for (root, scene) in options.scenes.iter().zip(&scenes) {
         tracing::info!("evaluating {}", root.display());
-        let context = SceneContext { options, network: &network, preprocess, lpips: lpips.as_ref(), motion, device };
+        let context = SceneContext {
+            options,
+            network: &network,
+            preprocess,
+            lpips: lpips.as_ref(),
+            refiner: refiner.as_ref(),
+            motion,
+            device,
+        };
         let report = evaluate_scene(root, scene, &context).map_err(|e| e.in_scene(root))?;
         for stage in &report.stages {
             if let Some(i) = STAGES.iter().position(|s| *s == stage.stage) {
@@ -200,6 +224,7 @@ pub fn evaluate(options: &EvalOptions, device: &Device) -> Result<EvalReport, Ev
              {MOTION_GATE}"
         ),
         lpips_note,
+        refiner: options.refine.as_ref().map(RefinerSpec::describe),
         overall: summarise_scenes(&reports, &splits),
         scenes: reports,
         stages: total.list(),
@@ -335,6 +360,7 @@ struct SceneContext<'a> {
     network: &'a LoadedNetwork,
     preprocess: Preprocess,
     lpips: Option<&'a Lpips>,
+    refiner: Option<&'a Refiner>,
     motion: MotionSource,
     device: &'a Device,
 }
@@ -373,11 +399,16 @@ fn evaluate_scene(root: &Path, scene: &Scene, context: &SceneContext<'_>) -> Res
             let render = forward.scene.render(&target)?;
             let rgb: Vec<f32> = host(render.rgb, "rendered colours")?.into_iter().map(|v| v.clamp(0.0, 1.0)).collect();
             let depth = host(render.depth, "rendered depth")?;
+            let refined = match context.refiner {
+                Some(refiner) => Some(refine_render(refiner, &rgb, forward.size, context)?),
+                None => None,
+            };
             watch.add(RENDER, started);
 
             let started = Instant::now();
             let view = ScoredView { frame, frame_position, camera_position, split, time: target.time };
-            records.push(score_view(scene, &forward, context, &view, &rgb, &depth, &mut seen)?);
+            let images = RenderedImages { rgb: &rgb, refined: refined.as_deref() };
+            records.push(score_view(scene, &forward, context, &view, images, &depth, &mut seen)?);
             watch.add(METRICS, started);
         }
     }
@@ -469,29 +500,63 @@ struct ScoredView {
     time: f64,
 }
 
-/// Scores one rendered view (`rgb` `[H, W, 3]` clamped, `depth` `[H, W]`) against the export: PSNR, SSIM,
-/// LPIPS, and at the lidar cells D-RMSE and scene flow.
+/// A view's render (interleaved `[H, W, 3]`, clamped) and, with a refiner, the refined render.
+#[derive(Clone, Copy)]
+struct RenderedImages<'a> {
+    rgb: &'a [f32],
+    refined: Option<&'a [f32]>,
+}
+
+/// PSNR, SSIM and (with weights) LPIPS of `rgb` against `truth`, both interleaved `[H, W, 3]` of `size`.
+fn image_scores(
+    rgb: &[f32],
+    truth: &[f32],
+    size: ImageSize,
+    context: &SceneContext<'_>,
+) -> Result<ImageScores, EvalError> {
+    let (h, w) = (size.height as usize, size.width as usize);
+    let lpips = match context.lpips {
+        Some(lpips) => {
+            let as_tensor =
+                |values: Vec<f32>| Tensor::<4>::from_data(TensorData::new(values, [1, h, w, 3]), context.device);
+            let value = lpips.eval(as_tensor(rgb.to_vec()), as_tensor(truth.to_vec()))?;
+            Some(f64::from(host(value, "LPIPS")?[0]))
+        }
+        None => None,
+    };
+    Ok(ImageScores { psnr: psnr(rgb, truth)?, ssim: ssim(rgb, truth, ImageShape::new(h, w, 3))?.value, lpips })
+}
+
+/// The render `rgb` (interleaved, clamped) after the refiner, interleaved.
+fn refine_render(
+    refiner: &Refiner,
+    rgb: &[f32],
+    size: ImageSize,
+    context: &SceneContext<'_>,
+) -> Result<Vec<f32>, EvalError> {
+    let refine_error = |e: dggt_refine::RefineError| EvalError::invalid("refining a render", e.to_string());
+    let spec = context.options.refine.as_ref().expect("a refiner comes from its spec");
+    let frame =
+        frame_from_interleaved(rgb, size.height as usize, size.width as usize, context.device).map_err(refine_error)?;
+    let refined = refiner.refine_frames(frame, None, spec.latent, 1, |_| ()).map_err(refine_error)?;
+    frame_to_interleaved(&refined, 0).map_err(refine_error)
+}
+
+/// Scores one rendered view (its images `[H, W, 3]` clamped, `depth` `[H, W]`) against the export: PSNR, SSIM,
+/// LPIPS of the render (and of the refined render), and at the lidar cells D-RMSE and scene flow.
 fn score_view(
     scene: &Scene,
     forward: &ForwardScene,
     context: &SceneContext<'_>,
     view: &ScoredView,
-    rgb: &[f32],
+    images: RenderedImages<'_>,
     depth: &[f32],
     seen: &mut FlowSeen,
 ) -> Result<ViewRecord, EvalError> {
-    let (h, w) = (forward.size.height as usize, forward.size.width as usize);
     let prepared = prepare_view(scene, view.frame_position, view.camera_position, &context.preprocess)?;
     let truth = interleaved(&prepared.image);
-    let image_lpips = match context.lpips {
-        Some(lpips) => {
-            let as_tensor =
-                |values: Vec<f32>| Tensor::<4>::from_data(TensorData::new(values, [1, h, w, 3]), context.device);
-            let value = lpips.eval(as_tensor(rgb.to_vec()), as_tensor(truth.clone()))?;
-            Some(f64::from(host(value, "LPIPS")?[0]))
-        }
-        None => None,
-    };
+    let scores = image_scores(images.rgb, &truth, forward.size, context)?;
+    let refined = images.refined.map(|rgb| image_scores(rgb, &truth, forward.size, context)).transpose()?;
     let camera = &scene.cameras[view.camera_position];
     let mut record = ViewRecord {
         frame: view.frame,
@@ -499,15 +564,16 @@ fn score_view(
         camera_name: camera.name.clone(),
         split: view.split,
         scene_time: view.time,
-        psnr: psnr(rgb, &truth)?,
-        ssim: ssim(rgb, &truth, ImageShape::new(h, w, 3))?.value,
-        lpips: image_lpips,
+        psnr: scores.psnr,
+        ssim: scores.ssim,
+        lpips: scores.lpips,
         d_rmse: None,
         depth_scale: None,
         depth_shift: None,
         depth_cells: 0,
         depth_note: None,
         motion: None,
+        refined,
     };
     let files = &scene.view(view.frame_position, view.camera_position).files;
     match scene.depth_map(view.frame_position, view.camera_position)? {

@@ -189,6 +189,7 @@ fn record(split: Split, psnr: f64, d_rmse: Option<f64>) -> ViewRecord {
         depth_cells: 0,
         depth_note: None,
         motion: None,
+        refined: None,
     }
 }
 

@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 
 use burn::tensor::Device;
 use dggt_eval::{EvalOptions, LpipsWeights, MOTION_HELD, Protocol, evaluate};
+use dggt_refine::{Latent, Prompt, RefinerSpec};
 use dggt_train::{RunOptions, Start, TrainConfig, Trainer};
 use serde_json::Value;
 
@@ -149,6 +150,31 @@ fn paper_protocol_scores_every_view_of_the_fixture() {
         assert!(lpips.is_finite() && (0.0..2.0).contains(&lpips), "{lpips}");
     }
     assert!(report.lpips_note.is_none(), "{:?}", report.lpips_note);
+
+    // The same views also scored after the tiny random refiner of the parity vectors (plumbing only): the
+    // unrefined metrics are unchanged, the refined ones sit beside them in eval.json and eval.md.
+    let refiner = parity_dir().join("difix_tiny_s1");
+    options.refine = Some(RefinerSpec {
+        model_dir: refiner.join("base"),
+        checkpoint: refiner.join("model_difix.pkl"),
+        prompt: Prompt::Tokens(vec![5, 7, 9]),
+        latent: Latent::PosteriorMean,
+    });
+    options.out = out.path().join("refined");
+    let refined = evaluate(&options, &Device::flex()).unwrap();
+    for (plain, view) in report.scenes[0].views.iter().zip(&refined.scenes[0].views) {
+        assert_eq!((plain.psnr, plain.ssim, plain.lpips), (view.psnr, view.ssim, view.lpips));
+        let scores = view.refined.as_ref().expect("refined scores");
+        assert!(scores.psnr.is_finite() && scores.psnr != view.psnr, "{scores:?} vs {}", view.psnr);
+        assert!((-1.0..=1.0).contains(&scores.ssim) && scores.lpips.is_some_and(|l| l.is_finite()), "{scores:?}");
+    }
+    let summary = refined.overall[0].refined.as_ref().expect("refined means");
+    assert!(summary.psnr.is_some() && summary.ssim.is_some() && summary.lpips.is_some(), "{summary:?}");
+    assert!(report.overall[0].refined.is_none());
+    let markdown = std::fs::read_to_string(options.out.join("eval.md")).unwrap();
+    assert!(markdown.contains("| PSNR (dB) | PSNR refined |") && markdown.contains("- refiner: "), "{markdown}");
+    let json: Value = serde_json::from_slice(&std::fs::read(options.out.join("eval.json")).unwrap()).unwrap();
+    assert!(json["scenes"][0]["views"][0]["refined"]["psnr"].is_number(), "{json}");
 }
 
 fn error_of(options: &EvalOptions) -> String {

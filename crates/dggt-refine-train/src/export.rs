@@ -5,26 +5,20 @@
 //! names and layouts, the targets and the rank. [`dggt_refine::Refiner::from_checkpoint`] merges the factors,
 //! so a trained refiner loads like a released one: [`load_refiner`].
 //!
-//! The file ([`write`], [`read_checkpoint`]) is safetensors, float32: tensors `unet.<name>` and `vae.<name>`,
-//! metadata `rank_vae` (an integer) and `vae_lora_target_modules` (a JSON list of names).
+//! The file ([`write`], [`read_checkpoint`]) is the refiner's safetensors form of a Difix checkpoint
+//! ([`DifixCheckpoint::write_safetensors`]).
 
-use std::collections::HashMap;
 use std::path::Path;
 
 use burn::module::ParamId;
 use burn::tensor::{Device, TensorData};
 use dggt_refine::checkpoint::DifixCheckpoint;
-use dggt_refine::lora::lora_names;
-use dggt_refine::weights::{HostTensor, NamedTensors, StoredLayout, read_safetensors};
+use dggt_refine::lora::{LORA_ALPHA, lora_names};
+use dggt_refine::weights::{HostTensor, NamedTensors, StoredLayout};
 use dggt_refine::{LoadReport, Refiner};
 
 use crate::error::RefineTrainError;
 use crate::model::{TrainableRefiner, param_values};
-
-const UNET_PREFIX: &str = "unet.";
-const VAE_PREFIX: &str = "vae.";
-const RANK_KEY: &str = "rank_vae";
-const TARGETS_KEY: &str = "vae_lora_target_modules";
 
 /// The trained weights as a Difix checkpoint (see the module's doc).
 pub fn to_checkpoint(model: &TrainableRefiner) -> Result<DifixCheckpoint, RefineTrainError> {
@@ -55,7 +49,13 @@ pub fn to_checkpoint(model: &TrainableRefiner) -> Result<DifixCheckpoint, Refine
         vae.insert(down_name, down);
         vae.insert(up_name, up);
     }
-    Ok(DifixCheckpoint { lora_targets: index.adapters.keys().cloned().collect(), lora_rank: index.rank, unet, vae })
+    Ok(DifixCheckpoint {
+        lora_targets: index.adapters.keys().cloned().collect(),
+        lora_rank: index.rank,
+        lora_alpha: LORA_ALPHA,
+        unet,
+        vae,
+    })
 }
 
 /// burn's factors `a`, `b` back to peft's `lora_A` (down) and `lora_B` (up); `kernel`: the target weight's
@@ -95,64 +95,14 @@ fn transposed(t: &HostTensor) -> HostTensor {
     HostTensor { shape: vec![cols, rows], values, file: t.file.clone() }
 }
 
-/// Writes `checkpoint` to `path` (see the module's doc), atomically.
+/// Writes `checkpoint` to `path` as safetensors ([`DifixCheckpoint::write_safetensors`]).
 pub fn write(checkpoint: &DifixCheckpoint, path: &Path) -> Result<(), RefineTrainError> {
-    let bytes: Vec<(String, Vec<u8>, Vec<usize>)> = [(UNET_PREFIX, &checkpoint.unet), (VAE_PREFIX, &checkpoint.vae)]
-        .into_iter()
-        .flat_map(|(prefix, tensors)| {
-            tensors.iter().map(move |(name, t)| {
-                (format!("{prefix}{name}"), t.values.iter().flat_map(|v| v.to_le_bytes()).collect(), t.shape.clone())
-            })
-        })
-        .collect();
-    let views = bytes
-        .iter()
-        .map(|(name, data, shape)| {
-            let view = safetensors::tensor::TensorView::new(safetensors::Dtype::F32, shape.clone(), data)
-                .expect("sizes agree");
-            (name.clone(), view)
-        })
-        .collect::<Vec<_>>();
-    let metadata: HashMap<String, String> = [
-        (RANK_KEY.to_string(), checkpoint.lora_rank.to_string()),
-        (TARGETS_KEY.to_string(), serde_json::to_string(&checkpoint.lora_targets).expect("names serialise")),
-    ]
-    .into();
-    let file = safetensors::serialize(views, Some(metadata))
-        .map_err(|e| RefineTrainError::invalid(path.display().to_string(), e.to_string()))?;
-    dggt_data::io::write_atomically(path, &file)
-        .map_err(|e| RefineTrainError::invalid(path.display().to_string(), e.to_string()))
+    Ok(checkpoint.write_safetensors(path)?)
 }
 
-/// Reads a Difix checkpoint: `model_difix.pkl` (any extension but `.safetensors`) or a file of [`write`].
+/// Reads a Difix checkpoint: `model_difix.pkl` or its safetensors form ([`DifixCheckpoint::read`]).
 pub fn read_checkpoint(path: &Path) -> Result<DifixCheckpoint, RefineTrainError> {
-    if path.extension().is_none_or(|e| e != "safetensors") {
-        return Ok(DifixCheckpoint::read(path)?);
-    }
-    let invalid = |detail: String| RefineTrainError::invalid(path.display().to_string(), detail);
-    let bytes = std::fs::read(path).map_err(|source| RefineTrainError::Io { path: path.into(), source })?;
-    let (_, header) = safetensors::SafeTensors::read_metadata(&bytes).map_err(|e| invalid(e.to_string()))?;
-    let metadata = header.metadata().clone().unwrap_or_default();
-    let rank = metadata
-        .get(RANK_KEY)
-        .and_then(|r| r.parse::<usize>().ok())
-        .filter(|&r| r > 0)
-        .ok_or_else(|| invalid(format!("metadata `{RANK_KEY}` missing or not a positive integer")))?;
-    let targets: Vec<String> = metadata
-        .get(TARGETS_KEY)
-        .and_then(|t| serde_json::from_str(t).ok())
-        .ok_or_else(|| invalid(format!("metadata `{TARGETS_KEY}` missing or not a JSON list of names")))?;
-    let (mut unet, mut vae) = (NamedTensors::new(), NamedTensors::new());
-    for (name, tensor) in read_safetensors(path)? {
-        if let Some(rest) = name.strip_prefix(UNET_PREFIX) {
-            unet.insert(rest.to_string(), tensor);
-        } else if let Some(rest) = name.strip_prefix(VAE_PREFIX) {
-            vae.insert(rest.to_string(), tensor);
-        } else {
-            return Err(invalid(format!("tensor '{name}' is neither unet.* nor vae.*")));
-        }
-    }
-    Ok(DifixCheckpoint { lora_targets: targets, lora_rank: rank, unet, vae })
+    Ok(DifixCheckpoint::read(path)?)
 }
 
 /// The refiner of an exported file over its base folder, LoRA merged.

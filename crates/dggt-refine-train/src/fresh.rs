@@ -10,7 +10,7 @@ use std::path::Path;
 
 use dggt_refine::checkpoint::DifixCheckpoint;
 use dggt_refine::config::{VaeConfig, read_json};
-use dggt_refine::lora::lora_names;
+use dggt_refine::lora::{LORA_ALPHA, lora_names};
 use dggt_refine::refiner::{standard_normal_values, weights_file};
 use dggt_refine::weights::{HostTensor, NamedTensors, read_safetensors};
 
@@ -58,7 +58,7 @@ pub fn fresh_checkpoint(base_dir: &Path, rank: usize, seed: u64) -> Result<Difix
         vae.insert(up_name, host(up_shape, up, &file));
     }
     let lora_targets = targets.into_iter().map(|(module, _)| module).collect();
-    Ok(DifixCheckpoint { lora_targets, lora_rank: rank, unet: NamedTensors::new(), vae })
+    Ok(DifixCheckpoint { lora_targets, lora_rank: rank, lora_alpha: LORA_ALPHA, unet: NamedTensors::new(), vae })
 }
 
 /// `[out, in, 1, 1]` of `skip_conv_1..N`: encoder down input `N-1-i` projected to the width entering decoder

@@ -6,10 +6,10 @@
 //!   through skip convolutions; decoder LoRA merged at load ([`lora`]);
 //! - [`unet`]: the SD 2.1-layout denoiser with its spatial transformers ([`transformer`]) and residual
 //!   blocks ([`resnet`]);
-//! - [`text_encoder`]: the CLIP text encoder for the fixed prompt, run once;
+//! - [`text_encoder`]: the CLIP text encoder for the fixed prompt, run once; [`tokenizer`]: its tokenizer;
 //! - [`scheduler`]: the noise schedule and the step to the clean latent;
 //! - [`refiner`]: the whole computation, and loading a diffusers model folder ([`config`], [`weights`]) with
-//!   a Difix checkpoint ([`checkpoint`]) over it.
+//!   a Difix checkpoint ([`checkpoint`]) over it; [`random`]: made-up weights at full size, for timing.
 //!
 //! Tensors carry no backend type: the [`burn::tensor::Device`] the refiner is loaded on selects it.
 
@@ -19,10 +19,12 @@ mod error;
 pub mod layers;
 pub mod lora;
 pub mod parity;
+pub mod random;
 pub mod refiner;
 pub mod resnet;
 pub mod scheduler;
 pub mod text_encoder;
+pub mod tokenizer;
 pub mod trace;
 pub mod transformer;
 pub mod unet;
@@ -30,5 +32,8 @@ pub mod vae;
 pub mod weights;
 
 pub use error::RefineError;
-pub use refiner::{Latent, LoadReport, Refiner, RefinerParts, TIMESTEP};
+pub use refiner::{
+    Latent, LoadReport, Refiner, RefinerParts, RefinerSpec, TIMESTEP, frame_from_interleaved, frame_to_interleaved,
+};
+pub use tokenizer::{DEFAULT_PROMPT, Prompt};
 pub use trace::Trace;

@@ -67,6 +67,18 @@ pub fn apply_vae_overlay(
     rank: usize,
     path: &Path,
 ) -> Result<VaeOverlay, RefineError> {
+    apply_vae_overlay_scaled(base, checkpoint, targets, rank, LORA_ALPHA, path)
+}
+
+/// [`apply_vae_overlay`] with the LoRA scale `alpha / rank` of a given `alpha`.
+pub fn apply_vae_overlay_scaled(
+    base: &mut NamedTensors,
+    checkpoint: NamedTensors,
+    targets: &[String],
+    rank: usize,
+    alpha: f32,
+    path: &Path,
+) -> Result<VaeOverlay, RefineError> {
     let lora_error = |module: &str, message: String| RefineError::Lora {
         path: path.display().to_string(),
         module: module.to_string(),
@@ -78,7 +90,7 @@ pub fn apply_vae_overlay(
         overlay.replaced.push(name.clone());
         base.insert(name, tensor);
     }
-    let scale = LORA_ALPHA / rank as f32;
+    let scale = alpha / rank as f32;
     for target in targets {
         let Some(LoraPair { down: Some(down), up: Some(up) }) = pairs.remove(target) else {
             return Err(lora_error(target, "lora_A or lora_B is missing from state_dict_vae".into()));

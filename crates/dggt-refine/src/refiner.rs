@@ -18,9 +18,10 @@ use rand::{RngExt, SeedableRng};
 use crate::checkpoint::DifixCheckpoint;
 use crate::config::{SchedulerConfig, TextEncoderConfig, UnetConfig, VaeConfig, read_json, require};
 use crate::error::RefineError;
-use crate::lora::{VaeOverlay, apply_vae_overlay};
+use crate::lora::{VaeOverlay, apply_vae_overlay_scaled};
 use crate::scheduler::{SingleStep, alphas_cumprod};
 use crate::text_encoder::TextEncoder;
+use crate::tokenizer::Prompt;
 use crate::trace::Trace;
 use crate::transformer::ViewAttention;
 use crate::unet::Unet;
@@ -40,6 +41,17 @@ pub enum Latent {
     PosteriorMean,
     /// `mean + std * n`, `n` standard normal drawn from `seed` (the deployed refiner's behaviour).
     Sampled { seed: u64 },
+}
+
+impl Latent {
+    /// The latent of the `k`-th of several refinements: a sampled latent's seed advanced by `k`, so that each
+    /// draws its own noise.
+    pub fn nth(self, k: usize) -> Self {
+        match self {
+            Self::Sampled { seed } => Self::Sampled { seed: seed.wrapping_add(k as u64) },
+            mean => mean,
+        }
+    }
 }
 
 /// What loading took from where.
@@ -69,18 +81,46 @@ pub struct RefinerParts {
     pub scaling_factor: f32,
 }
 
+/// Where a refiner comes from and how it draws its latent: what a command that refines its renders carries
+/// until it loads the refiner on its device.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RefinerSpec {
+    /// The base model folder (diffusers layout).
+    pub model_dir: PathBuf,
+    /// The Difix checkpoint, `.pkl` or converted `.safetensors`.
+    pub checkpoint: PathBuf,
+    pub prompt: Prompt,
+    pub latent: Latent,
+}
+
+impl RefinerSpec {
+    pub fn load(&self, device: &Device) -> Result<(Refiner, LoadReport), RefineError> {
+        Refiner::load_prompt(&self.model_dir, &self.checkpoint, &self.prompt, device)
+    }
+
+    /// One line naming the folder, the checkpoint and the latent.
+    pub fn describe(&self) -> String {
+        let latent = match self.latent {
+            Latent::PosteriorMean => "posterior mean".to_string(),
+            Latent::Sampled { seed } => format!("sampled latent, seed {seed}"),
+        };
+        format!("{} with {} ({latent})", self.model_dir.display(), self.checkpoint.display())
+    }
+}
+
 pub struct Refiner {
-    vae: Vae,
-    unet: Unet,
+    pub(crate) vae: Vae,
+    pub(crate) unet: Unet,
     /// `[1, tokens, context_dim]`.
-    prompt_embeds: Tensor<3>,
-    step: SingleStep,
-    scaling_factor: f32,
+    pub(crate) prompt_embeds: Tensor<3>,
+    pub(crate) step: SingleStep,
+    pub(crate) scaling_factor: f32,
 }
 
 impl Refiner {
     /// Loads the base model folder (diffusers layout: `vae/`, `unet/`, `text_encoder/`, `scheduler/`) with a
-    /// Difix checkpoint over it, and encodes the prompt given as token ids.
+    /// Difix checkpoint over it (its `.pkl` or the `.safetensors` converted from it), and encodes the prompt
+    /// given as token ids.
     pub fn load(
         model_dir: &Path,
         checkpoint: &Path,
@@ -105,11 +145,12 @@ impl Refiner {
         check_vae(&vae_config, &vae_config_path)?;
         let vae_file = weights_file(&model_dir.join("vae"), "diffusion_pytorch_model")?;
         let mut vae_tensors = read_safetensors(&vae_file)?;
-        report.vae = apply_vae_overlay(
+        report.vae = apply_vae_overlay_scaled(
             &mut vae_tensors,
             checkpoint.vae,
             &checkpoint.lora_targets,
             checkpoint.lora_rank,
+            checkpoint.lora_alpha,
             checkpoint_path,
         )?;
         let mut vae_weights = Weights::new(vae_tensors, sources(&vae_file, checkpoint_path), device);
@@ -152,6 +193,17 @@ impl Refiner {
     pub fn from_parts(parts: RefinerParts) -> Self {
         let RefinerParts { vae, unet, prompt_embeds, step, scaling_factor } = parts;
         Self { vae, unet, prompt_embeds, step, scaling_factor }
+    }
+
+    /// [`Refiner::load`] with the prompt as text (tokenised by `model_dir/tokenizer/`; an error naming the
+    /// missing file when the folder has none) or as token ids.
+    pub fn load_prompt(
+        model_dir: &Path,
+        checkpoint: &Path,
+        prompt: &Prompt,
+        device: &Device,
+    ) -> Result<(Self, LoadReport), RefineError> {
+        Self::load(model_dir, checkpoint, &prompt.token_ids(model_dir)?, device)
     }
 
     /// The refiner with its UNet computing in `dtype` (f32, f16, bf16). The VAE stays in f32 (sd-turbo's VAE
@@ -224,6 +276,67 @@ impl Refiner {
     }
 }
 
+impl Refiner {
+    /// Refines `frames` `[n, 3, h, w]` in [0, 1] in batches of `batch` frames (the reference-view mode when
+    /// `reference` `[n, 3, h, w]` is given, frame `i` attending to reference `i`), calling `progress` with the
+    /// number of frames done after each batch. A sampled latent draws batch `k`'s noise from `seed + k`, so
+    /// results are reproducible for the same seed and batch size.
+    pub fn refine_frames(
+        &self,
+        frames: Tensor<4>,
+        reference: Option<Tensor<4>>,
+        latent: Latent,
+        batch: usize,
+        mut progress: impl FnMut(usize),
+    ) -> Result<Tensor<4>, RefineError> {
+        let count = frames.dims()[0];
+        if batch == 0 || count == 0 {
+            return Err(RefineError::Input(format!("{count} frames in batches of {batch}: nothing to refine")));
+        }
+        if let Some(reference) = &reference
+            && reference.dims() != frames.dims()
+        {
+            return Err(RefineError::Input(format!(
+                "references of shape {:?}, expected the frames' {:?}",
+                reference.dims(),
+                frames.dims()
+            )));
+        }
+        let mut refined = Vec::with_capacity(count.div_ceil(batch));
+        for (k, start) in (0..count).step_by(batch).enumerate() {
+            let rows = batch.min(count - start);
+            let part = reference.as_ref().map(|r| r.clone().narrow(0, start, rows));
+            refined.push(self.refine(frames.clone().narrow(0, start, rows), part, latent.nth(k), &mut Trace::Off)?);
+            progress(start + rows);
+        }
+        Ok(Tensor::cat(refined, 0))
+    }
+}
+
+/// `[1, 3, h, w]` from interleaved RGB `[h, w, 3]` (a decoded image's layout).
+pub fn frame_from_interleaved(
+    rgb: &[f32],
+    height: usize,
+    width: usize,
+    device: &Device,
+) -> Result<Tensor<4>, RefineError> {
+    if rgb.len() != 3 * height * width {
+        return Err(RefineError::Input(format!("{} RGB values for a {width} x {height} frame", rgb.len())));
+    }
+    let hwc = Tensor::<3>::from_data(TensorData::new(rgb.to_vec(), [height, width, 3]), device);
+    Ok(hwc.permute([2, 0, 1]).unsqueeze_dim(0))
+}
+
+/// Interleaved RGB `[h, w, 3]` of frame `index` of `frames` `[n, 3, h, w]`.
+pub fn frame_to_interleaved(frames: &Tensor<4>, index: usize) -> Result<Vec<f32>, RefineError> {
+    let [_, channels, height, width] = frames.dims();
+    let hwc = frames.clone().narrow(0, index, 1).reshape([channels, height, width]).permute([1, 2, 0]);
+    hwc.into_data()
+        .convert::<f32>()
+        .try_into_vec::<f32>()
+        .map_err(|e| RefineError::Input(format!("frame {index}: {e:?}")))
+}
+
 /// Pads the bottom and right of `x` with copies of its edge pixels to sides that are multiples of `multiple`.
 fn pad_to_multiple(x: Tensor<4>, multiple: usize) -> Tensor<4> {
     let [_, _, height, width] = x.dims();
@@ -264,7 +377,7 @@ fn encode_prompt(dir: &Path, tokens: &[i64], device: &Device) -> Result<(Tensor<
 }
 
 /// Settings of the VAE configuration this implementation does not cover are errors.
-fn check_vae(config: &VaeConfig, path: &Path) -> Result<(), RefineError> {
+pub(crate) fn check_vae(config: &VaeConfig, path: &Path) -> Result<(), RefineError> {
     require(!config.block_out_channels.is_empty(), path, || "block_out_channels is empty".into())?;
     require(config.mid_block_add_attention, path, || "mid_block_add_attention false".into())?;
     require(config.use_quant_conv && config.use_post_quant_conv, path, || "quant convolutions turned off".into())

@@ -6,11 +6,11 @@
 //! them before they become parameters: checkpoint overlays replace base tensors and LoRA pairs are merged
 //! into their targets ([`crate::lora`]).
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 
 use burn::module::ParamId;
-use burn::tensor::{DType, Device, Tensor, TensorData};
+use burn::tensor::{DType, Device, Distribution, Tensor, TensorData};
 use safetensors::Dtype;
 
 use crate::error::RefineError;
@@ -58,9 +58,16 @@ pub type ParamNames = BTreeMap<String, (ParamId, StoredLayout)>;
 
 /// Every tensor of a safetensors file.
 pub fn read_safetensors(path: &Path) -> Result<NamedTensors, RefineError> {
+    Ok(read_safetensors_with_metadata(path)?.0)
+}
+
+/// Every tensor of a safetensors file, and the file's text metadata (empty when it has none).
+pub fn read_safetensors_with_metadata(path: &Path) -> Result<(NamedTensors, HashMap<String, String>), RefineError> {
     let bytes = std::fs::read(path).map_err(|e| RefineError::io(path, e))?;
-    let file = safetensors::SafeTensors::deserialize(&bytes)
-        .map_err(|e| RefineError::file(path, format!("not a safetensors file: {e}")))?;
+    let invalid = |e: safetensors::SafeTensorError| RefineError::file(path, format!("not a safetensors file: {e}"));
+    let (_, header) = safetensors::SafeTensors::read_metadata(&bytes).map_err(invalid)?;
+    let metadata = header.metadata().clone().unwrap_or_default();
+    let file = safetensors::SafeTensors::deserialize(&bytes).map_err(invalid)?;
     let mut tensors = NamedTensors::new();
     for (name, view) in file.tensors() {
         let dtype = match view.dtype() {
@@ -75,7 +82,37 @@ pub fn read_safetensors(path: &Path) -> Result<NamedTensors, RefineError> {
         let data = TensorData::from_bytes_vec(view.data().to_vec(), view.shape().to_vec(), dtype);
         tensors.insert(name.clone(), HostTensor::from_data(data, path, &name)?);
     }
-    Ok(tensors)
+    Ok((tensors, metadata))
+}
+
+/// Writes `tensors` (f32) and `metadata` as a safetensors file.
+pub fn write_safetensors(
+    path: &Path,
+    tensors: &NamedTensors,
+    metadata: HashMap<String, String>,
+) -> Result<(), RefineError> {
+    let bytes: Vec<(&String, Vec<u8>, &Vec<usize>)> = tensors
+        .iter()
+        .map(|(name, t)| (name, t.values.iter().flat_map(|v| v.to_le_bytes()).collect(), &t.shape))
+        .collect();
+    let views = bytes
+        .iter()
+        .map(|(name, data, shape)| {
+            safetensors::tensor::TensorView::new(Dtype::F32, shape.to_vec(), data)
+                .map(|view| (name.to_string(), view))
+                .map_err(|e| RefineError::file(path, format!("tensor '{name}': {e}")))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    safetensors::serialize_to_file(views, Some(metadata), path).map_err(|e| RefineError::file(path, e.to_string()))
+}
+
+/// Where [`Weights::take`] gets a tensor's values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Fill {
+    /// From the tensors read from files.
+    Stored,
+    /// Made up for the requested shape (see [`Weights::random`]).
+    Random,
 }
 
 /// The tensors a module tree is built from, on the device its parameters go to. Taking a tensor marks it
@@ -87,6 +124,7 @@ pub struct Weights {
     params: ParamNames,
     source: String,
     device: Device,
+    fill: Fill,
 }
 
 impl Weights {
@@ -98,7 +136,16 @@ impl Weights {
             params: ParamNames::new(),
             source: source.into(),
             device: device.clone(),
+            fill: Fill::Stored,
         }
+    }
+
+    /// Weights that give every requested tensor made-up values of its shape, made on the device (no host
+    /// copy), for timing and memory at a size whose weights are not at hand: matrices and kernels uniform with
+    /// the variance `1 / fan_in` (fan-in: the product of the dimensions after the first), vectors ones for
+    /// normalisation weights (a name containing `norm`) and zeros otherwise.
+    pub fn random(device: &Device) -> Self {
+        Self { fill: Fill::Random, ..Self::new(NamedTensors::new(), "random weights", device) }
     }
 
     pub fn device(&self) -> &Device {
@@ -111,6 +158,10 @@ impl Weights {
 
     /// The tensor `name`, which must have `shape`, as a parameter tensor.
     pub fn take<const D: usize>(&mut self, name: &str, shape: [usize; D]) -> Result<Tensor<D>, RefineError> {
+        if self.fill == Fill::Random {
+            self.taken.insert(name.to_string());
+            return Ok(random_tensor(name, shape, &self.device));
+        }
         let tensor = self.checked(name, &shape)?;
         Ok(Tensor::from_data(TensorData::new(tensor.values.clone(), shape), &self.device))
     }
@@ -147,4 +198,14 @@ impl Weights {
     pub fn unused(&self) -> Vec<String> {
         self.tensors.keys().filter(|name| !self.taken.contains(*name)).cloned().collect()
     }
+}
+
+/// See [`Weights::random`].
+fn random_tensor<const D: usize>(name: &str, shape: [usize; D], device: &Device) -> Tensor<D> {
+    if D == 1 {
+        return if name.contains("norm") { Tensor::ones(shape, device) } else { Tensor::zeros(shape, device) };
+    }
+    let fan_in: usize = shape[1..].iter().product();
+    let bound = (3.0 / fan_in.max(1) as f64).sqrt();
+    Tensor::random(shape, Distribution::Uniform(-bound, bound), device)
 }

@@ -1,22 +1,29 @@
 //! Parity with the reference refiner (diffusers 0.42.1 / peft 0.21.2, float32) on the tiny random
 //! configuration in `shared/parity/difix_tiny_s1`: the prompt embedding, the noise schedule and every stored
 //! intermediate of both modes (single view, and with a reference view), each within
-//! `5e-5 * max(1, max|ref|)`, on the CPU backend and (feature `wgpu`) on burn's wgpu device.
+//! `5e-5 * max(1, max|ref|)`, on the CPU backend and (feature `wgpu`) on burn's wgpu device; the same from the
+//! checkpoint converted to safetensors.
 //!
 //! The vectors live beside the repository in `shared/parity/difix_tiny_s1` (`$DGGT_PARITY_DIR/difix_tiny_s1`
 //! when set; the variable names the shared `parity` folder). Their README describes the computation.
 
+use std::collections::HashMap;
+use std::path::Path;
+
 use burn::tensor::{Device, FloatDType, Tensor};
+use dggt_refine::checkpoint::{DifixCheckpoint, SAFETENSORS_FORMAT};
 use dggt_refine::parity::{Status, compare, read_vectors, run_parity};
+use dggt_refine::weights::{HostTensor, NamedTensors, write_safetensors};
 use dggt_refine::{Latent, Refiner, Trace};
 
 mod common;
 
 use common::vectors_dir;
 
-fn both_modes_match_the_reference(device: &Device) {
+/// `checkpoint`: the vectors' `model_difix.pkl` when `None`.
+fn both_modes_match_the_reference(device: &Device, checkpoint: Option<&Path>) {
     let dir = vectors_dir();
-    let report = run_parity(&dir, None, device).expect("the refiner loads and runs");
+    let report = run_parity(&dir, checkpoint, device).expect("the refiner loads and runs");
     println!("{report}{}", report.summary());
     assert_eq!(report.load.unet_from_checkpoint.len(), 208, "the checkpoint's full UNet");
     assert_eq!(report.load.unet_from_base, 0);
@@ -35,13 +42,48 @@ fn both_modes_match_the_reference(device: &Device) {
 
 #[test]
 fn both_modes_match_the_reference_on_the_cpu() {
-    both_modes_match_the_reference(&Device::flex());
+    both_modes_match_the_reference(&Device::flex(), None);
 }
 
 #[cfg(feature = "wgpu")]
 #[test]
 fn both_modes_match_the_reference_on_wgpu() {
-    both_modes_match_the_reference(&Device::wgpu(burn::tensor::DeviceKind::default()));
+    both_modes_match_the_reference(&Device::wgpu(burn::tensor::DeviceKind::default()), None);
+}
+
+/// The checkpoint converted to safetensors holds the same tensors, bit for bit, and the same LoRA settings,
+/// and the refiner loaded from it matches the reference in both modes.
+#[test]
+fn the_checkpoint_converted_to_safetensors_matches_the_reference() {
+    let pickle = DifixCheckpoint::read(&vectors_dir().join("model_difix.pkl")).unwrap();
+    let out = tempfile::tempdir().unwrap();
+    let converted_path = out.path().join("model_difix.safetensors");
+    pickle.write_safetensors(&converted_path).unwrap();
+    let converted = DifixCheckpoint::read(&converted_path).unwrap();
+    assert_eq!((&converted.lora_targets, converted.lora_rank), (&pickle.lora_targets, pickle.lora_rank));
+    assert_eq!(converted.lora_alpha, pickle.lora_alpha);
+    for (name, (ours, theirs)) in [("unet", (&converted.unet, &pickle.unet)), ("vae", (&converted.vae, &pickle.vae))] {
+        assert_eq!(ours.keys().collect::<Vec<_>>(), theirs.keys().collect::<Vec<_>>(), "{name} tensor names");
+        for (key, tensor) in ours {
+            let bits = |t: &HostTensor| t.values.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!((&tensor.shape, bits(tensor)), (&theirs[key].shape, bits(&theirs[key])), "{name}.{key}");
+        }
+    }
+    both_modes_match_the_reference(&Device::flex(), Some(&converted_path));
+}
+
+#[test]
+fn a_converted_checkpoint_without_its_lora_settings_is_an_error_naming_the_key() {
+    let out = tempfile::tempdir().unwrap();
+    let path = out.path().join("bare.safetensors");
+    let tensors = NamedTensors::from([(
+        "unet.conv_in.bias".to_string(),
+        HostTensor { shape: vec![1], values: vec![0.0], file: path.clone() },
+    )]);
+    let metadata = HashMap::from([("format".to_string(), SAFETENSORS_FORMAT.to_string())]);
+    write_safetensors(&path, &tensors, metadata).unwrap();
+    let message = DifixCheckpoint::read(&path).unwrap_err().to_string();
+    assert!(message.contains("bare.safetensors") && message.contains("vae_lora_target_modules"), "{message}");
 }
 
 #[test]
@@ -110,4 +152,37 @@ fn a_reduced_precision_unet_stays_close_to_f32() {
         assert!(image_error > 0.0, "{dtype:?} computed nothing in reduced precision");
         assert!(image_error < bound && eps_error < 2.0 * bound, "{dtype:?}: {image_error} / {eps_error}");
     }
+}
+
+/// Frames refined in batches (with references) are the frames refined one by one, and progress counts them.
+#[test]
+fn frames_refined_in_batches_equal_frames_refined_one_by_one() {
+    let (refiner, image) = load_refiner(&Device::flex());
+    let frames = Tensor::cat(vec![image.clone(), image.clone().flip([3]), image.clone().flip([2])], 0);
+    let references = frames.clone().flip([0]);
+    let mut done = Vec::new();
+    let batched = refiner
+        .refine_frames(frames.clone(), Some(references.clone()), Latent::PosteriorMean, 2, |n| done.push(n))
+        .unwrap();
+    assert_eq!(done, [2, 3]);
+    assert_eq!(batched.dims(), frames.dims());
+    for i in 0..3 {
+        let single = refiner
+            .refine(
+                frames.clone().narrow(0, i, 1),
+                Some(references.clone().narrow(0, i, 1)),
+                Latent::PosteriorMean,
+                &mut Trace::Off,
+            )
+            .unwrap();
+        let error =
+            compare("frame", Some(&batched.clone().narrow(0, i, 1).into_data()), &single.into_data()).max_abs.unwrap();
+        assert!(error < 1e-5, "frame {i} differs by {error} batched");
+    }
+    assert!(
+        refiner
+            .refine_frames(frames.clone(), Some(references.narrow(0, 0, 2)), Latent::PosteriorMean, 2, |_| ())
+            .is_err()
+    );
+    assert!(refiner.refine_frames(frames, None, Latent::PosteriorMean, 0, |_| ()).is_err());
 }

@@ -1,0 +1,174 @@
+//! `dggt refine` on the tiny random refiner of the parity vectors (random weights: plumbing, shapes and
+//! determinism are checked, not quality): `convert` writes a safetensors checkpoint that `dggt parity`
+//! passes with, `images` writes one refined image per input, reproducibly, in both modes, `reconstruct
+//! --refine` writes refined renders beside the unrefined, and `bench refiner` times frames.
+//!
+//! The vectors are `$DGGT_PARITY_DIR/difix_tiny_s1` when that variable names the shared parity folder, else
+//! `<repo>/../shared/parity/difix_tiny_s1`.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use dggt_export::images::{read_rgb_png, write_rgb_png};
+use dggt_geom::ImageSize;
+
+fn dggt(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_dggt")).args(args).output().expect("the dggt binary runs")
+}
+
+fn vectors() -> PathBuf {
+    let root = std::env::var_os("DGGT_PARITY_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/parity"));
+    let dir = root.join("difix_tiny_s1");
+    assert!(
+        dir.join("model_difix.pkl").is_file(),
+        "refiner parity vectors not found at {} (set DGGT_PARITY_DIR to the shared parity folder)",
+        dir.display()
+    );
+    dir
+}
+
+fn succeeded(out: &Output) -> String {
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    stdout
+}
+
+fn path(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+#[test]
+fn a_converted_checkpoint_passes_parity() {
+    let dir = vectors();
+    let out = tempfile::tempdir().unwrap();
+    let converted = out.path().join("model_difix.safetensors");
+    let text = succeeded(&dggt(&[
+        "refine",
+        "convert",
+        "--checkpoint",
+        path(&dir.join("model_difix.pkl")),
+        "--out",
+        path(&converted),
+    ]));
+    assert!(text.contains("208 UNet and 74 VAE tensors, 35 LoRA targets at rank 4 (alpha 8)"), "{text}");
+    let text = succeeded(&dggt(&["parity", "--vectors", path(&dir), "--weights", path(&converted)]));
+    assert!(text.contains(" 0 fail"), "{text}");
+}
+
+/// A 20 x 30 gradient (sides not multiples of 8).
+fn write_test_image(path: &Path, shift: f32) {
+    let size = ImageSize::new(30, 20).unwrap();
+    let rgb: Vec<f32> = (0..size.area() * 3).map(|i| (i as f32 * 0.013 + shift) % 1.0).collect();
+    write_rgb_png(path, size, &rgb).unwrap();
+}
+
+#[test]
+fn images_are_refined_to_their_size_reproducibly_in_both_modes() {
+    let dir = vectors();
+    let work = tempfile::tempdir().unwrap();
+    let (a, b) = (work.path().join("a.png"), work.path().join("b.png"));
+    write_test_image(&a, 0.0);
+    write_test_image(&b, 0.5);
+    let (base, checkpoint) = (dir.join("base"), dir.join("model_difix.pkl"));
+    let refine = |out: &str, extra: &[&str]| {
+        let out = work.path().join(out);
+        let mut args = vec!["refine", "images", "--model", path(&base), "--image", path(&a)];
+        args.extend_from_slice(&["--image", path(&b), "--prompt-ids", "5,7,9", "--out", path(&out)]);
+        args.extend_from_slice(&["--checkpoint", path(&checkpoint)]);
+        args.extend_from_slice(extra);
+        assert!(succeeded(&dggt(&args)).contains("2 refined images"));
+        let read = |name: &str| read_rgb_png(&out.join(name)).unwrap();
+        let ((size_a, rgb_a), (size_b, _)) = (read("a.png"), read("b.png"));
+        assert_eq!((size_a.width, size_a.height, size_b.width, size_b.height), (30, 20, 30, 20));
+        rgb_a
+    };
+    let mean = refine("mean", &[]);
+    let sampled = refine("sampled", &["--sample-latent", "--seed", "3"]);
+    assert_eq!(sampled, refine("sampled_again", &["--sample-latent", "--seed", "3"]), "same seed, same image");
+    let with_reference = refine("reference", &["--reference", path(&b), "--reference", path(&a)]);
+    let differs = |x: &[f32], y: &[f32]| x.iter().zip(y).any(|(p, q)| (p - q).abs() > 1.5 / 255.0);
+    assert!(differs(&mean, &sampled), "sampling the latent changed nothing");
+    assert!(differs(&mean, &with_reference), "the reference view changed nothing");
+    let original = read_rgb_png(&a).unwrap().1;
+    assert!(differs(&mean, &original), "the refiner returned its input");
+}
+
+#[test]
+fn a_model_folder_without_tokenizer_or_checkpoint_is_named_in_the_error() {
+    let dir = vectors();
+    let work = tempfile::tempdir().unwrap();
+    let image = work.path().join("a.png");
+    write_test_image(&image, 0.0);
+    let base = dir.join("base");
+    let args = ["refine", "images", "--model", path(&base), "--image", path(&image), "--out", path(work.path())];
+    let out = dggt(&args);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && stderr.contains("model_difix.pkl") && stderr.contains(path(&base)), "{stderr}");
+    let checkpoint = dir.join("model_difix.pkl");
+    let out = dggt(&[&args[..], &["--checkpoint", path(&checkpoint)]].concat());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && stderr.contains("tokenizer/vocab.json"), "{stderr}");
+    let out = dggt(&["reconstruct", "--images", "x", "--checkpoint", "y", "--out", "z", "--refine-checkpoint", "c"]);
+    assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("--refine"));
+}
+
+#[test]
+fn the_refiner_benchmark_times_frames_at_a_folders_sizes() {
+    let base = vectors().join("base");
+    let args = ["bench", "refiner", "--model", path(&base), "--height", "20", "--width", "30", "--repeat", "2"];
+    let text = succeeded(&dggt(&[&args[..], &["--reference-view"]].concat()));
+    for expected in ["frame: 30 x 20 (ReferenceView)", "per frame: median", "of 2 runs", "peak memory: "] {
+        assert!(text.contains(expected), "{expected} missing from\n{text}");
+    }
+    assert!(!text.contains("unknown"), "peak memory is read on Linux:\n{text}");
+}
+
+/// `dggt reconstruct --refine`: a tiny network trained one step renders two frames of the fixture; each render
+/// is refined into `renders_refined/` under its name and size, the unrefined one kept.
+#[test]
+fn reconstruct_writes_refined_renders_beside_the_unrefined() {
+    let dir = vectors();
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let work = tempfile::tempdir().unwrap();
+    let (run, out) = (work.path().join("run"), work.path().join("reconstruction"));
+    let config = repo.join("configs/tiny-overfit.toml");
+    succeeded(&dggt(&["train", "--config", path(&config), "--steps", "1", "--out", path(&run)]));
+    let (base, checkpoint) = (dir.join("base"), dir.join("model_difix.pkl"));
+    let text = succeeded(&dggt(&[
+        "reconstruct",
+        "--images",
+        path(&repo.join("data-fixtures/synth-s0")),
+        "--checkpoint",
+        path(&run),
+        "--cameras",
+        "0",
+        "--frames",
+        "0..2",
+        "--width",
+        "56",
+        "--out",
+        path(&out),
+        "--refine",
+        path(&base),
+        "--refine-checkpoint",
+        path(&checkpoint),
+        "--refine-prompt-ids",
+        "5,7,9",
+    ]));
+    assert!(text.contains("refined 2 renders into") && text.contains("unrefined kept in renders/"), "{text}");
+    let names = |folder: &str| {
+        let mut names: Vec<_> = std::fs::read_dir(out.join(folder)).unwrap().map(|e| e.unwrap().file_name()).collect();
+        names.sort();
+        names
+    };
+    assert_eq!(names("renders").len(), 2);
+    assert_eq!(names("renders"), names("renders_refined"));
+    for name in names("renders") {
+        let (size, render) = read_rgb_png(&out.join("renders").join(&name)).unwrap();
+        let (refined_size, refined) = read_rgb_png(&out.join("renders_refined").join(&name)).unwrap();
+        assert_eq!(size, refined_size);
+        assert_ne!(render, refined, "{name:?} unchanged by the refiner");
+    }
+}
