@@ -81,14 +81,7 @@ impl RefineTrainer {
         let loss = RefineLoss::load(&config.loss, &device)?;
         let pairs = load_pairs(&config.pairs)?;
         let optimizer = Optimizer::ungrouped(&config.optim.section());
-        let state = RunState {
-            step: 0,
-            seed: config.run.seed,
-            skipped_steps: 0,
-            elapsed_s: 0.0,
-            bad_samples: 0,
-            samples_per_step: config.run.batch as u64,
-        };
+        let state = RunState::starting(config.run.seed, config.run.batch as u64);
         let mut trainer = Self { config, model, optimizer, loss, pairs, state, device, plain_device };
         if start == Start::Resume
             && let Some(dir) = latest(&trainer.checkpoints()).map_err(dggt_train::TrainError::from)?

@@ -48,6 +48,13 @@ pub struct RunState {
     pub samples_per_step: u64,
 }
 
+impl RunState {
+    /// The counters of a run that has not taken a step yet.
+    pub fn starting(seed: u64, samples_per_step: u64) -> Self {
+        Self { step: 0, seed, skipped_steps: 0, elapsed_s: 0.0, bad_samples: 0, samples_per_step }
+    }
+}
+
 /// The optimiser's state in a checkpoint folder.
 const OPTIMIZER_FILE: &str = "optimizer.bpk";
 

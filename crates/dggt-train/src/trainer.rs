@@ -129,14 +129,7 @@ impl Trainer {
                 let model = fresh_model(&model_config, init, &device)?;
                 let model = freeze(model, &config.optim.frozen)?;
                 let optimizer = Optimizer::new(&config.optim, &model);
-                let state = RunState {
-                    step: 0,
-                    seed: config.run.seed,
-                    skipped_steps: 0,
-                    elapsed_s: 0.0,
-                    bad_samples: 0,
-                    samples_per_step: 0,
-                };
+                let state = RunState::starting(config.run.seed, 0);
                 (model, model_config, optimizer, state)
             }
         };
