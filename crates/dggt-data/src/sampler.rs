@@ -58,15 +58,25 @@ impl Default for SamplerConfig {
 }
 
 impl SamplerConfig {
+    /// Checks the input counts alone (`1 <= min_inputs <= max_inputs`), which need no log: a configuration
+    /// check, so that a wrong range is reported once rather than as every sample failing to load.
+    pub fn check_input_counts(&self) -> Result<()> {
+        if self.min_inputs == 0 {
+            return Err(DataError::Config("sampler: min_inputs must be at least 1".into()));
+        }
+        if self.min_inputs > self.max_inputs {
+            return Err(DataError::Config(format!(
+                "sampler: min_inputs ({}) exceeds max_inputs ({})",
+                self.min_inputs, self.max_inputs
+            )));
+        }
+        Ok(())
+    }
+
     /// Checks the settings against a log of `frame_count` frames seen by `camera_count` cameras.
     pub fn validate(&self, frame_count: usize, camera_count: usize) -> Result<()> {
         let fail = |message: String| Err(DataError::Config(format!("sampler: {message}")));
-        if self.min_inputs == 0 {
-            return fail("min_inputs must be at least 1".into());
-        }
-        if self.min_inputs > self.max_inputs {
-            return fail(format!("min_inputs ({}) exceeds max_inputs ({})", self.min_inputs, self.max_inputs));
-        }
+        self.check_input_counts()?;
         if self.window < self.max_inputs {
             return fail(format!(
                 "a window of {} frames cannot hold max_inputs = {} distinct input frames",

@@ -48,6 +48,7 @@ fn train_config(out: &Path) -> TrainConfig {
     let mut config = TrainConfig::load(&repo().join("configs/tiny-overfit.toml")).expect("tiny-overfit.toml loads");
     config.data.scene = fixture();
     config.data.preprocess.target_width = 56;
+    config.sampler.min_inputs = 4;
     config.sampler.max_inputs = 4;
     config.render.render_inputs = false;
     // Optimiser and sampling pinned here rather than taken from the shipped file, whose tuning targets long runs.

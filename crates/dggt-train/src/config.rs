@@ -322,6 +322,7 @@ impl TrainConfig {
         if self.run.devices.is_empty() {
             return Err(setting("run.devices", "must name at least one device"));
         }
+        self.sampler.check_input_counts().map_err(|e| setting("sampler", e.to_string()))?;
         for spec in &self.data.datasets {
             spec.validate().map_err(|e| setting("data.datasets", e.to_string()))?;
         }

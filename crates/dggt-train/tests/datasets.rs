@@ -51,6 +51,7 @@ fn config(datasets: Vec<DatasetSpec>, out: &Path, steps: u64) -> TrainConfig {
     config.data.frames = None;
     config.data.preprocess.target_width = 56;
     config.data.workers = 1;
+    config.sampler.min_inputs = 4;
     config.sampler.max_inputs = 4;
     config.sampler.window = 8;
     config.render.render_inputs = false;

@@ -76,6 +76,7 @@ fn stand_in(config: &str, init: PathBuf, out: &Path) -> TrainConfig {
     config.data.preprocess.target_width = 56;
     config.data.preprocess.crop_to_square = true;
     config.data.workers = 1;
+    config.sampler.min_inputs = 4;
     config.sampler.max_inputs = 4;
     config.sampler.window = 8;
     config.loss.lpips_weights = Some(lpips.clone());

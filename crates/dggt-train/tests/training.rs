@@ -20,6 +20,7 @@ fn repo() -> PathBuf {
 fn small_config(out: &Path, steps: u64) -> TrainConfig {
     let mut config = TrainConfig::load(&repo().join("configs/tiny-overfit.toml")).expect("tiny-overfit.toml loads");
     config.data.preprocess.target_width = 56;
+    config.sampler.min_inputs = 4;
     config.sampler.max_inputs = 4;
     config.render.render_inputs = false;
     config.optim.warmup_steps = 2;
@@ -120,6 +121,14 @@ fn shipped_configurations_parse_and_validate() {
     std::fs::write(bad.path(), zero_eps2d).unwrap();
     let error = TrainConfig::load(bad.path()).unwrap_err().to_string();
     assert!(error.contains("render.eps2d"), "{error}");
+    // An empty input range is a configuration error, not a failure of every sample.
+    let inverted: String = overfit
+        .lines()
+        .map(|l| if l.starts_with("min_inputs = ") { "min_inputs = 7\n".into() } else { format!("{l}\n") })
+        .collect();
+    std::fs::write(bad.path(), inverted).unwrap();
+    let error = TrainConfig::load(bad.path()).unwrap_err().to_string();
+    assert!(error.contains("min_inputs (7) exceeds max_inputs (6)"), "{error}");
 }
 
 #[test]
