@@ -111,7 +111,9 @@ pub fn heads_chunked(
         if let Some(head) = &model.instance_head {
             let prediction = head.predict(|i| pick(aggregator.dino_token_list[i].clone()), start, grid, &chunk_images);
             let logits = f32(prediction.prediction.narrow(4, 0, 1).squeeze_dim::<4>(4));
-            still = motion == MotionPath::WhereDynamic && is_still(logits.clone().max().into_scalar());
+            // The read-back only where it can save the motion head.
+            let skippable = motion == MotionPath::WhereDynamic && model.motion_head.is_some();
+            still = skippable && is_still(logits.clone().max().into_scalar());
             dynamic.push(logits);
         }
         if let Some(head) = &model.gs_head {

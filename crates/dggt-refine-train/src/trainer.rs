@@ -16,11 +16,11 @@ use std::time::Instant;
 
 use burn::optim::GradientsParams;
 use burn::tensor::Device;
-use dggt_infer::checkpoint::{LATEST, MODEL_FILE, STATE_FILE, latest, load_model};
+use dggt_infer::checkpoint::{STATE_FILE, latest, load_model};
 use dggt_losses::psnr;
 use dggt_refine::Latent;
 use dggt_train::Start;
-use dggt_train::checkpoint::{RunState, optimizer_file, prune, save_model};
+use dggt_train::checkpoint::{RunState, optimizer_file, save_folder};
 use dggt_train::optimizer::Optimizer;
 use dggt_train::schedule::WarmupCosine;
 use dggt_train::trainer::{progress_bar, truncate_metrics};
@@ -243,22 +243,8 @@ impl RefineTrainer {
 
     /// Writes `checkpoints/step-NNNNNNNN/` and points `latest` at it; keeps the newest `run.keep_checkpoints`.
     pub fn save_checkpoint(&self) -> Result<PathBuf, RefineTrainError> {
-        let root = self.checkpoints();
-        let name = format!("step-{:08}", self.state.step);
-        let dir = root.join(&name);
-        let io = |path: &Path, e: String| RefineTrainError::invalid(path.display().to_string(), e);
-        fs::create_dir_all(&dir).map_err(|e| io(&dir, e.to_string()))?;
-        let _ = fs::remove_file(dir.join(STATE_FILE));
-        save_model(&dir.join(MODEL_FILE), &self.model.weights)?;
-        self.optimizer.save(&optimizer_file(&dir))?;
-        let state = serde_json::to_string_pretty(&self.state).expect("states serialise");
-        let write = |path: PathBuf, bytes: &[u8]| {
-            dggt_data::io::write_atomically(&path, bytes).map_err(|e| io(&path, e.to_string()))
-        };
-        write(dir.join(STATE_FILE), state.as_bytes())?;
-        write(root.join(LATEST), name.as_bytes())?;
-        prune(&root, self.config.run.keep_checkpoints.max(1))?;
-        Ok(dir)
+        let keep = self.config.run.keep_checkpoints;
+        Ok(save_folder(&self.checkpoints(), &self.model.weights, &self.optimizer, &self.state, keep, &[])?)
     }
 
     /// Continues from the checkpoint folder `dir`: weights, AdamW moments and run state.

@@ -18,8 +18,7 @@ use dggt_splat::{
 
 use crate::assemble::{AssembledGaussians, AssemblyCounts, AssemblySettings, HiddenSky, assemble};
 use crate::error::SceneError;
-use crate::pixels::PixelGaussians;
-use crate::pixels::host_values;
+use crate::pixels::{PixelGaussians, host_values};
 use crate::timeline::TargetView;
 
 /// One rendered view.

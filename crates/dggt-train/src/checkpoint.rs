@@ -71,6 +71,20 @@ pub fn save(
     state: &RunState,
     keep: usize,
 ) -> Result<PathBuf, TrainError> {
+    let config = serde_json::to_string_pretty(config).expect("configs serialise");
+    save_folder(root, model, optimizer, state, keep, &[(MODEL_CONFIG_FILE, config.as_bytes())])
+}
+
+/// [`save`] for any trained module: its parameters, the optimiser, `extra` files (name, bytes) and the run
+/// state, written last, in `root/step-NNNNNNNN/`; then `latest` and pruning to the newest `keep`.
+pub fn save_folder<M: Module>(
+    root: &Path,
+    model: &M,
+    optimizer: &Optimizer,
+    state: &RunState,
+    keep: usize,
+    extra: &[(&str, &[u8])],
+) -> Result<PathBuf, TrainError> {
     let name = format!("step-{:08}", state.step);
     let dir = root.join(&name);
     fs::create_dir_all(&dir).map_err(|e| checkpoint_error(&dir, e))?;
@@ -82,7 +96,9 @@ pub fn save(
     save_model(&dir.join(MODEL_FILE), model)?;
     failpoint::reached(failpoint::INSIDE_CHECKPOINT);
     optimizer.save(&dir.join(OPTIMIZER_FILE))?;
-    write(MODEL_CONFIG_FILE, serde_json::to_string_pretty(config).expect("configs serialise").as_bytes())?;
+    for (file, bytes) in extra {
+        write(file, bytes)?;
+    }
     write(STATE_FILE, serde_json::to_string_pretty(state).expect("states serialise").as_bytes())?;
     write_atomically(&root.join(LATEST), name.as_bytes()).map_err(|e| checkpoint_error(&root.join(LATEST), e))?;
     prune(root, keep.max(1))?;
