@@ -113,21 +113,37 @@ fn a_model_folder_without_tokenizer_or_checkpoint_is_named_in_the_error() {
     assert!(!out.status.success() && stderr.contains("tokenizer/vocab.json"), "{stderr}");
     let out = dggt(&["reconstruct", "--images", "x", "--checkpoint", "y", "--out", "z", "--refine-checkpoint", "c"]);
     assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("--refine"));
+    let out = dggt(&[&args[..], &["--checkpoint", path(&checkpoint), "--precision", "f64"]].concat());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && stderr.contains("f16-unet"), "{stderr}");
 }
 
 #[test]
 fn the_refiner_benchmark_times_frames_at_a_folders_sizes() {
     let base = vectors().join("base");
     let args = ["bench", "refiner", "--model", path(&base), "--height", "20", "--width", "30", "--repeat", "2"];
-    let text = succeeded(&dggt(&[&args[..], &["--reference-view"]].concat()));
-    for expected in ["frame: 30 x 20 (ReferenceView)", "per frame: median", "of 2 runs", "peak memory: "] {
+    let text = succeeded(&dggt(&[&args[..], &["--reference-view", "--precision", "bf16"]].concat()));
+    let expected =
+        ["frame: 30 x 20 (ReferenceView)", "precision bf16,", "per frame: median", "of 2 runs", "peak memory: "];
+    for expected in expected {
         assert!(text.contains(expected), "{expected} missing from\n{text}");
     }
     assert!(!text.contains("unknown"), "peak memory is read on Linux:\n{text}");
+
+    // A made-up folder at the same sizes, written, then loaded from disk with its fresh checkpoint.
+    let work = tempfile::tempdir().unwrap();
+    let folder = work.path().join("model");
+    let text = succeeded(&dggt(&["bench", "refiner", "--model", path(&base), "--write-model", path(&folder)]));
+    assert!(text.contains("wrote a made-up model folder") && folder.join("model_difix.safetensors").is_file());
+    let args = ["bench", "refiner", "--model", path(&folder), "--load", "--height", "20", "--width", "30"];
+    let text = succeeded(&dggt(&[&args[..], &["--repeat", "1"]].concat()));
+    assert!(text.contains("weights loaded from disk") && text.contains("load (files read"), "{text}");
 }
 
-/// `dggt reconstruct --refine`: a tiny network trained one step renders two frames of the fixture; each render
-/// is refined into `renders_refined/` under its name and size, the unrefined one kept.
+/// `dggt reconstruct --refine --refine-reference nearest-input`: a tiny network trained one step renders two
+/// frames of the fixture; each render is refined into `renders_refined/` under its name and size, the
+/// unrefined one kept, attending to the input image the summary names as its nearest input (the same as
+/// `dggt refine images` with that reference, and not what the single-view mode gives).
 #[test]
 fn reconstruct_writes_refined_renders_beside_the_unrefined() {
     let dir = vectors();
@@ -157,6 +173,8 @@ fn reconstruct_writes_refined_renders_beside_the_unrefined() {
         path(&checkpoint),
         "--refine-prompt-ids",
         "5,7,9",
+        "--refine-reference",
+        "nearest-input",
     ]));
     assert!(text.contains("refined 2 renders into") && text.contains("unrefined kept in renders/"), "{text}");
     let names = |folder: &str| {
@@ -172,6 +190,29 @@ fn reconstruct_writes_refined_renders_beside_the_unrefined() {
         assert_eq!(size, refined_size);
         assert_ne!(render, refined, "{name:?} unchanged by the refiner");
     }
+
+    // At the input times each render's nearest input is the input view of that time.
+    let summary: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    let renders = summary["renders"].as_array().unwrap();
+    let nearest: Vec<&str> = renders.iter().map(|r| r["nearest_input"].as_str().unwrap()).collect();
+    assert!(nearest[0] != nearest[1] && nearest.iter().all(|n| out.join(n).is_file()), "{nearest:?}");
+    let render = renders[0]["file"].as_str().unwrap();
+    let refine_alone = |reference: Option<&str>, folder: &str| {
+        let folder = work.path().join(folder);
+        let mut args = vec!["refine", "images", "--model", path(&base), "--checkpoint", path(&checkpoint)];
+        args.extend(["--prompt-ids", "5,7,9", "--out", path(&folder)]);
+        let image = out.join(render);
+        let reference = reference.map(|r| out.join(r));
+        args.extend(["--image", path(&image)]);
+        if let Some(reference) = &reference {
+            args.extend(["--reference", path(reference)]);
+        }
+        succeeded(&dggt(&args));
+        read_rgb_png(&folder.join(image.file_name().unwrap())).unwrap().1
+    };
+    let refined = read_rgb_png(&out.join("renders_refined").join(Path::new(render).file_name().unwrap())).unwrap().1;
+    assert_eq!(refined, refine_alone(Some(nearest[0]), "with-reference"));
+    assert_ne!(refined, refine_alone(None, "single-view"), "the reference view made no difference");
 }
 
 fn stdout(out: &Output) -> String {

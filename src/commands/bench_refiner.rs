@@ -5,14 +5,17 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Result;
-use dggt_bench::Precision;
+use burn::tensor::Device;
 use dggt_bench::refiner::{RefinerMode, time_refiner_frames};
 use dggt_bench::run::median;
 use dggt_reconstruct::summary::peak_memory_mib;
-use dggt_refine::Refiner;
 use dggt_refine::random::RefinerConfigs;
+use dggt_refine::random::write_random_model;
+use dggt_refine::{Latent, Prompt, ReferenceView, Refiner, RefinerPrecision, RefinerSpec};
+use dggt_refine_train::fresh::fresh_checkpoint;
 
 use crate::backend::DeviceList;
+use crate::commands::refine::load_refiner;
 
 /// Time the diffusion refiner on one frame (made-up weights and frames: the cost, not the quality) and report
 /// the process's peak resident memory after building it and after the runs.
@@ -21,6 +24,14 @@ pub struct Args {
     /// Take the network sizes from this model folder's configurations [default: sd-turbo's].
     #[arg(long)]
     model: Option<PathBuf>,
+    /// Load the weights of `--model` (and its Difix checkpoint) from disk, as a user's refiner loads, and
+    /// report the load's time and peak memory [default: weights made up on the device].
+    #[arg(long, requires = "model")]
+    load: bool,
+    /// Instead of timing: write a model folder of the sizes (sd-turbo's, or `--model`'s) with made-up weights
+    /// and a fresh Difix checkpoint (`model_difix.safetensors`) to this folder, for `--model DIR --load`.
+    #[arg(long, conflicts_with = "load")]
+    write_model: Option<PathBuf>,
     #[arg(long, default_value_t = 512)]
     height: usize,
     #[arg(long, default_value_t = 512)]
@@ -28,9 +39,9 @@ pub struct Args {
     /// With a reference view (two views through the networks).
     #[arg(long)]
     reference_view: bool,
-    /// The UNet's float type: f32, f16 or bf16 (the VAE stays f32).
+    /// Float types: f32, f16, bf16 (both networks) or f16-unet, bf16-unet (the UNet alone, the VAE in f32).
     #[arg(long, default_value = "f32")]
-    unet_precision: String,
+    precision: RefinerPrecision,
     /// Timed runs (the median is reported).
     #[arg(long, default_value_t = 3)]
     repeat: usize,
@@ -50,23 +61,65 @@ fn mib(value: Option<f64>) -> String {
 pub fn run(args: Args) -> Result<()> {
     anyhow::ensure!(args.repeat > 0, "--repeat must be at least 1");
     let device = args.device.single()?;
-    let precision = Precision::parse(&args.unet_precision)?;
     let (configs, origin) = match &args.model {
         Some(dir) => (RefinerConfigs::read(dir)?, dir.clone()),
         None => (RefinerConfigs::sd_turbo(), PathBuf::from("sd-turbo (built in)")),
     };
+    if let Some(dir) = &args.write_model {
+        return write_model(&configs, dir, &device);
+    }
     let started = Instant::now();
-    let refiner = Refiner::random(&configs, Path::new(&origin), &device)?.with_unet_dtype(precision.dtype());
+    let refiner = if args.load {
+        let spec = RefinerSpec {
+            model_dir: origin.clone(),
+            checkpoint: origin.join("model_difix.safetensors"),
+            prompt: Prompt::Tokens((0..configs.text_encoder.max_position_embeddings as i64).collect()),
+            latent: Latent::PosteriorMean,
+            reference: ReferenceView::None,
+            precision: args.precision,
+        };
+        load_refiner(&spec, &device)?
+    } else {
+        Refiner::random(&configs, Path::new(&origin), &device)?.with_precision(args.precision)
+    };
     let build_s = started.elapsed().as_secs_f64();
     let memory_built = peak_memory_mib();
     let mode = if args.reference_view { RefinerMode::ReferenceView } else { RefinerMode::SingleView };
     let size = [args.height, args.width];
     let times = time_refiner_frames(&refiner, size, mode, args.warmup, args.repeat, &device)?;
     let runs: Vec<String> = times.iter().map(|ms| format!("{:.2}", ms / 1e3)).collect();
-    println!("refiner: sizes of {}, made-up weights, UNet in {precision}, on {device:?}", origin.display());
+    let precision = args.precision.name();
+    let weights = if args.load { "weights loaded from disk" } else { "made-up weights" };
+    println!("refiner: sizes of {}, {weights}, precision {precision}, on {device:?}", origin.display());
     println!("frame: {} x {} ({mode:?})", args.width, args.height);
-    println!("build (weights made on the device, prompt encoded): {build_s:.1} s");
+    let build = if args.load {
+        "load (files read, LoRA merged, prompt encoded)"
+    } else {
+        "build (weights made on the device, prompt encoded)"
+    };
+    println!("{build}: {build_s:.1} s");
     println!("per frame: median {:.2} s of {} runs [{}]", median(times) / 1e3, runs.len(), runs.join(", "));
     println!("peak memory: {} after building, {} after the runs", mib(memory_built), mib(peak_memory_mib()));
+    Ok(())
+}
+
+/// Writes the made-up model folder of `configs` and a fresh Difix checkpoint over it into `dir`.
+fn write_model(configs: &RefinerConfigs, dir: &Path, device: &Device) -> Result<()> {
+    let started = Instant::now();
+    write_random_model(configs, dir, device)?;
+    let checkpoint = dir.join("model_difix.safetensors");
+    fresh_checkpoint(dir, 4, 0)?.write_safetensors(&checkpoint)?;
+    let bytes: u64 = ["vae/diffusion_pytorch_model", "unet/diffusion_pytorch_model", "text_encoder/model"]
+        .iter()
+        .filter_map(|stem| std::fs::metadata(dir.join(format!("{stem}.safetensors"))).ok())
+        .map(|m| m.len())
+        .sum();
+    println!(
+        "wrote a made-up model folder ({:.2} GiB of f32 weights) and {} in {:.1} s: {}",
+        bytes as f64 / f64::from(1u32 << 30),
+        checkpoint.display(),
+        started.elapsed().as_secs_f64(),
+        dir.display()
+    );
     Ok(())
 }

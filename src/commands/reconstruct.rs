@@ -7,6 +7,7 @@ use anyhow::Result;
 use dggt_infer::Architecture;
 use dggt_model::Preset;
 use dggt_reconstruct::{ReconstructOptions, TimeRequest, reconstruct};
+use dggt_refine::ReferenceView;
 
 use crate::backend::DeviceList;
 use crate::commands::parse_range;
@@ -62,7 +63,8 @@ pub struct Args {
 pub const REFINED_RENDERS: &str = "renders_refined";
 
 /// Runs the reconstruction with progress on stderr and prints its summary; with `--refine`, refines every
-/// render into `renders_refined/` under the same name.
+/// render into `renders_refined/` under the same name (attending to its nearest input view in `images/` with
+/// `--refine-reference nearest-input`).
 pub fn run(args: Args) -> Result<()> {
     let device = args.device.single()?;
     let refine = args.refine.spec()?;
@@ -94,7 +96,10 @@ pub fn run(args: Args) -> Result<()> {
                 let name = Path::new(&render.file).file_name().unwrap_or_default();
                 RefineJob {
                     image: options.out.join(&render.file),
-                    reference: None,
+                    reference: match spec.reference {
+                        ReferenceView::None => None,
+                        ReferenceView::NearestInput => Some(options.out.join(&render.nearest_input)),
+                    },
                     out: options.out.join(REFINED_RENDERS).join(name),
                 }
             })

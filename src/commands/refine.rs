@@ -9,7 +9,9 @@ use burn::tensor::Device;
 use clap::Subcommand;
 use dggt_export::images::{read_rgb_png, write_rgb_png};
 use dggt_refine::checkpoint::DifixCheckpoint;
-use dggt_refine::{Latent, Prompt, Refiner, RefinerSpec, frame_from_interleaved, frame_to_interleaved};
+use dggt_refine::{
+    Latent, Prompt, ReferenceView, Refiner, RefinerPrecision, RefinerSpec, frame_from_interleaved, frame_to_interleaved,
+};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::backend::DeviceList;
@@ -57,6 +59,9 @@ struct ImagesArgs {
     /// Prompt token ids, for a model folder without a tokenizer [default: "remove degradation" tokenised].
     #[arg(long, value_delimiter = ',')]
     prompt_ids: Option<Vec<i64>>,
+    /// Float types: f32, f16, bf16 (both networks) or f16-unet, bf16-unet (the UNet alone, the VAE in f32).
+    #[arg(long, default_value = "f32")]
+    precision: RefinerPrecision,
     /// Draw the latent from the encoder's posterior instead of taking its mean.
     #[arg(long)]
     sample_latent: bool,
@@ -103,7 +108,8 @@ fn images(args: ImagesArgs) -> Result<()> {
     );
     let device = args.device.single()?;
     let latent = if args.sample_latent { Latent::Sampled { seed: args.seed } } else { Latent::PosteriorMean };
-    let spec = refiner_spec(&args.model, args.checkpoint.as_deref(), args.prompt_ids, latent)?;
+    let mut spec = refiner_spec(&args.model, args.checkpoint.as_deref(), args.prompt_ids, latent)?;
+    spec.precision = args.precision;
     let refiner = load_refiner(&spec, &device)?;
     let jobs: Vec<RefineJob> = args
         .images
@@ -137,6 +143,13 @@ pub struct RefineArgs {
     /// Sample the refiner's latent with this seed [default: the posterior mean].
     #[arg(long = "refine-seed", requires = "refine_model")]
     pub refine_seed: Option<u64>,
+    /// The view each frame attends to: none (single-view mode) or nearest-input (the input view of the
+    /// frame's camera nearest in time: the reference-view mode).
+    #[arg(long = "refine-reference", default_value = "none", requires = "refine_model")]
+    pub refine_reference: ReferenceView,
+    /// The refiner's float types: f32, f16, bf16 (both networks) or f16-unet, bf16-unet (the UNet alone).
+    #[arg(long = "refine-precision", default_value = "f32", requires = "refine_model")]
+    pub refine_precision: RefinerPrecision,
 }
 
 impl RefineArgs {
@@ -144,12 +157,15 @@ impl RefineArgs {
     pub fn spec(&self) -> Result<Option<RefinerSpec>> {
         let Some(model) = &self.refine_model else { return Ok(None) };
         let latent = self.refine_seed.map_or(Latent::PosteriorMean, |seed| Latent::Sampled { seed });
-        Ok(Some(refiner_spec(model, self.refine_checkpoint.as_deref(), self.refine_prompt_ids.clone(), latent)?))
+        let mut spec = refiner_spec(model, self.refine_checkpoint.as_deref(), self.refine_prompt_ids.clone(), latent)?;
+        spec.reference = self.refine_reference;
+        spec.precision = self.refine_precision;
+        Ok(Some(spec))
     }
 }
 
 /// The refiner of `model` with `checkpoint` (see [`RefineArgs::refine_checkpoint`] for the default) and the
-/// prompt as token ids when given, else the default prompt through the folder's tokenizer.
+/// prompt as token ids when given, else the default prompt through the folder's tokenizer; single-view, in f32.
 pub fn refiner_spec(
     model: &Path,
     checkpoint: Option<&Path>,
@@ -165,7 +181,8 @@ pub fn refiner_spec(
             .with_context(|| format!("no model_difix.safetensors or model_difix.pkl in {}", model.display()))?,
     };
     let prompt = prompt_ids.map_or_else(Prompt::default, Prompt::Tokens);
-    Ok(RefinerSpec { model_dir: model.to_path_buf(), checkpoint, prompt, latent })
+    let (reference, precision) = (ReferenceView::None, RefinerPrecision::default());
+    Ok(RefinerSpec { model_dir: model.to_path_buf(), checkpoint, prompt, latent, reference, precision })
 }
 
 /// Loads the refiner `spec` names on `device`, warning about tensors it did not use.

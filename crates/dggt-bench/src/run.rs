@@ -22,8 +22,8 @@ use dggt_infer::{
 };
 use dggt_losses::{ImageShape, Lpips, LpipsKind};
 use dggt_model::{Dggt, ModelConfig};
-use dggt_refine::{Latent, Refiner, RefinerSpec, frame_from_interleaved, frame_to_interleaved};
-use dggt_scene::{AssemblyCounts, AssemblySettings, TargetView, Timeline};
+use dggt_refine::{Latent, ReferenceView, Refiner, RefinerSpec, frame_from_interleaved, frame_to_interleaved};
+use dggt_scene::{AssemblyCounts, AssemblySettings, TargetView, Timeline, nearest_in_time};
 
 use crate::error::BenchError;
 use crate::frames::{FramePlan, plan_frames};
@@ -297,6 +297,9 @@ struct RowRun {
     skipped: SkipCounts,
     /// Per target view, `[H, W, 3]` at the row's size, clamped to `[0, 1]`.
     renders: Vec<Vec<f32>>,
+    /// Per target view, the refiner's reference view `[H, W, 3]` when it takes one (see
+    /// [`RowSetup::references`]).
+    references: Vec<Vec<f32>>,
 }
 
 struct Runner<'a> {
@@ -567,6 +570,7 @@ impl Runner<'_> {
             sky_gaussians: last.sky_gaussians,
             skipped: last.skipped,
             renders: last.renders.into_iter().map(|r| r.into_iter().map(|v| v.clamp(0.0, 1.0)).collect()).collect(),
+            references: setup.references,
         })
     }
 
@@ -601,8 +605,21 @@ impl Runner<'_> {
             };
             (slot, camera)
         };
-        let (input_slots, input_cameras) = input_views.iter().map(truth).unzip();
-        let target_truth = target_views.iter().map(truth).collect();
+        let (input_slots, input_cameras): (Vec<ViewSlot>, _) = input_views.iter().map(truth).unzip();
+        let target_truth: Vec<(ViewSlot, PosedCamera)> = target_views.iter().map(truth).collect();
+        let references = match self.options.refine.as_ref().map(|spec| spec.reference) {
+            Some(ReferenceView::NearestInput) => target_truth
+                .iter()
+                .map(|(slot, _)| {
+                    let candidates = input_slots.iter().map(|s| (s.rig_camera, s.time));
+                    let position = nearest_in_time(candidates, slot.rig_camera, slot.time).ok_or_else(|| {
+                        BenchError::invalid("refiner reference", format!("no input view of camera {}", slot.rig_camera))
+                    })?;
+                    Ok(interleaved(&input_views[position].image.data, size))
+                })
+                .collect::<Result<Vec<_>, BenchError>>()?,
+            Some(ReferenceView::None) | None => Vec::new(),
+        };
         let assembly = match knobs.culling {
             Culling::Off => AssemblySettings::exact(),
             Culling::MinOpacity(min_opacity) => AssemblySettings { min_opacity, ..AssemblySettings::default() },
@@ -611,7 +628,17 @@ impl Runner<'_> {
         let sky = if knobs.sky { SkyChoice::Render } else { SkyChoice::Skip };
         let scene_options = SceneOptions { sky, assembly, ..SceneOptions::default() };
         let motion = knobs.skips.motion();
-        Ok(RowSetup { images, size, timeline, input_slots, input_cameras, target_truth, scene_options, motion })
+        Ok(RowSetup {
+            images,
+            size,
+            timeline,
+            input_slots,
+            input_cameras,
+            target_truth,
+            scene_options,
+            motion,
+            references,
+        })
     }
 
     /// One timed run of the whole reconstruction: `[backbone, heads, assembly, raster]` milliseconds, and what it
@@ -702,6 +729,9 @@ struct RowSetup {
     target_truth: Vec<(ViewSlot, PosedCamera)>,
     scene_options: SceneOptions,
     motion: MotionPath,
+    /// Per target, the refiner's reference view `[H, W, 3]`: the input view of its camera nearest in time,
+    /// when the refiner takes one; empty otherwise.
+    references: Vec<Vec<f32>>,
 }
 
 /// What one repetition rendered.
@@ -713,8 +743,8 @@ struct RepetitionOutputs {
     renders: Vec<Vec<f32>>,
 }
 
-/// Refines every render of `run` (`[H, W, 3]` at `run.size`) `repeat` times: the median milliseconds of a
-/// pass, and the refined images.
+/// Refines every render of `run` (`[H, W, 3]` at `run.size`, each attending to its reference view when the
+/// run has them) `repeat` times: the median milliseconds of a pass, and the refined images.
 fn refine_renders(
     refiner: &Refiner,
     latent: Latent,
@@ -731,9 +761,11 @@ fn refine_renders(
         refined = run
             .renders
             .iter()
-            .map(|rgb| {
+            .enumerate()
+            .map(|(i, rgb)| {
                 let frame = frame_from_interleaved(rgb, h, w, device)?;
-                frame_to_interleaved(&refiner.refine_frames(frame, None, latent, 1, |_| ())?, 0)
+                let reference = run.references.get(i).map(|r| frame_from_interleaved(r, h, w, device)).transpose()?;
+                frame_to_interleaved(&refiner.refine_frames(frame, reference, latent, 1, |_| ())?, 0)
             })
             .collect::<Result<Vec<_>, _>>()
             .map_err(refine_error)?;

@@ -13,7 +13,7 @@ use dggt_bench::run::fresh_tiny_config;
 use dggt_bench::{BenchOptions, RowOutcome, run_bench, stages, write_outputs};
 use dggt_geom::{PinholeIntrinsics, PosedCamera, WorldFromCamera};
 use dggt_infer::Scene4d;
-use dggt_refine::{Latent, Prompt, RefinerSpec};
+use dggt_refine::{Latent, Prompt, ReferenceView, RefinerSpec};
 use dggt_scene::{AssemblySettings, InputView, MeansGradient, PixelGaussians, TargetView, render_target};
 
 fn fixture() -> PathBuf {
@@ -48,7 +48,8 @@ fn bounded_sweep_writes_table_and_plot() {
         skips: vec![Skips::All],
         full_grid: false,
     };
-    // The tiny random refiner of the parity vectors (plumbing only: its images mean nothing).
+    // The tiny random refiner of the parity vectors (plumbing only: its images mean nothing), in the
+    // reference-view mode (each render attends to its camera's nearest input view).
     let refiner = std::env::var_os("DGGT_PARITY_DIR")
         .map_or_else(|| fixture().join("../../../shared/parity"), PathBuf::from)
         .join("difix_tiny_s1");
@@ -57,6 +58,8 @@ fn bounded_sweep_writes_table_and_plot() {
         checkpoint: refiner.join("model_difix.pkl"),
         prompt: Prompt::Tokens(vec![5, 7, 9]),
         latent: Latent::PosteriorMean,
+        reference: ReferenceView::NearestInput,
+        precision: Default::default(),
     });
     let report = run_bench(&options, &device).expect("the sweep runs");
     for row in report.rows.iter().filter_map(RowOutcome::measured) {

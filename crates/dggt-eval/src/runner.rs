@@ -29,8 +29,8 @@ use dggt_infer::{
     forward_chunked, input_views, load_network,
 };
 use dggt_losses::{ImageShape, Lpips, LpipsKind, psnr, ssim};
-use dggt_refine::{Refiner, RefinerSpec, frame_from_interleaved, frame_to_interleaved};
-use dggt_scene::{TargetView, Timeline};
+use dggt_refine::{ReferenceView, Refiner, RefinerSpec, frame_from_interleaved, frame_to_interleaved};
+use dggt_scene::{TargetView, Timeline, nearest_in_time};
 
 use crate::error::EvalError;
 use crate::grid::{CellMapping, cell_has_sky};
@@ -368,6 +368,8 @@ struct SceneContext<'a> {
 /// One scene's forward pass: its inputs, their network size and the scene to render.
 struct ForwardScene {
     inputs: InputSet,
+    /// The inputs as the network saw them, in `inputs.views`' order.
+    input_images: Vec<PlanarImage>,
     size: ImageSize,
     mapping: CellMapping,
     timeline: Timeline,
@@ -400,7 +402,10 @@ fn evaluate_scene(root: &Path, scene: &Scene, context: &SceneContext<'_>) -> Res
             let rgb: Vec<f32> = host(render.rgb, "rendered colours")?.into_iter().map(|v| v.clamp(0.0, 1.0)).collect();
             let depth = host(render.depth, "rendered depth")?;
             let refined = match context.refiner {
-                Some(refiner) => Some(refine_render(refiner, &rgb, forward.size, context)?),
+                Some(refiner) => {
+                    let reference = reference_view(&forward, &target, context)?;
+                    Some(refine_render(refiner, &rgb, reference, forward.size, context)?)
+                }
                 None => None,
             };
             watch.add(RENDER, started);
@@ -476,7 +481,7 @@ fn forward_scene(root: &Path, context: &SceneContext<'_>, watch: &mut Stopwatch)
         })?;
     drop(prediction);
     watch.add(ASSEMBLY, started);
-    Ok(ForwardScene { inputs, size, mapping, timeline, scene })
+    Ok(ForwardScene { inputs, input_images, size, mapping, timeline, scene })
 }
 
 /// The view of the protocol's camera `camera_position` at log frame `frame`: an input view from its own
@@ -527,18 +532,42 @@ fn image_scores(
     Ok(ImageScores { psnr: psnr(rgb, truth)?, ssim: ssim(rgb, truth, ImageShape::new(h, w, 3))?.value, lpips })
 }
 
-/// The render `rgb` (interleaved, clamped) after the refiner, interleaved.
+/// The refiner's reference view for `target` (interleaved), as the spec asks: none, or the input view of the
+/// target's camera nearest in time.
+fn reference_view(
+    forward: &ForwardScene,
+    target: &TargetView,
+    context: &SceneContext<'_>,
+) -> Result<Option<Vec<f32>>, EvalError> {
+    let spec = context.options.refine.as_ref().expect("a refiner comes from its spec");
+    match spec.reference {
+        ReferenceView::None => Ok(None),
+        ReferenceView::NearestInput => {
+            let views = forward.inputs.views.iter().map(|v| (v.camera, forward.timeline.time(v.frame as f64)));
+            let position = nearest_in_time(views, target.rig_camera, target.time).ok_or_else(|| {
+                EvalError::invalid("refiner reference", format!("no input view of camera {}", target.rig_camera))
+            })?;
+            Ok(Some(interleaved(&forward.input_images[position])))
+        }
+    }
+}
+
+/// The render `rgb` (interleaved, clamped) after the refiner, attending to `reference` (interleaved) when
+/// given; interleaved.
 fn refine_render(
     refiner: &Refiner,
     rgb: &[f32],
+    reference: Option<Vec<f32>>,
     size: ImageSize,
     context: &SceneContext<'_>,
 ) -> Result<Vec<f32>, EvalError> {
     let refine_error = |e: dggt_refine::RefineError| EvalError::invalid("refining a render", e.to_string());
     let spec = context.options.refine.as_ref().expect("a refiner comes from its spec");
-    let frame =
-        frame_from_interleaved(rgb, size.height as usize, size.width as usize, context.device).map_err(refine_error)?;
-    let refined = refiner.refine_frames(frame, None, spec.latent, 1, |_| ()).map_err(refine_error)?;
+    let (h, w) = (size.height as usize, size.width as usize);
+    let frame = frame_from_interleaved(rgb, h, w, context.device).map_err(refine_error)?;
+    let reference =
+        reference.map(|rgb| frame_from_interleaved(&rgb, h, w, context.device)).transpose().map_err(refine_error)?;
+    let refined = refiner.refine_frames(frame, reference, spec.latent, 1, |_| ()).map_err(refine_error)?;
     frame_to_interleaved(&refined, 0).map_err(refine_error)
 }
 

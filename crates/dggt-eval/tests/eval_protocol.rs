@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use burn::tensor::Device;
 use dggt_eval::{EvalOptions, LpipsWeights, MOTION_HELD, Protocol, evaluate};
-use dggt_refine::{Latent, Prompt, RefinerSpec};
+use dggt_refine::{Latent, Prompt, ReferenceView, RefinerSpec};
 use dggt_train::{RunOptions, Start, TrainConfig, Trainer};
 use serde_json::Value;
 
@@ -159,6 +159,8 @@ fn paper_protocol_scores_every_view_of_the_fixture() {
         checkpoint: refiner.join("model_difix.pkl"),
         prompt: Prompt::Tokens(vec![5, 7, 9]),
         latent: Latent::PosteriorMean,
+        reference: ReferenceView::None,
+        precision: Default::default(),
     });
     options.out = out.path().join("refined");
     let refined = evaluate(&options, &Device::flex()).unwrap();
@@ -175,6 +177,19 @@ fn paper_protocol_scores_every_view_of_the_fixture() {
     assert!(markdown.contains("| PSNR (dB) | PSNR refined |") && markdown.contains("- refiner: "), "{markdown}");
     let json: Value = serde_json::from_slice(&std::fs::read(options.out.join("eval.json")).unwrap()).unwrap();
     assert!(json["scenes"][0]["views"][0]["refined"]["psnr"].is_number(), "{json}");
+
+    // The reference-view mode: each render attends to its camera's nearest input view, which changes the
+    // refined image (the UNet's self-attention spans both views) but not the unrefined scores.
+    options.refine.as_mut().unwrap().reference = ReferenceView::NearestInput;
+    options.out = out.path().join("refined-reference");
+    let with_reference = evaluate(&options, &Device::flex()).unwrap();
+    for (single, view) in refined.scenes[0].views.iter().zip(&with_reference.scenes[0].views) {
+        assert_eq!((single.psnr, single.ssim), (view.psnr, view.ssim));
+        let (single, joint) = (single.refined.as_ref().unwrap(), view.refined.as_ref().unwrap());
+        assert!(joint.psnr.is_finite() && joint.psnr != single.psnr, "{joint:?} vs {single:?}");
+    }
+    let markdown = std::fs::read_to_string(options.out.join("eval.md")).unwrap();
+    assert!(markdown.contains("reference view: nearest-input"), "{markdown}");
 }
 
 fn error_of(options: &EvalOptions) -> String {

@@ -36,7 +36,9 @@ use dggt_infer::{
     InputCameras, InputSet, LoadedNetwork, MotionPath, Scene4d, SceneOptions, ViewSlot, forward_chunked, input_views,
     load_network,
 };
-use dggt_scene::{AssemblyCounts, InputView, MIN_OPACITY, PixelGaussians, TargetView, Timeline, nearest_view};
+use dggt_scene::{
+    AssemblyCounts, InputView, MIN_OPACITY, PixelGaussians, TargetView, Timeline, nearest_in_time, nearest_view,
+};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::align::pose_error;
@@ -317,11 +319,15 @@ fn render_views(
                 }
             };
             write_rgb_png(&written.path(&file), size, &rgb)?;
+            let nearest = nearest_in_time(inputs.views.iter().map(|v| (v.camera, v.time_s)), camera, time_s)
+                .map(|position| &inputs.views[position])
+                .ok_or_else(|| ReconstructError::invalid(format!("camera {camera}"), "no input view"))?;
             renders.push(RenderRecord {
                 file,
                 camera,
                 time_s,
                 at_input: input_times.contains(&time_s),
+                nearest_input: input_image_file(&nearest.name),
                 candidates: assembly.candidates,
                 transparent: assembly.transparent,
                 off_screen: assembly.off_screen,
@@ -333,6 +339,11 @@ fn render_views(
     }
     bar.finish_and_clear();
     Ok((renders, input_psnr_db))
+}
+
+/// Where the input view `name` is written (as the network saw it).
+fn input_image_file(name: &str) -> String {
+    format!("images/{name}.png")
 }
 
 /// The requested times in seconds, ascending as given.
@@ -393,7 +404,7 @@ fn write_cameras(
     let mut records = Vec::new();
     let (mut colmap_cameras, mut colmap_images, mut frames) = (Vec::new(), Vec::new(), Vec::new());
     for (i, ((view, image), camera)) in inputs.views.iter().zip(images).zip(cameras).enumerate() {
-        let file = format!("images/{}.png", view.name);
+        let file = input_image_file(&view.name);
         write_rgb_png(&written.path(&file), size, &interleaved(image))?;
         records.push(CameraRecord {
             name: view.name.clone(),

@@ -38,6 +38,9 @@ pub struct RenderRecord {
     pub time_s: f64,
     /// Whether `time_s` is an input frame's time.
     pub at_input: bool,
+    /// `images/NAME.png`: the input view of this camera nearest in time (the earlier of two as near), the
+    /// refiner's reference view (`--refine-reference nearest-input`).
+    pub nearest_input: String,
     /// Candidates before culling, and what culling dropped and kept.
     pub candidates: usize,
     pub transparent: usize,

@@ -26,7 +26,8 @@ pub struct RefineTrainConfig {
 }
 
 /// The refiner trained from: a diffusers folder and a Difix checkpoint over it (its LoRA factors are the
-/// starting point), and the prompt as token ids.
+/// starting point), and its prompt: text through the folder's tokenizer (by default "remove degradation"), or
+/// token ids (listed, or in a file) for a folder without one.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ModelSection {
@@ -38,6 +39,9 @@ pub struct ModelSection {
     /// The LoRA rank of a fresh start (Difix's is 4).
     #[serde(default = "default_rank")]
     pub lora_rank: usize,
+    /// The prompt as text, tokenised by `base_dir/tokenizer/`.
+    #[serde(default)]
+    pub prompt: Option<String>,
     /// The prompt's token ids, or `prompt_tokens_file`: a safetensors file with an integer `input_ids`.
     #[serde(default)]
     pub prompt_tokens: Vec<i64>,
@@ -76,6 +80,10 @@ pub struct LossSection {
     pub lpips: f64,
     #[serde(default = "default_gram")]
     pub gram: f64,
+    /// The first step the Gram term counts at (0: from the start, the paper's; the Difix release's training
+    /// script starts it after 2000 steps).
+    #[serde(default)]
+    pub gram_start_step: u64,
     /// The LPIPS backbone (the Difix release uses `vgg`).
     #[serde(default = "default_lpips_kind")]
     pub lpips_kind: LpipsKind,
@@ -221,10 +229,15 @@ impl RefineTrainConfig {
         let check = |ok: bool, what: &str, detail: &str| {
             if ok { Ok(()) } else { Err(RefineTrainError::invalid(what, detail)) }
         };
+        let prompts = [
+            self.model.prompt.is_some(),
+            !self.model.prompt_tokens.is_empty(),
+            self.model.prompt_tokens_file.is_some(),
+        ];
         check(
-            self.model.prompt_tokens.is_empty() != self.model.prompt_tokens_file.is_none(),
-            "model.prompt_tokens",
-            "give exactly one of prompt_tokens and prompt_tokens_file",
+            prompts.iter().filter(|&&given| given).count() <= 1,
+            "model.prompt",
+            "give at most one of prompt, prompt_tokens and prompt_tokens_file",
         )?;
         check(
             self.pairs.images.is_some() != self.pairs.rendered.is_some(),

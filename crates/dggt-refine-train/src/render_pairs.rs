@@ -13,6 +13,7 @@ use std::path::Path;
 use burn::module::Module;
 use burn::tensor::{Device, Tensor};
 use dggt_objective::{StepBatch, ViewTruth, ViewsToRender};
+use dggt_scene::nearest_in_time;
 use dggt_train::{TrainError, Trainer};
 
 use crate::error::RefineTrainError;
@@ -69,9 +70,8 @@ pub fn render_pairs(
 
 /// The input view of `target`'s camera nearest to it in time (the earlier of two as near).
 fn nearest_input<'a>(inputs: &'a [ViewTruth], target: &ViewTruth) -> Option<&'a ViewTruth> {
-    inputs.iter().filter(|v| v.rig_camera == target.rig_camera).min_by(|a, b| {
-        (a.time - target.time).abs().total_cmp(&(b.time - target.time).abs()).then(a.time.total_cmp(&b.time))
-    })
+    let candidates = inputs.iter().map(|v| (v.rig_camera, v.time));
+    nearest_in_time(candidates, target.rig_camera, target.time).map(|position| &inputs[position])
 }
 
 /// `[H, W, 3]` in [0, 1] to a host image.

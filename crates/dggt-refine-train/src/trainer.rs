@@ -18,7 +18,7 @@ use burn::optim::GradientsParams;
 use burn::tensor::Device;
 use dggt_infer::checkpoint::{STATE_FILE, latest, load_model};
 use dggt_losses::psnr;
-use dggt_refine::Latent;
+use dggt_refine::{Latent, Prompt};
 use dggt_train::Start;
 use dggt_train::checkpoint::{RunState, optimizer_file, save_folder};
 use dggt_train::optimizer::Optimizer;
@@ -124,7 +124,7 @@ impl RefineTrainer {
         let chosen: Vec<_> = indices.iter().map(|&i| &self.pairs.train[i]).collect();
         let (render, target, reference) = batch_pairs(&chosen, &self.device)?;
         let refined = self.model.refine(render, reference, Latent::Sampled { seed: self.state.seed ^ step })?;
-        let value = self.loss.compute(refined, target)?;
+        let value = self.loss.compute(refined, target, step)?;
         let loss: f32 = value.total.clone().into_scalar();
         let mut record =
             StepRecord { step, loss: loss.into(), l2: value.l2, lpips: value.lpips, gram: value.gram, grad_norm: None };
@@ -291,10 +291,17 @@ fn load_pairs(section: &PairsSection) -> Result<PairSet, RefineTrainError> {
     }
 }
 
-/// The prompt's token ids from the configuration.
+/// The prompt's token ids from the configuration: its text (by default Difix's prompt) through the base
+/// folder's tokenizer, or its ids.
 fn prompt_tokens(config: &RefineTrainConfig) -> Result<Vec<i64>, RefineTrainError> {
-    let Some(path) = &config.model.prompt_tokens_file else {
-        return Ok(config.model.prompt_tokens.clone());
+    let model = &config.model;
+    let Some(path) = &model.prompt_tokens_file else {
+        let prompt = match &model.prompt {
+            _ if !model.prompt_tokens.is_empty() => Prompt::Tokens(model.prompt_tokens.clone()),
+            Some(text) => Prompt::Text(text.clone()),
+            None => Prompt::default(),
+        };
+        return Ok(prompt.token_ids(&model.base_dir)?);
     };
     let invalid = |detail: String| RefineTrainError::invalid(path.display().to_string(), detail);
     let bytes = fs::read(path).map_err(|source| RefineTrainError::Io { path: path.clone(), source })?;

@@ -46,4 +46,16 @@ fn unset_loss_weights_and_rate_are_the_papers_and_bad_settings_name_themselves()
     std::fs::write(&path, text("[optim]\nlr = 1e-4\nbetas = 3\n")).unwrap();
     let error = RefineTrainConfig::load(&path).unwrap_err().to_string();
     assert!(error.contains("betas"), "{error}");
+
+    // The prompt as text, or none (Difix's through the tokenizer); never two forms at once.
+    let as_text = text("").replace("prompt_tokens = [1, 2]", "prompt = \"remove degradation\"");
+    std::fs::write(&path, &as_text).unwrap();
+    let config = RefineTrainConfig::load(&path).unwrap();
+    assert_eq!(config.model.prompt.as_deref(), Some("remove degradation"));
+    assert_eq!(config.loss.gram_start_step, 0, "the Gram term from the first step, as the paper");
+    std::fs::write(&path, text("").replace("prompt_tokens = [1, 2]\n", "")).unwrap();
+    assert!(RefineTrainConfig::load(&path).unwrap().model.prompt.is_none());
+    std::fs::write(&path, as_text.replace("[pairs]", "prompt_tokens = [1]\n[pairs]")).unwrap();
+    let error = RefineTrainConfig::load(&path).unwrap_err().to_string();
+    assert!(error.contains("model.prompt") && error.contains("at most one"), "{error}");
 }

@@ -6,10 +6,11 @@
 use std::collections::HashMap;
 
 use burn::module::ParamId;
-use burn::tensor::{Device, TensorData};
+use burn::tensor::{Device, Tensor, TensorData};
 use dggt_refine::Latent;
 use dggt_refine_train::RefineTrainer;
 use dggt_refine_train::export::{load_refiner, to_checkpoint, write};
+use dggt_refine_train::loss::{LossValue, RefineLoss};
 use dggt_refine_train::model::param_values;
 use dggt_refine_train::pairs::batch;
 use dggt_train::Start;
@@ -35,6 +36,29 @@ fn the_loss_falls_and_the_held_out_psnr_rises() {
     assert!(records.iter().all(|r| r.grad_norm.is_some()), "a step was skipped: {records:?}");
     assert!(last < 0.85 * first, "the loss did not fall: {first} -> {last}");
     assert!(after.refined_psnr > before.refined_psnr + 1.0, "PSNR {before:?} -> {after:?}");
+}
+
+/// With `gram_start_step`, the Gram term is absent before that step and weighted in from it on.
+#[test]
+fn the_gram_term_counts_from_its_start_step() {
+    let out = tempfile::tempdir().unwrap();
+    let mut section = tiny_config(out.path(), 1).loss;
+    section.gram_start_step = 3;
+    let loss = RefineLoss::load(&section, &Device::flex()).unwrap();
+    let device = Device::flex();
+    let image = |seed: u64| {
+        let values: Vec<f32> =
+            (0..3 * 32 * 32).map(|i| ((i as u64 * 7919 + seed * 104729) % 1000) as f32 / 1000.0).collect();
+        Tensor::<4>::from_data(TensorData::new(values, [1, 3, 32, 32]), &device)
+    };
+    let total = |value: &LossValue| f64::from(value.total.clone().into_scalar::<f32>());
+    let before = loss.compute(image(1), image(2), 2).unwrap();
+    let from = loss.compute(image(1), image(2), 3).unwrap();
+    assert_eq!(before.gram, 0.0);
+    assert!((total(&before) - (before.l2 + before.lpips)).abs() < 1e-5, "{}", total(&before));
+    assert!(from.gram > 0.0 && (from.l2, from.lpips) == (before.l2, before.lpips));
+    let expected = from.l2 + from.lpips + 0.5 * from.gram;
+    assert!((total(&from) - expected).abs() < 1e-5 * expected.max(1.0), "{} vs {expected}", total(&from));
 }
 
 #[test]

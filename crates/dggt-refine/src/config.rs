@@ -5,13 +5,13 @@
 
 use std::path::Path;
 
-use serde::Deserialize;
 use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
 
 use crate::error::RefineError;
 
 /// `AutoencoderKL`.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct VaeConfig {
     pub in_channels: usize,
     pub out_channels: usize,
@@ -29,7 +29,7 @@ pub struct VaeConfig {
 }
 
 /// `UNet2DConditionModel` in the SD 2.1 layout.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct UnetConfig {
     pub in_channels: usize,
     pub out_channels: usize,
@@ -53,7 +53,7 @@ pub struct UnetConfig {
 }
 
 /// A head count for every level, or one for all.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(untagged)]
 pub enum HeadsPerLevel {
     All(usize),
@@ -70,7 +70,7 @@ impl HeadsPerLevel {
 }
 
 /// transformers' `CLIPTextModel`.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct TextEncoderConfig {
     pub vocab_size: usize,
     pub hidden_size: usize,
@@ -83,7 +83,7 @@ pub struct TextEncoderConfig {
 }
 
 /// The DDPM noise schedule (`scaled_linear` betas).
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct SchedulerConfig {
     pub beta_start: f64,
     pub beta_end: f64,

@@ -9,7 +9,9 @@
 //! - [`text_encoder`]: the CLIP text encoder for the fixed prompt, run once; [`tokenizer`]: its tokenizer;
 //! - [`scheduler`]: the noise schedule and the step to the clean latent;
 //! - [`refiner`]: the whole computation, and loading a diffusers model folder ([`config`], [`weights`]) with
-//!   a Difix checkpoint ([`checkpoint`]) over it; [`random`]: made-up weights at full size, for timing.
+//!   a Difix checkpoint ([`checkpoint`]) over it; [`random`]: made-up weights at full size, for timing;
+//! - [`precision`]: the float types of the UNet and the VAE;
+//! - [`reference`]: which input view a rendered frame attends to in the reference-view mode.
 //!
 //! Tensors carry no backend type: the [`burn::tensor::Device`] the refiner is loaded on selects it.
 
@@ -19,7 +21,9 @@ mod error;
 pub mod layers;
 pub mod lora;
 pub mod parity;
+pub mod precision;
 pub mod random;
+pub mod reference;
 pub mod refiner;
 pub mod resnet;
 pub mod scheduler;
@@ -32,6 +36,8 @@ pub mod vae;
 pub mod weights;
 
 pub use error::RefineError;
+pub use precision::RefinerPrecision;
+pub use reference::ReferenceView;
 pub use refiner::{
     Latent, LoadReport, Refiner, RefinerParts, RefinerSpec, TIMESTEP, frame_from_interleaved, frame_to_interleaved,
 };

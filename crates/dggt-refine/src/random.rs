@@ -2,6 +2,7 @@
 //! of the full-size refiner (sd-turbo's sizes, [`RefinerConfigs::sd_turbo`]) without its weights at hand.
 //! Its images mean nothing.
 
+use std::collections::HashMap;
 use std::path::Path;
 
 use burn::tensor::Device;
@@ -14,7 +15,7 @@ use crate::scheduler::{SingleStep, alphas_cumprod};
 use crate::text_encoder::TextEncoder;
 use crate::unet::Unet;
 use crate::vae::Vae;
-use crate::weights::Weights;
+use crate::weights::{Weights, write_safetensors};
 
 /// The four configurations of a refiner's model folder.
 #[derive(Debug, Clone)]
@@ -88,6 +89,38 @@ impl Refiner {
         let step = SingleStep::new(&alphas_cumprod(&configs.scheduler, origin)?, TIMESTEP)?;
         Ok(Self { vae, unet, prompt_embeds, step, scaling_factor: configs.vae.scaling_factor })
     }
+}
+
+/// Writes a model folder of `configs`' sizes in the diffusers layout with made-up weights (as
+/// [`Refiner::random`] makes them, f32): `vae/`, `unet/` and `text_encoder/` with their configurations and
+/// safetensors, and `scheduler/`. No tokenizer: prompts for it are token ids. What loading at full size is
+/// measured on (`dggt bench refiner --write-model`, then `--model DIR --load`). One network's host copy is held
+/// at a time.
+pub fn write_random_model(configs: &RefinerConfigs, dir: &Path, device: &Device) -> Result<(), RefineError> {
+    check_vae(&configs.vae, dir)?;
+    let write = |component: &str, file: &str, config: serde_json::Value, weights: Weights| {
+        let folder = dir.join(component);
+        std::fs::create_dir_all(&folder).map_err(|e| RefineError::io(&folder, e))?;
+        let config_path = folder.join(if component == "scheduler" { "scheduler_config.json" } else { "config.json" });
+        let text = serde_json::to_string_pretty(&config).expect("a JSON value serialises");
+        std::fs::write(&config_path, text).map_err(|e| RefineError::io(&config_path, e))?;
+        let made = weights.into_made();
+        if !made.is_empty() {
+            write_safetensors(&folder.join(file), &made, HashMap::new())?;
+        }
+        Ok::<_, RefineError>(())
+    };
+    let json = |value: Result<serde_json::Value, serde_json::Error>| value.expect("configurations serialise");
+    let mut weights = Weights::random_kept(device);
+    drop(Vae::load(&mut weights, &configs.vae)?);
+    write("vae", "diffusion_pytorch_model.safetensors", json(serde_json::to_value(&configs.vae)), weights)?;
+    let mut weights = Weights::random_kept(device);
+    drop(Unet::load(&mut weights, &configs.unet, dir)?);
+    write("unet", "diffusion_pytorch_model.safetensors", json(serde_json::to_value(&configs.unet)), weights)?;
+    let mut weights = Weights::random_kept(device);
+    drop(TextEncoder::load(&mut weights, &configs.text_encoder, dir)?);
+    write("text_encoder", "model.safetensors", json(serde_json::to_value(&configs.text_encoder)), weights)?;
+    write("scheduler", "", json(serde_json::to_value(&configs.scheduler)), Weights::random(device))
 }
 
 #[cfg(test)]

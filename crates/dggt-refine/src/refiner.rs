@@ -6,7 +6,7 @@
 //! of 8, encoded to the posterior, scaled by the VAE's scaling factor, denoised at timestep 199 by the UNet
 //! (in the reference mode its self-attention spans both views), stepped to the clean latent `x0`, decoded
 //! with the encoder's skips, cropped back, and view 0 is returned clamped and mapped back to [0, 1]. Images,
-//! latents and the result are f32; the UNet may compute in f16 or bf16 ([`Refiner::with_unet_dtype`]).
+//! latents and the result are f32; the UNet and the VAE may compute in f16 or bf16 ([`Refiner::with_precision`]).
 
 use std::path::{Path, PathBuf};
 
@@ -19,6 +19,8 @@ use crate::checkpoint::DifixCheckpoint;
 use crate::config::{SchedulerConfig, TextEncoderConfig, UnetConfig, VaeConfig, read_json, require};
 use crate::error::RefineError;
 use crate::lora::{VaeOverlay, apply_vae_overlay_scaled};
+use crate::precision::RefinerPrecision;
+use crate::reference::ReferenceView;
 use crate::scheduler::{SingleStep, alphas_cumprod};
 use crate::text_encoder::TextEncoder;
 use crate::tokenizer::Prompt;
@@ -91,20 +93,30 @@ pub struct RefinerSpec {
     pub checkpoint: PathBuf,
     pub prompt: Prompt,
     pub latent: Latent,
+    /// The view each frame attends to (none: the single-view mode).
+    pub reference: ReferenceView,
+    pub precision: RefinerPrecision,
 }
 
 impl RefinerSpec {
+    /// The refiner on `device`, in the spec's precision.
     pub fn load(&self, device: &Device) -> Result<(Refiner, LoadReport), RefineError> {
-        Refiner::load_prompt(&self.model_dir, &self.checkpoint, &self.prompt, device)
+        let (refiner, report) = Refiner::load_prompt(&self.model_dir, &self.checkpoint, &self.prompt, device)?;
+        Ok((refiner.with_precision(self.precision), report))
     }
 
-    /// One line naming the folder, the checkpoint and the latent.
+    /// One line naming the folder, the checkpoint, the latent, the reference view and the precision.
     pub fn describe(&self) -> String {
         let latent = match self.latent {
             Latent::PosteriorMean => "posterior mean".to_string(),
             Latent::Sampled { seed } => format!("sampled latent, seed {seed}"),
         };
-        format!("{} with {} ({latent})", self.model_dir.display(), self.checkpoint.display())
+        let reference = match self.reference {
+            ReferenceView::None => String::new(),
+            view => format!(", reference view: {}", view.name()),
+        };
+        let precision = self.precision.name();
+        format!("{} with {} ({latent}{reference}, {precision})", self.model_dir.display(), self.checkpoint.display())
     }
 }
 
@@ -206,10 +218,15 @@ impl Refiner {
         Self::load(model_dir, checkpoint, &prompt.token_ids(model_dir)?, device)
     }
 
-    /// The refiner with its UNet computing in `dtype` (f32, f16, bf16). The VAE stays in f32 (sd-turbo's VAE
-    /// asks for it: `force_upcast`), and the UNet's attention in f32 when its configuration upcasts it.
-    pub fn with_unet_dtype(self, dtype: FloatDType) -> Self {
-        Self { unet: self.unet.with_float_dtype(dtype), prompt_embeds: self.prompt_embeds.cast(dtype), ..self }
+    /// The refiner with its UNet and VAE computing in `precision`'s types (the UNet's attention in f32 when its
+    /// configuration upcasts it); images, latents and the result stay f32.
+    pub fn with_precision(self, precision: RefinerPrecision) -> Self {
+        Self {
+            unet: self.unet.with_float_dtype(precision.unet),
+            vae: self.vae.with_float_dtype(precision.vae),
+            prompt_embeds: self.prompt_embeds.cast(precision.unet),
+            ..self
+        }
     }
 
     /// The prompt's text-encoder output `[1, tokens, context_dim]`, the UNet's cross-attention context.

@@ -4,16 +4,18 @@
 //! decoder here is a plain one with skips.
 //!
 //! Tensors are NCHW. The encoder takes images in [-1, 1]; the posterior is in unscaled latent units (the
-//! refiner multiplies by the scaling factor); the decoder returns images in [-1, 1] scale, unclamped.
+//! refiner multiplies by the scaling factor); the decoder returns images in [-1, 1] scale, unclamped. The VAE
+//! computes in the type of its parameters ([`Vae::with_float_dtype`]) behind an f32 interface.
 //! GroupNorms use eps 1e-6. Downsampling pads one zero row below and one zero column right, then runs a
 //! 3x3 stride-2 convolution; upsampling is nearest x2 then a 3x3 convolution.
 
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::nn::{GroupNorm, Linear};
-use burn::tensor::Tensor;
 use burn::tensor::activation::silu;
+use burn::tensor::{FloatDType, Tensor};
 use dggt_model::attention::attend;
+use dggt_model::leaf::CastFloats;
 
 use crate::config::VaeConfig;
 use crate::error::RefineError;
@@ -54,10 +56,22 @@ impl Vae {
         })
     }
 
-    /// `x`: images `[rows, in_channels, h, w]` in [-1, 1].
+    /// The VAE with every float parameter in `dtype` (f32, f16, bf16). Its interface stays f32: it casts what it
+    /// is given to `dtype` and its posterior and decoded images back to f32.
+    pub fn with_float_dtype(self, dtype: FloatDType) -> Self {
+        self.map(&mut CastFloats(dtype))
+    }
+
+    /// The float type the VAE computes in.
+    pub fn float_dtype(&self) -> FloatDType {
+        self.quant_conv.weight.val().dtype().into()
+    }
+
+    /// `x`: images `[rows, in_channels, h, w]` in [-1, 1]. The posterior's mean and std are f32, its
+    /// `down_inputs` in the VAE's type.
     pub fn encode(&self, x: Tensor<4>, trace: &mut Trace) -> Posterior {
-        let (h, down_inputs) = self.encoder.forward(x, trace);
-        let moments = self.quant_conv.forward(h);
+        let (h, down_inputs) = self.encoder.forward(x.cast(self.float_dtype()), trace);
+        let moments = self.quant_conv.forward(h).cast(FloatDType::F32);
         let [mean, logvar] = moments.chunk(2, 1).try_into().expect("quant_conv has an even channel count");
         let std = (logvar.clamp(LOGVAR_RANGE.0, LOGVAR_RANGE.1) * 0.5).exp();
         trace.record("posterior.mean", &mean);
@@ -68,7 +82,8 @@ impl Vae {
     /// `latent`: unscaled latents `[rows, latent_channels, h/8, w/8]`; `down_inputs`: the same rows'
     /// [`Posterior::down_inputs`]. Returns `[rows, out_channels, h, w]` in [-1, 1] scale, unclamped.
     pub fn decode(&self, latent: Tensor<4>, down_inputs: &[Tensor<4>], trace: &mut Trace) -> Tensor<4> {
-        self.decoder.forward(self.post_quant_conv.forward(latent), down_inputs, trace)
+        let h = self.post_quant_conv.forward(latent.cast(self.float_dtype()));
+        self.decoder.forward(h, down_inputs, trace).cast(FloatDType::F32)
     }
 }
 

@@ -7,6 +7,7 @@
 //! into their targets ([`crate::lora`]).
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 
 use burn::module::ParamId;
@@ -61,28 +62,88 @@ pub fn read_safetensors(path: &Path) -> Result<NamedTensors, RefineError> {
     Ok(read_safetensors_with_metadata(path)?.0)
 }
 
-/// Every tensor of a safetensors file, and the file's text metadata (empty when it has none).
+/// Every tensor of a safetensors file, and the file's text metadata (empty when it has none). The file is
+/// read tensor by tensor (its header first, then each tensor's bytes), so reading holds one tensor's bytes
+/// beside the widened values rather than a copy of the whole file.
 pub fn read_safetensors_with_metadata(path: &Path) -> Result<(NamedTensors, HashMap<String, String>), RefineError> {
-    let bytes = std::fs::read(path).map_err(|e| RefineError::io(path, e))?;
-    let invalid = |e: safetensors::SafeTensorError| RefineError::file(path, format!("not a safetensors file: {e}"));
-    let (_, header) = safetensors::SafeTensors::read_metadata(&bytes).map_err(invalid)?;
-    let metadata = header.metadata().clone().unwrap_or_default();
-    let file = safetensors::SafeTensors::deserialize(&bytes).map_err(invalid)?;
+    let mut file = std::fs::File::open(path).map_err(|e| RefineError::io(path, e))?;
+    let file_len = file.metadata().map_err(|e| RefineError::io(path, e))?.len();
+    let header = SafetensorsHeader::read(&mut file, file_len, path)?;
     let mut tensors = NamedTensors::new();
-    for (name, view) in file.tensors() {
-        let dtype = match view.dtype() {
-            Dtype::F64 => DType::F64,
-            Dtype::F32 => DType::F32,
-            Dtype::F16 => DType::F16,
-            Dtype::BF16 => DType::BF16,
+    let mut bytes = Vec::new();
+    for (name, entry) in &header.tensors {
+        let dtype = match entry.dtype.as_str() {
+            "F64" => DType::F64,
+            "F32" => DType::F32,
+            "F16" => DType::F16,
+            "BF16" => DType::BF16,
             other => {
-                return Err(RefineError::file(path, format!("tensor '{name}' has type {other:?}, expected a float")));
+                return Err(RefineError::file(path, format!("tensor '{name}' has type {other}, expected a float")));
             }
         };
-        let data = TensorData::from_bytes_vec(view.data().to_vec(), view.shape().to_vec(), dtype);
-        tensors.insert(name.clone(), HostTensor::from_data(data, path, &name)?);
+        let [begin, end] = entry.data_offsets;
+        let count: usize = entry.shape.iter().product();
+        if end < begin || (end - begin) as usize != count * dtype.size() {
+            return Err(RefineError::file(path, format!("tensor '{name}': offsets {begin}..{end} for {count} values")));
+        }
+        bytes.resize((end - begin) as usize, 0);
+        file.seek(SeekFrom::Start(header.data_start + begin))
+            .and_then(|_| file.read_exact(&mut bytes))
+            .map_err(|e| RefineError::file(path, format!("tensor '{name}' not readable: {e}")))?;
+        let data = TensorData::from_bytes_vec(std::mem::take(&mut bytes), entry.shape.clone(), dtype);
+        tensors.insert(name.clone(), HostTensor::from_data(data, path, name)?);
     }
-    Ok((tensors, metadata))
+    Ok((tensors, header.metadata))
+}
+
+/// A safetensors file's header: an 8-byte little-endian length, then that many bytes of JSON naming each
+/// tensor's type, shape and byte range (relative to the data that follows), and optional text metadata.
+struct SafetensorsHeader {
+    tensors: BTreeMap<String, HeaderEntry>,
+    metadata: HashMap<String, String>,
+    /// Where the tensors' data begins in the file.
+    data_start: u64,
+}
+
+#[derive(serde::Deserialize)]
+struct HeaderEntry {
+    dtype: String,
+    shape: Vec<usize>,
+    data_offsets: [u64; 2],
+}
+
+/// Headers beyond this are refused (the format's own bound).
+const MAX_HEADER_BYTES: u64 = 100_000_000;
+
+impl SafetensorsHeader {
+    fn read(file: &mut std::fs::File, file_len: u64, path: &Path) -> Result<Self, RefineError> {
+        let invalid = |detail: String| RefineError::file(path, format!("not a safetensors file: {detail}"));
+        let mut length = [0u8; 8];
+        file.read_exact(&mut length).map_err(|e| invalid(format!("no header length ({e})")))?;
+        let length = u64::from_le_bytes(length);
+        if length > MAX_HEADER_BYTES || 8 + length > file_len {
+            return Err(invalid(format!("a header of {length} bytes in a file of {file_len}")));
+        }
+        let mut json = vec![0u8; length as usize];
+        file.read_exact(&mut json).map_err(|e| invalid(format!("header not readable ({e})")))?;
+        let mut entries: BTreeMap<String, serde_json::Value> =
+            serde_json::from_slice(&json).map_err(|e| invalid(format!("header: {e}")))?;
+        let metadata = match entries.remove("__metadata__") {
+            Some(value) => serde_json::from_value(value).map_err(|e| invalid(format!("metadata: {e}")))?,
+            None => HashMap::new(),
+        };
+        let data_start = 8 + length;
+        let mut tensors = BTreeMap::new();
+        for (name, value) in entries {
+            let entry: HeaderEntry =
+                serde_json::from_value(value).map_err(|e| invalid(format!("tensor '{name}': {e}")))?;
+            if data_start + entry.data_offsets[1] > file_len {
+                return Err(invalid(format!("tensor '{name}' ends past the end of the file")));
+            }
+            tensors.insert(name, entry);
+        }
+        Ok(Self { tensors, metadata, data_start })
+    }
 }
 
 /// Writes `tensors` (f32) and `metadata` as a safetensors file.
@@ -119,6 +180,8 @@ enum Fill {
 /// used; [`Weights::unused`] lists the rest.
 pub struct Weights {
     tensors: NamedTensors,
+    /// With [`Weights::random_kept`], host copies of the made-up tensors, by name.
+    made: Option<NamedTensors>,
     taken: BTreeSet<String>,
     /// The parameter each taken weight became, by file name (see [`Weights::record`]).
     params: ParamNames,
@@ -132,6 +195,7 @@ impl Weights {
     pub fn new(tensors: NamedTensors, source: impl Into<String>, device: &Device) -> Self {
         Self {
             tensors,
+            made: None,
             taken: BTreeSet::new(),
             params: ParamNames::new(),
             source: source.into(),
@@ -148,6 +212,17 @@ impl Weights {
         Self { fill: Fill::Random, ..Self::new(NamedTensors::new(), "random weights", device) }
     }
 
+    /// [`Weights::random`], keeping a host copy of every tensor made, in the file's layout
+    /// ([`Weights::into_made`]): what writing a made-up model folder needs.
+    pub fn random_kept(device: &Device) -> Self {
+        Self { made: Some(NamedTensors::new()), ..Self::random(device) }
+    }
+
+    /// The tensors made so far by [`Weights::random_kept`] (none for other weights).
+    pub fn into_made(self) -> NamedTensors {
+        self.made.unwrap_or_default()
+    }
+
     pub fn device(&self) -> &Device {
         &self.device
     }
@@ -160,10 +235,16 @@ impl Weights {
     pub fn take<const D: usize>(&mut self, name: &str, shape: [usize; D]) -> Result<Tensor<D>, RefineError> {
         if self.fill == Fill::Random {
             self.taken.insert(name.to_string());
-            return Ok(random_tensor(name, shape, &self.device));
+            let tensor = random_tensor(name, shape, &self.device);
+            if let Some(made) = &mut self.made {
+                let host = HostTensor::from_data(tensor.to_data(), Path::new(&self.source), name)?;
+                made.insert(name.to_string(), host);
+            }
+            return Ok(tensor);
         }
-        let tensor = self.checked(name, &shape)?;
-        Ok(Tensor::from_data(TensorData::new(tensor.values.clone(), shape), &self.device))
+        self.checked(name, &shape)?;
+        let tensor = self.tensors.remove(name).expect("checked: present");
+        Ok(Tensor::from_data(TensorData::new(tensor.values, shape), &self.device))
     }
 
     /// The host copy of the tensor `name`, which must have `shape`, marked used.

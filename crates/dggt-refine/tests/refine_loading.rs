@@ -148,3 +148,48 @@ fn a_checkpoint_that_is_not_a_torch_file_is_an_error_naming_it() {
     assert!(matches!(error, RefineError::File { .. }), "{error}");
     assert!(error.to_string().contains("broken.pkl"), "{error}");
 }
+
+/// A made-up model folder at the parity model's sizes loads like a real one: the Difix checkpoint applies, no
+/// tensor is left unused, the refiner runs, and the written weights have the made-up distribution.
+#[test]
+fn a_written_made_up_model_folder_loads_with_the_checkpoint() {
+    use dggt_refine::random::{RefinerConfigs, write_random_model};
+    let vectors = vectors_dir();
+    let configs = RefinerConfigs::read(&vectors.join("base")).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    write_random_model(&configs, dir.path(), &Device::flex()).unwrap();
+    for file in ["vae/diffusion_pytorch_model.safetensors", "unet/config.json", "text_encoder/model.safetensors"] {
+        assert!(dir.path().join(file).is_file(), "{file} not written");
+    }
+    assert!(dir.path().join("scheduler/scheduler_config.json").is_file());
+    let written = read_safetensors(&dir.path().join("unet/diffusion_pytorch_model.safetensors")).unwrap();
+    let (refiner, report) =
+        Refiner::load(dir.path(), &vectors.join("model_difix.pkl"), &[5, 7, 9], &Device::flex()).unwrap();
+    assert!(report.unused.is_empty(), "{:?}", report.unused);
+    // This checkpoint holds a full UNet: every written UNet tensor was overlaid, none left over.
+    assert_eq!(report.unet_from_base + report.unet_from_checkpoint.len(), written.len());
+    let image = Tensor::<4>::random([1, 3, 16, 24], Distribution::Uniform(0.0, 1.0), &Device::flex());
+    let out = refiner.refine(image, None, dggt_refine::Latent::PosteriorMean, &mut Default::default()).unwrap();
+    assert_eq!(out.dims(), [1, 3, 16, 24]);
+    // Matrices and kernels uniform with variance 1 / fan-in, as made up.
+    for (name, tensor) in written.iter().filter(|(_, t)| t.shape.len() >= 2) {
+        let bound = (3.0 / tensor.shape[1..].iter().product::<usize>() as f32).sqrt();
+        let largest = tensor.values.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        assert!(largest > 0.0 && largest <= bound, "{name}: largest {largest}, bound {bound}");
+    }
+}
+
+/// A truncated or garbled safetensors file is an error naming the file, not a panic.
+#[test]
+fn a_truncated_weights_file_is_an_error_naming_it() {
+    let vectors = vectors_dir();
+    let source = vectors.join("base/vae/diffusion_pytorch_model.safetensors");
+    let bytes = std::fs::read(&source).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("cut.safetensors");
+    for cut in [4, 64, bytes.len() - 10] {
+        std::fs::write(&path, &bytes[..cut]).unwrap();
+        let message = read_safetensors(&path).unwrap_err().to_string();
+        assert!(message.contains("cut.safetensors") && message.contains("not a safetensors file"), "{cut}: {message}");
+    }
+}

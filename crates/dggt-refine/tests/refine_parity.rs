@@ -14,7 +14,7 @@ use burn::tensor::{Device, FloatDType, Tensor};
 use dggt_refine::checkpoint::{DifixCheckpoint, SAFETENSORS_FORMAT};
 use dggt_refine::parity::{Status, compare, read_vectors, run_parity};
 use dggt_refine::weights::{HostTensor, NamedTensors, write_safetensors};
-use dggt_refine::{Latent, Refiner, Trace};
+use dggt_refine::{Latent, Refiner, RefinerPrecision, Trace};
 
 mod common;
 
@@ -129,11 +129,11 @@ fn an_image_whose_sides_are_not_multiples_of_8_keeps_its_size() {
     assert!(values.iter().all(|v| (0.0..=1.0).contains(v)), "outside [0, 1]");
 }
 
-/// The UNet in f16 and bf16 (VAE in f32, attention upcast): the refined image stays close to the f32 one.
-/// Bounds: a few times the types' rounding (2^-11, 2^-8) carried through the UNet's depth; on this tiny
-/// random model f16 moves the image by about 7e-3 and bf16 by about 4e-2.
+/// The UNet alone, then the UNet and the VAE, in f16 and bf16 (attention upcast): the refined image stays close
+/// to the f32 one and comes back in f32. Bounds: a few times the types' rounding (2^-11, 2^-8) carried through
+/// the networks' depth; the measured errors on this tiny random model are printed.
 #[test]
-fn a_reduced_precision_unet_stays_close_to_f32() {
+fn reduced_precision_networks_stay_close_to_f32() {
     let device = Device::flex();
     let (refiner, image) = load_refiner(&device);
     let refine = |refiner: &Refiner| {
@@ -143,15 +143,27 @@ fn a_reduced_precision_unet_stays_close_to_f32() {
         (out, eps)
     };
     let (reference, reference_eps) = refine(&refiner);
-    for (dtype, bound) in [(FloatDType::F16, 1.5e-2), (FloatDType::BF16, 8e-2)] {
-        let (out, eps) = refine(&load_refiner(&device).0.with_unet_dtype(dtype));
-        assert_eq!(out.dtype(), burn::tensor::DType::F32, "the image comes back in f32");
+    let (f16, bf16) = (FloatDType::F16, FloatDType::BF16);
+    let cases = [
+        (RefinerPrecision::unet_only(f16), 1.5e-2),
+        (RefinerPrecision::unet_only(bf16), 8e-2),
+        (RefinerPrecision::all(f16), 2e-2),
+        (RefinerPrecision::all(bf16), 1.2e-1),
+    ];
+    for (precision, bound) in cases {
+        let name = precision.name();
+        let (out, eps) = refine(&load_refiner(&device).0.with_precision(precision));
+        assert_eq!(out.dtype(), burn::tensor::DType::F32, "{name}: the image comes back in f32");
         let image_error = compare("image_out", Some(&out), &reference).max_abs.unwrap();
         let eps_error = compare("unet.eps", Some(&eps), &reference_eps).max_abs.unwrap();
-        println!("{dtype:?}: image_out {image_error:.3e}, unet.eps {eps_error:.3e}");
-        assert!(image_error > 0.0, "{dtype:?} computed nothing in reduced precision");
-        assert!(image_error < bound && eps_error < 2.0 * bound, "{dtype:?}: {image_error} / {eps_error}");
+        println!("{name}: image_out {image_error:.3e}, unet.eps {eps_error:.3e}");
+        assert!(image_error > 0.0, "{name} computed nothing in reduced precision");
+        assert!(image_error < bound && eps_error < 2.0 * bound, "{name}: {image_error} / {eps_error}");
     }
+    // The VAE's own cast shows: the whole refiner in f16 differs from the UNet alone in f16.
+    let image = |precision: RefinerPrecision| refine(&load_refiner(&device).0.with_precision(precision)).0;
+    let (unet_only, all) = (image(RefinerPrecision::unet_only(f16)), image(RefinerPrecision::all(f16)));
+    assert!(compare("image_out", Some(&all), &unet_only).max_abs.unwrap() > 0.0, "the VAE stayed in f32");
 }
 
 /// Frames refined in batches (with references) are the frames refined one by one, and progress counts them.

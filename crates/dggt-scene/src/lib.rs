@@ -22,4 +22,6 @@ pub use assemble::{AssembledGaussians, AssemblyCounts, AssemblySettings, HiddenS
 pub use compose::{ViewRender, camera_tensors, composite, render_assembled, render_target, sky_splats};
 pub use error::SceneError;
 pub use pixels::{MeansGradient, PixelGaussians};
-pub use timeline::{DynamicBlend, InputView, TargetView, Timeline, dynamic_sources, interpolate_camera, nearest_view};
+pub use timeline::{
+    DynamicBlend, InputView, TargetView, Timeline, dynamic_sources, interpolate_camera, nearest_in_time, nearest_view,
+};

@@ -83,13 +83,21 @@ pub fn interpolate_camera(views: &[InputView], rig_camera: usize, time: f64) -> 
 
 /// Index (into `views`) of the input view of `rig_camera` nearest in time to `time`; the earlier on a tie.
 pub fn nearest_view(views: &[InputView], rig_camera: usize, time: f64) -> Option<usize> {
-    views
-        .iter()
+    nearest_in_time(views.iter().map(|v| (v.rig_camera, v.time)), rig_camera, time)
+}
+
+/// Position among `candidates` (each a rig camera and a time, in any one unit) of the one of `rig_camera`
+/// nearest in time to `time`; the earlier on a tie; `None` when no candidate shows that camera.
+pub fn nearest_in_time(
+    candidates: impl IntoIterator<Item = (usize, f64)>,
+    rig_camera: usize,
+    time: f64,
+) -> Option<usize> {
+    candidates
+        .into_iter()
         .enumerate()
-        .filter(|(_, v)| v.rig_camera == rig_camera)
-        .min_by(|(_, a), (_, b)| {
-            (a.time - time).abs().total_cmp(&(b.time - time).abs()).then(a.time.total_cmp(&b.time))
-        })
+        .filter(|(_, (camera, _))| *camera == rig_camera)
+        .min_by(|(_, (_, a)), (_, (_, b))| (a - time).abs().total_cmp(&(b - time).abs()).then(a.total_cmp(b)))
         .map(|(i, _)| i)
 }
 
