@@ -123,8 +123,14 @@ fn the_refiner_benchmark_times_frames_at_a_folders_sizes() {
     let base = vectors().join("base");
     let args = ["bench", "refiner", "--model", path(&base), "--height", "20", "--width", "30", "--repeat", "2"];
     let text = succeeded(&dggt(&[&args[..], &["--reference-view", "--precision", "bf16"]].concat()));
-    let expected =
-        ["frame: 30 x 20 (ReferenceView)", "precision bf16,", "per frame: median", "of 2 runs", "peak memory: "];
+    let expected = [
+        "frame: 30 x 20 (ReferenceView)",
+        "precision bf16,",
+        "per frame: median",
+        "of 2 runs",
+        "peak memory: ",
+        "resident memory: ",
+    ];
     for expected in expected {
         assert!(text.contains(expected), "{expected} missing from\n{text}");
     }

@@ -8,7 +8,7 @@ use anyhow::Result;
 use burn::tensor::Device;
 use dggt_bench::refiner::{RefinerMode, time_refiner_frames};
 use dggt_bench::run::median;
-use dggt_reconstruct::summary::peak_memory_mib;
+use dggt_reconstruct::summary::{peak_memory_mib, resident_memory_mib};
 use dggt_refine::random::RefinerConfigs;
 use dggt_refine::random::write_random_model;
 use dggt_refine::{Latent, Prompt, ReferenceView, Refiner, RefinerPrecision, RefinerSpec};
@@ -83,7 +83,7 @@ pub fn run(args: Args) -> Result<()> {
         Refiner::random(&configs, Path::new(&origin), &device)?.with_precision(args.precision)
     };
     let build_s = started.elapsed().as_secs_f64();
-    let memory_built = peak_memory_mib();
+    let (memory_built, resident_built) = (peak_memory_mib(), resident_memory_mib());
     let mode = if args.reference_view { RefinerMode::ReferenceView } else { RefinerMode::SingleView };
     let size = [args.height, args.width];
     let times = time_refiner_frames(&refiner, size, mode, args.warmup, args.repeat, &device)?;
@@ -100,6 +100,7 @@ pub fn run(args: Args) -> Result<()> {
     println!("{build}: {build_s:.1} s");
     println!("per frame: median {:.2} s of {} runs [{}]", median(times) / 1e3, runs.len(), runs.join(", "));
     println!("peak memory: {} after building, {} after the runs", mib(memory_built), mib(peak_memory_mib()));
+    println!("resident memory: {} after building, {} after the runs", mib(resident_built), mib(resident_memory_mib()));
     Ok(())
 }
 

@@ -81,8 +81,18 @@ pub struct Summary {
 
 /// Peak resident set size of this process in MiB, from `/proc/self/status` (Linux).
 pub fn peak_memory_mib() -> Option<f64> {
+    process_status_mib("VmHWM:")
+}
+
+/// Resident set size of this process now, in MiB (Linux).
+pub fn resident_memory_mib() -> Option<f64> {
+    process_status_mib("VmRSS:")
+}
+
+/// The `/proc/self/status` figure `key` (in kiB there) in MiB.
+fn process_status_mib(key: &str) -> Option<f64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let line = status.lines().find(|l| l.starts_with(key))?;
     let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kib / 1024.0)
 }
