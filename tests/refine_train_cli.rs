@@ -48,3 +48,40 @@ fn refine_train_refuses_a_bad_configuration_naming_it() {
     assert!(!output.status.success());
     assert!(stderr.contains("bad.toml") && stderr.contains("run.batch"), "{stderr}");
 }
+
+/// `dggt refine-pairs --shards`: one pairs file per sample of a reconstruction run, kept when the command runs
+/// again (only the missing samples render), and `refine-train` trains on the folder.
+#[test]
+fn refine_pairs_writes_shards_that_a_rerun_keeps_and_training_reads() {
+    let repo = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let work = tempfile::tempdir().unwrap();
+    let (run, shards) = (work.path().join("run"), work.path().join("shards"));
+    let overfit = repo.join("configs/tiny-overfit.toml");
+    let path = |p: &PathBuf| p.to_str().unwrap().to_string();
+    stdout(&dggt(&["train", "--config", &path(&overfit), "--steps", "1", "--out", &path(&run)]));
+    let pairs = |samples: &str| {
+        let args = ["refine-pairs", "--config", &path(&overfit), "--run", &path(&run), "--samples", samples];
+        stdout(&dggt(&[&args[..], &["--shards", "--out", &path(&shards)]].concat()))
+    };
+    let first = pairs("0..2");
+    assert!(first.contains("from 2 samples rendered (0 kept") && first.contains("at step 1"), "{first}");
+    let shard = |i: usize| shards.join(format!("sample-{i:06}.safetensors"));
+    assert!(shard(0).is_file() && shard(1).is_file());
+    std::fs::remove_file(shard(1)).unwrap();
+    let written = std::fs::metadata(shard(0)).unwrap().modified().unwrap();
+    let second = pairs("0..3");
+    assert!(second.contains("from 2 samples rendered (1 kept"), "{second}");
+    assert_eq!(std::fs::metadata(shard(0)).unwrap().modified().unwrap(), written, "sample 0 was rewritten");
+
+    // The refiner trains on the folder (the tiny configuration with absolute paths and rendered pairs).
+    let shared = repo.join("../shared");
+    let text = std::fs::read_to_string(config()).unwrap().replace("\"../../shared", &format!("\"{}", shared.display()));
+    let images = text.lines().find(|l| l.starts_with("images = ")).unwrap().to_string();
+    let text = text.replace(&images, &format!("rendered = \"{}\"", shards.display()));
+    let refine_config = work.path().join("refine.toml");
+    std::fs::write(&refine_config, text).unwrap();
+    let out = work.path().join("refiner");
+    let trained =
+        stdout(&dggt(&["refine-train", "--config", &path(&refine_config), "--steps", "2", "--out", &path(&out)]));
+    assert!(trained.contains("trained steps 0..2"), "{trained}");
+}

@@ -1,12 +1,17 @@
 //! `dggt refine-pairs`: renders training pairs for the refiner from a reconstruction run (its newest
 //! checkpoint): the targets of the run's samples, at frames between their inputs, with the export's images
-//! and an input view as reference, written to one pairs file that `refine-train` reads (`[pairs] rendered`).
+//! and an input view as reference, written to one pairs file, or with `--shards` to a folder of one file per
+//! sample, that `refine-train` reads (`[pairs] rendered`).
+//!
+//! A sample that fails to load or render is reported and skipped; the run fails only when no sample gave
+//! pairs. With `--shards` each sample's file is written as soon as it is rendered (memory stays that of one
+//! sample) and samples whose file exists are kept, so a stopped run resumes where it stopped.
 
 use std::ops::Range;
 use std::path::PathBuf;
 
-use anyhow::Result;
-use dggt_refine_train::render_pairs::{render_pairs, write_pairs};
+use anyhow::{Context, Result};
+use dggt_refine_train::render_pairs::{RenderedPair, render_pairs, shard_path, write_pairs};
 use dggt_train::trainer::progress_bar;
 use dggt_train::{Start, TrainConfig, Trainer};
 
@@ -19,34 +24,94 @@ pub struct Args {
     /// The reconstruction run's training configuration; its newest checkpoint renders the pairs.
     #[arg(long)]
     config: PathBuf,
+    /// The run's folder [default: the configuration's `out_dir`].
+    #[arg(long)]
+    run: Option<PathBuf>,
     /// The sample indices to render the targets of, `START..END`.
     #[arg(long, value_parser = parse_range)]
     samples: Range<usize>,
-    /// The pairs file to write (safetensors).
+    /// The pairs file to write (safetensors), or with `--shards` the folder of per-sample files.
     #[arg(long)]
     out: PathBuf,
+    /// Write one file per sample into the `--out` folder as it is rendered, keeping those already there.
+    #[arg(long)]
+    shards: bool,
     #[arg(long, default_value = "cpu")]
     device: DeviceSpec,
 }
 
+/// What became of the samples.
+#[derive(Debug, Default)]
+struct Tally {
+    pairs: usize,
+    rendered: usize,
+    kept: usize,
+    failed: Vec<u64>,
+}
+
 pub fn run(args: Args) -> Result<()> {
-    let config = TrainConfig::load(&args.config)?;
+    let mut config = TrainConfig::load(&args.config)?;
+    if let Some(run) = &args.run {
+        config.run.out_dir = run.clone();
+    }
     let device = args.device.device()?;
     let run = Trainer::new(config, vec![device.clone()], Start::Resume)?;
     if run.state().step == 0 {
         tracing::warn!("no checkpoint under the run's out_dir: rendering with the network as initialised");
     }
+    if args.shards {
+        std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    }
     let bar = progress_bar(std::io::IsTerminal::is_terminal(&std::io::stderr()), 0, args.samples.len() as u64);
-    let mut pairs = Vec::new();
-    for sample in args.samples.clone() {
-        pairs.extend(render_pairs(&run, [sample as u64], &device)?);
+    let mut tally = Tally::default();
+    let mut collected = Vec::new();
+    for sample in args.samples.clone().map(|s| s as u64) {
+        let shard = args.shards.then(|| shard_path(&args.out, sample));
+        if shard.as_ref().is_some_and(|path| path.is_file()) {
+            tally.kept += 1;
+        } else {
+            match render_pairs(&run, [sample], &device) {
+                Ok(pairs) => {
+                    tally.rendered += 1;
+                    tally.pairs += pairs.len();
+                    match &shard {
+                        Some(path) => write_pairs(&pairs, path)?,
+                        None => collected.extend(pairs),
+                    }
+                }
+                Err(error) => {
+                    tracing::warn!("sample {sample} skipped: {error}");
+                    tally.failed.push(sample);
+                }
+            }
+        }
         bar.inc(1);
     }
     bar.finish_and_clear();
-    write_pairs(&pairs, &args.out)?;
+    finish(&args, &run, &tally, &collected)
+}
+
+/// Writes the collected pairs (without `--shards`) and prints what was done.
+fn finish(args: &Args, run: &Trainer, tally: &Tally, collected: &[RenderedPair]) -> Result<()> {
+    anyhow::ensure!(
+        tally.rendered + tally.kept > 0,
+        "no sample of {}..{} gave pairs (failed: {:?})",
+        args.samples.start,
+        args.samples.end,
+        tally.failed
+    );
+    if !args.shards {
+        write_pairs(collected, &args.out)?;
+    }
+    let failed = match tally.failed.as_slice() {
+        [] => String::new(),
+        samples => format!("; {} samples failed and were skipped: {samples:?}", samples.len()),
+    };
     println!(
-        "{} pairs from samples {}..{} of the run at step {}: {}",
-        pairs.len(),
+        "{} pairs from {} samples rendered ({} kept from an earlier run) of samples {}..{} of the run at step {}{failed}: {}",
+        tally.pairs,
+        tally.rendered,
+        tally.kept,
         args.samples.start,
         args.samples.end,
         run.state().step,

@@ -55,6 +55,7 @@ pub struct ModelSection {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PairsSection {
+    /// A pairs file, or a folder of pair files (`dggt refine-pairs --shards`).
     #[serde(default)]
     pub rendered: Option<PathBuf>,
     /// A safetensors file of clean images: its tensors `tensors` (`[3, H, W]` or `[N, 3, H, W]` float32 in

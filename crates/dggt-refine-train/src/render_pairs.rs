@@ -5,10 +5,12 @@
 //!
 //! The pairs file ([`write_pairs`], [`read_pairs`]) is safetensors: `render`, `target` and `reference`, each
 //! `[N, 3, H, W]` float32 RGB in [0, 1], and metadata `views`: a JSON list of `[frame, camera]` per pair
-//! (positions in the scene).
+//! (positions in the scene). Many samples' pairs may instead go to a folder of such files, one per sample
+//! ([`shard_path`]), written as each sample is rendered so that memory stays bounded and a stopped run resumes;
+//! [`read_pair_source`] reads either.
 
 use std::collections::HashMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use burn::module::Module;
 use burn::tensor::{Device, Tensor};
@@ -146,4 +148,36 @@ pub fn read_pairs(path: &Path) -> Result<Vec<RenderedPair>, RefineTrainError> {
             camera: views[i][1],
         })
         .collect())
+}
+
+/// The file of sample `sample`'s pairs in a folder of pair shards.
+pub fn shard_path(dir: &Path, sample: u64) -> PathBuf {
+    dir.join(format!("sample-{sample:06}.safetensors"))
+}
+
+/// The pairs of a pairs file, or of every `.safetensors` file of a folder of shards in name order.
+pub fn read_pair_source(path: &Path) -> Result<Vec<RenderedPair>, RefineTrainError> {
+    if !path.is_dir() {
+        return read_pairs(path);
+    }
+    let entries = std::fs::read_dir(path).map_err(|source| RefineTrainError::Io { path: path.into(), source })?;
+    let mut files = Vec::new();
+    for entry in entries {
+        let file = entry.map_err(|source| RefineTrainError::Io { path: path.into(), source })?.path();
+        if file.extension().is_some_and(|e| e == "safetensors") {
+            files.push(file);
+        }
+    }
+    if files.is_empty() {
+        return Err(RefineTrainError::invalid(
+            path.display().to_string(),
+            "a folder without pair files (.safetensors)",
+        ));
+    }
+    files.sort();
+    let mut pairs = Vec::new();
+    for file in files {
+        pairs.extend(read_pairs(&file)?);
+    }
+    Ok(pairs)
 }

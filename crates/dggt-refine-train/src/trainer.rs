@@ -32,7 +32,7 @@ use crate::fresh::fresh_checkpoint;
 use crate::loss::RefineLoss;
 use crate::model::TrainableRefiner;
 use crate::pairs::{Image, PairSet, batch, batch_pairs, read_images, split_held_out, step_indices, synthetic_pairs};
-use crate::render_pairs::read_pairs;
+use crate::render_pairs::read_pair_source;
 
 /// What one step did.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -277,11 +277,11 @@ fn load_model_of(
     }
 }
 
-/// The configured pairs: rendered ones from their file, or synthetic ones from clean images.
+/// The configured pairs: rendered ones from their file or folder of shards, or synthetic ones from clean images.
 fn load_pairs(section: &PairsSection) -> Result<PairSet, RefineTrainError> {
     match (&section.rendered, &section.images) {
-        (Some(file), _) => {
-            let pairs = read_pairs(file)?.into_iter().map(|rendered| rendered.pair).collect();
+        (Some(source), _) => {
+            let pairs = read_pair_source(source)?.into_iter().map(|rendered| rendered.pair).collect();
             split_held_out(pairs, section.held_out)
         }
         (None, Some(images)) => {

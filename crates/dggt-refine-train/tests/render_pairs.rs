@@ -1,13 +1,14 @@
 //! The pair generator on a tiny reconstruction run (`configs/tiny-overfit.toml` on the bundled fixture, its
 //! network as initialised): the targets of a sample rendered at frames that are not among its inputs, paired
-//! with the export's images and an input view as the reference; the pairs file round-trips; the refiner
+//! with the export's images and an input view as the reference; the pairs file and a folder of shards
+//! round-trip; the refiner
 //! trains on rendered pairs in its reference-view mode.
 
 use std::path::PathBuf;
 
 use burn::tensor::Device;
 use dggt_refine_train::RefineTrainer;
-use dggt_refine_train::render_pairs::{read_pairs, render_pairs, write_pairs};
+use dggt_refine_train::render_pairs::{read_pair_source, read_pairs, render_pairs, shard_path, write_pairs};
 use dggt_train::{Start, TrainConfig, Trainer};
 
 mod common;
@@ -43,6 +44,20 @@ fn targets_between_the_inputs_are_rendered_and_paired_with_the_truth_and_an_inpu
     let file = run_dir.path().join("pairs.safetensors");
     write_pairs(&pairs, &file).unwrap();
     assert_eq!(read_pairs(&file).unwrap(), pairs, "the pairs file round-trips");
+
+    // A folder of shards reads as its files' pairs in name order, whatever else it holds.
+    let shards = run_dir.path().join("shards");
+    std::fs::create_dir(&shards).unwrap();
+    let (first, second) = pairs.split_at(1);
+    write_pairs(second, &shard_path(&shards, 10)).unwrap();
+    write_pairs(first, &shard_path(&shards, 9)).unwrap();
+    std::fs::write(shards.join("notes.txt"), "not a pair file").unwrap();
+    assert_eq!(read_pair_source(&shards).unwrap(), pairs);
+    assert_eq!(read_pair_source(&file).unwrap(), pairs);
+    let empty = run_dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let message = read_pair_source(&empty).unwrap_err().to_string();
+    assert!(message.contains("empty") && message.contains("without pair files"), "{message}");
 }
 
 #[test]
