@@ -1,6 +1,7 @@
 //! `dggt refine-train` on `configs/refine-tiny.toml` (the tiny random refiner of the shared parity folder):
 //! trains a few steps, writes metrics, checkpoints and the refiner file, resumes where it stopped, and refuses
-//! a bad configuration naming the file and the setting.
+//! a bad configuration naming the file and the setting; `dggt refine-pairs` writes per-sample shards that a
+//! rerun keeps and training reads, and survives a damaged image in the export.
 
 use std::path::PathBuf;
 use std::process::{Command, Output};
@@ -84,4 +85,43 @@ fn refine_pairs_writes_shards_that_a_rerun_keeps_and_training_reads() {
     let trained =
         stdout(&dggt(&["refine-train", "--config", &path(&refine_config), "--steps", "2", "--out", &path(&out)]));
     assert!(trained.contains("trained steps 0..2"), "{trained}");
+}
+
+/// A damaged image in the export: the samples that need it are skipped with a warning naming the file, and
+/// `refine-pairs` still writes the pairs of the others.
+#[test]
+fn refine_pairs_survives_a_damaged_image_and_names_it() {
+    let repo = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let work = tempfile::tempdir().unwrap();
+    let scene = work.path().join("scene");
+    copy_folder(&repo.join("data-fixtures/synth-s0"), &scene);
+    let damaged = scene.join("images/012_0.jpg");
+    let bytes = std::fs::read(&damaged).unwrap();
+    std::fs::write(&damaged, &bytes[..400]).unwrap();
+    let text = std::fs::read_to_string(repo.join("configs/tiny-overfit.toml")).unwrap();
+    let text = text.replace("scene = \"../data-fixtures/synth-s0\"", &format!("scene = \"{}\"", scene.display()));
+    assert!(text.contains(&scene.display().to_string()), "the fixture's path in tiny-overfit.toml changed");
+    let config = work.path().join("overfit.toml");
+    std::fs::write(&config, text).unwrap();
+    let (run, out) = (work.path().join("run"), work.path().join("pairs.safetensors"));
+    let path = |p: &PathBuf| p.to_str().unwrap().to_string();
+    let args = ["refine-pairs", "--config", &path(&config), "--run", &path(&run), "--samples", "0..6"];
+    let output = dggt(&[&args[..], &["--out", &path(&out)]].concat());
+    let text = stdout(&output);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("sample skipped") && stderr.contains("012_0.jpg"), "{stderr}");
+    assert!(text.contains("from 6 samples rendered") && out.is_file(), "{text}");
+}
+
+fn copy_folder(from: &std::path::Path, to: &std::path::Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        let target = to.join(entry.file_name());
+        if entry.file_type().unwrap().is_dir() {
+            copy_folder(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), target).unwrap();
+        }
+    }
 }
