@@ -69,19 +69,7 @@ pub fn run(args: Args) -> Result<()> {
         return write_model(&configs, dir, &device);
     }
     let started = Instant::now();
-    let refiner = if args.load {
-        let spec = RefinerSpec {
-            model_dir: origin.clone(),
-            checkpoint: origin.join("model_difix.safetensors"),
-            prompt: Prompt::Tokens((0..configs.text_encoder.max_position_embeddings as i64).collect()),
-            latent: Latent::PosteriorMean,
-            reference: ReferenceView::None,
-            precision: args.precision,
-        };
-        load_refiner(&spec, &device)?
-    } else {
-        Refiner::random(&configs, Path::new(&origin), &device)?.with_precision(args.precision)
-    };
+    let refiner = build_refiner(&args, &configs, &origin, &device)?;
     let build_s = started.elapsed().as_secs_f64();
     let (memory_built, resident_built) = (peak_memory_mib(), resident_memory_mib());
     let mode = if args.reference_view { RefinerMode::ReferenceView } else { RefinerMode::SingleView };
@@ -102,6 +90,22 @@ pub fn run(args: Args) -> Result<()> {
     println!("peak memory: {} after building, {} after the runs", mib(memory_built), mib(peak_memory_mib()));
     println!("resident memory: {} after building, {} after the runs", mib(resident_built), mib(resident_memory_mib()));
     Ok(())
+}
+
+/// The refiner timed: `--model`'s weights loaded from disk with `--load`, else made-up weights of the sizes.
+fn build_refiner(args: &Args, configs: &RefinerConfigs, origin: &Path, device: &Device) -> Result<Refiner> {
+    if !args.load {
+        return Ok(Refiner::random(configs, origin, device)?.with_precision(args.precision));
+    }
+    let spec = RefinerSpec {
+        model_dir: origin.to_path_buf(),
+        checkpoint: origin.join("model_difix.safetensors"),
+        prompt: Prompt::Tokens((0..configs.text_encoder.max_position_embeddings as i64).collect()),
+        latent: Latent::PosteriorMean,
+        reference: ReferenceView::None,
+        precision: args.precision,
+    };
+    load_refiner(&spec, device)
 }
 
 /// Writes the made-up model folder of `configs` and a fresh Difix checkpoint over it into `dir`.

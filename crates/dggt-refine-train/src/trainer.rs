@@ -296,10 +296,10 @@ fn load_pairs(section: &PairsSection) -> Result<PairSet, RefineTrainError> {
 fn prompt_tokens(config: &RefineTrainConfig) -> Result<Vec<i64>, RefineTrainError> {
     let model = &config.model;
     let Some(path) = &model.prompt_tokens_file else {
-        let prompt = match &model.prompt {
-            _ if !model.prompt_tokens.is_empty() => Prompt::Tokens(model.prompt_tokens.clone()),
-            Some(text) => Prompt::Text(text.clone()),
-            None => Prompt::default(),
+        let prompt = if model.prompt_tokens.is_empty() {
+            model.prompt.clone().map_or_else(Prompt::default, Prompt::Text)
+        } else {
+            Prompt::Tokens(model.prompt_tokens.clone())
         };
         return Ok(prompt.token_ids(&model.base_dir)?);
     };

@@ -15,7 +15,7 @@ use crate::scheduler::{SingleStep, alphas_cumprod};
 use crate::text_encoder::TextEncoder;
 use crate::unet::Unet;
 use crate::vae::Vae;
-use crate::weights::{Weights, write_safetensors};
+use crate::weights::{NamedTensors, Weights, write_safetensors};
 
 /// The four configurations of a refiner's model folder.
 #[derive(Debug, Clone)]
@@ -98,29 +98,36 @@ impl Refiner {
 /// at a time.
 pub fn write_random_model(configs: &RefinerConfigs, dir: &Path, device: &Device) -> Result<(), RefineError> {
     check_vae(&configs.vae, dir)?;
-    let write = |component: &str, file: &str, config: serde_json::Value, weights: Weights| {
-        let folder = dir.join(component);
-        std::fs::create_dir_all(&folder).map_err(|e| RefineError::io(&folder, e))?;
-        let config_path = folder.join(if component == "scheduler" { "scheduler_config.json" } else { "config.json" });
-        let text = serde_json::to_string_pretty(&config).expect("a JSON value serialises");
-        std::fs::write(&config_path, text).map_err(|e| RefineError::io(&config_path, e))?;
-        let made = weights.into_made();
-        if !made.is_empty() {
-            write_safetensors(&folder.join(file), &made, HashMap::new())?;
-        }
-        Ok::<_, RefineError>(())
-    };
-    let json = |value: Result<serde_json::Value, serde_json::Error>| value.expect("configurations serialise");
     let mut weights = Weights::random_kept(device);
     drop(Vae::load(&mut weights, &configs.vae)?);
-    write("vae", "diffusion_pytorch_model.safetensors", json(serde_json::to_value(&configs.vae)), weights)?;
+    write_component(dir, "vae", "diffusion_pytorch_model", &configs.vae, weights.into_made())?;
     let mut weights = Weights::random_kept(device);
     drop(Unet::load(&mut weights, &configs.unet, dir)?);
-    write("unet", "diffusion_pytorch_model.safetensors", json(serde_json::to_value(&configs.unet)), weights)?;
+    write_component(dir, "unet", "diffusion_pytorch_model", &configs.unet, weights.into_made())?;
     let mut weights = Weights::random_kept(device);
     drop(TextEncoder::load(&mut weights, &configs.text_encoder, dir)?);
-    write("text_encoder", "model.safetensors", json(serde_json::to_value(&configs.text_encoder)), weights)?;
-    write("scheduler", "", json(serde_json::to_value(&configs.scheduler)), Weights::random(device))
+    write_component(dir, "text_encoder", "model", &configs.text_encoder, weights.into_made())?;
+    write_component(dir, "scheduler", "", &configs.scheduler, NamedTensors::new())
+}
+
+/// `dir/component/`: its configuration (`config.json`, the scheduler's `scheduler_config.json`) and, when there
+/// are any, its tensors as `stem.safetensors`.
+fn write_component(
+    dir: &Path,
+    component: &str,
+    stem: &str,
+    config: &impl serde::Serialize,
+    tensors: NamedTensors,
+) -> Result<(), RefineError> {
+    let folder = dir.join(component);
+    std::fs::create_dir_all(&folder).map_err(|e| RefineError::io(&folder, e))?;
+    let config_path = folder.join(if component == "scheduler" { "scheduler_config.json" } else { "config.json" });
+    let text = serde_json::to_string_pretty(config).expect("configurations serialise");
+    std::fs::write(&config_path, text).map_err(|e| RefineError::io(&config_path, e))?;
+    if tensors.is_empty() {
+        return Ok(());
+    }
+    write_safetensors(&folder.join(format!("{stem}.safetensors")), &tensors, HashMap::new())
 }
 
 #[cfg(test)]

@@ -82,9 +82,13 @@ pub fn read_safetensors_with_metadata(path: &Path) -> Result<(NamedTensors, Hash
             }
         };
         let [begin, end] = entry.data_offsets;
-        let count: usize = entry.shape.iter().product();
-        if end < begin || (end - begin) as usize != count * dtype.size() {
-            return Err(RefineError::file(path, format!("tensor '{name}': offsets {begin}..{end} for {count} values")));
+        let length = entry.shape.iter().try_fold(dtype.size(), |bytes, &side| bytes.checked_mul(side));
+        if end < begin || length != usize::try_from(end - begin).ok() {
+            let shape = &entry.shape;
+            return Err(RefineError::file(
+                path,
+                format!("tensor '{name}': offsets {begin}..{end} for shape {shape:?}"),
+            ));
         }
         bytes.resize((end - begin) as usize, 0);
         file.seek(SeekFrom::Start(header.data_start + begin))
@@ -137,7 +141,7 @@ impl SafetensorsHeader {
         for (name, value) in entries {
             let entry: HeaderEntry =
                 serde_json::from_value(value).map_err(|e| invalid(format!("tensor '{name}': {e}")))?;
-            if data_start + entry.data_offsets[1] > file_len {
+            if entry.data_offsets[1] > file_len - data_start {
                 return Err(invalid(format!("tensor '{name}' ends past the end of the file")));
             }
             tensors.insert(name, entry);
