@@ -231,8 +231,7 @@ fn network(options: &BenchOptions, device: &Device) -> Result<(Network, Vec<Stri
         }
         None => {
             let config = fresh_tiny_config();
-            device.seed(options.seed);
-            let model = fresh_model(&config, None, device)?;
+            let model = fresh_model(&config, None, options.seed, device)?;
             let network = Network {
                 patch_size: config.aggregator.patch_size as u32,
                 crop_to_square: true,

@@ -188,35 +188,46 @@ pub struct StartingWeights<'a> {
     pub may_lack: &'a [String],
 }
 
-/// A fresh network: random layers, the sky model's fixed buffers, then the starting checkpoint when given.
-/// A parameter the checkpoint lacks is an error naming it unless `may_lack` allows it; tensors of mismatched
-/// shape are an error naming every one; tensors the network does not use are reported by name.
+/// A fresh network drawn from `seed`: random layers, the sky model's fixed buffers, then the starting checkpoint
+/// when given. The draw takes its turn with every other seeded draw of the process ([`dggt_model::seeded`]), so
+/// the same seed gives the same weights whatever else runs. A parameter the checkpoint lacks is an error naming
+/// it unless `may_lack` allows it; tensors of mismatched shape are an error naming every one; tensors the network
+/// does not use are reported by name.
 pub fn fresh_model(
     config: &ModelConfig,
     init: Option<StartingWeights<'_>>,
+    seed: u64,
     device: &Device,
 ) -> Result<Dggt, InferError> {
-    let mut model = Dggt::new(config, device)?;
-    if let Some(sky) = &config.sky_model {
-        model.sky_model = Some(SkyModel::initialised(sky, device));
-    }
-    // Loaded before the fresh parameters are drawn, so that a wrong file fails before the network is allocated.
-    if let Some(init) = init {
-        let report = load_checkpoint_with(&mut model, init.path, Coverage::Partial)?;
-        check_coverage(init, &report)?;
-        if !report.unused.is_empty() {
-            tracing::warn!(checkpoint = %init.path.display(), unused = ?report.unused, "tensors the network does not use");
+    dggt_model::seeded::with_seed(device, seed, || {
+        let mut model = Dggt::new(config, device)?;
+        if let Some(sky) = &config.sky_model {
+            model.sky_model = Some(SkyModel::initialised(sky, device));
         }
-        tracing::info!(
-            checkpoint = %init.path.display(),
-            applied = report.applied.len(),
-            fresh = report.missing.len(),
-            unused = report.unused.len(),
-            "starting weights loaded"
-        );
+        // Loaded before the fresh parameters are drawn, so that a wrong file fails before the network is allocated.
+        if let Some(init) = init {
+            apply_starting_weights(&mut model, init)?;
+        }
+        materialise(&model);
+        Ok(model)
+    })
+}
+
+/// Loads `init` over `model`, refusing it when it lacks what `may_lack` does not allow.
+fn apply_starting_weights(model: &mut Dggt, init: StartingWeights<'_>) -> Result<(), InferError> {
+    let report = load_checkpoint_with(model, init.path, Coverage::Partial)?;
+    check_coverage(init, &report)?;
+    if !report.unused.is_empty() {
+        tracing::warn!(checkpoint = %init.path.display(), unused = ?report.unused, "tensors the network does not use");
     }
-    materialise(&model);
-    Ok(model)
+    tracing::info!(
+        checkpoint = %init.path.display(),
+        applied = report.applied.len(),
+        fresh = report.missing.len(),
+        unused = report.unused.len(),
+        "starting weights loaded"
+    );
+    Ok(())
 }
 
 /// Every parameter the checkpoint lacks must match one of the allowed patterns.

@@ -13,7 +13,8 @@
 //!   lists (`tests/checkpoint_keys.rs`).
 //!
 //! - [`sky`]: the sky model's Gaussians and their colours sampled from the input views;
-//! - [`lifespan`]: frame times, the static/dynamic opacity split and the lifespan decay.
+//! - [`lifespan`]: frame times, the static/dynamic opacity split and the lifespan decay;
+//! - [`seeded`]: fresh weights drawn from a seed, one caller at a time (the backend's generator is global).
 //!
 //! The network stops at its maps: placing and rendering Gaussians is `dggt-scene`'s, and running a folder of
 //! reference vectors against the release (`dggt parity`) is `dggt-infer`'s.
@@ -39,6 +40,7 @@ pub mod mlp;
 pub mod model;
 pub mod resample;
 pub mod rope;
+pub mod seeded;
 pub mod sky;
 pub mod uv_embed;
 pub mod weights;

@@ -427,8 +427,7 @@ fn network_cases(options: &StressOptions) -> Result<Vec<NetworkCase>, String> {
 /// activations and constants; the scene is assembled and rendered in f32), trained in that type, where the
 /// device declares the type.
 fn network_group(options: &StressOptions, config: &ModelConfig, device: &Device) -> Result<Vec<CaseOutcome>, String> {
-    device.seed(0);
-    let model = fresh_model(config, None, device).map_err(|e| e.to_string())?;
+    let model = fresh_model(config, None, 0, device).map_err(|e| e.to_string())?;
     let network_render = RenderSection {
         cameras: CameraSource::Predicted,
         means_gradient: MeansGradient::Through,

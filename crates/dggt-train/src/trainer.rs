@@ -119,14 +119,13 @@ impl Trainer {
                 (model, loaded.config, optimizer, loaded.state)
             }
             None => {
-                device.seed(config.run.seed);
                 let model_config = config.model.architecture();
                 let init = config
                     .model
                     .init_checkpoint
                     .as_deref()
                     .map(|path| StartingWeights { path, may_lack: &config.model.init_may_lack });
-                let model = fresh_model(&model_config, init, &device)?;
+                let model = fresh_model(&model_config, init, config.run.seed, &device)?;
                 let model = freeze(model, &config.optim.frozen)?;
                 let optimizer = Optimizer::new(&config.optim, &model);
                 let state = RunState::starting(config.run.seed, 0);

@@ -170,17 +170,17 @@ fn a_starting_checkpoint_that_does_not_cover_the_network_is_refused_by_name() {
     let partial = dir.path().join("partial.safetensors");
     safetensors::serialize_to_file(kept, None, &partial).unwrap();
     let init = dggt_infer::StartingWeights { path: &partial, may_lack: &[] };
-    let error = dggt_infer::fresh_model(&tiny, Some(init), &device).err().expect("refused").to_string();
+    let error = dggt_infer::fresh_model(&tiny, Some(init), 0, &device).err().expect("refused").to_string();
     assert!(error.contains("gs_head.") && error.contains("init_may_lack"), "{error}");
     // ...and accepted when the configuration allows the head to start fresh.
     let allowed = ["gs_head.*".to_string()];
     let init = dggt_infer::StartingWeights { path: &partial, may_lack: &allowed };
-    assert!(dggt_infer::fresh_model(&tiny, Some(init), &device).is_ok());
+    assert!(dggt_infer::fresh_model(&tiny, Some(init), 0, &device).is_ok());
 
     // The tiny weights given to the full-size network: every mismatched tensor is named.
     let full = dggt_infer::ModelSection { preset: dggt_model::Preset::Dggt, ..Default::default() }.architecture();
     let init = dggt_infer::StartingWeights { path: &weights, may_lack: &[] };
-    let error = dggt_infer::fresh_model(&full, Some(init), &device).err().expect("refused").to_string();
+    let error = dggt_infer::fresh_model(&full, Some(init), 0, &device).err().expect("refused").to_string();
     assert!(error.contains("aggregator.patch_embed") && error.contains("network [1024"), "{error}");
     assert!(error.len() < 4000, "the names are listed, not the whole file: {} bytes", error.len());
 }

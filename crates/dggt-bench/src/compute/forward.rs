@@ -122,8 +122,7 @@ struct Network {
 
 impl Network {
     fn new(spec: &ScaleSpec, seed: u64, device: &Device) -> Result<Self, BenchError> {
-        device.seed(seed);
-        let model = dggt_infer::fresh_model(&spec.model, None, device)?;
+        let model = dggt_infer::fresh_model(&spec.model, None, seed, device)?;
         Ok(Self { model, spec: spec.clone(), device: device.clone() })
     }
 
