@@ -6,7 +6,7 @@
 //!   low-rank factors over its frozen weights, its skip convolutions trained, the encoder frozen;
 //! - [`loss`]: `l2 · L2 + lpips · LPIPS + gram · Gram(VGG-16)`;
 //! - [`render_pairs`]: pairs rendered by a trained reconstruction run at non-input frames, with an input view
-//!   as the reference, and their file;
+//!   as the reference, and their file; [`pair_files`]: those files read a pair at a time as training draws them;
 //! - [`fresh`]: the starting skip convolutions and LoRA when only the base model (sd-turbo) is given;
 //! - [`export`]: the trained weights as a Difix checkpoint (LoRA factors in peft's names) that the refiner's
 //!   loader merges, written to and read from a safetensors file;
@@ -20,6 +20,7 @@ pub mod export;
 pub mod fresh;
 pub mod loss;
 pub mod model;
+pub mod pair_files;
 pub mod pairs;
 pub mod render_pairs;
 pub mod trainer;

@@ -6,6 +6,7 @@
 //! disocclusion) and pixel noise. The pairs of a step are a pure function of `(seed, step)`
 //! ([`step_indices`]), so a resumed run draws what an uninterrupted one would.
 
+use std::borrow::Cow;
 use std::path::Path;
 
 use burn::tensor::{Device, Tensor, TensorData};
@@ -13,6 +14,7 @@ use rand::rngs::Xoshiro256PlusPlus;
 use rand::{RngExt, SeedableRng};
 
 use crate::error::RefineTrainError;
+use crate::pair_files::PairFiles;
 
 /// A host image `[3, height, width]`, values in [0, 1].
 #[derive(Debug, Clone, PartialEq)]
@@ -31,11 +33,74 @@ pub struct Pair {
     pub reference: Option<Image>,
 }
 
-/// The pairs trained on and those held out for validation.
+/// Where a run's pairs are: in memory (synthetic pairs), or in pairs files read a pair at a time.
+#[derive(Debug, Clone)]
+pub enum PairSource {
+    InMemory(Vec<Pair>),
+    Files(PairFiles),
+}
+
+impl PairSource {
+    fn len(&self) -> usize {
+        match self {
+            Self::InMemory(pairs) => pairs.len(),
+            Self::Files(files) => files.len(),
+        }
+    }
+
+    fn get(&self, index: usize) -> Result<Cow<'_, Pair>, RefineTrainError> {
+        match self {
+            Self::InMemory(pairs) => pairs
+                .get(index)
+                .map(Cow::Borrowed)
+                .ok_or_else(|| RefineTrainError::invalid("pairs", format!("pair {index} of {}", pairs.len()))),
+            Self::Files(files) => Ok(Cow::Owned(files.read(index)?.pair)),
+        }
+    }
+}
+
+/// The pairs trained on and those held out for validation: the last `held_out` of a source.
 #[derive(Debug, Clone)]
 pub struct PairSet {
-    pub train: Vec<Pair>,
-    pub held_out: Vec<Pair>,
+    source: PairSource,
+    held_out: usize,
+}
+
+impl PairSet {
+    /// `source` with its last `held_out` pairs held out; at least one must be left to train on.
+    pub fn new(source: PairSource, held_out: usize) -> Result<Self, RefineTrainError> {
+        if held_out >= source.len() {
+            return Err(RefineTrainError::invalid(
+                "pairs.held_out",
+                format!("{held_out} held out of {} pairs leaves none to train on", source.len()),
+            ));
+        }
+        Ok(Self { source, held_out })
+    }
+
+    pub fn train_len(&self) -> usize {
+        self.source.len() - self.held_out
+    }
+
+    pub fn held_out_len(&self) -> usize {
+        self.held_out
+    }
+
+    /// Training pair `index` (of [`Self::train_len`]).
+    pub fn train(&self, index: usize) -> Result<Cow<'_, Pair>, RefineTrainError> {
+        if index >= self.train_len() {
+            return Err(RefineTrainError::invalid("pairs", format!("training pair {index} of {}", self.train_len())));
+        }
+        self.source.get(index)
+    }
+
+    /// Held-out pair `index` (of [`Self::held_out_len`]).
+    pub fn held_out(&self, index: usize) -> Result<Cow<'_, Pair>, RefineTrainError> {
+        if index >= self.held_out {
+            return Err(RefineTrainError::invalid("pairs", format!("held-out pair {index} of {}", self.held_out)));
+        }
+        self.source.get(self.train_len() + index)
+    }
 }
 
 /// The tensors `names` of a safetensors file (`[3, H, W]` or `[N, 3, H, W]` float32, values in [0, 1]) as
@@ -89,19 +154,7 @@ pub fn synthetic_pairs(images: &[Image], variants: usize, held_out: usize) -> Re
             })
         })
         .collect();
-    split_held_out(pairs, held_out)
-}
-
-/// The last `held_out` of `pairs` held out, the rest to train on.
-pub fn split_held_out(mut pairs: Vec<Pair>, held_out: usize) -> Result<PairSet, RefineTrainError> {
-    if held_out >= pairs.len() {
-        return Err(RefineTrainError::invalid(
-            "pairs.held_out",
-            format!("{held_out} held out of {} pairs leaves none to train on", pairs.len()),
-        ));
-    }
-    let held_out = pairs.split_off(pairs.len() - held_out);
-    Ok(PairSet { train: pairs, held_out })
+    PairSet::new(PairSource::InMemory(pairs), held_out)
 }
 
 /// `image` with ghosting, a hole and noise drawn from `seed` (see the module's doc).

@@ -7,7 +7,7 @@
 //! `[N, 3, H, W]` float32 RGB in [0, 1], and metadata `views`: a JSON list of `[frame, camera]` per pair
 //! (positions in the scene). Many samples' pairs may instead go to a folder of such files, one per sample
 //! ([`shard_path`]), written as each sample is rendered so that memory stays bounded and a stopped run resumes;
-//! [`read_pair_source`] reads either.
+//! [`crate::pair_files`] reads either, a pair at a time.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -30,8 +30,10 @@ pub struct RenderedPair {
     pub camera: usize,
 }
 
-const TENSORS: [&str; 3] = ["render", "target", "reference"];
-const VIEWS_KEY: &str = "views";
+/// The tensors of a pairs file, in this order.
+pub(crate) const TENSORS: [&str; 3] = ["render", "target", "reference"];
+/// The metadata entry naming each pair's view.
+pub(crate) const VIEWS_KEY: &str = "views";
 
 /// Renders the targets of the run's samples `samples` (sample indices, as its steps draw them) with its
 /// current weights, on `device` (without autodiff).
@@ -120,64 +122,7 @@ pub fn write_pairs(pairs: &[RenderedPair], path: &Path) -> Result<(), RefineTrai
     dggt_data::io::write_atomically(path, &file).map_err(|e| invalid(e.to_string()))
 }
 
-/// Reads a pairs file of [`write_pairs`].
-pub fn read_pairs(path: &Path) -> Result<Vec<RenderedPair>, RefineTrainError> {
-    let invalid = |detail: String| RefineTrainError::invalid(path.display().to_string(), detail);
-    let bytes = std::fs::read(path).map_err(|source| RefineTrainError::Io { path: path.into(), source })?;
-    let (_, header) = safetensors::SafeTensors::read_metadata(&bytes).map_err(|e| invalid(e.to_string()))?;
-    let views: Vec<[usize; 2]> = header
-        .metadata()
-        .as_ref()
-        .and_then(|m| m.get(VIEWS_KEY))
-        .and_then(|v| serde_json::from_str(v).ok())
-        .ok_or_else(|| invalid(format!("metadata `{VIEWS_KEY}` missing or not a list of [frame, camera]")))?;
-    let images = crate::pairs::read_images(path, &TENSORS.map(String::from))?;
-    let count = views.len();
-    if images.len() != 3 * count {
-        return Err(invalid(format!("{} images for {count} views, expected 3 per view", images.len())));
-    }
-    let mut columns = images.chunks_exact(count);
-    let (render, target, reference) = (columns.next(), columns.next(), columns.next());
-    let (Some(render), Some(target), Some(reference)) = (render, target, reference) else {
-        return Err(invalid("render, target and reference expected".into()));
-    };
-    Ok((0..count)
-        .map(|i| RenderedPair {
-            pair: Pair { render: render[i].clone(), target: target[i].clone(), reference: Some(reference[i].clone()) },
-            frame: views[i][0],
-            camera: views[i][1],
-        })
-        .collect())
-}
-
 /// The file of sample `sample`'s pairs in a folder of pair shards.
 pub fn shard_path(dir: &Path, sample: u64) -> PathBuf {
     dir.join(format!("sample-{sample:06}.safetensors"))
-}
-
-/// The pairs of a pairs file, or of every `.safetensors` file of a folder of shards in name order.
-pub fn read_pair_source(path: &Path) -> Result<Vec<RenderedPair>, RefineTrainError> {
-    if !path.is_dir() {
-        return read_pairs(path);
-    }
-    let entries = std::fs::read_dir(path).map_err(|source| RefineTrainError::Io { path: path.into(), source })?;
-    let mut files = Vec::new();
-    for entry in entries {
-        let file = entry.map_err(|source| RefineTrainError::Io { path: path.into(), source })?.path();
-        if file.extension().is_some_and(|e| e == "safetensors") {
-            files.push(file);
-        }
-    }
-    if files.is_empty() {
-        return Err(RefineTrainError::invalid(
-            path.display().to_string(),
-            "a folder without pair files (.safetensors)",
-        ));
-    }
-    files.sort();
-    let mut pairs = Vec::new();
-    for file in files {
-        pairs.extend(read_pairs(&file)?);
-    }
-    Ok(pairs)
 }

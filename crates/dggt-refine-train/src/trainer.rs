@@ -31,8 +31,8 @@ use crate::error::RefineTrainError;
 use crate::fresh::fresh_checkpoint;
 use crate::loss::RefineLoss;
 use crate::model::TrainableRefiner;
-use crate::pairs::{Image, PairSet, batch, batch_pairs, read_images, split_held_out, step_indices, synthetic_pairs};
-use crate::render_pairs::read_pair_source;
+use crate::pair_files::PairFiles;
+use crate::pairs::{Image, PairSet, PairSource, batch, batch_pairs, read_images, step_indices, synthetic_pairs};
 
 /// What one step did.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -120,9 +120,10 @@ impl RefineTrainer {
     /// One optimiser step. A non-finite loss or gradient leaves the weights untouched (counted as skipped).
     pub fn step(&mut self) -> Result<StepRecord, RefineTrainError> {
         let step = self.state.step;
-        let indices = step_indices(self.state.seed, step, self.config.run.batch, self.pairs.train.len());
-        let chosen: Vec<_> = indices.iter().map(|&i| &self.pairs.train[i]).collect();
-        let (render, target, reference) = batch_pairs(&chosen, &self.device)?;
+        let indices = step_indices(self.state.seed, step, self.config.run.batch, self.pairs.train_len());
+        let chosen = indices.iter().map(|&i| self.pairs.train(i)).collect::<Result<Vec<_>, _>>()?;
+        let (render, target, reference) =
+            batch_pairs(&chosen.iter().map(AsRef::as_ref).collect::<Vec<_>>(), &self.device)?;
         let refined = self.model.refine(render, reference, Latent::Sampled { seed: self.state.seed ^ step })?;
         let value = self.loss.compute(refined, target, step)?;
         let loss: f32 = value.total.clone().into_scalar();
@@ -190,8 +191,9 @@ impl RefineTrainer {
     pub fn validate(&self) -> Result<Validation, RefineTrainError> {
         let (mut refined_sum, mut render_sum) = (0.0, 0.0);
         let model = self.model.valid();
-        for pair in &self.pairs.held_out {
-            let (render, _, reference) = batch_pairs(&[pair], &self.plain_device)?;
+        for index in 0..self.pairs.held_out_len() {
+            let pair = self.pairs.held_out(index)?;
+            let (render, _, reference) = batch_pairs(&[&pair], &self.plain_device)?;
             let refined = model.refine(render, reference, Latent::PosteriorMean)?;
             let refined: Vec<f32> = refined
                 .into_data()
@@ -200,7 +202,7 @@ impl RefineTrainer {
             refined_sum += psnr(&refined, &pair.target.values)?;
             render_sum += psnr(&pair.render.values, &pair.target.values)?;
         }
-        let count = self.pairs.held_out.len().max(1) as f64;
+        let count = self.pairs.held_out_len().max(1) as f64;
         Ok(Validation { step: self.state.step, refined_psnr: refined_sum / count, render_psnr: render_sum / count })
     }
 
@@ -280,10 +282,7 @@ fn load_model_of(
 /// The configured pairs: rendered ones from their file or folder of shards, or synthetic ones from clean images.
 fn load_pairs(section: &PairsSection) -> Result<PairSet, RefineTrainError> {
     match (&section.rendered, &section.images) {
-        (Some(source), _) => {
-            let pairs = read_pair_source(source)?.into_iter().map(|rendered| rendered.pair).collect();
-            split_held_out(pairs, section.held_out)
-        }
+        (Some(source), _) => PairSet::new(PairSource::Files(PairFiles::open(source)?), section.held_out),
         (None, Some(images)) => {
             synthetic_pairs(&read_images(images, &section.tensors)?, section.variants, section.held_out)
         }

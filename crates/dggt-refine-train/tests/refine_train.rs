@@ -135,7 +135,8 @@ fn the_exported_merged_refiner_equals_the_trained_unmerged_one() {
     for _ in 0..3 {
         trainer.step().unwrap();
     }
-    let image = &trainer.pairs().held_out[0].render;
+    let held_out = trainer.pairs().held_out(0).unwrap();
+    let image = &held_out.render;
     let unmerged = trainer.refine_host(image, None).unwrap();
 
     let path = out.path().join("refiner.safetensors");
@@ -162,7 +163,8 @@ fn the_exported_merged_refiner_equals_the_trained_unmerged_one() {
     assert!(worst <= 1e-5, "merged and unmerged refiners differ by {worst}");
 
     // The reference-view mode alike.
-    let reference = &trainer.pairs().train[0].target;
+    let first = trainer.pairs().train(0).unwrap();
+    let reference = &first.target;
     let unmerged = trainer.refine_host(image, Some(reference)).unwrap();
     let merged = refiner
         .refine(
@@ -206,7 +208,7 @@ fn bad_checkpoints_and_pair_files_are_errors_naming_the_file_and_the_part() {
     assert!(error.contains("broken.safetensors") && error.contains(target), "{error}");
 
     let images = config.pairs.images.clone().unwrap();
-    let error = dggt_refine_train::render_pairs::read_pairs(&images).unwrap_err().to_string();
+    let error = dggt_refine_train::pair_files::PairFiles::open(&images).unwrap_err().to_string();
     assert!(error.contains("inputs.safetensors") && error.contains("views"), "{error}");
 }
 

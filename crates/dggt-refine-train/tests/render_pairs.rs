@@ -8,7 +8,8 @@ use std::path::PathBuf;
 
 use burn::tensor::Device;
 use dggt_refine_train::RefineTrainer;
-use dggt_refine_train::render_pairs::{read_pair_source, read_pairs, render_pairs, shard_path, write_pairs};
+use dggt_refine_train::pair_files::PairFiles;
+use dggt_refine_train::render_pairs::{render_pairs, shard_path, write_pairs};
 use dggt_train::{Start, TrainConfig, Trainer};
 
 mod common;
@@ -43,7 +44,7 @@ fn targets_between_the_inputs_are_rendered_and_paired_with_the_truth_and_an_inpu
 
     let file = run_dir.path().join("pairs.safetensors");
     write_pairs(&pairs, &file).unwrap();
-    assert_eq!(read_pairs(&file).unwrap(), pairs, "the pairs file round-trips");
+    assert_eq!(PairFiles::open(&file).unwrap().read_all().unwrap(), pairs, "the pairs file round-trips");
 
     // A folder of shards reads as its files' pairs in name order, whatever else it holds.
     let shards = run_dir.path().join("shards");
@@ -52,11 +53,10 @@ fn targets_between_the_inputs_are_rendered_and_paired_with_the_truth_and_an_inpu
     write_pairs(second, &shard_path(&shards, 10)).unwrap();
     write_pairs(first, &shard_path(&shards, 9)).unwrap();
     std::fs::write(shards.join("notes.txt"), "not a pair file").unwrap();
-    assert_eq!(read_pair_source(&shards).unwrap(), pairs);
-    assert_eq!(read_pair_source(&file).unwrap(), pairs);
+    assert_eq!(PairFiles::open(&shards).unwrap().read_all().unwrap(), pairs);
     let empty = run_dir.path().join("empty");
     std::fs::create_dir(&empty).unwrap();
-    let message = read_pair_source(&empty).unwrap_err().to_string();
+    let message = PairFiles::open(&empty).unwrap_err().to_string();
     assert!(message.contains("empty") && message.contains("without pair files"), "{message}");
 }
 
@@ -73,7 +73,8 @@ fn the_refiner_trains_on_rendered_pairs_with_their_reference_views() {
     config.pairs.images = None;
     config.pairs.rendered = Some(file);
     let mut trainer = RefineTrainer::new(config, device(), Start::Fresh).unwrap();
-    assert!(trainer.pairs().train.iter().all(|p| p.reference.is_some()));
+    let training = trainer.pairs();
+    assert!((0..training.train_len()).all(|i| training.train(i).unwrap().reference.is_some()));
     for _ in 0..2 {
         let record = trainer.step().unwrap();
         assert!(record.loss.is_finite() && record.grad_norm.is_some(), "{record:?}");

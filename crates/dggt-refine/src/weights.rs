@@ -7,7 +7,6 @@
 //! into their targets ([`crate::lora`]).
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
-use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 
 use burn::module::ParamId;
@@ -15,6 +14,7 @@ use burn::tensor::{DType, Device, Distribution, Tensor, TensorData};
 use safetensors::Dtype;
 
 use crate::error::RefineError;
+use crate::safetensors_file::SafetensorsFile;
 
 /// One tensor's shape, values (row-major) and the file it was read from.
 #[derive(Debug, Clone)]
@@ -66,13 +66,12 @@ pub fn read_safetensors(path: &Path) -> Result<NamedTensors, RefineError> {
 /// read tensor by tensor (its header first, then each tensor's bytes), so reading holds one tensor's bytes
 /// beside the widened values rather than a copy of the whole file.
 pub fn read_safetensors_with_metadata(path: &Path) -> Result<(NamedTensors, HashMap<String, String>), RefineError> {
-    let mut file = std::fs::File::open(path).map_err(|e| RefineError::io(path, e))?;
-    let file_len = file.metadata().map_err(|e| RefineError::io(path, e))?.len();
-    let header = SafetensorsHeader::read(&mut file, file_len, path)?;
+    let mut file = SafetensorsFile::open(path)?;
     let mut tensors = NamedTensors::new();
     let mut bytes = Vec::new();
-    for (name, entry) in &header.tensors {
-        let dtype = match entry.dtype.as_str() {
+    let names: Vec<String> = file.tensors.keys().cloned().collect();
+    for name in names {
+        let dtype = match file.tensors[&name].dtype.as_str() {
             "F64" => DType::F64,
             "F32" => DType::F32,
             "F16" => DType::F16,
@@ -81,73 +80,13 @@ pub fn read_safetensors_with_metadata(path: &Path) -> Result<(NamedTensors, Hash
                 return Err(RefineError::file(path, format!("tensor '{name}' has type {other}, expected a float")));
             }
         };
-        let [begin, end] = entry.data_offsets;
-        let length = entry.shape.iter().try_fold(dtype.size(), |bytes, &side| bytes.checked_mul(side));
-        if end < begin || length != usize::try_from(end - begin).ok() {
-            let shape = &entry.shape;
-            return Err(RefineError::file(
-                path,
-                format!("tensor '{name}': offsets {begin}..{end} for shape {shape:?}"),
-            ));
-        }
-        bytes.resize((end - begin) as usize, 0);
-        file.seek(SeekFrom::Start(header.data_start + begin))
-            .and_then(|_| file.read_exact(&mut bytes))
-            .map_err(|e| RefineError::file(path, format!("tensor '{name}' not readable: {e}")))?;
-        let data = TensorData::from_bytes_vec(std::mem::take(&mut bytes), entry.shape.clone(), dtype);
-        tensors.insert(name.clone(), HostTensor::from_data(data, path, name)?);
+        let shape = file.entry(&name, dtype.size())?.shape.clone();
+        bytes.resize(shape.iter().product::<usize>() * dtype.size(), 0);
+        file.read_bytes(&name, 0, &mut bytes)?;
+        let data = TensorData::from_bytes_vec(std::mem::take(&mut bytes), shape, dtype);
+        tensors.insert(name.clone(), HostTensor::from_data(data, path, &name)?);
     }
-    Ok((tensors, header.metadata))
-}
-
-/// A safetensors file's header: an 8-byte little-endian length, then that many bytes of JSON naming each
-/// tensor's type, shape and byte range (relative to the data that follows), and optional text metadata.
-struct SafetensorsHeader {
-    tensors: BTreeMap<String, HeaderEntry>,
-    metadata: HashMap<String, String>,
-    /// Where the tensors' data begins in the file.
-    data_start: u64,
-}
-
-#[derive(serde::Deserialize)]
-struct HeaderEntry {
-    dtype: String,
-    shape: Vec<usize>,
-    data_offsets: [u64; 2],
-}
-
-/// Headers beyond this are refused (the format's own bound).
-const MAX_HEADER_BYTES: u64 = 100_000_000;
-
-impl SafetensorsHeader {
-    fn read(file: &mut std::fs::File, file_len: u64, path: &Path) -> Result<Self, RefineError> {
-        let invalid = |detail: String| RefineError::file(path, format!("not a safetensors file: {detail}"));
-        let mut length = [0u8; 8];
-        file.read_exact(&mut length).map_err(|e| invalid(format!("no header length ({e})")))?;
-        let length = u64::from_le_bytes(length);
-        if length > MAX_HEADER_BYTES || 8 + length > file_len {
-            return Err(invalid(format!("a header of {length} bytes in a file of {file_len}")));
-        }
-        let mut json = vec![0u8; length as usize];
-        file.read_exact(&mut json).map_err(|e| invalid(format!("header not readable ({e})")))?;
-        let mut entries: BTreeMap<String, serde_json::Value> =
-            serde_json::from_slice(&json).map_err(|e| invalid(format!("header: {e}")))?;
-        let metadata = match entries.remove("__metadata__") {
-            Some(value) => serde_json::from_value(value).map_err(|e| invalid(format!("metadata: {e}")))?,
-            None => HashMap::new(),
-        };
-        let data_start = 8 + length;
-        let mut tensors = BTreeMap::new();
-        for (name, value) in entries {
-            let entry: HeaderEntry =
-                serde_json::from_value(value).map_err(|e| invalid(format!("tensor '{name}': {e}")))?;
-            if entry.data_offsets[1] > file_len - data_start {
-                return Err(invalid(format!("tensor '{name}' ends past the end of the file")));
-            }
-            tensors.insert(name, entry);
-        }
-        Ok(Self { tensors, metadata, data_start })
-    }
+    Ok((tensors, std::mem::take(&mut file.metadata)))
 }
 
 /// Writes `tensors` (f32) and `metadata` as a safetensors file.

@@ -1,0 +1,151 @@
+//! Rendered pairs read from disk as training needs them: a pairs file or a folder of shards
+//! ([`crate::render_pairs`]) is indexed by its headers alone, and each pair is read when a step or the
+//! validation draws it, so training on the pairs of hundreds of scenes holds one batch of them in memory.
+//!
+//! Every file is checked when indexed: its `views` metadata, and `render`, `target` and `reference` as float32
+//! `[N, 3, H, W]` with one `N` per file (one per view) and one `H x W` for the whole source (a batch takes
+//! pairs of one size). A pair's values are checked when read: a value outside [0, 1] or not a number is an
+//! error naming the file, the tensor and the pair.
+
+use std::path::{Path, PathBuf};
+
+use dggt_refine::safetensors_file::SafetensorsFile;
+
+use crate::error::RefineTrainError;
+use crate::pairs::{Image, Pair};
+use crate::render_pairs::{RenderedPair, TENSORS, VIEWS_KEY};
+
+/// The pairs of a pairs file or of a folder of shards, in file-name order, read one at a time.
+#[derive(Debug, Clone)]
+pub struct PairFiles {
+    files: Vec<PairFile>,
+    /// The index of each file's first pair among all of them.
+    starts: Vec<usize>,
+    count: usize,
+    height: usize,
+    width: usize,
+}
+
+#[derive(Debug, Clone)]
+struct PairFile {
+    path: PathBuf,
+    /// `[frame, camera]` of each pair, from the file's metadata.
+    views: Vec<[usize; 2]>,
+}
+
+impl PairFiles {
+    /// Indexes the pairs file `path`, or every `.safetensors` file of the folder `path` in name order.
+    pub fn open(path: &Path) -> Result<Self, RefineTrainError> {
+        let paths = if path.is_dir() { shard_files(path)? } else { vec![path.to_path_buf()] };
+        let (mut files, mut starts, mut count, mut size) = (Vec::new(), Vec::new(), 0, None);
+        for path in paths {
+            let (file, file_size) = index_file(&path)?;
+            match size {
+                Some((height, width)) if (height, width) != file_size => {
+                    return Err(RefineTrainError::invalid(
+                        path.display().to_string(),
+                        format!("pairs of {}x{} among pairs of {height}x{width}", file_size.0, file_size.1),
+                    ));
+                }
+                _ => size = Some(file_size),
+            }
+            starts.push(count);
+            count += file.views.len();
+            files.push(file);
+        }
+        let (height, width) = size.unwrap_or_default();
+        Ok(Self { files, starts, count, height, width })
+    }
+
+    /// The number of pairs.
+    pub fn len(&self) -> usize {
+        self.count
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.count == 0
+    }
+
+    /// Pair `index` (of [`Self::len`]) and the view it shows, read from its file.
+    pub fn read(&self, index: usize) -> Result<RenderedPair, RefineTrainError> {
+        if index >= self.count {
+            return Err(RefineTrainError::invalid("pairs", format!("pair {index} of {}", self.count)));
+        }
+        let position = self.starts.partition_point(|&start| start <= index) - 1;
+        let file = &self.files[position];
+        let at = index - self.starts[position];
+        let mut open = SafetensorsFile::open(&file.path)?;
+        let [render, target, reference] = TENSORS.map(|name| self.read_image(&mut open, name, at));
+        let [frame, camera] = file.views[at];
+        Ok(RenderedPair { pair: Pair { render: render?, target: target?, reference: Some(reference?) }, frame, camera })
+    }
+
+    /// Every pair, in order.
+    pub fn read_all(&self) -> Result<Vec<RenderedPair>, RefineTrainError> {
+        (0..self.count).map(|index| self.read(index)).collect()
+    }
+
+    /// Image `at` of tensor `name` of `file`, checked to lie in [0, 1].
+    fn read_image(&self, file: &mut SafetensorsFile, name: &str, at: usize) -> Result<Image, RefineTrainError> {
+        let (height, width) = (self.height, self.width);
+        let mut bytes = vec![0u8; 3 * height * width * 4];
+        file.read_bytes(name, (at * bytes.len()) as u64, &mut bytes)?;
+        let values: Vec<f32> = bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+        if let Some(bad) = values.iter().find(|v| !(0.0..=1.0).contains(*v)) {
+            return Err(RefineTrainError::invalid(
+                format!("{}: tensor '{name}', pair {at}", file.path().display()),
+                format!("value {bad} outside [0, 1]"),
+            ));
+        }
+        Ok(Image { height, width, values })
+    }
+}
+
+/// The `.safetensors` files of a folder of shards, in name order; none is an error naming the folder.
+fn shard_files(dir: &Path) -> Result<Vec<PathBuf>, RefineTrainError> {
+    let io = |source| RefineTrainError::Io { path: dir.into(), source };
+    let mut files = Vec::new();
+    for entry in std::fs::read_dir(dir).map_err(io)? {
+        let file = entry.map_err(io)?.path();
+        if file.extension().is_some_and(|e| e == "safetensors") {
+            files.push(file);
+        }
+    }
+    if files.is_empty() {
+        return Err(RefineTrainError::invalid(dir.display().to_string(), "a folder without pair files (.safetensors)"));
+    }
+    files.sort();
+    Ok(files)
+}
+
+/// One pairs file's views and its pairs' size, from its header (see the module's doc for the checks).
+fn index_file(path: &Path) -> Result<(PairFile, (usize, usize)), RefineTrainError> {
+    let invalid = |detail: String| RefineTrainError::invalid(path.display().to_string(), detail);
+    let file = SafetensorsFile::open(path)?;
+    let views: Vec<[usize; 2]> = file
+        .metadata
+        .get(VIEWS_KEY)
+        .and_then(|v| serde_json::from_str(v).ok())
+        .ok_or_else(|| invalid(format!("metadata `{VIEWS_KEY}` missing or not a list of [frame, camera]")))?;
+    let mut size = None;
+    for name in TENSORS {
+        let entry = file.entry(name, 4)?;
+        if entry.dtype != "F32" {
+            return Err(invalid(format!("tensor '{name}' is {}, expected F32", entry.dtype)));
+        }
+        let tensor_size = match entry.shape.as_slice() {
+            &[n, 3, height, width] if n == views.len() => (height, width),
+            shape => {
+                return Err(invalid(format!(
+                    "tensor '{name}' has shape {shape:?}, expected [{}, 3, H, W] (one image per view)",
+                    views.len()
+                )));
+            }
+        };
+        if size.is_some_and(|size| size != tensor_size) {
+            return Err(invalid(format!("tensor '{name}' differs in size from the others")));
+        }
+        size = Some(tensor_size);
+    }
+    Ok((PairFile { path: path.to_path_buf(), views }, size.expect("three tensors checked")))
+}
