@@ -302,10 +302,35 @@ struct SquaredNorm<'a> {
 impl ModuleVisitor for SquaredNorm<'_> {
     fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
         if let Some(grad) = self.grads.get::<D>(param.id) {
-            let value: f32 = grad.powi_scalar(2).sum().into_scalar();
-            self.sum += value as f64;
+            self.sum += squared_sum(grad);
         }
     }
+}
+
+/// Elements summed on the device per row of [`squared_sum`].
+const SUM_ROW: usize = 4096;
+
+/// `Σ x²` over `tensor`, in the same order on every run: rows of [`SUM_ROW`] elements summed on the device
+/// (one row per reduction), the row sums read back and added in order in f64. A plain `sum()` is not
+/// reproducible: the CPU backend sums four million elements or more in parallel pieces whose grouping follows
+/// the thread scheduling, so the norm of a large gradient — and the clipping it decides — could differ in its
+/// last bits between a resumed run and an uninterrupted one.
+fn squared_sum<const D: usize>(tensor: Tensor<D>) -> f64 {
+    let count = tensor.shape().num_elements();
+    let squares = tensor.powi_scalar(2).reshape([count]);
+    let rows = count / SUM_ROW;
+    let mut partial = Vec::with_capacity(rows + 1);
+    if rows > 0 {
+        partial.push(squares.clone().slice(0..rows * SUM_ROW).reshape([rows, SUM_ROW]).sum_dim(1).reshape([rows]));
+    }
+    if count > rows * SUM_ROW {
+        partial.push(squares.slice(rows * SUM_ROW..count).sum());
+    }
+    if partial.is_empty() {
+        return 0.0;
+    }
+    let sums = Tensor::cat(partial, 0).into_data().convert::<f64>();
+    sums.iter::<f64>().sum()
 }
 
 struct Scale<'a> {
@@ -318,5 +343,27 @@ impl ModuleVisitor for Scale<'_> {
         if let Some(grad) = self.grads.remove::<D>(param.id) {
             self.grads.register::<D>(param.id, grad.mul_scalar(self.factor));
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use burn::tensor::Distribution;
+
+    #[test]
+    fn a_large_squared_sum_is_the_same_every_time_and_accurate() {
+        let device = Device::flex();
+        // Above the size the CPU backend sums in scheduling-dependent pieces, with a tail shorter than a row.
+        let count = 2000 * SUM_ROW + 123;
+        let tensor = Tensor::<1>::random([count], Distribution::Normal(0.0, 1.0), &device);
+        let values = tensor.clone().into_data().convert::<f64>();
+        let exact: f64 = values.iter::<f64>().map(|v| v * v).sum();
+        let sums: std::collections::BTreeSet<u64> = (0..100).map(|_| squared_sum(tensor.clone()).to_bits()).collect();
+        assert_eq!(sums.len(), 1, "one value over 100 sums of the same tensor");
+        let sum = f64::from_bits(*sums.first().unwrap());
+        assert!((sum - exact).abs() <= 1e-6 * exact, "{sum} against {exact}");
+        assert_eq!(squared_sum(Tensor::<2>::zeros([0, 3], &device)), 0.0);
+        assert_eq!(squared_sum(Tensor::<2>::from_data([[3.0f32, 4.0]], &device)), 25.0);
     }
 }
