@@ -69,6 +69,10 @@ pub struct PairsSection {
     /// The last this many pairs are held out for validation.
     #[serde(default = "default_held_out")]
     pub held_out: usize,
+    /// How many drawn pairs may fail to read before the run stops (after saving a checkpoint); each is
+    /// replaced by the next readable training pair, with a warning naming its file.
+    #[serde(default = "default_max_bad_pairs")]
+    pub max_bad_pairs: u64,
 }
 
 /// Loss weights and the perceptual networks' weight files.
@@ -193,6 +197,10 @@ fn default_variants() -> usize {
 
 fn default_held_out() -> usize {
     1
+}
+
+fn default_max_bad_pairs() -> u64 {
+    100
 }
 
 impl RefineTrainConfig {

@@ -9,6 +9,7 @@
 //! renders). Records go to `out_dir/metrics.jsonl`, one JSON object a line with its `kind` and `step`, as the
 //! project's trainer writes them (a resumed run first drops the records it is about to write again).
 
+use std::borrow::Cow;
 use std::fs;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -32,7 +33,7 @@ use crate::fresh::fresh_checkpoint;
 use crate::loss::RefineLoss;
 use crate::model::TrainableRefiner;
 use crate::pair_files::PairFiles;
-use crate::pairs::{Image, PairSet, PairSource, batch, batch_pairs, read_images, step_indices, synthetic_pairs};
+use crate::pairs::{Image, Pair, PairSet, PairSource, batch, batch_pairs, read_images, step_indices, synthetic_pairs};
 
 /// What one step did.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -121,7 +122,11 @@ impl RefineTrainer {
     pub fn step(&mut self) -> Result<StepRecord, RefineTrainError> {
         let step = self.state.step;
         let indices = step_indices(self.state.seed, step, self.config.run.batch, self.pairs.train_len());
-        let chosen = indices.iter().map(|&i| self.pairs.train(i)).collect::<Result<Vec<_>, _>>()?;
+        let limit = self.config.pairs.max_bad_pairs;
+        let chosen = indices
+            .iter()
+            .map(|&i| readable_pair(&self.pairs, i, &mut self.state, limit))
+            .collect::<Result<Vec<_>, _>>()?;
         let (render, target, reference) =
             batch_pairs(&chosen.iter().map(AsRef::as_ref).collect::<Vec<_>>(), &self.device)?;
         let refined = self.model.refine(render, reference, Latent::Sampled { seed: self.state.seed ^ step })?;
@@ -154,7 +159,16 @@ impl RefineTrainer {
         let mut last = None;
         truncate_metrics(&self.metrics_path(), self.state.step)?;
         while self.state.step < run.steps {
-            let record = self.step()?;
+            let record = match self.step() {
+                Ok(record) => record,
+                Err(error) => {
+                    // The weights and state of the last completed step are kept for `--resume`.
+                    if let Err(save) = self.save_checkpoint() {
+                        tracing::error!("no checkpoint saved after the failure: {save}");
+                    }
+                    return Err(error);
+                }
+            };
             bar.set_message(format!("loss {:.4}", record.loss));
             bar.inc(1);
             self.append_metrics("train", &record)?;
@@ -191,8 +205,16 @@ impl RefineTrainer {
     pub fn validate(&self) -> Result<Validation, RefineTrainError> {
         let (mut refined_sum, mut render_sum) = (0.0, 0.0);
         let model = self.model.valid();
+        let mut scored = 0;
         for index in 0..self.pairs.held_out_len() {
-            let pair = self.pairs.held_out(index)?;
+            let pair = match self.pairs.held_out(index) {
+                Ok(pair) => pair,
+                Err(error) => {
+                    tracing::warn!("held-out pair {index} left out of the validation: {error}");
+                    continue;
+                }
+            };
+            scored += 1;
             let (render, _, reference) = batch_pairs(&[&pair], &self.plain_device)?;
             let refined = model.refine(render, reference, Latent::PosteriorMean)?;
             let refined: Vec<f32> = refined
@@ -202,7 +224,10 @@ impl RefineTrainer {
             refined_sum += psnr(&refined, &pair.target.values)?;
             render_sum += psnr(&pair.render.values, &pair.target.values)?;
         }
-        let count = self.pairs.held_out_len().max(1) as f64;
+        if scored == 0 && self.pairs.held_out_len() > 0 {
+            return Err(RefineTrainError::invalid("pairs.held_out", "no held-out pair can be read"));
+        }
+        let count = scored.max(1) as f64;
         Ok(Validation { step: self.state.step, refined_psnr: refined_sum / count, render_psnr: render_sum / count })
     }
 
@@ -261,6 +286,33 @@ impl RefineTrainer {
         tracing::info!(checkpoint = %dir.display(), step = self.state.step, "resumed");
         Ok(())
     }
+}
+
+/// Training pair `index`, or when it cannot be read the next readable one (wrapping, so a persistent failure
+/// is replaced the same way in a resumed run); each failure is warned about, naming the file, and counted in
+/// `state.bad_samples`, and past `limit` of them the run stops.
+fn readable_pair<'a>(
+    pairs: &'a PairSet,
+    index: usize,
+    state: &mut RunState,
+    limit: u64,
+) -> Result<Cow<'a, Pair>, RefineTrainError> {
+    let count = pairs.train_len();
+    for position in (index..count).chain(0..index) {
+        let error = match pairs.train(position) {
+            Ok(pair) => return Ok(pair),
+            Err(error) => error,
+        };
+        state.bad_samples += 1;
+        tracing::warn!("training pair {position} replaced by the next one: {error}");
+        if state.bad_samples > limit {
+            return Err(RefineTrainError::invalid(
+                "pairs.max_bad_pairs",
+                format!("{} pairs could not be read (at most {limit} may fail); the last: {error}", state.bad_samples),
+            ));
+        }
+    }
+    Err(RefineTrainError::invalid("pairs", format!("none of the {count} training pairs can be read")))
 }
 
 /// The refiner to train: the configured checkpoint over the base, or a fresh start from the base.

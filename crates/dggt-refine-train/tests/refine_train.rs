@@ -1,7 +1,8 @@
 //! Training the refiner on the tiny random model of `shared/parity/difix_tiny_s1` with synthetic pairs made
 //! from its two input images, and the VGG-16 / LPIPS (AlexNet) weights of `shared/parity/metrics`:
 //! the loss falls and the held-out PSNR rises; a run resumed halfway ends bit-identical to an uninterrupted
-//! one; the encoder gets no update; the exported, merged refiner equals the trained, unmerged one.
+//! one; the encoder gets no update; the exported, merged refiner equals the trained, unmerged one; a pair that
+//! cannot be read is replaced and counted, and past `pairs.max_bad_pairs` the run stops with a checkpoint.
 
 use std::collections::HashMap;
 
@@ -12,7 +13,8 @@ use dggt_refine_train::RefineTrainer;
 use dggt_refine_train::export::{load_refiner, to_checkpoint, write};
 use dggt_refine_train::loss::{LossValue, RefineLoss};
 use dggt_refine_train::model::param_values;
-use dggt_refine_train::pairs::batch;
+use dggt_refine_train::pairs::{Image, Pair, batch, step_indices};
+use dggt_refine_train::render_pairs::{RenderedPair, write_pairs};
 use dggt_train::Start;
 
 mod common;
@@ -241,4 +243,45 @@ fn a_fresh_start_from_the_base_has_difixs_targets_and_shapes_zero_lora_b_and_tra
         let record = trainer.step().unwrap();
         assert!(record.loss.is_finite() && record.grad_norm.is_some(), "{record:?}");
     }
+}
+
+#[test]
+fn an_unreadable_pair_is_replaced_and_counted_and_past_the_limit_the_run_stops_with_a_checkpoint() {
+    let dir = tempfile::tempdir().unwrap();
+    let image = |seed: usize| Image {
+        height: 32,
+        width: 48,
+        values: (0..3 * 32 * 48).map(|i| ((i * 13 + seed * 29) % 101) as f32 / 100.0).collect(),
+    };
+    let mut pairs: Vec<RenderedPair> = (0..6)
+        .map(|k| RenderedPair {
+            pair: Pair { render: image(3 * k), target: image(3 * k + 1), reference: Some(image(3 * k + 2)) },
+            frame: k,
+            camera: 0,
+        })
+        .collect();
+    let mut config = tiny_config(&dir.path().join("lenient"), 2);
+    // The pair the first step draws (of the 5 trained on) holds a value outside [0, 1].
+    let bad = step_indices(config.run.seed, 0, config.run.batch, 5)[0];
+    pairs[bad].pair.target.values[7] = 1.5;
+    let file = dir.path().join("pairs.safetensors");
+    write_pairs(&pairs, &file).unwrap();
+    config.pairs.images = None;
+    config.pairs.rendered = Some(file);
+
+    let mut lenient = RefineTrainer::new(config.clone(), device(), Start::Fresh).unwrap();
+    let record = lenient.step().expect("the step trains on the next readable pair");
+    assert!(record.loss.is_finite() && record.grad_norm.is_some(), "{record:?}");
+    assert_eq!(lenient.state().bad_samples, 1);
+
+    config.pairs.max_bad_pairs = 0;
+    config.run.out_dir = dir.path().join("strict");
+    let mut strict = RefineTrainer::new(config, device(), Start::Fresh).unwrap();
+    let error = strict.run(false).err().expect("no pair may fail").to_string();
+    let named = format!("pair {bad}");
+    assert!(
+        error.contains("pairs.safetensors") && error.contains("max_bad_pairs") && error.contains(&named),
+        "{error}"
+    );
+    assert!(dir.path().join("strict/checkpoints/latest").exists(), "a checkpoint saved at the failure");
 }

@@ -307,27 +307,30 @@ impl ModuleVisitor for SquaredNorm<'_> {
     }
 }
 
+/// Tensors of this many elements or more are summed by rows in [`squared_sum`].
+const SUM_BY_ROWS_FROM: usize = 1 << 20;
 /// Elements summed on the device per row of [`squared_sum`].
 const SUM_ROW: usize = 4096;
 
-/// `Σ x²` over `tensor`, in the same order on every run: rows of [`SUM_ROW`] elements summed on the device
-/// (one row per reduction), the row sums read back and added in order in f64. A plain `sum()` is not
-/// reproducible: the CPU backend sums four million elements or more in parallel pieces whose grouping follows
-/// the thread scheduling, so the norm of a large gradient — and the clipping it decides — could differ in its
-/// last bits between a resumed run and an uninterrupted one.
+/// `Σ x²` over `tensor`, in the same order on every run. A plain `sum()` is one reduction in a fixed order
+/// on the CPU backends up to a few million elements, but from four million on the default backend sums
+/// parallel pieces whose grouping follows the thread scheduling, so the norm of a large gradient — and the
+/// clipping it decides — could differ in its last bits between a resumed run and an uninterrupted one. Tensors
+/// of [`SUM_BY_ROWS_FROM`] elements or more are therefore summed in rows of [`SUM_ROW`] on the device (one
+/// reduction per row), and the row sums read back and added in order in f64.
 fn squared_sum<const D: usize>(tensor: Tensor<D>) -> f64 {
     let count = tensor.shape().num_elements();
-    let squares = tensor.powi_scalar(2).reshape([count]);
-    let rows = count / SUM_ROW;
-    let mut partial = Vec::with_capacity(rows + 1);
-    if rows > 0 {
-        partial.push(squares.clone().slice(0..rows * SUM_ROW).reshape([rows, SUM_ROW]).sum_dim(1).reshape([rows]));
+    let squares = tensor.powi_scalar(2);
+    if count < SUM_BY_ROWS_FROM {
+        let sum: f32 = squares.sum().into_scalar();
+        return sum.into();
     }
+    let squares = squares.reshape([count]);
+    let rows = count / SUM_ROW;
+    let mut partial =
+        vec![squares.clone().slice(0..rows * SUM_ROW).reshape([rows, SUM_ROW]).sum_dim(1).reshape([rows])];
     if count > rows * SUM_ROW {
         partial.push(squares.slice(rows * SUM_ROW..count).sum());
-    }
-    if partial.is_empty() {
-        return 0.0;
     }
     let sums = Tensor::cat(partial, 0).into_data().convert::<f64>();
     sums.iter::<f64>().sum()
@@ -364,6 +367,7 @@ mod tests {
         let sum = f64::from_bits(*sums.first().unwrap());
         assert!((sum - exact).abs() <= 1e-6 * exact, "{sum} against {exact}");
         assert_eq!(squared_sum(Tensor::<2>::zeros([0, 3], &device)), 0.0);
+        assert_eq!(squared_sum(Tensor::<1>::ones([SUM_BY_ROWS_FROM + 1], &device)), (SUM_BY_ROWS_FROM + 1) as f64);
         assert_eq!(squared_sum(Tensor::<2>::from_data([[3.0f32, 4.0]], &device)), 25.0);
     }
 }

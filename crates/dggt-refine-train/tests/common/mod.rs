@@ -40,6 +40,7 @@ pub fn tiny_config(out_dir: &Path, steps: u64) -> RefineTrainConfig {
             tensors: vec!["image".into(), "ref_image".into()],
             variants: 3,
             held_out: 1,
+            max_bad_pairs: 100,
         },
         loss: LossSection {
             l2: 1.0,
