@@ -317,7 +317,8 @@ const SUM_ROW: usize = 4096;
 /// parallel pieces whose grouping follows the thread scheduling, so the norm of a large gradient — and the
 /// clipping it decides — could differ in its last bits between a resumed run and an uninterrupted one. Tensors
 /// of [`SUM_BY_ROWS_FROM`] elements or more are therefore summed in rows of [`SUM_ROW`] on the device (one
-/// reduction per row), and the row sums read back and added in order in f64.
+/// reduction per row), and the row sums read back and added in order in f64. (On a GPU, other kernels
+/// accumulate with atomics, so runs there agree to rounding rather than bit for bit anyway.)
 fn squared_sum<const D: usize>(tensor: Tensor<D>) -> f64 {
     let count = tensor.shape().num_elements();
     let squares = tensor.powi_scalar(2);
