@@ -7,12 +7,14 @@
 //! pairs of one size). A pair's values are checked when read: a value outside [0, 1] or not a number is an
 //! error naming the file, the tensor and the pair.
 
+use std::fs::File;
+use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 
 use dggt_refine::safetensors_file::SafetensorsFile;
 
 use crate::error::RefineTrainError;
-use crate::pairs::{Image, Pair};
+use crate::pairs::{Image, Pair, unit_values};
 use crate::render_pairs::{RenderedPair, TENSORS, VIEWS_KEY};
 
 /// The pairs of a pairs file or of a folder of shards, in file-name order, read one at a time.
@@ -31,6 +33,8 @@ struct PairFile {
     path: PathBuf,
     /// `[frame, camera]` of each pair, from the file's metadata.
     views: Vec<[usize; 2]>,
+    /// Where `render`, `target` and `reference` ([`TENSORS`]) begin in the file, checked when indexed.
+    starts: [u64; 3],
 }
 
 impl PairFiles {
@@ -66,7 +70,8 @@ impl PairFiles {
         self.count == 0
     }
 
-    /// Pair `index` (of [`Self::len`]) and the view it shows, read from its file.
+    /// Pair `index` (of [`Self::len`]) and the view it shows, read from its file at the byte ranges its
+    /// indexing checked.
     pub fn read(&self, index: usize) -> Result<RenderedPair, RefineTrainError> {
         if index >= self.count {
             return Err(RefineTrainError::invalid("pairs", format!("pair {index} of {}", self.count)));
@@ -74,10 +79,12 @@ impl PairFiles {
         let position = self.starts.partition_point(|&start| start <= index) - 1;
         let file = &self.files[position];
         let at = index - self.starts[position];
-        let mut open = SafetensorsFile::open(&file.path)?;
-        let [render, target, reference] = TENSORS.map(|name| self.read_image(&mut open, name, at));
+        let mut open =
+            File::open(&file.path).map_err(|source| RefineTrainError::Io { path: file.path.clone(), source })?;
+        let mut read = |k: usize| self.read_image(&mut open, file, k, at);
+        let (render, target, reference) = (read(0)?, read(1)?, read(2)?);
         let [frame, camera] = file.views[at];
-        Ok(RenderedPair { pair: Pair { render: render?, target: target?, reference: Some(reference?) }, frame, camera })
+        Ok(RenderedPair { pair: Pair { render, target, reference: Some(reference) }, frame, camera })
     }
 
     /// Every pair, in order.
@@ -85,19 +92,21 @@ impl PairFiles {
         (0..self.count).map(|index| self.read(index)).collect()
     }
 
-    /// Image `at` of tensor `name` of `file`, checked to lie in [0, 1].
-    fn read_image(&self, file: &mut SafetensorsFile, name: &str, at: usize) -> Result<Image, RefineTrainError> {
+    /// Image `at` of tensor `TENSORS[tensor]` of `file` (open as `open`), checked to lie in [0, 1].
+    fn read_image(
+        &self,
+        open: &mut File,
+        file: &PairFile,
+        tensor: usize,
+        at: usize,
+    ) -> Result<Image, RefineTrainError> {
         let (height, width) = (self.height, self.width);
         let mut bytes = vec![0u8; 3 * height * width * 4];
-        file.read_bytes(name, (at * bytes.len()) as u64, &mut bytes)?;
-        let values: Vec<f32> = bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
-        if let Some(bad) = values.iter().find(|v| !(0.0..=1.0).contains(*v)) {
-            return Err(RefineTrainError::invalid(
-                format!("{}: tensor '{name}', pair {at}", file.path().display()),
-                format!("value {bad} outside [0, 1]"),
-            ));
-        }
-        Ok(Image { height, width, values })
+        let what = || format!("{}: tensor '{}', pair {at}", file.path.display(), TENSORS[tensor]);
+        open.seek(SeekFrom::Start(file.starts[tensor] + (at * bytes.len()) as u64))
+            .and_then(|_| open.read_exact(&mut bytes))
+            .map_err(|e| RefineTrainError::invalid(what(), format!("not readable: {e}")))?;
+        Ok(Image { height, width, values: unit_values(&bytes, what)? })
     }
 }
 
@@ -127,8 +136,8 @@ fn index_file(path: &Path) -> Result<(PairFile, (usize, usize)), RefineTrainErro
         .get(VIEWS_KEY)
         .and_then(|v| serde_json::from_str(v).ok())
         .ok_or_else(|| invalid(format!("metadata `{VIEWS_KEY}` missing or not a list of [frame, camera]")))?;
-    let mut size = None;
-    for name in TENSORS {
+    let (mut size, mut starts) = (None, [0; 3]);
+    for (k, name) in TENSORS.into_iter().enumerate() {
         let entry = file.entry(name, 4)?;
         if entry.dtype != "F32" {
             return Err(invalid(format!("tensor '{name}' is {}, expected F32", entry.dtype)));
@@ -146,6 +155,7 @@ fn index_file(path: &Path) -> Result<(PairFile, (usize, usize)), RefineTrainErro
             return Err(invalid(format!("tensor '{name}' differs in size from the others")));
         }
         size = Some(tensor_size);
+        starts[k] = file.byte_range(name)?.start;
     }
-    Ok((PairFile { path: path.to_path_buf(), views }, size.expect("three tensors checked")))
+    Ok((PairFile { path: path.to_path_buf(), views, starts }, size.expect("three tensors checked")))
 }

@@ -127,11 +127,7 @@ pub fn read_images(path: &Path, names: &[String]) -> Result<Vec<Image>, RefineTr
                 ));
             }
         };
-        let values: Vec<f32> =
-            view.data().chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
-        if values.iter().any(|v| !(0.0..=1.0).contains(v)) {
-            return Err(RefineTrainError::invalid(what(), "values outside [0, 1]"));
-        }
+        let values = unit_values(view.data(), what)?;
         let size = 3 * height * width;
         images.extend(values.chunks_exact(size).map(|v| Image { height, width, values: v.to_vec() }));
     }
@@ -139,6 +135,16 @@ pub fn read_images(path: &Path, names: &[String]) -> Result<Vec<Image>, RefineTr
         return Err(RefineTrainError::invalid(path.display().to_string(), "no image tensor named"));
     }
     Ok(images)
+}
+
+/// Little-endian float32 `bytes` as values, each checked to lie in [0, 1] (not a number fails too); `what`
+/// names them in the error.
+pub(crate) fn unit_values(bytes: &[u8], what: impl FnOnce() -> String) -> Result<Vec<f32>, RefineTrainError> {
+    let values: Vec<f32> = bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+    match values.iter().find(|v| !(0.0..=1.0).contains(*v)) {
+        Some(bad) => Err(RefineTrainError::invalid(what(), format!("value {bad} outside [0, 1]"))),
+        None => Ok(values),
+    }
 }
 
 /// `variants` degraded copies of each image (seeds `0..variants` per image), the last `held_out` pairs held out.

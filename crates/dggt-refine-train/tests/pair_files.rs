@@ -32,7 +32,7 @@ fn pairs(count: usize, height: usize, width: usize, first_frame: usize) -> Vec<R
 }
 
 fn message(path: &Path) -> String {
-    PairFiles::open(path).err().expect("refused").to_string()
+    PairFiles::open(path).expect_err("refused").to_string()
 }
 
 #[test]

@@ -7,6 +7,7 @@
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use crate::error::RefineError;
@@ -85,15 +86,22 @@ impl SafetensorsFile {
         Ok(entry)
     }
 
-    /// Reads `out.len()` bytes of tensor `name`'s data from byte `offset` of it (checked against its range).
-    pub fn read_bytes(&mut self, name: &str, offset: u64, out: &mut [u8]) -> Result<(), RefineError> {
+    /// Where tensor `name`'s data lies in the file (absolute byte positions).
+    pub fn byte_range(&self, name: &str) -> Result<Range<u64>, RefineError> {
         let entry =
             self.tensors.get(name).ok_or_else(|| RefineError::file(&self.path, format!("no tensor '{name}'")))?;
         let [begin, end] = entry.data_offsets;
-        let inside = begin
+        Ok(self.data_start + begin..self.data_start + end)
+    }
+
+    /// Reads `out.len()` bytes of tensor `name`'s data from byte `offset` of it (checked against its range).
+    pub fn read_bytes(&mut self, name: &str, offset: u64, out: &mut [u8]) -> Result<(), RefineError> {
+        let range = self.byte_range(name)?;
+        let inside = range
+            .start
             .checked_add(offset)
             .and_then(|start| start.checked_add(out.len() as u64))
-            .is_some_and(|stop| stop <= end);
+            .is_some_and(|stop| stop <= range.end);
         if !inside {
             return Err(RefineError::file(
                 &self.path,
@@ -101,7 +109,7 @@ impl SafetensorsFile {
             ));
         }
         self.file
-            .seek(SeekFrom::Start(self.data_start + begin + offset))
+            .seek(SeekFrom::Start(range.start + offset))
             .and_then(|_| self.file.read_exact(out))
             .map_err(|e| RefineError::file(&self.path, format!("tensor '{name}' not readable: {e}")))
     }
