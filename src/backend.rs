@@ -38,8 +38,8 @@ impl DeviceChoice {
         match self {
             Self::Cpu => cfg!(feature = "flex"),
             Self::Ndarray => cfg!(feature = "ndarray"),
-            Self::Wgpu => cfg!(feature = "wgpu"),
-            Self::Cuda => cfg!(feature = "cuda"),
+            Self::Wgpu => cfg!(feature = "wgpu-backend"),
+            Self::Cuda => cfg!(feature = "cuda-backend"),
         }
     }
 
@@ -49,7 +49,7 @@ impl DeviceChoice {
     }
 
     /// Device number `index` of this backend (GPUs; the CPU backends have one device).
-    #[cfg_attr(not(any(feature = "wgpu", feature = "cuda")), allow(unused_variables))]
+    #[cfg_attr(not(any(feature = "wgpu-backend", feature = "cuda-backend")), allow(unused_variables))]
     pub fn device_at(self, index: usize) -> Result<Device> {
         match self {
             #[cfg(feature = "flex")]
@@ -57,11 +57,11 @@ impl DeviceChoice {
             #[cfg(feature = "ndarray")]
             #[allow(deprecated)]
             Self::Ndarray => Ok(Device::ndarray()),
-            #[cfg(feature = "wgpu")]
+            #[cfg(feature = "wgpu-backend")]
             Self::Wgpu if index == 0 => Ok(Device::wgpu(burn::tensor::DeviceKind::default())),
-            #[cfg(feature = "wgpu")]
+            #[cfg(feature = "wgpu-backend")]
             Self::Wgpu => Ok(Device::wgpu(burn::tensor::DeviceKind::DiscreteGpu(index))),
-            #[cfg(feature = "cuda")]
+            #[cfg(feature = "cuda-backend")]
             Self::Cuda => Ok(Device::cuda(index)),
             #[allow(unreachable_patterns)]
             other => bail!(

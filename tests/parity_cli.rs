@@ -56,7 +56,7 @@ fn passes_from_the_default_weights() {
 
 /// The same vectors through the CubeCL kernels (on CI, Mesa's software Vulkan driver): every network output and
 /// every render within tolerance, so both kernel sets reproduce the release.
-#[cfg(feature = "wgpu")]
+#[cfg(feature = "wgpu-backend")]
 #[test]
 fn passes_on_wgpu() {
     let dir = vectors();

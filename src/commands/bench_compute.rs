@@ -139,7 +139,7 @@ fn read_all(paths: &[PathBuf]) -> Result<Vec<RecordFile>> {
 }
 
 /// The device in words: burn's identity of it where the backend gives one (CubeCL backends only).
-#[cfg(any(feature = "wgpu", feature = "cuda"))]
+#[cfg(any(feature = "wgpu-backend", feature = "cuda-backend"))]
 fn describe(device: &burn::tensor::Device) -> String {
     match device.identity() {
         Some(identity) => format!("{device:?}: {identity:?}"),
@@ -148,7 +148,7 @@ fn describe(device: &burn::tensor::Device) -> String {
 }
 
 /// The device in words: a CPU-only build names it.
-#[cfg(not(any(feature = "wgpu", feature = "cuda")))]
+#[cfg(not(any(feature = "wgpu-backend", feature = "cuda-backend")))]
 fn describe(device: &burn::tensor::Device) -> String {
     format!("{device:?}")
 }
