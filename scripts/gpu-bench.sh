@@ -1,43 +1,117 @@
 #!/usr/bin/env bash
-# The GPU comparison in one command: dggt-rs's compute suite at the release's scale, then the same work on the
-# DGGT release and gsplat (run by this machine's PyTorch), then the table with the ratios (docs/BENCHMARKS.md).
+# The GPU comparison in one run of bounded length: dggt-rs's compute suite at the release's scale with the build
+# users get (burn's fusion and autotune), the DGGT release and gsplat on the same card (run by its PyTorch), the
+# build without fusion and autotune beside it, then one table with every ratio (docs/BENCHMARKS.md).
 #
-#   scripts/gpu-bench.sh OUT_DIR [--release-src DIR] [--device wgpu|cuda] [--dggt BINARY] [--longest-budget-s S]
+#   scripts/gpu-bench.sh OUT_DIR [--dggt BIN] [--baseline-dggt BIN] [--release-src DIR] [--gsplat-src DIR]
+#                        [--device wgpu|cuda] [--scale full|reduced] [--budget-s S] [--no-reference]
 #
-# --release-src: the release's source tree (the folder holding `dggt/`); without it only gsplat is timed.
-# --device:      our backend (default wgpu; `cuda` needs a build with `--features cuda`).
-# --dggt:        the dggt binary (default: target/release/dggt, built with the device's feature).
-# Outputs in OUT_DIR: ours/compute.json, reference.json, compute.md (the table), and each step's log.
-set -euo pipefail
+# --dggt:          the binary to measure (default target/release/dggt, `cargo build --release --features wgpu`).
+# --baseline-dggt: a build without fusion and autotune (`--features wgpu-backend`); its forward and rasteriser
+#                  rows appear beside ours with the gain. Without it that part is skipped.
+# --release-src:   the DGGT release's source tree (the folder holding `dggt/`); without it only gsplat is timed.
+# --gsplat-src:    a gsplat source tree to import (prepended to PYTHONPATH) where gsplat is not installed.
+# --budget-s:      the whole run's wall-clock limit (default 540); each part gets its share and is stopped at
+#                  it, keeping the records it finished. Parts in order of importance: ours, the references, the
+#                  baseline.
+# --no-reference:  skip the release and gsplat (a machine without CUDA PyTorch).
+#
+# Outputs in OUT_DIR (keep them as docs/gpu-bench-<card>/): ours-*/compute.json, baseline/compute.json,
+# reference.json, compute.md (the table), machine.txt and each part's log.
+set -uo pipefail
 
-usage() { sed -n '4,9p' "$0" >&2; exit 2; }
-[[ $# -ge 1 ]] || usage
+usage() { sed -n '6,18p' "$0" >&2; exit 2; }
+[[ $# -ge 1 && $1 != -* ]] || usage
 out=$1
 shift
-release_src=""
-device="wgpu"
 dggt="target/release/dggt"
-longest_budget=240
+baseline=""
+release_src=""
+gsplat_src=""
+device="wgpu"
+scale="full"
+budget=540
+reference=1
 while [[ $# -gt 0 ]]; do
     case $1 in
-        --release-src) release_src=$2; shift 2 ;;
-        --device) device=$2; shift 2 ;;
         --dggt) dggt=$2; shift 2 ;;
-        --longest-budget-s) longest_budget=$2; shift 2 ;;
+        --baseline-dggt) baseline=$2; shift 2 ;;
+        --release-src) release_src=$2; shift 2 ;;
+        --gsplat-src) gsplat_src=$2; shift 2 ;;
+        --device) device=$2; shift 2 ;;
+        --scale) scale=$2; shift 2 ;;
+        --budget-s) budget=$2; shift 2 ;;
+        --no-reference) reference=0; shift ;;
         *) usage ;;
     esac
 done
 [[ -x $dggt ]] || { echo "no dggt binary at $dggt (cargo build --release --features $device)" >&2; exit 1; }
-mkdir -p "$out/ours"
+[[ -z $baseline || -x $baseline ]] || { echo "no baseline binary at $baseline" >&2; exit 1; }
+[[ $scale == full || $scale == reduced ]] || usage
+mkdir -p "$out"
 here=$(cd "$(dirname "$0")" && pwd)
+deadline=$(($(date +%s) + budget))
 
-echo "== dggt-rs on $device" >&2
-"$dggt" bench compute --device "$device" --scale full --longest-budget-s "$longest_budget" --out "$out/ours" \
-    2>&1 | tee "$out/ours.log"
+# Seconds a part may take: its share of the budget, and never past the deadline (less 10 s for the table).
+allowance() {
+    local share=$(($1 * budget / 100)) left=$((deadline - $(date +%s) - 10))
+    echo $((share < left ? share : left))
+}
 
-echo "== the release and gsplat" >&2
-reference_args=(--out "$out/reference.json" --gsplat --longest-budget-s "$longest_budget")
-[[ -n $release_src ]] && reference_args+=(--release-src "$release_src")
-python3 "$here/reference_bench.py" "${reference_args[@]}" 2>&1 | tee "$out/reference.log"
+# Runs one part under its allowance; a part that fails or runs out keeps what it wrote and the run goes on.
+part() {
+    local name=$1 percent=$2
+    shift 2
+    local limit
+    limit=$(allowance "$percent")
+    if ((limit < 5)); then
+        echo "== $name: skipped, the budget is spent" | tee -a "$out/parts.txt" >&2
+        return
+    fi
+    echo "== $name (at most $limit s)" >&2
+    local started=$(date +%s)
+    timeout --signal=INT --kill-after=10 "$limit" "$@" > "$out/$name.log" 2>&1
+    local status=$?
+    echo "== $name: exit $status after $(($(date +%s) - started)) s" | tee -a "$out/parts.txt" >&2
+    tail -n 3 "$out/$name.log" >&2
+}
 
-"$dggt" bench table --ours "$out/ours/compute.json" --reference "$out/reference.json" --out "$out/compute.md"
+{
+    date -u
+    nvidia-smi --query-gpu=name,memory.total,driver_version,clocks.max.sm --format=csv 2>/dev/null || echo "no nvidia-smi"
+    "$dggt" devices --device "$device" 2>&1 | tail -n 5
+} > "$out/machine.txt"
+
+# Full scale: the forward in f32 and f16 (bf16 where the device has it: wgpu has not), the longest search asking
+# whether 150 frames fit in f16; reduced: the same code at a CPU's scale (the search in f32, which every device has).
+if [[ $scale == full ]]; then
+    longest=(--longest-frames 150 --longest-precisions f16)
+else
+    longest=(--longest-frames 2..4 --longest-precisions f32)
+fi
+compute() { "$1" bench compute --device "$device" --scale "$scale" --repeat 3 --warmup 1 --out "$2" "${@:3}"; }
+
+part ours-raster 6 compute "$dggt" "$out/ours-raster" --workloads raster
+part ours-forward 22 compute "$dggt" "$out/ours-forward" --workloads forward --precisions f32,f16
+part ours-train-step 10 compute "$dggt" "$out/ours-train-step" --workloads train-step
+part ours-longest 14 compute "$dggt" "$out/ours-longest" --workloads longest --longest-budget-s "$(allowance 10)" \
+    "${longest[@]}"
+
+if ((reference)); then
+    reference_args=(--out "$out/reference.json" --gsplat)
+    [[ -n $release_src ]] && reference_args+=(--release-src "$release_src")
+    [[ $scale == reduced ]] && reference_args+=(--reduced)
+    part reference 30 env PYTHONUNBUFFERED=1 PYTHONPATH="${gsplat_src}${PYTHONPATH:+:$PYTHONPATH}" \
+        python3 "$here/reference_bench.py" "${reference_args[@]}" --workloads forward,train-step,raster
+fi
+
+if [[ -n $baseline ]]; then
+    part baseline 18 compute "$baseline" "$out/baseline" --workloads raster,forward --precisions f32
+fi
+
+table_args=()
+for file in "$out"/ours-*/compute.json; do [[ -f $file ]] && table_args+=(--ours "$file"); done
+[[ -f $out/baseline/compute.json ]] && table_args+=(--baseline "$out/baseline/compute.json")
+[[ -f $out/reference.json ]] && table_args+=(--reference "$out/reference.json")
+((${#table_args[@]})) || { echo "no part wrote records (see $out/*.log)" >&2; exit 1; }
+"$dggt" bench table "${table_args[@]}" --out "$out/compute.md"

@@ -138,3 +138,37 @@ fn bench_compute_runs_every_workload_at_reduced_size() {
     let text = String::from_utf8_lossy(&table.stdout);
     assert!(text.contains("(release)") && text.contains("| 2.00x |"), "{text}");
 }
+
+/// `scripts/gpu-bench.sh` at the reduced scale on the wgpu device (on CI, Mesa's software Vulkan driver): every
+/// part of ours and of the baseline build writes its records, and the table shows ours beside the baseline with
+/// the gain, so that a GPU run is one prepared command. The test's binary stands in for both builds.
+#[cfg(feature = "wgpu-backend")]
+#[test]
+fn gpu_bench_script_measures_every_part_at_reduced_scale() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("gpu");
+    let binary = env!("CARGO_BIN_EXE_dggt");
+    let script = format!("{}/scripts/gpu-bench.sh", env!("CARGO_MANIFEST_DIR"));
+    let run = Command::new("bash")
+        .args([&script, out.to_str().unwrap(), "--scale", "reduced", "--dggt", binary, "--baseline-dggt", binary])
+        .args(["--no-reference", "--budget-s", "900"])
+        .output()
+        .expect("bash runs the script");
+    let log = format!("{}\n{}", String::from_utf8_lossy(&run.stdout), String::from_utf8_lossy(&run.stderr));
+    assert!(run.status.success(), "{log}");
+    let parts = std::fs::read_to_string(out.join("parts.txt")).unwrap();
+    for part in ["ours-raster", "ours-forward", "ours-train-step", "ours-longest", "baseline"] {
+        assert!(parts.contains(&format!("== {part}: exit 0")), "{part} did not finish: {parts}\n{log}");
+    }
+    let table = std::fs::read_to_string(out.join("compute.md")).unwrap();
+    assert!(table.contains("Baseline: dggt-rs, fusion + autotune"), "{table}");
+    for key in ["raster/20000x2/forward+backward", "forward/4/f32", "train-step/2+4/f32", "longest/f32"] {
+        let row = table.lines().find(|line| line.starts_with(&format!("| `{key}` |"))).unwrap_or_else(|| {
+            panic!("no row for {key}:\n{table}");
+        });
+        assert!(!row.contains("failed"), "{row}");
+    }
+    let raster_row = table.lines().find(|line| line.starts_with("| `raster/20000x2/forward` |")).unwrap();
+    let gain = raster_row.split('|').nth(5).unwrap().trim();
+    assert!(gain.ends_with('x') && gain.trim_end_matches('x').parse::<f64>().is_ok(), "no gain: {raster_row}");
+}

@@ -34,6 +34,10 @@ pub struct Args {
     /// Seconds each longest-sequence search may take (it reports the best so far when they run out).
     #[arg(long, default_value_t = 240.0)]
     longest_budget_s: f64,
+    /// Frame counts of the longest-sequence search: `START..MAX` (doubling from START, never past MAX), or one
+    /// count `N` to ask only whether N frames fit. Default: the scale's (16..1024 at full size).
+    #[arg(long, value_parser = parse_frame_range)]
+    longest_frames: Option<(usize, usize)>,
     /// Timed runs per workload (the median is reported).
     #[arg(long, default_value_t = 5)]
     repeat: usize,
@@ -71,6 +75,7 @@ impl Args {
             precisions: precisions(&self.precisions)?,
             longest_precisions: precisions(&self.longest_precisions)?,
             longest_budget_s: self.longest_budget_s,
+            longest_range: self.longest_frames,
             repeat: self.repeat,
             warmup: self.warmup,
             chunk_frames: self.chunk,
@@ -81,14 +86,43 @@ impl Args {
     }
 }
 
+/// `START..MAX` or `N` (meaning `N..N`), with `1 <= START <= MAX`.
+fn parse_frame_range(text: &str) -> Result<(usize, usize)> {
+    let count = |part: &str| {
+        part.trim().parse::<usize>().ok().filter(|&n| n > 0).with_context(|| format!("`{part}` is not a frame count"))
+    };
+    let (start, max) = match text.split_once("..") {
+        Some((start, max)) => (count(start)?, count(max)?),
+        None => (count(text)?, count(text)?),
+    };
+    anyhow::ensure!(start <= max, "`{text}`: the search starts past its maximum");
+    Ok((start, max))
+}
+
+/// How this binary's GPU backends were built, as the records name it.
+fn build_flavour() -> &'static str {
+    if cfg!(feature = "gpu-tuning") {
+        "fusion + autotune"
+    } else if cfg!(any(feature = "wgpu-backend", feature = "cuda-backend")) {
+        "no fusion, no autotune"
+    } else {
+        "CPU only"
+    }
+}
+
 pub fn run(args: Args) -> Result<()> {
     let device = args.device.single()?;
     let options = args.options()?;
     let references = read_all(&args.reference)?;
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let json_path = args.out.join("compute.json");
-    let mut file = RecordFile { implementation: IMPLEMENTATION.into(), device: describe(&device), records: vec![] };
-    eprintln!("dggt bench compute on {} ({:?} scale)", file.device, options.scale);
+    let mut file = RecordFile {
+        implementation: IMPLEMENTATION.into(),
+        device: describe(&device),
+        build: build_flavour().into(),
+        records: vec![],
+    };
+    eprintln!("dggt bench compute on {} ({:?} scale, {})", file.device, options.scale, file.build);
     let mut save_error = None;
     run_compute(&options, &device, |record: &Record| {
         eprintln!("{}", one_line(record));
@@ -102,7 +136,7 @@ pub fn run(args: Args) -> Result<()> {
     }
     // Written after every record already; once more so that a run of no workloads leaves the file too.
     file.write(&json_path)?;
-    let table = markdown(&file, &references);
+    let table = markdown(&file, None, &references);
     let table_path = args.out.join("compute.md");
     std::fs::write(&table_path, &table).with_context(|| format!("writing {}", table_path.display()))?;
     print!("{table}");
@@ -116,6 +150,10 @@ pub struct TableArgs {
     /// Our record files (`compute.json`), in order: a later record of a key replaces an earlier one.
     #[arg(long, required = true)]
     ours: Vec<PathBuf>,
+    /// Our record files of another build to show beside, with our gain over it (e.g. the build without burn's
+    /// fusion and autotune, `--features wgpu-backend`); repeatable like `--ours`.
+    #[arg(long)]
+    baseline: Vec<PathBuf>,
     /// A reference's record file (`scripts/reference_bench.py --out`); repeatable.
     #[arg(long)]
     reference: Vec<PathBuf>,
@@ -126,7 +164,8 @@ pub struct TableArgs {
 
 pub fn run_table(args: TableArgs) -> Result<()> {
     let ours = RecordFile::merge(read_all(&args.ours)?)?;
-    let table = markdown(&ours, &read_all(&args.reference)?);
+    let baseline = if args.baseline.is_empty() { None } else { Some(RecordFile::merge(read_all(&args.baseline)?)?) };
+    let table = markdown(&ours, baseline.as_ref(), &read_all(&args.reference)?);
     if let Some(path) = &args.out {
         std::fs::write(path, &table).with_context(|| format!("writing {}", path.display()))?;
     }

@@ -72,6 +72,12 @@ pub const MAX_SCORE_ELEMENTS: usize = 1 << 28;
 /// Query blocks are multiples of this many tokens (flash-attention kernels tile the queries).
 pub const QUERY_ALIGN: usize = 128;
 
+/// Most scores an aligned block of [`QUERY_ALIGN`] queries may hold when the budget allows fewer rows: 2 GiB in
+/// f32, half a GPU buffer's limit. Past [`MAX_SCORE_ELEMENTS`], but an aligned block can run the flash kernel,
+/// which holds no scores at all, where an unaligned one always materialises them (150 frames of 930 tokens, 16
+/// heads: 120 rows fit the budget, 128 rows hold 1.1 GB of scores if materialised).
+pub const MAX_ALIGNED_BLOCK_SCORES: usize = 1 << 29;
+
 /// Sequences at most this long attend in one call (their scores are small, and one call is cheapest).
 const SINGLE_CALL_TOKENS: usize = 1024;
 
@@ -101,7 +107,13 @@ fn query_blocks(queries: usize, scores_per_query: usize) -> Vec<std::ops::Range<
         return vec![0..queries];
     }
     let budget_rows = (MAX_SCORE_ELEMENTS / scores_per_query.max(1)).max(1);
-    let block = if budget_rows >= QUERY_ALIGN { budget_rows / QUERY_ALIGN * QUERY_ALIGN } else { budget_rows };
+    let block = if budget_rows >= QUERY_ALIGN {
+        budget_rows / QUERY_ALIGN * QUERY_ALIGN
+    } else if QUERY_ALIGN * scores_per_query <= MAX_ALIGNED_BLOCK_SCORES {
+        QUERY_ALIGN
+    } else {
+        budget_rows
+    };
     let aligned_end = if block % QUERY_ALIGN == 0 { queries / QUERY_ALIGN * QUERY_ALIGN } else { queries };
     let mut ranges: Vec<_> =
         (0..aligned_end).step_by(block).map(|start| start..(start + block).min(aligned_end)).collect();
@@ -137,6 +149,21 @@ mod tests {
             assert!(block.len() * 16 * queries <= MAX_SCORE_ELEMENTS, "{block:?}");
         }
         assert_eq!(blocks.last().unwrap(), &(queries / QUERY_ALIGN * QUERY_ALIGN..queries));
+    }
+
+    #[test]
+    fn very_long_sequences_keep_aligned_blocks_while_one_fits_half_a_buffer() {
+        // 150 frames of 930 tokens, 16 heads: the budget holds 120 query rows, an aligned block 1.1 GB of scores.
+        let queries = 150 * 930;
+        let blocks = query_blocks(queries, 16 * queries);
+        let aligned = &blocks[..blocks.len() - 1];
+        assert!(aligned.iter().all(|b| b.len() == QUERY_ALIGN && b.start % QUERY_ALIGN == 0), "{:?}", &blocks[..3]);
+        assert_eq!(blocks.iter().map(|b| b.len()).sum::<usize>(), queries);
+        // 600 frames: an aligned block would hold 4.6 GB; blocks shrink to the budget instead.
+        let queries = 600 * 930;
+        let blocks = query_blocks(queries, 16 * queries);
+        assert!(blocks.iter().all(|b| b.len() * 16 * queries <= MAX_SCORE_ELEMENTS));
+        assert_eq!(blocks.iter().map(|b| b.len()).sum::<usize>(), queries);
     }
 
     #[test]

@@ -105,7 +105,8 @@ pub fn longest_records(
             }
             fitted.is_ok()
         };
-        let search = search_longest(spec.longest_start, spec.longest_max, options.longest_budget_s, fits);
+        let (start, max) = options.longest_range.unwrap_or((spec.longest_start, spec.longest_max));
+        let search = search_longest(start, max, options.longest_budget_s, fits);
         device.memory_cleanup();
         let note = format!("{HEADS_NOTE}; {}", search.note);
         keep(Record { frames: Some(search.frames), ..Record::new(key) }.with_note(note));

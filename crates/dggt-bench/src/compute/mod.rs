@@ -131,6 +131,9 @@ pub struct ComputeOptions {
     pub longest_precisions: Vec<Precision>,
     /// Wall-clock budget of each longest-sequence search (it records the best so far when it runs out).
     pub longest_budget_s: f64,
+    /// Frame counts the longest-sequence search starts from and never passes (the scale's when `None`):
+    /// `Some((150, 150))` asks only whether 150 frames fit.
+    pub longest_range: Option<(usize, usize)>,
     pub repeat: usize,
     pub warmup: usize,
     /// Frames per chunk of the dense heads.
@@ -148,6 +151,7 @@ impl ComputeOptions {
             precisions: vec![Precision::F32, Precision::Bf16],
             longest_precisions: vec![Precision::Bf16],
             longest_budget_s: 240.0,
+            longest_range: None,
             repeat: 5,
             warmup: 1,
             chunk_frames: 4,

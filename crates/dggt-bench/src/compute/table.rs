@@ -18,6 +18,9 @@ pub struct RecordFile {
     /// The device, in words.
     #[serde(default)]
     pub device: String,
+    /// How the implementation was built where that matters (ours: with or without burn's fusion and autotune).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub build: String,
     pub records: Vec<Record>,
 }
 
@@ -30,14 +33,19 @@ impl RecordFile {
     /// One file of several runs' records of the same implementation (e.g. a suite run in parts): a later
     /// record of a key replaces an earlier one; the devices are listed once each.
     pub fn merge(files: Vec<RecordFile>) -> Result<Self, BenchError> {
-        let mut merged = RecordFile { implementation: String::new(), device: String::new(), records: vec![] };
-        for file in files {
-            if merged.implementation.is_empty() {
+        let mut merged =
+            RecordFile { implementation: String::new(), device: String::new(), build: String::new(), records: vec![] };
+        for (index, file) in files.into_iter().enumerate() {
+            if index == 0 {
                 merged.implementation = file.implementation.clone();
-            } else if file.implementation != merged.implementation {
+                merged.build = file.build.clone();
+            } else if (&file.implementation, &file.build) != (&merged.implementation, &merged.build) {
                 return Err(BenchError::invalid(
                     "record files",
-                    format!("cannot merge `{}` records into `{}` ones", file.implementation, merged.implementation),
+                    format!(
+                        "cannot merge `{}` records ({}) into `{}` ones ({})",
+                        file.implementation, file.build, merged.implementation, merged.build
+                    ),
                 ));
             }
             if !merged.device.split("; ").any(|device| device == file.device) {
@@ -60,22 +68,34 @@ impl RecordFile {
     }
 }
 
-/// The Markdown table of `ours` with, per key, the first reference record of that key.
-pub fn markdown(ours: &RecordFile, references: &[RecordFile]) -> String {
+/// The Markdown table of `ours` with, per key, the first reference record of that key; with a `baseline` (our
+/// own records of another build, e.g. without fusion and autotune), its figures and ours' gain over it too.
+pub fn markdown(ours: &RecordFile, baseline: Option<&RecordFile>, references: &[RecordFile]) -> String {
     let reference_records: Vec<&Record> = references.iter().flat_map(|file| &file.records).collect();
     let mut text = format!("Device: {}\n\n", ours.device);
+    if !ours.build.is_empty() {
+        text.push_str(&format!("dggt-rs build: {}\n\n", ours.build));
+    }
+    if let Some(baseline) = baseline {
+        text.push_str(&format!("Baseline: dggt-rs, {} ({})\n\n", baseline.build, baseline.device));
+    }
     for file in references {
         text.push_str(&format!("Reference `{}`: {}\n\n", file.implementation, file.device));
     }
-    text.push_str("| work | dggt-rs | MiB | reference | MiB | advantage | notes |\n");
-    text.push_str("|---|---:|---:|---|---:|---:|---|\n");
+    let baseline_headers = if baseline.is_some() { " baseline | gain |" } else { "" };
+    let baseline_rule = if baseline.is_some() { "---:|---:|" } else { "" };
+    text.push_str(&format!("| work | dggt-rs | MiB |{baseline_headers} reference | MiB | advantage | notes |\n"));
+    text.push_str(&format!("|---|---:|---:|{baseline_rule}---|---:|---:|---|\n"));
+    let find = |records: &[&Record], key: &str| records.iter().find(|r| r.key == key).copied();
+    let baseline_records: Vec<&Record> = baseline.map(|file| file.records.iter().collect()).unwrap_or_default();
     for record in &ours.records {
-        let reference = reference_records.iter().find(|r| r.key == record.key).copied();
-        text.push_str(&row(record, reference));
+        let before = baseline.map(|_| find(&baseline_records, &record.key));
+        text.push_str(&row(record, before, find(&reference_records, &record.key)));
     }
+    let empty_baseline = if baseline.is_some() { " | |" } else { "" };
     for orphan in reference_records.iter().filter(|r| !ours.records.iter().any(|o| o.key == r.key)) {
         text.push_str(&format!(
-            "| `{}` | — | | {} ({}) | {} | | {} |\n",
+            "| `{}` | — | {empty_baseline} | {} ({}) | {} | | {} |\n",
             orphan.key,
             value(orphan),
             orphan.implementation,
@@ -86,7 +106,17 @@ pub fn markdown(ours: &RecordFile, references: &[RecordFile]) -> String {
     text
 }
 
-fn row(record: &Record, reference: Option<&Record>) -> String {
+/// One row: ours, then (when a baseline file is given) the baseline's figure of the key and our gain over it,
+/// then the reference's.
+fn row(record: &Record, baseline: Option<Option<&Record>>, reference: Option<&Record>) -> String {
+    let baseline_cells = match baseline {
+        None => String::new(),
+        Some(None) => " | |".into(),
+        Some(Some(before)) => {
+            let gain = advantage(record, before).map_or(String::new(), |a| format!("{a:.2}x"));
+            format!(" {} | {gain} |", value(before))
+        }
+    };
     let (reference_value, reference_mib, advantage, reference_note) = match reference {
         Some(reference) => (
             format!("{} ({})", value(reference), reference.implementation),
@@ -97,7 +127,7 @@ fn row(record: &Record, reference: Option<&Record>) -> String {
         None => (String::new(), String::new(), String::new(), String::new()),
     };
     format!(
-        "| `{}` | {} | {} | {reference_value} | {reference_mib} | {advantage} | {}{} |\n",
+        "| `{}` | {} | {} |{baseline_cells} {reference_value} | {reference_mib} | {advantage} | {}{} |\n",
         record.key,
         value(record),
         mib(record),
@@ -153,6 +183,7 @@ mod tests {
         let ours = RecordFile {
             implementation: "dggt-rs".into(),
             device: "GPU".into(),
+            build: String::new(),
             records: vec![
                 timed("forward/4/f32", "dggt-rs", 100.0),
                 Record { frames: Some(96), ..Record::new("longest/bf16") },
@@ -162,13 +193,14 @@ mod tests {
         let reference = RecordFile {
             implementation: "reference".into(),
             device: "GPU".into(),
+            build: String::new(),
             records: vec![
                 timed("forward/4/f32", "release", 250.0),
                 Record { frames: Some(48), implementation: "release".into(), ..Record::new("longest/bf16") },
                 timed("train-step/4+8/f32", "release+gsplat", 900.0),
             ],
         };
-        let table = markdown(&ours, &[reference]);
+        let table = markdown(&ours, None, &[reference]);
         assert!(table.contains("| `forward/4/f32` | 100.0 ms |  | 250.0 ms (release) |  | 2.50x |"), "{table}");
         assert!(table.contains("| 96 frames |  | 48 frames (release) |  | 2.00x |"), "{table}");
         assert!(table.contains("failed: out of memory / really"), "{table}");
@@ -177,7 +209,12 @@ mod tests {
 
     #[test]
     fn a_record_file_round_trips_through_json() {
-        let file = RecordFile { implementation: "x".into(), device: "d".into(), records: vec![timed("k", "x", 1.5)] };
+        let file = RecordFile {
+            implementation: "x".into(),
+            device: "d".into(),
+            build: "b".into(),
+            records: vec![timed("k", "x", 1.5)],
+        };
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("compute.json");
         file.write(&path).unwrap();
@@ -192,11 +229,13 @@ mod tests {
         let first = RecordFile {
             implementation: "dggt-rs".into(),
             device: "GPU".into(),
+            build: "fusion + autotune".into(),
             records: vec![timed("forward/4/f32", "dggt-rs", 100.0), timed("raster/1x1/forward", "dggt-rs", 5.0)],
         };
         let second = RecordFile {
             implementation: "dggt-rs".into(),
             device: "GPU".into(),
+            build: "fusion + autotune".into(),
             records: vec![timed("forward/4/f32", "dggt-rs", 90.0)],
         };
         let merged = RecordFile::merge(vec![first.clone(), second]).unwrap();
@@ -206,6 +245,37 @@ mod tests {
         assert_eq!(forward[0].median_ms, Some(90.0));
         assert_eq!(merged.records.len(), 2);
         let other = RecordFile { implementation: "release".into(), ..first.clone() };
-        assert!(RecordFile::merge(vec![first, other]).is_err());
+        assert!(RecordFile::merge(vec![first.clone(), other]).is_err());
+        let untuned = RecordFile { build: "no fusion, no autotune".into(), ..first.clone() };
+        let error = RecordFile::merge(vec![first, untuned]).unwrap_err().to_string();
+        assert!(error.contains("no fusion, no autotune"), "{error}");
+    }
+
+    #[test]
+    fn a_baseline_build_shows_beside_ours_with_the_gain() {
+        let ours = RecordFile {
+            implementation: "dggt-rs".into(),
+            device: "GPU".into(),
+            build: "fusion + autotune".into(),
+            records: vec![timed("forward/4/f32", "dggt-rs", 100.0), timed("raster/1x1/forward", "dggt-rs", 5.0)],
+        };
+        let baseline = RecordFile {
+            build: "no fusion, no autotune".into(),
+            records: vec![timed("forward/4/f32", "dggt-rs", 700.0)],
+            ..ours.clone()
+        };
+        let reference = RecordFile {
+            implementation: "reference".into(),
+            device: "GPU".into(),
+            build: String::new(),
+            records: vec![timed("forward/4/f32", "release", 400.0)],
+        };
+        let table = markdown(&ours, Some(&baseline), &[reference]);
+        assert!(table.contains("Baseline: dggt-rs, no fusion, no autotune"), "{table}");
+        assert!(
+            table.contains("| `forward/4/f32` | 100.0 ms |  | 700.0 ms | 7.00x | 400.0 ms (release) |  | 4.00x |"),
+            "{table}"
+        );
+        assert!(table.contains("| `raster/1x1/forward` | 5.0 ms |  | | | "), "{table}");
     }
 }
