@@ -44,7 +44,7 @@ use dggt_geom::ImageSize;
 use crate::settings::RasterSettings;
 
 #[cfg(any(feature = "wgpu", feature = "cuda"))]
-pub use cube::CubeForward;
+pub use cube::{CubeForward, SortedIntersections, prefix_sums, sort_intersections};
 pub use host::HostForward;
 
 /// Extra channels after the `K` colours in the packed image tensor: alpha, then depth.
