@@ -54,6 +54,10 @@ pub use forward::{Images, Rasterized, rasterize};
 pub use gaussians::{Gaussians, Opacities};
 #[cfg(any(feature = "wgpu", feature = "cuda"))]
 pub use op::CubeForward;
+/// The device radix sort of tile intersections on host data, for tests.
+#[cfg(any(feature = "wgpu", feature = "cuda"))]
+#[doc(hidden)]
+pub use op::{SortedIntersections, prefix_sums, sort_intersections};
 pub use op::{HostForward, PACKED_EXTRA_CHANNELS, SplatGrads, SplatInputs, SplatKernels, SplatOps, SplatOutputs};
 pub use projection::Projection;
 pub use render::{

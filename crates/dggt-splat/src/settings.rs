@@ -18,6 +18,10 @@ pub struct RasterSettings {
     pub tile_size: u32,
     /// `[K]` colour behind the Gaussians, composited with the final transmittance; `None` is black.
     pub background: Option<Vec<f32>>,
+    /// The largest single device buffer the GPU rasteriser may allocate, in bytes; `None` is the device's own
+    /// limit (the lower of the two applies). Views whose tile intersections would not fit one buffer are
+    /// rendered in batches of views that do. The host ignores it. Lowering it is for tests of the batching.
+    pub max_buffer_bytes: Option<u64>,
 }
 
 impl Default for RasterSettings {
@@ -28,6 +32,7 @@ impl Default for RasterSettings {
             eps2d: DEFAULT_EPS2D,
             tile_size: DEFAULT_TILE_SIZE,
             background: None,
+            max_buffer_bytes: None,
         }
     }
 }

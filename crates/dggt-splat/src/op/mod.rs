@@ -16,8 +16,9 @@
 //!   are bit-identical to it.
 //! - `cube` (features `wgpu` / `cuda`): burn's `CubeBackend`, the one backend type of every CubeCL runtime, so a
 //!   single set of CubeCL kernels serves wgpu (Vulkan, Metal, DX12) and CUDA. The stages of the host pipeline run
-//!   as kernels on the device, in `f32`, with the host's rules and culling codes; the only read-back is the total
-//!   number of tile intersections (one integer per call) that sizes the tile-list buffer. Gradients are added
+//!   as kernels on the device, in `f32`, with the host's rules and culling codes; the only read-back is the number
+//!   of tile intersections per view (`V + 1` integers per call), which sizes the tile-list buffers and groups
+//!   the views into batches that fit the device's buffer limit. Gradients are added
 //!   with atomics (native `f32` atomic add where the device has it, compare-and-swap otherwise), so results agree
 //!   with the host to float rounding rather than bit for bit.
 //! - `fusion` (feature `fusion` with `wgpu` / `cuda`): `Fusion<CubeBackend>`, which is what burn's `Cube`
@@ -44,7 +45,7 @@ use dggt_geom::ImageSize;
 use crate::settings::RasterSettings;
 
 #[cfg(any(feature = "wgpu", feature = "cuda"))]
-pub use cube::CubeForward;
+pub use cube::{CubeForward, SortedIntersections, prefix_sums, sort_intersections};
 pub use host::HostForward;
 
 /// Extra channels after the `K` colours in the packed image tensor: alpha, then depth.

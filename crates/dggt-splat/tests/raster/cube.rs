@@ -29,7 +29,7 @@ use crate::tensor_op::{camera_tensors, gaussian_tensors, per_view_scene, tensor,
 const GRADIENT: Tolerance = Tolerance { atol: 1e-5, rtol: 1e-3 };
 
 /// burn's default wgpu device, checked to work: a clear failure when no adapter can be created.
-fn wgpu_device() -> Device {
+pub fn wgpu_device() -> Device {
     let device = Device::wgpu(DeviceKind::DefaultDevice);
     let probe = catch_unwind(AssertUnwindSafe(|| {
         let t = Tensor::<1>::from_data(TensorData::new(vec![1.0f32, 2.0], [2]), &device);
@@ -46,12 +46,12 @@ fn wgpu_device() -> Device {
 }
 
 /// What one wgpu render and its backward pass produced, as host buffers.
-struct DeviceResult {
-    colors: Vec<f32>,
-    alpha: Vec<f32>,
-    depth: Vec<f32>,
-    stats: Vec<CullStats>,
-    grads: GaussianGrads,
+pub struct DeviceResult {
+    pub colors: Vec<f32>,
+    pub alpha: Vec<f32>,
+    pub depth: Vec<f32>,
+    pub stats: Vec<CullStats>,
+    pub grads: GaussianGrads,
 }
 
 /// Renders `scene` on `device` (an autodiff device), differentiates the weighted loss and reads everything back.
@@ -62,9 +62,21 @@ fn render_on(
     background: Option<&[f32]>,
     weights: &LossWeights,
 ) -> DeviceResult {
+    render_on_with(device, scene, views, background, weights, &RasterSettings::default())
+}
+
+/// [`render_on`] with the given raster settings.
+pub fn render_on_with(
+    device: &Device,
+    scene: &Scene,
+    views: &ViewBatch,
+    background: Option<&[f32]>,
+    weights: &LossWeights,
+    raster: &RasterSettings,
+) -> DeviceResult {
     let gaussians = gaussian_tensors(scene, views.len(), device, true);
     let background = background.map(|b| tensor(b, [b.len()], device).require_grad());
-    let settings = RenderSettings { raster: RasterSettings::default(), background: background.clone() };
+    let settings = RenderSettings { raster: raster.clone(), background: background.clone() };
     let (images, stats) = render_with_stats(&gaussians, &camera_tensors(views, device), &settings).unwrap();
     let grads = weighted_loss(&images, weights, device).backward();
     let opacities = match &gaussians.opacities {
@@ -96,7 +108,7 @@ fn render_on(
 }
 
 /// Compares a device result with the host forward and backward of the same scene; returns the host gradients.
-fn assert_close_to_host(
+pub fn assert_close_to_host(
     case: &str,
     result: &DeviceResult,
     scene: &Scene,
@@ -104,7 +116,20 @@ fn assert_close_to_host(
     background: Option<&[f32]>,
     weights: &LossWeights,
 ) -> GaussianGrads {
-    let settings = RasterSettings { background: background.map(<[f32]>::to_vec), ..RasterSettings::default() };
+    assert_close_to_host_with(case, result, scene, views, background, weights, &RasterSettings::default())
+}
+
+/// [`assert_close_to_host`] for a render with the given raster settings.
+pub fn assert_close_to_host_with(
+    case: &str,
+    result: &DeviceResult,
+    scene: &Scene,
+    views: &ViewBatch,
+    background: Option<&[f32]>,
+    weights: &LossWeights,
+    raster: &RasterSettings,
+) -> GaussianGrads {
+    let settings = RasterSettings { background: background.map(<[f32]>::to_vec), ..raster.clone() };
     let gaussians = scene.gaussians();
     let forward = rasterize(&gaussians, views, &settings).unwrap();
     let host = rasterize_backward(&gaussians, views, &settings, &forward, &weights.image_grads()).unwrap();

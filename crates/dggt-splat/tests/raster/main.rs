@@ -3,11 +3,15 @@
 //! `wgpu`) the CubeCL kernels against the host.
 
 #[cfg(feature = "wgpu")]
+mod batches;
+#[cfg(feature = "wgpu")]
 mod cube;
 mod empty;
 mod finite_difference;
 mod parity;
 mod per_view;
+#[cfg(feature = "wgpu")]
+mod radix;
 mod scenes;
 mod stress;
 mod tensor_op;

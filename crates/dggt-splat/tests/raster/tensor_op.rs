@@ -61,7 +61,14 @@ pub fn weighted_loss(images: &RenderTensors, weights: &LossWeights, device: &Dev
     let colors = tensor(&weights.colors, [v, h, w, k], device);
     let alpha = tensor(&weights.alpha, [v, h, w], device);
     let depth = tensor(&weights.depth, [v, h, w], device);
-    (images.colors.clone() * colors).sum() + (images.alpha.clone() * alpha).sum() + (images.depth.clone() * depth).sum()
+    total(images.colors.clone() * colors) + total(images.alpha.clone() * alpha) + total(images.depth.clone() * depth)
+}
+
+/// The sum of all elements as a `[1]` tensor, through a sum along one dimension: burn's full-sum kernel uses
+/// shared memory, which lavapipe (the CI device) cannot compile as CubeCL emits it.
+fn total<const D: usize>(values: Tensor<D>) -> Tensor<1> {
+    let count = values.shape().num_elements();
+    values.reshape([count, 1]).sum_dim(0).reshape([1])
 }
 
 /// Renders `scene` with the tensor op on `device` (an autodiff device) and asserts that the images, the

@@ -1,6 +1,7 @@
-//! Tile binning: which screen tiles each kept footprint touches. [`count_kernel`] counts the intersections
-//! per tile list (and fills the culling statistics), the prefix sum (`scan`) turns the counts into list
-//! offsets, and [`fill_kernel`] writes one sort entry per intersection, which `sort` then orders.
+//! Tile binning: which screen tiles each kept footprint touches. [`count_kernel`] counts the tiles of every
+//! (view, Gaussian) pair (and fills the culling statistics), the prefix sum (`scan`) turns the counts into
+//! each pair's offset, [`fill_kernel`] writes one sort entry per intersection at those offsets (in pair order,
+//! no atomics), `radix` sorts them by (list, depth), and [`ranges_kernel`] finds each list's range.
 
 use burn_cubecl::cubecl;
 use cubecl::prelude::*;
@@ -26,14 +27,15 @@ pub fn tile_rect(
     (x0 as u32, x1 as u32, y0 as u32, y1 as u32)
 }
 
-/// Counts tile intersections per tile and fills the statistics rows `[V, 9]` (see `CullStats::to_counts`).
+/// Counts the tiles each (view, Gaussian) pair touches into `pair_counts` (zero when culled) and fills the
+/// statistics rows `[V, 9]` (see `CullStats::to_counts`).
 #[cube(launch)]
 #[allow(clippy::too_many_arguments)]
 pub fn count_kernel(
     means2d: &Tensor<f32>,
     radii: &Tensor<u32>,
     reasons: &Tensor<u32>,
-    tile_counts: &Tensor<Atomic<u32>>,
+    pair_counts: &mut Tensor<u32>,
     stats: &Tensor<Atomic<i32>>,
     count: u32,
     views: u32,
@@ -50,26 +52,33 @@ pub fn count_kernel(
     let row = 9 * v;
     stats[row].fetch_add(1i32);
     let reason = reasons[k];
+    let mut touched = 0u32;
     if reason != 0 {
         stats[row + 1 + reason as usize].fetch_add(1i32);
     } else {
         stats[row + 1].fetch_add(1i32);
         let (x0, x1, y0, y1) =
             tile_rect(means2d[2 * k], means2d[2 * k + 1], radii[2 * k], radii[2 * k + 1], tile_size, tiles_x, tiles_y);
-        let base = v * (tiles_x * tiles_y) as usize;
-        for ty in y0..y1 {
-            for tx in x0..x1 {
-                tile_counts[base + (ty * tiles_x + tx) as usize].fetch_add(1u32);
-            }
-        }
-        let touched = (x1 - x0) * (y1 - y0);
+        touched = (x1 - x0) * (y1 - y0);
         stats[row + 8].fetch_add(touched as i32);
+    }
+    pair_counts[k] = touched;
+}
+
+/// `view_starts[v] = pair_offsets[v · count]` for `v` in `0..=views`: where each view's intersections start
+/// (entry `views` is the total), the only values read back to size the intersection buffers.
+#[cube(launch)]
+pub fn view_starts_kernel(pair_offsets: &Tensor<u32>, view_starts: &mut Tensor<u32>, count: u32, views: u32) {
+    let v = ABSOLUTE_POS;
+    if v <= views as usize {
+        view_starts[v] = pair_offsets[v * count as usize];
     }
 }
 
-/// Writes one sort entry per (kept Gaussian, tile it touches) into the list's slice of the intersection
-/// buffer, in arrival order: the list index, the Gaussian's depth in that view and its index. The slot within
-/// the slice does not matter, since [`bitonic_step_kernel`] orders the entries by all three afterwards.
+/// Writes the sort entries of the views `first_view..first_view + views` (the pairs `k` from
+/// `first_view · count`), each pair at its own offset `pair_offsets[k] - base` in pair order, its tiles in
+/// row-major order: the list `(v - first_view) · tiles + tile`, the depth's `f32` bits (positive, so they
+/// order as unsigned integers) and the Gaussian index.
 #[cube(launch)]
 #[allow(clippy::too_many_arguments)]
 pub fn fill_kernel(
@@ -77,37 +86,65 @@ pub fn fill_kernel(
     radii: &Tensor<u32>,
     reasons: &Tensor<u32>,
     depths: &Tensor<f32>,
-    offsets: &Tensor<u32>,
-    cursors: &Tensor<Atomic<u32>>,
+    pair_offsets: &Tensor<u32>,
     entry_lists: &mut Tensor<u32>,
-    entry_depths: &mut Tensor<f32>,
+    entry_depths: &mut Tensor<u32>,
     entry_ids: &mut Tensor<u32>,
     count: u32,
+    first_view: u32,
     views: u32,
+    base: u32,
     tile_size: u32,
     tiles_x: u32,
     tiles_y: u32,
 ) {
-    let k = ABSOLUTE_POS;
+    let local = ABSOLUTE_POS;
     let count = count as usize;
-    if k >= count * (views as usize) {
+    if local >= count * (views as usize) {
         terminate!();
     }
+    let k = first_view as usize * count + local;
     if reasons[k] == 0 {
-        let v = k / count;
+        let list_base = (local / count) as u32 * (tiles_x * tiles_y);
         let n = (k % count) as u32;
-        let depth = depths[k];
+        let depth = depths[k].to_bits();
         let (x0, x1, y0, y1) =
             tile_rect(means2d[2 * k], means2d[2 * k + 1], radii[2 * k], radii[2 * k + 1], tile_size, tiles_x, tiles_y);
-        let base = v * (tiles_x * tiles_y) as usize;
+        let mut slot = (pair_offsets[k] - base) as usize;
         for ty in y0..y1 {
             for tx in x0..x1 {
-                let list = base + (ty * tiles_x + tx) as usize;
-                let slot = (offsets[list] + cursors[list].fetch_add(1u32)) as usize;
-                entry_lists[slot] = list as u32;
+                entry_lists[slot] = list_base + ty * tiles_x + tx;
                 entry_depths[slot] = depth;
                 entry_ids[slot] = n;
+                slot += 1;
             }
         }
+    }
+}
+
+/// Each list's range `[ranges[2 l], ranges[2 l + 1])` of the sorted entries, from the list boundaries
+/// (`ranges` zeroed first: an empty list keeps `[0, 0)`).
+#[cube(launch)]
+pub fn ranges_kernel(entry_lists: &Tensor<u32>, ranges: &mut Tensor<u32>, len: u32) {
+    let i = ABSOLUTE_POS;
+    let len = len as usize;
+    if i >= len {
+        terminate!();
+    }
+    let list = entry_lists[i];
+    // Neighbour indices kept in range: both sides of `||` may be evaluated.
+    let mut previous = i;
+    if i > 0 {
+        previous = i - 1;
+    }
+    let mut next = i;
+    if i + 1 < len {
+        next = i + 1;
+    }
+    if previous == i || entry_lists[previous] != list {
+        ranges[2 * list as usize] = i as u32;
+    }
+    if next == i || entry_lists[next] != list {
+        ranges[2 * list as usize + 1] = i as u32 + 1;
     }
 }

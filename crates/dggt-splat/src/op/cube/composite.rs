@@ -14,7 +14,7 @@ use crate::constants::{ALPHA_THRESHOLD, MAX_ALPHA, MIN_DEPTH_ALPHA, MIN_TRANSMIT
 #[allow(clippy::too_many_arguments)]
 pub fn composite_kernel(
     ids: &Tensor<u32>,
-    offsets: &Tensor<u32>,
+    ranges: &Tensor<u32>,
     means2d: &Tensor<f32>,
     conics: &Tensor<f32>,
     depths: &Tensor<f32>,
@@ -25,6 +25,7 @@ pub fn composite_kernel(
     transmittances: &mut Tensor<f32>,
     list_ends: &mut Tensor<u32>,
     count: u32,
+    first_view: u32,
     per_view: u32,
     width: u32,
     height: u32,
@@ -35,18 +36,22 @@ pub fn composite_kernel(
 ) {
     let x = ABSOLUTE_POS_X;
     let y = ABSOLUTE_POS_Y;
-    let v = ABSOLUTE_POS_Z as usize;
+    let batch_view = ABSOLUTE_POS_Z as usize;
+    let v = first_view as usize + batch_view;
     if x >= width || y >= height {
         terminate!();
     }
     let pixel = (v * height as usize + y as usize) * width as usize + x as usize;
-    let list = v * (tiles_x * tiles_y) as usize + ((y / tile_size) * tiles_x + x / tile_size) as usize;
-    let start = offsets[list] as usize;
-    let end = offsets[list + 1] as usize;
+    let list = batch_view * (tiles_x * tiles_y) as usize + ((y / tile_size) * tiles_x + x / tile_size) as usize;
+    let start = ranges[2 * list] as usize;
+    let end = ranges[2 * list + 1] as usize;
     let base = v * count as usize;
     let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
 
     let mut accumulated = Array::<f32>::new(channels);
+    for ch in 0..channels {
+        accumulated[ch] = 0.0;
+    }
     let mut depth = 0.0f32;
     let mut transmittance = 1.0f32;
     let mut last = 0u32;

@@ -16,7 +16,7 @@ use crate::constants::{ALPHA_THRESHOLD, MAX_ALPHA, MIN_DEPTH_ALPHA};
 #[allow(clippy::too_many_arguments)]
 pub fn composite_backward_kernel<A: FloatAdd>(
     ids: &Tensor<u32>,
-    offsets: &Tensor<u32>,
+    ranges: &Tensor<u32>,
     means2d: &Tensor<f32>,
     conics: &Tensor<f32>,
     depths: &Tensor<f32>,
@@ -29,6 +29,7 @@ pub fn composite_backward_kernel<A: FloatAdd>(
     grad_images: &Tensor<f32>,
     grads: &Tensor<Atomic<A::Slot>>,
     count: u32,
+    first_view: u32,
     views: u32,
     opacity_offset: u32,
     color_offset: u32,
@@ -42,7 +43,8 @@ pub fn composite_backward_kernel<A: FloatAdd>(
 ) {
     let x = ABSOLUTE_POS_X;
     let y = ABSOLUTE_POS_Y;
-    let v = ABSOLUTE_POS_Z as usize;
+    let batch_view = ABSOLUTE_POS_Z as usize;
+    let v = first_view as usize + batch_view;
     if x >= width || y >= height {
         terminate!();
     }
@@ -51,8 +53,8 @@ pub fn composite_backward_kernel<A: FloatAdd>(
     if last == 0 {
         terminate!();
     }
-    let list = v * (tiles_x * tiles_y) as usize + ((y / tile_size) * tiles_x + x / tile_size) as usize;
-    let start = offsets[list] as usize;
+    let list = batch_view * (tiles_x * tiles_y) as usize + ((y / tile_size) * tiles_x + x / tile_size) as usize;
+    let start = ranges[2 * list] as usize;
     let base = v * count as usize;
     let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
     let packed = pixel * (channels + 2);
@@ -79,6 +81,9 @@ pub fn composite_backward_kernel<A: FloatAdd>(
     }
 
     let mut behind = Array::<f32>::new(channels);
+    for ch in 0..channels {
+        behind[ch] = 0.0;
+    }
     let mut depth_behind = 0.0f32;
     let mut transmittance = final_transmittance;
     let mut j = start + last;

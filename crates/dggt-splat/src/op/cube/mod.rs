@@ -2,35 +2,56 @@
 //! set runs on every CubeCL runtime (wgpu/Vulkan/Metal, CUDA, ROCm).
 //!
 //! The kernels, one module per stage, all in `f32`: [`math`] (shared device math and the atomic float add),
-//! [`project`], tile binning ([`bin`]: count and fill; [`scan`]; [`sort`]), [`composite`], and the backward
-//! kernels [`composite_backward`] and [`project_backward`]. Every kernel reads and writes flat, contiguous
-//! buffers with the layouts of the host pipeline (`Projection`, `TileBins`, `Images`): index `k = v * N + n` for
+//! [`project`], tile binning ([`bin`]: count, fill, list ranges; [`scan`]: prefix sums; [`radix`]: the sort;
+//! [`lists`]: batching them under the buffer cap), [`composite`], and the backward kernels
+//! [`composite_backward`] and [`project_backward`]. Every kernel reads and writes flat, contiguous buffers with
+//! the layouts of the host pipeline (`Projection`, `TileBins`, `Images`): index `k = v * N + n` for
 //! per-(view, Gaussian) values, pixel `p = (v * H + y) * W + x` for per-pixel values. Sizes arrive as runtime
 //! `u32` scalars; only the number of colour channels is a compile-time constant (one compiled kernel per `K`),
 //! so that per-pixel colour accumulators live in registers. Their constants are [`crate::constants`].
 //!
-//! Forward, for a batch of `V` views:
+//! Forward, for `V` views:
 //!
 //! 1. `project_kernel`: one unit per (view, Gaussian) projects and culls exactly as the host does (same rules
 //!    and order, same culling codes), in `f32` where the host uses `f64`.
-//! 2. `count_kernel`: per-tile intersection counts and the statistics rows (atomics).
-//! 3. `scan_kernel`: exclusive prefix sum of the counts of all `V · tiles` lists (one cube), giving each list
-//!    its slice of the intersection buffer. The total is **read back to the host** (one `u32`) to size that
-//!    buffer: the only device-to-host transfer of the forward pass, once per call whatever `V`.
-//! 4. `fill_kernel`: each kept Gaussian appends an entry (list, depth, index) to every list it touches (atomic
-//!    cursors, so in arrival order).
-//! 5. `bitonic_step_kernel`: one bitonic sort of all entries of all lists at once by (list, depth, index), the
-//!    host's order, `O(I log² I)` work for `I` intersections in constant-time units whatever a list's length.
-//! 6. `composite_kernel`: one unit per pixel, front to back with gsplat's classic rules.
+//! 2. `count_kernel`: the number of tiles each pair touches, and the statistics rows (atomics).
+//! 3. `exclusive_scan` of the pair counts: each pair's offset into the intersections, in pair order.
+//!    `view_starts_kernel` picks the offsets at view boundaries, **read back to the host** (`V + 1` integers,
+//!    the only device-to-host transfer of the forward pass), which group the views into batches whose
+//!    per-entry buffers fit the buffer cap (`lists`).
+//! 4. Per batch: `fill_kernel` writes each pair's entries at its own offset (deterministic, no atomics): key
+//!    (list, depth bits), payload Gaussian index; `radix` sorts them stably by depth, then by list (so equal
+//!    depths keep index order, the host's); `ranges_kernel` finds each list's range; `composite_kernel`
+//!    blends one pixel per unit, front to back with gsplat's classic rules.
 //!
-//! Backward: `composite_backward_kernel` walks each pixel's list back to front and adds footprint gradients
-//! with atomics (native `f32` atomic add where the device has it, a compare-and-swap loop on `u32` bits
-//! otherwise); `project_backward_kernel` pulls them through the projection, one unit per Gaussian summing its
-//! views in order; the background gradient `Σ_pixels dL/dcolour · T_final` is a reduction on tensors.
+//! Backward: per batch, `composite_backward_kernel` walks each pixel's list back to front and adds footprint
+//! gradients with atomics (native `f32` atomic add where the device has it, a compare-and-swap loop on `u32`
+//! bits otherwise); `project_backward_kernel` pulls them through the projection, one unit per Gaussian summing
+//! its views in order; the background gradient `Σ_pixels dL/dcolour · T_final` is a reduction on tensors.
+//!
+//! Launches and passes over memory, for `V = 12` views of 518x350 (16-pixel tiles: `726 · 12 = 8712` lists,
+//! 14 bits), `N = 2.2M` Gaussians (`26.4M` pairs) and `I` intersections, `L = ⌈log2 I⌉`:
+//!
+//! | | before (bitonic) | now (radix) |
+//! |---|---|---|
+//! | binning | zero, count, one-cube scan, zero, fill (atomic cursors), pad: 6 launches | count, pair scan (7 launches: 4 levels of 256), view starts, per batch zero and fill |
+//! | sort | `L (L + 1) / 2` launches (378 at `I ≈ 10^8`, 435 at `2^29`), each reading and writing all `2^L` padded entries | 12 passes (8 over the depth bits, 4 over the 14 list bits) of 2 launches plus a histogram scan (`I / 16` counts: 5 launches at `I = 10^8`): 84 launches |
+//! | sort traffic | `24 · 2^L` B per launch: ≈ 1.6 TB at `I ≈ 10^8` (`2^27`), 5.6 TB at `2^29` | 28 B/entry per depth pass, 20 B/entry per list pass, ≈ 10 B/entry of histogram scans: ≈ 0.31 kB per intersection, 31 GB at `10^8` |
+//! | forward launches | ≈ 9 + `L (L + 1) / 2`: 387 at `10^8`, 444 at `2^29` | ≈ 10 + 88 per batch: ≈ 98 with one batch |
+//! | backward launches | compositing backward, projection backward, background reduction | the same, the compositing backward once per batch |
+//! | largest buffer | `2^L` entries of 4 B (4 GiB past `2^29`: beyond wgpu's limit) | `I_batch` entries of 4 B, `I_batch` capped by the device's buffer limit |
+//!
+//! Device memory of the sort, per intersection of a batch: keys, depth bits and payloads, each double
+//! buffered (`6 · 4 = 24` B) while sorting by depth, `4 · 4 = 16` B while sorting by list, and `16 / 256 · 4`
+//! B of histogram; after the forward only the sorted Gaussian ids (4 B per intersection) stay alive.
 //!
 //! Everything stays on the device; the saved state ([`CubeForward`]) holds device buffers only. Kernels bind at
 //! most 13 storage buffers (the compositing backward adds into one buffer holding all its gradients), within
 //! what wgpu adapters offer.
+//!
+//! Lavapipe (Mesa 22.3, the software Vulkan of the CI machine) cannot compile the shared memory CubeCL 0.11.3
+//! emits for devices without Vulkan's explicit workgroup layout (it crashes in pipeline creation), so the
+//! scan and the sort use none: each unit works serially on its own block or run.
 //!
 //! Against the host implementation: the images agree to float rounding (the host projects in `f64`, these
 //! kernels in `f32`, and accumulation orders differ under atomics), so the GPU path is tested against the host
@@ -40,11 +61,13 @@
 mod bin;
 mod composite;
 mod composite_backward;
+mod lists;
 mod math;
+mod probe;
 mod project;
 mod project_backward;
+mod radix;
 mod scan;
-mod sort;
 
 use std::fmt;
 use std::sync::Arc;
@@ -58,7 +81,6 @@ use burn_cubecl::cubecl::ir::{FloatKind, Type};
 use burn_cubecl::cubecl::prelude::*;
 use burn_cubecl::cubecl::{self, calculate_cube_count_elemwise};
 use burn_cubecl::kernel::into_contiguous;
-use burn_cubecl::ops::into_data_sync;
 use burn_cubecl::ops::numeric::{empty_device_dtype, zeros_client};
 use burn_cubecl::tensor::CubeTensor;
 use burn_cubecl::{CubeBackend, CubeDevice};
@@ -68,7 +90,8 @@ use super::{PACKED_EXTRA_CHANNELS, SplatGrads, SplatInputs, SplatKernels, SplatO
 use crate::cull::CullStats;
 use crate::settings::RasterSettings;
 use math::{NativeAdd, SwapAdd};
-use scan::SCAN_THREADS;
+use lists::{FootprintBuffers, ListBatch};
+pub use probe::{SortedIntersections, prefix_sums, sort_intersections};
 
 /// Units per cube of the per-element kernels.
 const ELEMENT_UNITS: u32 = 256;
@@ -109,9 +132,17 @@ impl Layout {
 /// What the backward pass reads, all on the device: the contiguous inputs, the projection (`[V, N, ..]`), the
 /// sorted tile lists and the per-pixel results of compositing.
 ///
-/// Memory, for `N` Gaussians with `K` channels, `V` views of `P` pixels and `I` tile intersections: the inputs
-/// (as given, made contiguous), `9 · V · N` values of projection and culling, `I` sorted list entries (rounded
-/// up to a power of two) and `V · tiles + 1` offsets, and `V · P · (K + 4)` per-pixel values (the packed image, transmittance and list end).
+/// Memory, for `N` Gaussians with `K` channels, `V` views of `P` pixels, `T` tiles a view and `I` tile
+/// intersections, besides the inputs (kept as given, copied only where not contiguous):
+///
+/// - per (view, Gaussian) pair, 28 bytes: mean (8), conic (12), depth (4) and culling code (4);
+/// - per intersection, 4 bytes: the sorted Gaussian id (no padding);
+/// - per tile list, 8 bytes: its range;
+/// - per pixel, `4 (K + 2)` bytes of packed image (the output itself, shared), 4 of final transmittance and
+///   4 of list end.
+///
+/// At 2.2M Gaussians, 12 views of 518x350 (`T = 726`, `P = 181 300`), `K = 3`: 739 MB of pairs, `4 I` bytes of
+/// ids, 70 kB of ranges and 61 MB of pixels (44 MB of them the output images).
 #[derive(Clone)]
 pub struct CubeForward {
     layout: Layout,
@@ -127,8 +158,7 @@ pub struct CubeForward {
     conics: CubeTensor,
     depths: CubeTensor,
     reasons: CubeTensor,
-    offsets: CubeTensor,
-    ids: CubeTensor,
+    batches: Vec<ListBatch>,
     images: CubeTensor,
     transmittance: CubeTensor,
     list_ends: CubeTensor,
@@ -163,9 +193,10 @@ fn element_launch(client: &cubecl::client::Client, elements: usize) -> (CubeCoun
     (calculate_cube_count_elemwise(client, elements, dim), dim)
 }
 
-fn pixel_launch(layout: &Layout) -> (CubeCount, CubeDim) {
+/// One unit per pixel of the `views` views of a batch.
+fn pixel_launch(layout: &Layout, views: usize) -> (CubeCount, CubeDim) {
     (
-        CubeCount::new_3d(layout.width.div_ceil(PIXEL_BLOCK), layout.height.div_ceil(PIXEL_BLOCK), layout.views as u32),
+        CubeCount::new_3d(layout.width.div_ceil(PIXEL_BLOCK), layout.height.div_ceil(PIXEL_BLOCK), views as u32),
         CubeDim::new_2d(PIXEL_BLOCK, PIXEL_BLOCK),
     )
 }
@@ -200,85 +231,6 @@ fn layout(inputs: &SplatInputs<CubeBackend>, settings: &RasterSettings, size: Im
     }
 }
 
-/// Steps 4 and 5: fills the intersection buffer and sorts it, returning the Gaussian indices of every tile
-/// list in order (list `l` at `offsets[l]..offsets[l + 1]`; the buffer is padded to a power of two).
-#[allow(clippy::too_many_arguments)]
-fn sorted_tile_lists(
-    client: &cubecl::client::Client,
-    device: &CubeDevice,
-    layout: &Layout,
-    means2d: &CubeTensor,
-    radii: &CubeTensor,
-    reasons: &CubeTensor,
-    depths: &CubeTensor,
-    offsets: &CubeTensor,
-    intersections: usize,
-) -> CubeTensor {
-    let len = intersections.next_power_of_two().max(2);
-    let len32 = u32::try_from(len).expect("splat: more than 2^31 tile intersections in one call");
-    let entry_lists = buffer(device, len, DType::U32);
-    let entry_depths = buffer(device, len, DType::F32);
-    let entry_ids = buffer(device, len, DType::U32);
-    if intersections == 0 {
-        return entry_ids;
-    }
-    let cursors = zeroed(device, layout.views * layout.tiles(), DType::U32);
-    let (cubes, dim) = element_launch(client, layout.pairs());
-    bin::fill_kernel::launch(
-        client,
-        cubes,
-        dim,
-        arg(means2d),
-        arg(radii),
-        arg(reasons),
-        arg(depths),
-        arg(offsets),
-        arg(&cursors),
-        arg(&entry_lists),
-        arg(&entry_depths),
-        arg(&entry_ids),
-        layout.count as u32,
-        layout.views as u32,
-        layout.tile_size,
-        layout.tiles_x,
-        layout.tiles_y,
-    );
-    if len > intersections {
-        let (cubes, dim) = element_launch(client, len - intersections);
-        sort::pad_kernel::launch(
-            client,
-            cubes,
-            dim,
-            arg(&entry_lists),
-            arg(&entry_depths),
-            arg(&entry_ids),
-            intersections as u32,
-            len32,
-        );
-    }
-    let (cubes, dim) = element_launch(client, len / 2);
-    let mut block = 2u32;
-    while block <= len32 {
-        let mut stride = block / 2;
-        while stride > 0 {
-            sort::bitonic_step_kernel::launch(
-                client,
-                cubes.clone(),
-                dim,
-                arg(&entry_lists),
-                arg(&entry_depths),
-                arg(&entry_ids),
-                block,
-                stride,
-                len32,
-            );
-            stride /= 2;
-        }
-        block *= 2;
-    }
-    entry_ids
-}
-
 /// The per-(view, Gaussian) footprints of the projection, with the per-list intersection counts and the
 /// culling statistics.
 struct Footprints {
@@ -287,7 +239,7 @@ struct Footprints {
     depths: CubeTensor,
     radii: CubeTensor,
     reasons: CubeTensor,
-    tile_counts: CubeTensor,
+    pair_counts: CubeTensor,
     stats: CubeTensor,
 }
 
@@ -322,7 +274,7 @@ fn project_and_count(device: &CubeDevice, layout: &Layout, inputs: &SplatInputs<
         depths: buffer(device, pairs, DType::F32),
         radii: buffer(device, 2 * pairs, DType::U32),
         reasons: buffer(device, pairs, DType::U32),
-        tile_counts: zeroed(device, views * layout.tiles(), DType::U32),
+        pair_counts: buffer(device, pairs, DType::U32),
         stats: zeros_client(client.clone(), device.clone(), Shape::new([views, CullStats::COUNTS]), DType::I32),
     };
     if pairs == 0 {
@@ -363,7 +315,7 @@ fn project_and_count(device: &CubeDevice, layout: &Layout, inputs: &SplatInputs<
         arg(&footprints.means2d),
         arg(&footprints.radii),
         arg(&footprints.reasons),
-        arg(&footprints.tile_counts),
+        arg(&footprints.pair_counts),
         arg(&footprints.stats),
         count32,
         views32,
@@ -374,81 +326,94 @@ fn project_and_count(device: &CubeDevice, layout: &Layout, inputs: &SplatInputs<
     footprints
 }
 
-/// Each list's offset into the intersection buffer (the exclusive prefix sum of `tile_counts`, `lists + 1`
-/// long) and the total, read back to the host to size that buffer.
-fn list_offsets(device: &CubeDevice, tile_counts: &CubeTensor, lists: usize) -> (CubeTensor, usize) {
-    let offsets = buffer(device, lists + 1, DType::U32);
-    if lists == 0 {
-        return (offsets, 0);
+/// The output buffers of compositing, for all views.
+fn composited_buffers(device: &CubeDevice, layout: &Layout) -> Composited {
+    let pixels = layout.views * layout.pixels();
+    let stride = layout.channels + PACKED_EXTRA_CHANNELS;
+    let images_shape = Shape::new([layout.views, layout.height as usize, layout.width as usize, stride]);
+    Composited {
+        images: empty_device_dtype(device.client(), device.clone(), images_shape, DType::F32),
+        transmittance: buffer(device, pixels, DType::F32),
+        list_ends: buffer(device, pixels, DType::U32),
     }
-    let total = buffer(device, 1, DType::U32);
-    scan::scan_kernel::launch(
-        &device.client(),
-        CubeCount::new_single(),
-        CubeDim::new_1d(SCAN_THREADS),
-        arg(tile_counts),
-        arg(&offsets),
-        arg(&total),
-        lists as u32,
-        (lists as u32).div_ceil(SCAN_THREADS),
-    );
-    let data = into_data_sync(total);
-    let intersections = data.iter::<u32>().next().expect("one total") as usize;
-    (offsets, intersections)
 }
 
-/// Blends every pixel's sorted list front to back.
-fn composite_pixels(
+/// Blends every pixel of a batch's views front to back.
+fn composite_batch(
     device: &CubeDevice,
     layout: &Layout,
     inputs: &SplatInputs<CubeBackend>,
     footprints: &Footprints,
-    ids: &CubeTensor,
-    offsets: &CubeTensor,
-) -> Composited {
+    batch: &ListBatch,
+    out: &Composited,
+) {
     let client = device.client();
-    let (views, channels) = (layout.views, layout.channels);
-    let pixels = views * layout.pixels();
-    let images_shape =
-        Shape::new([views, layout.height as usize, layout.width as usize, channels + PACKED_EXTRA_CHANNELS]);
-    let composited = Composited {
-        images: empty_device_dtype(client.clone(), device.clone(), images_shape, DType::F32),
-        transmittance: buffer(device, pixels, DType::F32),
-        list_ends: buffer(device, pixels, DType::U32),
-    };
-    if pixels == 0 {
-        return composited;
-    }
-    let (cubes, dim) = pixel_launch(layout);
+    let (cubes, dim) = pixel_launch(layout, batch.views);
     composite::composite_kernel::launch(
         &client,
         cubes,
         dim,
-        arg(ids),
-        arg(offsets),
+        arg(&batch.ids),
+        arg(&batch.ranges),
         arg(&footprints.means2d),
         arg(&footprints.conics),
         arg(&footprints.depths),
         arg(&inputs.opacities),
         arg(&inputs.colors),
         arg(&inputs.background),
-        arg(&composited.images),
-        arg(&composited.transmittance),
-        arg(&composited.list_ends),
+        arg(&out.images),
+        arg(&out.transmittance),
+        arg(&out.list_ends),
         layout.count as u32,
+        batch.first_view as u32,
         layout.per_view as u32,
         layout.width,
         layout.height,
         layout.tile_size,
         layout.tiles_x,
         layout.tiles_y,
-        channels,
+        layout.channels,
     );
-    composited
 }
 
-/// The forward pass: projection and tile counts, list offsets, sorted tile lists, compositing; returns the
-/// outputs and what the backward pass needs.
+/// Sorts the tile lists batch by batch (see `lists`) and composites each batch as soon as it is sorted, so
+/// only one batch's intersection buffers are alive at a time besides the sorted ids kept for the backward.
+fn sort_and_composite(
+    device: &CubeDevice,
+    layout: &Layout,
+    settings: &RasterSettings,
+    inputs: &SplatInputs<CubeBackend>,
+    footprints: &Footprints,
+    out: &Composited,
+) -> Vec<ListBatch> {
+    if layout.views == 0 || layout.pixels() == 0 {
+        return Vec::new();
+    }
+    let pair_offsets = scan::exclusive_scan(device, &footprints.pair_counts, layout.pairs());
+    let starts = lists::view_starts(device, layout, &pair_offsets);
+    let per_view = lists::per_view_counts(&starts);
+    let cap = lists::max_entries(lists::buffer_cap(&device.client(), settings));
+    let f = FootprintBuffers {
+        means2d: &footprints.means2d,
+        radii: &footprints.radii,
+        reasons: &footprints.reasons,
+        depths: &footprints.depths,
+        pair_offsets: &pair_offsets,
+    };
+    lists::plan_batches(&per_view, cap)
+        .into_iter()
+        .map(|views| {
+            let entries: u64 = per_view[views.clone()].iter().sum();
+            let base = starts[views.start];
+            let batch = lists::sorted_batch(device, layout, &f, views, base, entries as usize);
+            composite_batch(device, layout, inputs, footprints, &batch, out);
+            batch
+        })
+        .collect()
+}
+
+/// The forward pass: projection and tile counts, pair offsets, sorted tile lists and compositing batch by
+/// batch; returns the outputs and what the backward pass needs.
 fn forward_saved(
     inputs: SplatInputs<CubeBackend>,
     settings: &RasterSettings,
@@ -456,24 +421,10 @@ fn forward_saved(
 ) -> (SplatOutputs<CubeBackend>, CubeForward) {
     let layout = layout(&inputs, settings, size);
     let device = inputs.means.device.clone();
-    let client = device.client();
     let inputs = contiguous_inputs(inputs);
     let footprints = project_and_count(&device, &layout, &inputs);
-    let lists = layout.views * layout.tiles();
-    let (offsets, intersections) = list_offsets(&device, &footprints.tile_counts, lists);
-    let f = &footprints;
-    let ids = sorted_tile_lists(
-        &client,
-        &device,
-        &layout,
-        &f.means2d,
-        &f.radii,
-        &f.reasons,
-        &f.depths,
-        &offsets,
-        intersections,
-    );
-    let composited = composite_pixels(&device, &layout, &inputs, &footprints, &ids, &offsets);
+    let composited = composited_buffers(&device, &layout);
+    let batches = sort_and_composite(&device, &layout, settings, &inputs, &footprints, &composited);
     let SplatInputs { means, quats, scales, opacities, colors, background, viewmats, intrinsics } = inputs;
     let Footprints { means2d, conics, depths, reasons, stats, .. } = footprints;
     let saved = CubeForward {
@@ -490,8 +441,7 @@ fn forward_saved(
         conics,
         depths,
         reasons,
-        offsets,
-        ids,
+        batches,
         images: composited.images.clone(),
         transmittance: composited.transmittance,
         list_ends: composited.list_ends,
@@ -504,6 +454,56 @@ fn gradient(device: &CubeDevice, shape: Shape) -> CubeTensor {
     zeros_client(device.client(), device.clone(), shape, DType::F32)
 }
 
+/// Adds the compositing gradients of a batch's views into `accumulated` (layout: `composite_backward_kernel`).
+fn composite_backward_batch(
+    saved: &CubeForward,
+    batch: &ListBatch,
+    grad_images: &CubeTensor,
+    accumulated: &CubeTensor,
+    native: bool,
+) {
+    let layout = &saved.layout;
+    let client = saved.means.client.clone();
+    let pairs = layout.pairs();
+    let opacity_len = if layout.per_view { pairs } else { layout.count };
+    let (cubes, dim) = pixel_launch(layout, batch.views);
+    let launch = if native {
+        composite_backward::composite_backward_kernel::launch::<NativeAdd>
+    } else {
+        composite_backward::composite_backward_kernel::launch::<SwapAdd>
+    };
+    launch(
+        &client,
+        cubes,
+        dim,
+        arg(&batch.ids),
+        arg(&batch.ranges),
+        arg(&saved.means2d),
+        arg(&saved.conics),
+        arg(&saved.depths),
+        arg(&saved.opacities),
+        arg(&saved.colors),
+        arg(&saved.background),
+        arg(&saved.images),
+        arg(&saved.transmittance),
+        arg(&saved.list_ends),
+        arg(grad_images),
+        arg(accumulated),
+        layout.count as u32,
+        batch.first_view as u32,
+        layout.views as u32,
+        (6 * pairs) as u32,
+        (6 * pairs + opacity_len) as u32,
+        layout.per_view as u32,
+        layout.width,
+        layout.height,
+        layout.tile_size,
+        layout.tiles_x,
+        layout.tiles_y,
+        layout.channels,
+    );
+}
+
 fn backward(saved: &CubeForward, grad_images: FloatTensor<CubeBackend>) -> SplatGrads<CubeBackend> {
     let layout = saved.layout;
     let device = saved.means.device.clone();
@@ -513,7 +513,6 @@ fn backward(saved: &CubeForward, grad_images: FloatTensor<CubeBackend>) -> Splat
     let pixels = views * layout.pixels();
     let grad_images = contiguous(grad_images, "image gradient");
     let (count32, views32) = (count as u32, views as u32);
-    let per_view = layout.per_view as u32;
 
     // One buffer for everything the compositing backward adds into (see `composite_backward_kernel`).
     let opacity_len = if layout.per_view { views * count } else { count };
@@ -524,41 +523,10 @@ fn backward(saved: &CubeForward, grad_images: FloatTensor<CubeBackend>) -> Splat
     let grad_scales = gradient(&device, Shape::new([count, 3]));
 
     if pixels > 0 && count > 0 {
-        let (cubes, dim) = pixel_launch(&layout);
-        let launch = if native_float_atomics(&client) {
-            composite_backward::composite_backward_kernel::launch::<NativeAdd>
-        } else {
-            composite_backward::composite_backward_kernel::launch::<SwapAdd>
-        };
-        launch(
-            &client,
-            cubes,
-            dim,
-            arg(&saved.ids),
-            arg(&saved.offsets),
-            arg(&saved.means2d),
-            arg(&saved.conics),
-            arg(&saved.depths),
-            arg(&saved.opacities),
-            arg(&saved.colors),
-            arg(&saved.background),
-            arg(&saved.images),
-            arg(&saved.transmittance),
-            arg(&saved.list_ends),
-            arg(&grad_images),
-            arg(&accumulated),
-            count32,
-            views32,
-            opacity_offset as u32,
-            color_offset as u32,
-            per_view,
-            layout.width,
-            layout.height,
-            layout.tile_size,
-            layout.tiles_x,
-            layout.tiles_y,
-            channels,
-        );
+        let native = native_float_atomics(&client);
+        for batch in &saved.batches {
+            composite_backward_batch(saved, batch, &grad_images, &accumulated, native);
+        }
         let (cubes, dim) = element_launch(&client, count);
         project_backward::project_backward_kernel::launch(
             &client,
