@@ -52,10 +52,16 @@ mkdir -p "$out"
 here=$(cd "$(dirname "$0")" && pwd)
 deadline=$(($(date +%s) + budget))
 
-# Seconds a part may take: its share of the budget, and never past the deadline (less 10 s for the table).
+# The parts' shares of the budget, in percent; time a part leaves unused goes to the parts after it.
+shares_left=100
+((reference)) || shares_left=$((shares_left - 30))
+[[ -n $baseline ]] || shares_left=$((shares_left - 18))
+
+# Seconds a part with share $1 may take: that share of what is left for it and the parts after it (less 10 s
+# for the table).
 allowance() {
-    local share=$(($1 * budget / 100)) left=$((deadline - $(date +%s) - 10))
-    echo $((share < left ? share : left))
+    local left=$((deadline - $(date +%s) - 10))
+    echo $((left * $1 / shares_left))
 }
 
 # Runs one part under its allowance; a part that fails or runs out keeps what it wrote and the run goes on.
@@ -64,6 +70,7 @@ part() {
     shift 2
     local limit
     limit=$(allowance "$percent")
+    shares_left=$((shares_left - percent))
     if ((limit < 5)); then
         echo "== $name: skipped, the budget is spent" | tee -a "$out/parts.txt" >&2
         return
@@ -89,13 +96,13 @@ if [[ $scale == full ]]; then
 else
     longest=(--longest-frames 2..4 --longest-precisions f32)
 fi
-compute() { "$1" bench compute --device "$device" --scale "$scale" --repeat 3 --warmup 1 --out "$2" "${@:3}"; }
+common=(bench compute --device "$device" --scale "$scale" --repeat 3 --warmup 1)
 
-part ours-raster 6 compute "$dggt" "$out/ours-raster" --workloads raster
-part ours-forward 22 compute "$dggt" "$out/ours-forward" --workloads forward --precisions f32,f16
-part ours-train-step 10 compute "$dggt" "$out/ours-train-step" --workloads train-step
-part ours-longest 14 compute "$dggt" "$out/ours-longest" --workloads longest --longest-budget-s "$(allowance 10)" \
-    "${longest[@]}"
+part ours-raster 6 "$dggt" "${common[@]}" --out "$out/ours-raster" --workloads raster
+part ours-forward 22 "$dggt" "${common[@]}" --out "$out/ours-forward" --workloads forward --precisions f32,f16,bf16
+part ours-train-step 10 "$dggt" "${common[@]}" --out "$out/ours-train-step" --workloads train-step
+part ours-longest 14 "$dggt" "${common[@]}" --out "$out/ours-longest" --workloads longest \
+    --longest-budget-s "$(allowance 9)" "${longest[@]}"
 
 if ((reference)); then
     reference_args=(--out "$out/reference.json" --gsplat)
@@ -106,7 +113,7 @@ if ((reference)); then
 fi
 
 if [[ -n $baseline ]]; then
-    part baseline 18 compute "$baseline" "$out/baseline" --workloads raster,forward --precisions f32
+    part baseline 18 "$baseline" "${common[@]}" --out "$out/baseline" --workloads raster,forward --precisions f32
 fi
 
 table_args=()

@@ -86,7 +86,6 @@ pub fn markdown(ours: &RecordFile, baseline: Option<&RecordFile>, references: &[
     let baseline_rule = if baseline.is_some() { "---:|---:|" } else { "" };
     text.push_str(&format!("| work | dggt-rs | MiB |{baseline_headers} reference | MiB | advantage | notes |\n"));
     text.push_str(&format!("|---|---:|---:|{baseline_rule}---|---:|---:|---|\n"));
-    let find = |records: &[&Record], key: &str| records.iter().find(|r| r.key == key).copied();
     let baseline_records: Vec<&Record> = baseline.map(|file| file.records.iter().collect()).unwrap_or_default();
     for record in &ours.records {
         let before = baseline.map(|_| find(&baseline_records, &record.key));
@@ -108,6 +107,10 @@ pub fn markdown(ours: &RecordFile, baseline: Option<&RecordFile>, references: &[
 
 /// One row: ours, then (when a baseline file is given) the baseline's figure of the key and our gain over it,
 /// then the reference's.
+fn find<'a>(records: &[&'a Record], key: &str) -> Option<&'a Record> {
+    records.iter().find(|r| r.key == key).copied()
+}
+
 fn row(record: &Record, baseline: Option<Option<&Record>>, reference: Option<&Record>) -> String {
     let baseline_cells = match baseline {
         None => String::new(),
