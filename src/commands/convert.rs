@@ -7,7 +7,7 @@ use std::sync::Mutex;
 use std::time::Duration;
 
 use anyhow::{Context, Result};
-use dggt_convert::batch::{self, FailurePolicy, Outcome, Progress, ProgressUnit, SegmentJob};
+use dggt_convert::batch::{self, ExistingScenes, FailurePolicy, Outcome, Progress, ProgressUnit, SegmentJob};
 use dggt_convert::nuscenes::{FrameRate, NuScenesVersion};
 use dggt_convert::sky;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
@@ -121,10 +121,27 @@ pub struct Args {
     /// Sky masks (`lidar`: approximate, from the projected lidar returns; recorded in `sky_masks/SOURCE.txt`).
     #[arg(long, value_enum, default_value = "none")]
     sky_masks: SkyMasks,
+    /// Convert the chosen scenes again even when their folders exist, replacing each once its new version is
+    /// complete. Without it, a scene finished from the same source with the same options is skipped and any
+    /// other folder in its place is refused.
+    #[arg(long)]
+    overwrite: bool,
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let Args { dataset, input, out, scenes, cameras, workers, keep_going, version, nuscenes_rate, sky_masks } = args;
+    let Args {
+        dataset,
+        input,
+        out,
+        scenes,
+        cameras,
+        workers,
+        keep_going,
+        version,
+        nuscenes_rate,
+        sky_masks,
+        overwrite,
+    } = args;
     let dataset = dataset.converter(version, nuscenes_rate);
     let names = dataset.variant().camera_names();
     let cameras = cameras.unwrap_or_else(|| (0..names.len()).collect());
@@ -141,7 +158,8 @@ pub fn run(args: Args) -> Result<()> {
         SkyMasks::Lidar => sky::SkyMasks::Lidar,
     };
     let options = batch::ConvertOptions { cameras, sky_masks };
-    let outcomes = batch::convert_segments(dataset, &jobs, &options, workers, policy, &bars)?;
+    let existing = if overwrite { ExistingScenes::Replace } else { ExistingScenes::Keep };
+    let outcomes = batch::convert_segments(dataset, &jobs, &options, workers, policy, existing, &bars)?;
     bars.overall.finish_and_clear();
     report(&jobs, &outcomes, started.elapsed())
 }
@@ -149,7 +167,7 @@ pub fn run(args: Args) -> Result<()> {
 /// Prints what became of each segment; fails when any segment did.
 fn report(jobs: &[SegmentJob], outcomes: &[Outcome], elapsed: Duration) -> Result<()> {
     let mut failures = Vec::new();
-    let (mut converted, mut skipped, mut frames) = (0, 0, 0);
+    let (mut converted, mut skipped, mut refused, mut frames) = (0, 0, 0, 0);
     for (job, outcome) in jobs.iter().zip(outcomes) {
         match outcome {
             Outcome::Converted(summary) => {
@@ -157,14 +175,23 @@ fn report(jobs: &[SegmentJob], outcomes: &[Outcome], elapsed: Duration) -> Resul
                 frames += summary.frames;
             }
             Outcome::AlreadyDone(_) => skipped += 1,
+            Outcome::Refused(refusal) => {
+                refused += 1;
+                failures.push(format!(
+                    "{}: {refusal}; convert with the earlier options, into another --out, or pass --overwrite to \
+                     convert it again",
+                    job.scene.display()
+                ));
+            }
             Outcome::Failed(error) => failures.push(format!("{}: {error}", job.describe())),
             Outcome::NotStarted => {}
         }
     }
     println!(
-        "converted {converted} segments ({frames} frames) in {:.1} s; {skipped} already done; {} failed",
+        "converted {converted} segments ({frames} frames) in {:.1} s; {skipped} already done; {refused} refused; {} \
+         failed",
         elapsed.as_secs_f64(),
-        failures.len()
+        failures.len() - refused
     );
     if failures.is_empty() {
         return Ok(());
@@ -172,7 +199,7 @@ fn report(jobs: &[SegmentJob], outcomes: &[Outcome], elapsed: Duration) -> Resul
     for failure in &failures {
         eprintln!("failed: {failure}");
     }
-    anyhow::bail!("{} of {} segments failed", failures.len(), jobs.len())
+    anyhow::bail!("{} of {} segments failed or were refused", failures.len(), jobs.len())
 }
 
 /// An overall bar (segments) and one bar per running segment (bytes read).
