@@ -219,6 +219,16 @@ fn reconstruct_writes_refined_renders_beside_the_unrefined() {
     let refined = read_rgb_png(&out.join("renders_refined").join(Path::new(render).file_name().unwrap())).unwrap().1;
     assert_eq!(refined, refine_alone(Some(nearest[0]), "with-reference"));
     assert_ne!(refined, refine_alone(None, "single-view"), "the reference view made no difference");
+
+    // A second run into a used folder is refused before any work; `--overwrite` replaces the earlier output.
+    let folder = work.path().join("single-view");
+    let mut again = vec!["refine", "images", "--model", path(&base), "--checkpoint", path(&checkpoint)];
+    again.extend(["--prompt-ids", "5,7,9", "--image", path(&out.join(render)), "--out", path(&folder)]);
+    let refused = dggt(&again);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success() && stderr.contains("is not empty") && stderr.contains("--overwrite"), "{stderr}");
+    assert!(folder.join("refined.json").is_file(), "refine images records what it refined");
+    succeeded(&dggt(&[&again[..], &["--overwrite"]].concat()));
 }
 
 fn stdout(out: &Output) -> String {
