@@ -24,8 +24,8 @@ pub struct Args {
     /// The device to train on (`cpu`, `wgpu`, `cuda:0`).
     #[arg(long, default_value = "cpu")]
     device: DeviceSpec,
-    /// Override `run.steps`.
-    #[arg(long)]
+    /// Override `run.steps` (at least 1).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     steps: Option<u64>,
     /// Override `run.out_dir`.
     #[arg(long)]

@@ -20,8 +20,8 @@ pub struct Args {
     /// Devices to train on, overriding `run.devices` (e.g. `cpu`, `wgpu`, `cuda:0,cuda:1`).
     #[arg(long)]
     device: Option<DeviceList>,
-    /// Override `run.steps`.
-    #[arg(long)]
+    /// Override `run.steps` (at least 1).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     steps: Option<u64>,
     /// Override `run.out_dir`.
     #[arg(long)]

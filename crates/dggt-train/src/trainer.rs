@@ -571,6 +571,7 @@ fn index_datasets(config: &TrainConfig) -> Result<(DatasetSampling, Vec<IndexedS
     };
     let mut index = DatasetIndex::load_or_build(&specs, config.run.seed, &cache, &show)?;
     bar.finish_and_clear();
+    check_single_scene(config, &index)?;
     index.exclude_shorter_than(config.sampler.window);
     if !index.excluded.is_empty() {
         tracing::warn!(excluded = index.excluded.len(), indexed = index.scenes.len(), "scenes excluded (see the log)");
@@ -602,6 +603,34 @@ fn index_datasets(config: &TrainConfig) -> Result<(DatasetSampling, Vec<IndexedS
     let sampling =
         DatasetSampling { index: Arc::new(index), mix, sampler: config.sampler.clone(), seed: config.run.seed };
     Ok((sampling, validation_scenes))
+}
+
+/// A run on one scene (`data.scene`) uses all of the frames `data.frames` names: a range reaching outside the
+/// scene, or a scene that cannot be indexed, is an error rather than a quietly smaller run. (A dataset's
+/// `frames` is clipped to each of its scenes, as documented.)
+fn check_single_scene(config: &TrainConfig, index: &DatasetIndex) -> Result<(), TrainError> {
+    if !config.data.datasets.is_empty() {
+        return Ok(());
+    }
+    if let Some(excluded) = index.excluded.first() {
+        return Err(TrainError::Invalid {
+            what: format!("data.scene {}", excluded.root.display()),
+            detail: excluded.reason.clone(),
+        });
+    }
+    let (Some([start, end]), Some(scene)) = (config.data.frames, index.scenes.first()) else { return Ok(()) };
+    // The index clips the range to the scene's frames: each bound it moved lies outside them.
+    let (first, last) = (scene.frames.start, scene.frames.end);
+    let valid = match (start < first, end > last) {
+        (false, false) => return Ok(()),
+        (true, false) => format!("a start of at least {first}"),
+        (false, true) => format!("an end of at most {last}"),
+        (true, true) => format!("a range within [{first}, {last})"),
+    };
+    Err(TrainError::Setting {
+        setting: "data.frames",
+        detail: format!("[{start}, {end}) reaches outside the frames of {}: give {valid}", scene.root.display()),
+    })
 }
 
 /// What one sample of a step measured.
