@@ -182,7 +182,7 @@ fn convert_nuscenes_numbers_the_scene_table_and_names_a_failed_scene() {
     assert!(again.status.success() && text(&again).contains("1 already done"), "{}", text(&again));
     let without_sky = dggt(&[&args[..], &["--scenes", "0"]].concat());
     assert!(!without_sky.status.success(), "{}", text(&without_sky));
-    assert!(text(&without_sky).contains("another sky masks: lidar (this run: none)"), "{}", text(&without_sky));
+    assert!(text(&without_sky).contains("with sky masks lidar (this run: none)"), "{}", text(&without_sky));
     let missing = dggt(&[
         "convert",
         "nuscenes",
@@ -220,9 +220,9 @@ fn convert_skips_a_scene_only_when_its_marker_records_the_same_conversion() {
     std::fs::copy(&record, &copy).unwrap();
     let log = real_data().join("av2/sensor/val/7fab2350-7eaf-3b7e-a39d-6937a4c1bede");
     let refusals = [
-        (convert("waymo", &record, &out, &[]), "another cameras: [0] (this run: [0, 1, 2, 3, 4])"),
-        (convert("waymo", &copy, &out, &["--cameras", "0"]), "another source"),
-        (convert("argoverse2", &log, &out, &["--cameras", "0"]), "another source"),
+        (convert("waymo", &record, &out, &[]), "with cameras [0] (this run: [0, 1, 2, 3, 4])"),
+        (convert("waymo", &copy, &out, &["--cameras", "0"]), "with source "),
+        (convert("argoverse2", &log, &out, &["--cameras", "0"]), "with source "),
     ];
     for (refused, reason) in refusals {
         let report = text(&refused);

@@ -164,10 +164,10 @@ pub fn run(args: Args) -> Result<()> {
     report(&jobs, &outcomes, started.elapsed())
 }
 
-/// Prints what became of each segment; fails when any segment did.
+/// Prints what became of each segment; fails when any segment failed or was refused.
 fn report(jobs: &[SegmentJob], outcomes: &[Outcome], elapsed: Duration) -> Result<()> {
-    let mut failures = Vec::new();
-    let (mut converted, mut skipped, mut refused, mut frames) = (0, 0, 0, 0);
+    let (mut failures, mut refusals) = (Vec::new(), Vec::new());
+    let (mut converted, mut skipped, mut frames) = (0, 0, 0);
     for (job, outcome) in jobs.iter().zip(outcomes) {
         match outcome {
             Outcome::Converted(summary) => {
@@ -175,31 +175,30 @@ fn report(jobs: &[SegmentJob], outcomes: &[Outcome], elapsed: Duration) -> Resul
                 frames += summary.frames;
             }
             Outcome::AlreadyDone(_) => skipped += 1,
-            Outcome::Refused(refusal) => {
-                refused += 1;
-                failures.push(format!(
-                    "{}: {refusal}; convert with the earlier options, into another --out, or pass --overwrite to \
-                     convert it again",
-                    job.scene.display()
-                ));
-            }
+            Outcome::Refused(refusal) => refusals.push(format!(
+                "{}: {refusal}; convert with the earlier options, into another --out, or pass --overwrite to convert \
+                 it again",
+                job.scene.display()
+            )),
             Outcome::Failed(error) => failures.push(format!("{}: {error}", job.describe())),
             Outcome::NotStarted => {}
         }
     }
     println!(
-        "converted {converted} segments ({frames} frames) in {:.1} s; {skipped} already done; {refused} refused; {} \
-         failed",
+        "converted {converted} segments ({frames} frames) in {:.1} s; {skipped} already done; {} refused; {} failed",
         elapsed.as_secs_f64(),
-        failures.len() - refused
+        refusals.len(),
+        failures.len()
     );
-    if failures.is_empty() {
-        return Ok(());
+    for refusal in &refusals {
+        eprintln!("refused: {refusal}");
     }
     for failure in &failures {
         eprintln!("failed: {failure}");
     }
-    anyhow::bail!("{} of {} segments failed or were refused", failures.len(), jobs.len())
+    let unfinished = refusals.len() + failures.len();
+    anyhow::ensure!(unfinished == 0, "{unfinished} of {} segments failed or were refused", jobs.len());
+    Ok(())
 }
 
 /// An overall bar (segments) and one bar per running segment (bytes read).

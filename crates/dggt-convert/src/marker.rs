@@ -81,7 +81,7 @@ impl fmt::Display for Refusal {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Self::Differs { field, recorded, requested } => {
-                write!(f, "converted earlier with another {field}: {recorded} (this run: {requested})")
+                write!(f, "converted earlier with {field} {recorded} (this run: {requested})")
             }
             Self::Unrecorded => {
                 write!(f, "its {DONE_MARKER} does not record the source and options it was converted with")
