@@ -107,27 +107,7 @@ pub fn load_network(
             warnings
                 .push(format!("{} stores its own architecture; the one from {arch_name} is ignored", dir.display()));
         }
-        let preprocess = match (checkpoint::read_preprocess(&dir)?, preprocess) {
-            (Some(recorded), configured) => {
-                if configured.is_some_and(|c| c != recorded) {
-                    warnings.push(format!(
-                        "{} records the preprocessing it was trained with; the one from {arch_name} is ignored",
-                        dir.display()
-                    ));
-                }
-                Some(recorded)
-            }
-            (None, Some(configured)) => Some(configured),
-            (None, None) => {
-                warnings.push(format!(
-                    "{} does not record the input preprocessing it was trained with (a checkpoint of an older \
-                     version): the default width {} applies unless --width (or a training --config) is given",
-                    dir.display(),
-                    Preprocess::default().target_width
-                ));
-                None
-            }
-        };
+        let preprocess = trained_preprocess(&dir, preprocess, &arch_name, &mut warnings)?;
         let model = checkpoint::load_model(&dir, Dggt::new(&config, device)?)?;
         let info = CheckpointInfo {
             path: dir.clone(),
@@ -160,6 +140,31 @@ pub fn load_network(
         fresh_modules: fresh,
     };
     Ok(LoadedNetwork { model, config, info, preprocess, assembly, warnings })
+}
+
+/// The input preprocessing of the trainer checkpoint `dir`: the one it records, else `configured` (a training
+/// `.toml` given as `--config`), else none (the default applies), with a warning where that is a guess.
+fn trained_preprocess(
+    dir: &Path,
+    configured: Option<Preprocess>,
+    arch_name: &str,
+    warnings: &mut Vec<String>,
+) -> Result<Option<Preprocess>, InferError> {
+    let recorded = checkpoint::read_preprocess(dir)?;
+    match (recorded, configured) {
+        (Some(recorded), Some(configured)) if configured != recorded => warnings.push(format!(
+            "{} records the preprocessing it was trained with; the one from {arch_name} is ignored",
+            dir.display()
+        )),
+        (None, None) => warnings.push(format!(
+            "{} does not record the input preprocessing it was trained with (a checkpoint of an older version): the \
+             default width {} applies unless --width (or a training --config) is given",
+            dir.display(),
+            Preprocess::default().target_width
+        )),
+        _ => {}
+    }
+    Ok(recorded.or(configured))
 }
 
 /// The top-level modules a release-format load left fresh; an error when it matched nothing or left the core
