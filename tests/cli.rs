@@ -61,6 +61,28 @@ fn synth_refuses_to_overwrite_and_validates() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("cameras"));
 }
 
+/// `--steps 0` is refused as the flag's error (not the configuration file's); `run.steps = 0` in a file names
+/// the file and the key.
+#[test]
+fn train_refuses_zero_steps_naming_where_the_zero_comes_from() {
+    let config = format!("{}/configs/tiny-overfit.toml", env!("CARGO_MANIFEST_DIR"));
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let flag = dggt(&["train", "--config", &config, "--steps", "0", "--out", out.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&flag.stderr);
+    assert!(!flag.status.success());
+    assert!(stderr.contains("--steps") && stderr.contains("'0'") && !stderr.contains("tiny-overfit.toml"), "{stderr}");
+    assert!(!out.exists(), "a refused run wrote {}", out.display());
+
+    let text = std::fs::read_to_string(&config).unwrap().replace("steps = 700", "steps = 0");
+    let file = dir.path().join("zero.toml");
+    std::fs::write(&file, text).unwrap();
+    let zero = dggt(&["train", "--config", file.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&zero.stderr);
+    assert!(!zero.status.success());
+    assert!(stderr.contains("zero.toml") && stderr.contains("run.steps: must be at least 1"), "{stderr}");
+}
+
 #[test]
 fn devices_checks_the_default_cpu_backend() {
     let out = dggt(&["devices", "--device", "cpu"]);

@@ -178,8 +178,11 @@ fn convert_nuscenes_numbers_the_scene_table_and_names_a_failed_scene() {
     assert_eq!(std::fs::read_dir(out.join("000/sky_masks")).unwrap().count(), 2 * 6 + 1, "masks and the note");
     assert!(!out.join("001").exists());
 
-    let again = dggt(&[&args[..], &["--scenes", "0", "--version", "v1.0-mini"]].concat());
+    let again = dggt(&[&args[..], &["--scenes", "0", "--version", "v1.0-mini", "--sky-masks", "lidar"]].concat());
     assert!(again.status.success() && text(&again).contains("1 already done"), "{}", text(&again));
+    let without_sky = dggt(&[&args[..], &["--scenes", "0"]].concat());
+    assert!(!without_sky.status.success(), "{}", text(&without_sky));
+    assert!(text(&without_sky).contains("with sky masks lidar (this run: none)"), "{}", text(&without_sky));
     let missing = dggt(&[
         "convert",
         "nuscenes",
@@ -191,4 +194,59 @@ fn convert_nuscenes_numbers_the_scene_table_and_names_a_failed_scene() {
         "v1.0-trainval",
     ]);
     assert!(!missing.status.success() && text(&missing).contains("v1.0-trainval/scene.json"), "{}", text(&missing));
+}
+
+/// A scene is skipped only when its done marker records this run's source and options. Any other conversion
+/// into its place (other cameras, another record, an Argoverse 2 log) is refused naming what differs and the
+/// flag that converts it again, and leaves the scene as it was; a scene folder without a marker is refused in
+/// plain words, with no partial folder left behind.
+#[test]
+fn convert_skips_a_scene_only_when_its_marker_records_the_same_conversion() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("scenes");
+    let record = real_data().join("waymo/one_frame_5cams.tfrecord");
+    let convert = |dataset: &str, input: &Path, out: &Path, extra: &[&str]| {
+        let args = ["convert", dataset, "--input", input.to_str().unwrap(), "--out", out.to_str().unwrap()];
+        dggt(&[&args[..], extra].concat())
+    };
+    let first = convert("waymo", &record, &out, &["--cameras", "0"]);
+    assert!(first.status.success(), "{}", text(&first));
+    let scene = out.join("000");
+    let marker = std::fs::read(scene.join(dggt_convert::DONE_MARKER)).unwrap();
+    let images = || std::fs::read_dir(scene.join("images")).unwrap().count();
+    assert_eq!(images(), 1);
+
+    let copy = dir.path().join("other.tfrecord");
+    std::fs::copy(&record, &copy).unwrap();
+    let log = real_data().join("av2/sensor/val/7fab2350-7eaf-3b7e-a39d-6937a4c1bede");
+    let refusals = [
+        (convert("waymo", &record, &out, &[]), "with cameras [0] (this run: [0, 1, 2, 3, 4])"),
+        (convert("waymo", &copy, &out, &["--cameras", "0"]), "with source "),
+        (convert("argoverse2", &log, &out, &["--cameras", "0"]), "with source "),
+    ];
+    for (refused, reason) in refusals {
+        let report = text(&refused);
+        assert!(!refused.status.success(), "{report}");
+        for expected in [scene.to_str().unwrap(), reason, "--overwrite", "1 refused"] {
+            assert!(report.contains(expected), "{expected} missing from\n{report}");
+        }
+        assert_eq!(std::fs::read(scene.join(dggt_convert::DONE_MARKER)).unwrap(), marker, "{report}");
+        assert_eq!(images(), 1, "{report}");
+    }
+
+    let same = convert("waymo", &record, &out, &["--cameras", "0"]);
+    assert!(same.status.success() && text(&same).contains("1 already done"), "{}", text(&same));
+    let replaced = convert("waymo", &record, &out, &["--overwrite"]);
+    assert!(replaced.status.success() && text(&replaced).contains("converted 1 segments"), "{}", text(&replaced));
+    assert_eq!(images(), 5);
+    assert!(!out.join("000.partial").exists() && !out.join("000.replaced").exists());
+
+    let bare = dir.path().join("bare");
+    std::fs::create_dir_all(bare.join("000")).unwrap();
+    std::fs::write(bare.join("000/notes.txt"), "the user's").unwrap();
+    let unmarked = convert("waymo", &record, &bare, &[]);
+    let report = text(&unmarked);
+    assert!(!unmarked.status.success(), "{report}");
+    assert!(report.contains("has no convert_done.json") && !report.contains("os error"), "{report}");
+    assert!(bare.join("000/notes.txt").is_file() && !bare.join("000.partial").exists(), "{report}");
 }

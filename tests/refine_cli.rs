@@ -103,7 +103,8 @@ fn a_model_folder_without_tokenizer_or_checkpoint_is_named_in_the_error() {
     let image = work.path().join("a.png");
     write_test_image(&image, 0.0);
     let base = dir.join("base");
-    let args = ["refine", "images", "--model", path(&base), "--image", path(&image), "--out", path(work.path())];
+    let refined = work.path().join("refined");
+    let args = ["refine", "images", "--model", path(&base), "--image", path(&image), "--out", path(&refined)];
     let out = dggt(&args);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && stderr.contains("model_difix.pkl") && stderr.contains(path(&base)), "{stderr}");
@@ -219,6 +220,16 @@ fn reconstruct_writes_refined_renders_beside_the_unrefined() {
     let refined = read_rgb_png(&out.join("renders_refined").join(Path::new(render).file_name().unwrap())).unwrap().1;
     assert_eq!(refined, refine_alone(Some(nearest[0]), "with-reference"));
     assert_ne!(refined, refine_alone(None, "single-view"), "the reference view made no difference");
+
+    // A second run into a used folder is refused before any work; `--overwrite` replaces the earlier output.
+    let (folder, image) = (work.path().join("single-view"), out.join(render));
+    let mut again = vec!["refine", "images", "--model", path(&base), "--checkpoint", path(&checkpoint)];
+    again.extend(["--prompt-ids", "5,7,9", "--image", path(&image), "--out", path(&folder)]);
+    let refused = dggt(&again);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success() && stderr.contains("is not empty") && stderr.contains("--overwrite"), "{stderr}");
+    assert!(folder.join("refined.json").is_file(), "refine images records what it refined");
+    succeeded(&dggt(&[&again[..], &["--overwrite"]].concat()));
 }
 
 fn stdout(out: &Output) -> String {

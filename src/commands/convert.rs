@@ -7,7 +7,7 @@ use std::sync::Mutex;
 use std::time::Duration;
 
 use anyhow::{Context, Result};
-use dggt_convert::batch::{self, FailurePolicy, Outcome, Progress, ProgressUnit, SegmentJob};
+use dggt_convert::batch::{self, ExistingScenes, FailurePolicy, Outcome, Progress, ProgressUnit, SegmentJob};
 use dggt_convert::nuscenes::{FrameRate, NuScenesVersion};
 use dggt_convert::sky;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
@@ -121,10 +121,27 @@ pub struct Args {
     /// Sky masks (`lidar`: approximate, from the projected lidar returns; recorded in `sky_masks/SOURCE.txt`).
     #[arg(long, value_enum, default_value = "none")]
     sky_masks: SkyMasks,
+    /// Convert the chosen scenes again even when their folders exist, replacing each once its new version is
+    /// complete. Without it, a scene finished from the same source with the same options is skipped and any
+    /// other folder in its place is refused.
+    #[arg(long)]
+    overwrite: bool,
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let Args { dataset, input, out, scenes, cameras, workers, keep_going, version, nuscenes_rate, sky_masks } = args;
+    let Args {
+        dataset,
+        input,
+        out,
+        scenes,
+        cameras,
+        workers,
+        keep_going,
+        version,
+        nuscenes_rate,
+        sky_masks,
+        overwrite,
+    } = args;
     let dataset = dataset.converter(version, nuscenes_rate);
     let names = dataset.variant().camera_names();
     let cameras = cameras.unwrap_or_else(|| (0..names.len()).collect());
@@ -141,14 +158,15 @@ pub fn run(args: Args) -> Result<()> {
         SkyMasks::Lidar => sky::SkyMasks::Lidar,
     };
     let options = batch::ConvertOptions { cameras, sky_masks };
-    let outcomes = batch::convert_segments(dataset, &jobs, &options, workers, policy, &bars)?;
+    let existing = if overwrite { ExistingScenes::Replace } else { ExistingScenes::Keep };
+    let outcomes = batch::convert_segments(dataset, &jobs, &options, workers, policy, existing, &bars)?;
     bars.overall.finish_and_clear();
     report(&jobs, &outcomes, started.elapsed())
 }
 
-/// Prints what became of each segment; fails when any segment did.
+/// Prints what became of each segment; fails when any segment failed or was refused.
 fn report(jobs: &[SegmentJob], outcomes: &[Outcome], elapsed: Duration) -> Result<()> {
-    let mut failures = Vec::new();
+    let (mut failures, mut refusals) = (Vec::new(), Vec::new());
     let (mut converted, mut skipped, mut frames) = (0, 0, 0);
     for (job, outcome) in jobs.iter().zip(outcomes) {
         match outcome {
@@ -157,22 +175,30 @@ fn report(jobs: &[SegmentJob], outcomes: &[Outcome], elapsed: Duration) -> Resul
                 frames += summary.frames;
             }
             Outcome::AlreadyDone(_) => skipped += 1,
+            Outcome::Refused(refusal) => refusals.push(format!(
+                "{}: {refusal}; convert with the earlier options, into another --out, or pass --overwrite to convert \
+                 it again",
+                job.scene.display()
+            )),
             Outcome::Failed(error) => failures.push(format!("{}: {error}", job.describe())),
             Outcome::NotStarted => {}
         }
     }
     println!(
-        "converted {converted} segments ({frames} frames) in {:.1} s; {skipped} already done; {} failed",
+        "converted {converted} segments ({frames} frames) in {:.1} s; {skipped} already done; {} refused; {} failed",
         elapsed.as_secs_f64(),
+        refusals.len(),
         failures.len()
     );
-    if failures.is_empty() {
-        return Ok(());
+    for refusal in &refusals {
+        eprintln!("refused: {refusal}");
     }
     for failure in &failures {
         eprintln!("failed: {failure}");
     }
-    anyhow::bail!("{} of {} segments failed", failures.len(), jobs.len())
+    let unfinished = refusals.len() + failures.len();
+    anyhow::ensure!(unfinished == 0, "{unfinished} of {} segments failed or were refused", jobs.len());
+    Ok(())
 }
 
 /// An overall bar (segments) and one bar per running segment (bytes read).

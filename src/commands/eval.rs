@@ -13,8 +13,12 @@ use dggt_infer::Architecture;
 use dggt_model::Preset;
 
 use crate::backend::DeviceList;
+use crate::commands::output::{self, OutputKind, OverwriteArg};
 use crate::commands::parse_range;
 use crate::commands::refine::RefineArgs;
+
+/// An evaluation's folder; `eval.json` is written with the report.
+const OUTPUT: OutputKind = OutputKind { command: "eval", signature: "eval.json" };
 
 /// Which protocol `--protocol` names.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -61,7 +65,8 @@ pub struct Args {
     /// AlexNet features for LPIPS [default: the --lpips-weights file, for a full state dict].
     #[arg(long, requires = "lpips_weights")]
     pub alexnet: Option<PathBuf>,
-    /// Network input width, a multiple of 14 [default: the --config training file's, else 518].
+    /// Network input width, a multiple of 14 [default: the width the checkpoint was trained at, else the
+    /// --config training file's, else 518].
     #[arg(long)]
     pub width: Option<u32>,
     /// Frames per chunk of the dense heads (lower uses less memory).
@@ -70,9 +75,11 @@ pub struct Args {
     /// Device: cpu, ndarray, wgpu[:N], cuda[:N].
     #[arg(long, default_value = "cpu")]
     pub device: DeviceList,
-    /// Output folder of eval.json and eval.md.
+    /// Output folder of eval.json and eval.md; must not exist or be empty.
     #[arg(long)]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub overwrite: OverwriteArg,
     /// With `--refine MODEL_DIR`, every render is also scored after the diffusion refiner, side by side.
     #[command(flatten)]
     pub refine: RefineArgs,
@@ -125,6 +132,7 @@ impl Args {
 pub fn run(args: Args) -> Result<()> {
     let device = args.device.single()?;
     let options = args.options()?;
+    output::prepare(&options.out, OUTPUT, args.overwrite.existing())?;
     let report = evaluate(&options, &device)?;
     print!("{}", report.markdown());
     println!("\noutputs: {} and {}", options.out.join("eval.json").display(), options.out.join("eval.md").display());

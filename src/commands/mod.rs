@@ -8,6 +8,7 @@ pub mod convert;
 pub mod devices;
 pub mod eval;
 pub mod inspect;
+pub mod output;
 pub mod parity;
 pub mod reconstruct;
 pub mod refine;

@@ -10,6 +10,7 @@ use dggt_reconstruct::{ReconstructOptions, TimeRequest, reconstruct};
 use dggt_refine::ReferenceView;
 
 use crate::backend::DeviceList;
+use crate::commands::output::{self, OutputKind, OverwriteArg};
 use crate::commands::parse_range;
 use crate::commands::refine::{RefineArgs, RefineJob, load_refiner, refine_files};
 
@@ -43,7 +44,8 @@ pub struct Args {
     /// Render K evenly spaced times per interval between input frames.
     #[arg(long)]
     every: Option<usize>,
-    /// Network input width, a multiple of 14 [default: the --config training file's, else 518].
+    /// Network input width, a multiple of 14 [default: the width the checkpoint was trained at, else the
+    /// --config training file's, else 518].
     #[arg(long)]
     width: Option<u32>,
     /// Frames per chunk of the dense heads (lower uses less memory).
@@ -52,12 +54,17 @@ pub struct Args {
     /// Device: cpu, ndarray, wgpu[:N], cuda[:N].
     #[arg(long, default_value = "cpu")]
     device: DeviceList,
-    /// Output folder.
+    /// Output folder; must not exist or be empty.
     #[arg(long)]
     out: PathBuf,
     #[command(flatten)]
+    overwrite: OverwriteArg,
+    #[command(flatten)]
     refine: RefineArgs,
 }
+
+/// A reconstruction's folder; `summary.json` is written once the reconstruction is complete.
+const OUTPUT: OutputKind = OutputKind { command: "reconstruct", signature: "summary.json" };
 
 /// Where the refined renders go (the unrefined ones stay in `renders/`).
 pub const REFINED_RENDERS: &str = "renders_refined";
@@ -66,6 +73,7 @@ pub const REFINED_RENDERS: &str = "renders_refined";
 /// render into `renders_refined/` under the same name (attending to its nearest input view in `images/` with
 /// `--refine-reference nearest-input`).
 pub fn run(args: Args) -> Result<()> {
+    output::prepare(&args.out, OUTPUT, args.overwrite.existing())?;
     let device = args.device.single()?;
     let refine = args.refine.spec()?;
     let refiner = refine.as_ref().map(|spec| load_refiner(spec, &device)).transpose()?;

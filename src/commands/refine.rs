@@ -15,6 +15,7 @@ use dggt_refine::{
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::backend::DeviceList;
+use crate::commands::output::{self, OutputKind, OverwriteArg};
 
 /// The single-step diffusion refiner (Difix on sd-turbo): convert its checkpoint, refine images.
 #[derive(Debug, clap::Args)]
@@ -40,7 +41,8 @@ struct ConvertArgs {
     out: PathBuf,
 }
 
-/// Refine image files, each written under the same name into the output folder.
+/// Refine image files, each written under the same name into the output folder, with `refined.json` saying
+/// what was refined.
 #[derive(Debug, clap::Args)]
 struct ImagesArgs {
     /// The base model folder (diffusers layout: vae/, unet/, text_encoder/, scheduler/, tokenizer/).
@@ -71,10 +73,15 @@ struct ImagesArgs {
     /// Device: cpu, ndarray, wgpu[:N], cuda[:N].
     #[arg(long, default_value = "cpu")]
     device: DeviceList,
-    /// Output folder.
+    /// Output folder; must not exist or be empty.
     #[arg(long)]
     out: PathBuf,
+    #[command(flatten)]
+    overwrite: OverwriteArg,
 }
+
+/// A folder of refined images; `refined.json` (what was refined, with which refiner) is written last.
+const REFINED_IMAGES: OutputKind = OutputKind { command: "refine images", signature: "refined.json" };
 
 pub fn run(args: Args) -> Result<()> {
     match args.action {
@@ -106,6 +113,7 @@ fn images(args: ImagesArgs) -> Result<()> {
         args.references.len(),
         args.images.len()
     );
+    output::prepare(&args.out, REFINED_IMAGES, args.overwrite.existing())?;
     let device = args.device.single()?;
     let latent = if args.sample_latent { Latent::Sampled { seed: args.seed } } else { Latent::PosteriorMean };
     let mut spec = refiner_spec(&args.model, args.checkpoint.as_deref(), args.prompt_ids, latent)?;
@@ -122,6 +130,15 @@ fn images(args: ImagesArgs) -> Result<()> {
         })
         .collect();
     refine_files(&refiner, &jobs, latent, &device)?;
+    let record = serde_json::json!({
+        "refiner": spec.describe(),
+        "images": jobs.iter().map(|job| serde_json::json!({
+            "image": job.image, "reference": job.reference, "refined": job.out,
+        })).collect::<Vec<_>>(),
+    });
+    let path = args.out.join(REFINED_IMAGES.signature);
+    std::fs::write(&path, serde_json::to_string_pretty(&record)?)
+        .with_context(|| format!("writing {}", path.display()))?;
     println!("{} refined images in {}", jobs.len(), args.out.display());
     Ok(())
 }

@@ -5,10 +5,11 @@
 use std::path::PathBuf;
 
 use anyhow::Result;
-use dggt_refine_train::{RefineTrainConfig, RefineTrainer};
+use dggt_refine_train::{RefineTrainConfig, RefineTrainError, RefineTrainer};
 use dggt_train::Start;
 
 use crate::backend::DeviceSpec;
+use crate::commands::train;
 
 /// Train the single-step diffusion refiner (Difix) on pairs of frames with artifacts and their ground truth.
 #[derive(Debug, clap::Args)]
@@ -16,14 +17,15 @@ pub struct Args {
     /// The configuration file.
     #[arg(long)]
     config: PathBuf,
-    /// Continue from the newest checkpoint in the run's output folder.
+    /// Continue from the newest checkpoint in the run's output folder. Without it, a folder that already holds
+    /// a run (checkpoints, metrics) is refused.
     #[arg(long)]
     resume: bool,
     /// The device to train on (`cpu`, `wgpu`, `cuda:0`).
     #[arg(long, default_value = "cpu")]
     device: DeviceSpec,
-    /// Override `run.steps`.
-    #[arg(long)]
+    /// Override `run.steps` (at least 1).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     steps: Option<u64>,
     /// Override `run.out_dir`.
     #[arg(long)]
@@ -43,7 +45,10 @@ pub fn run(args: Args) -> Result<()> {
     }
     config.validate().map_err(|e| anyhow::anyhow!("{}: {e}", args.config.display()))?;
     let start = if args.resume { Start::Resume } else { Start::Fresh };
-    let mut trainer = RefineTrainer::new(config, args.device.device()?, start)?;
+    let mut trainer = RefineTrainer::new(config, args.device.device()?, start).map_err(|error| match error {
+        RefineTrainError::Train(error) => train::with_flags(error),
+        other => other.into(),
+    })?;
     let first_step = trainer.state().step;
     let before = trainer.validate()?;
     let after = trainer.run(std::io::IsTerminal::is_terminal(&std::io::stderr()))?;

@@ -4,12 +4,19 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 
+use crate::commands::output::{self, OutputKind, OverwriteArg};
+
+/// A scene export written by `dggt synth`.
+const OUTPUT: OutputKind = OutputKind { command: "synth", signature: "synth.json" };
+
 /// Write a procedural driving scene (ray-cast ground truth) in the scene-export layout.
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Output folder; must not exist or be empty.
     #[arg(long)]
     out: PathBuf,
+    #[command(flatten)]
+    overwrite: OverwriteArg,
     #[arg(long, default_value_t = 0)]
     seed: u64,
     #[arg(long, default_value_t = 20)]
@@ -30,9 +37,8 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let Args { out, seed, frames, cameras, width, height, layout, lidar } = args;
-    let is_non_empty = out.read_dir().map(|mut entries| entries.next().is_some()).unwrap_or(false);
-    anyhow::ensure!(!is_non_empty, "{} is not empty; choose a new folder", out.display());
+    let Args { out, overwrite, seed, frames, cameras, width, height, layout, lidar } = args;
+    output::prepare(&out, OUTPUT, overwrite.existing())?;
     let config = dggt_synth::SynthConfig { seed, frames, cameras, width, height };
     let started = std::time::Instant::now();
     let summary = dggt_synth::synthesize(

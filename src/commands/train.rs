@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use anyhow::Result;
-use dggt_train::{RunOptions, Start, TrainConfig, Trainer};
+use dggt_train::{RunOptions, Start, TrainConfig, TrainError, Trainer};
 
 use crate::backend::DeviceList;
 
@@ -13,14 +13,15 @@ pub struct Args {
     /// The configuration file.
     #[arg(long)]
     config: PathBuf,
-    /// Continue from the newest checkpoint in the run's output folder.
+    /// Continue from the newest checkpoint in the run's output folder. Without it, a folder that already holds
+    /// a run (checkpoints, metrics, validation renders) is refused.
     #[arg(long)]
     resume: bool,
     /// Devices to train on, overriding `run.devices` (e.g. `cpu`, `wgpu`, `cuda:0,cuda:1`).
     #[arg(long)]
     device: Option<DeviceList>,
-    /// Override `run.steps`.
-    #[arg(long)]
+    /// Override `run.steps` (at least 1).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     steps: Option<u64>,
     /// Override `run.out_dir`.
     #[arg(long)]
@@ -47,7 +48,7 @@ pub fn run(args: Args) -> Result<()> {
             .map_err(|e| anyhow::anyhow!("{}: run.devices: {e}", path.display()))?,
     };
     let start = if args.resume { Start::Resume } else { Start::Fresh };
-    let mut trainer = Trainer::new(config, devices.devices()?, start)?;
+    let mut trainer = Trainer::new(config, devices.devices()?, start).map_err(with_flags)?;
     let params = burn::module::Module::num_params(trainer.model());
     tracing::info!(
         "{} parameters, starting at step {} of {}",
@@ -103,4 +104,16 @@ pub fn run(args: Args) -> Result<()> {
         println!("checkpoint: {}", dir.display());
     }
     Ok(())
+}
+
+/// A refusal to start a run (of `train` or `refine-train`), with the flags that resolve it; other errors as
+/// they are.
+pub fn with_flags(error: TrainError) -> anyhow::Error {
+    match error {
+        TrainError::RunExists { .. } => {
+            anyhow::anyhow!("{error}: continue it with --resume, or train into another folder with --out DIR")
+        }
+        TrainError::ArchitectureChanged { .. } => anyhow::anyhow!("{error} (--out DIR)"),
+        other => other.into(),
+    }
 }

@@ -2,9 +2,11 @@
 //! folder, with finished scenes skipped.
 //!
 //! Segment `i` (position in the sorted input list, as in drivestudio's numbered train lists) becomes
-//! `<out>/{i:03}/`. It is written into `<out>/{i:03}.partial/`, gets its done marker last, and is then renamed
-//! into place, so `<out>/{i:03}/` only ever holds a finished scene: a re-run skips it, and restarts an
-//! interrupted one from scratch.
+//! `<out>/{i:03}/`. It is written into `<out>/{i:03}.partial/`, gets its done marker last (recording what it
+//! was converted from and with, [`Provenance`]), and is then renamed into place, so `<out>/{i:03}/` only ever
+//! holds a finished scene. A re-run skips a scene whose marker records the same conversion, refuses any other
+//! folder in its place unless told to replace it ([`ExistingScenes`]), and restarts an interrupted scene from
+//! scratch; a failed scene leaves no partial folder behind.
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -12,7 +14,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use rayon::prelude::*;
 
 use crate::error::{ConvertError, Result};
-use crate::marker::{DoneMarker, read_done};
+use crate::marker::{DoneMarker, Found, Provenance, Refusal, examine, read_done, write_done};
 use crate::nuscenes::{FrameRate, NuScenesOptions, NuScenesVersion, Tables};
 use crate::sky::SkyMasks;
 use crate::waymo::{WaymoOptions, convert_segment};
@@ -45,6 +47,15 @@ pub struct ConvertOptions {
 }
 
 impl Dataset {
+    /// The dataset and its options, as a done marker records them.
+    pub fn describe(self) -> String {
+        match self {
+            Self::Waymo => "waymo".into(),
+            Self::Argoverse2 => "argoverse2".into(),
+            Self::NuScenes(version, rate) => format!("nuscenes {}, {}", version.folder(), rate.describe()),
+        }
+    }
+
     /// The export variant written.
     pub fn variant(self) -> dggt_data::ExportVariant {
         match self {
@@ -169,6 +180,15 @@ impl SegmentJob {
     }
 }
 
+/// What to do with a scene folder already in place.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ExistingScenes {
+    /// Skip a scene whose marker records the same conversion; refuse anything else.
+    Keep,
+    /// Convert every scene again, replacing what is in its place once the new scene is complete.
+    Replace,
+}
+
 /// What to do when a segment fails.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FailurePolicy {
@@ -182,8 +202,10 @@ pub enum FailurePolicy {
 #[derive(Debug)]
 pub enum Outcome {
     Converted(Converted),
-    /// A previous run finished it.
+    /// A previous run finished it from the same source with the same options.
     AlreadyDone(DoneMarker),
+    /// Something else is in the scene's place (see [`ExistingScenes`]); it was left as it was.
+    Refused(Refusal),
     Failed(ConvertError),
     /// Not started because an earlier failure stopped the run.
     NotStarted,
@@ -241,6 +263,7 @@ pub fn convert_segments(
     options: &ConvertOptions,
     workers: usize,
     policy: FailurePolicy,
+    existing: ExistingScenes,
     progress: &dyn Progress,
 ) -> Result<Vec<Outcome>> {
     let pool = rayon::ThreadPoolBuilder::new()
@@ -256,8 +279,8 @@ pub fn convert_segments(
                 if stopped.load(Ordering::Relaxed) {
                     return Outcome::NotStarted;
                 }
-                let outcome = convert_one(&prepared, job, options, progress);
-                if matches!(outcome, Outcome::Failed(_)) && policy == FailurePolicy::Stop {
+                let outcome = convert_one(&prepared, dataset, job, options, existing, progress);
+                if matches!(outcome, Outcome::Failed(_) | Outcome::Refused(_)) && policy == FailurePolicy::Stop {
                     stopped.store(true, Ordering::Relaxed);
                 }
                 progress.finished(job, &outcome);
@@ -267,29 +290,101 @@ pub fn convert_segments(
     }))
 }
 
-fn convert_one(prepared: &Prepared, job: &SegmentJob, options: &ConvertOptions, progress: &dyn Progress) -> Outcome {
-    if let Some(marker) = read_done(&job.scene) {
-        return Outcome::AlreadyDone(marker);
+fn convert_one(
+    prepared: &Prepared,
+    dataset: Dataset,
+    job: &SegmentJob,
+    options: &ConvertOptions,
+    existing: ExistingScenes,
+    progress: &dyn Progress,
+) -> Outcome {
+    let provenance = provenance(dataset, job, options);
+    if existing == ExistingScenes::Keep {
+        match examine(&job.scene, &provenance) {
+            Found::Nothing => {}
+            Found::Done(marker) => return Outcome::AlreadyDone(marker),
+            Found::Refused(refusal) => return Outcome::Refused(refusal),
+        }
     }
-    match write_scene(prepared, job, options, progress) {
+    match write_scene(prepared, job, options, &provenance, progress) {
         Ok(summary) => Outcome::Converted(summary),
         Err(error) => Outcome::Failed(error),
     }
 }
 
+/// What converting `job` with `options` records in its done marker.
+fn provenance(dataset: Dataset, job: &SegmentJob, options: &ConvertOptions) -> Provenance {
+    Provenance {
+        source: std::fs::canonicalize(&job.input).unwrap_or_else(|_| job.input.clone()),
+        segment: job.name.clone(),
+        dataset: dataset.describe(),
+        cameras: options.cameras.clone(),
+        sky_masks: options.sky_masks.name().into(),
+        converter: format!("dggt-convert {}", env!("CARGO_PKG_VERSION")),
+    }
+}
+
+/// Converts `job` into its `.partial` folder, records `provenance` in the marker and moves the scene into
+/// place (replacing what was there only now that the new scene is complete). The partial folder is removed
+/// when anything fails.
 fn write_scene(
     prepared: &Prepared,
     job: &SegmentJob,
     options: &ConvertOptions,
+    provenance: &Provenance,
     progress: &dyn Progress,
 ) -> Result<Converted> {
     progress.started(job, prepared.progress_total(job), prepared.progress_unit());
     let partial = job.scene.with_extension("partial");
-    if partial.exists() {
-        std::fs::remove_dir_all(&partial).map_err(|e| ConvertError::io(&partial, e))?;
+    remove_folder(&partial)?;
+    let written = prepared
+        .convert(job, &partial, options, &|done| progress.advanced(job, done))
+        .and_then(|summary| stamp(&partial, provenance).map(|()| summary))
+        .and_then(|summary| move_into_place(&partial, &job.scene).map(|()| summary));
+    match written {
+        Ok(mut summary) => {
+            summary.scene = job.scene.clone();
+            Ok(summary)
+        }
+        Err(error) => {
+            if let Err(cleanup) = remove_folder(&partial) {
+                tracing::warn!(%cleanup, "cannot remove the partial scene");
+            }
+            Err(error)
+        }
     }
-    let mut summary = prepared.convert(job, &partial, options, &|done| progress.advanced(job, done))?;
-    std::fs::rename(&partial, &job.scene).map_err(|e| ConvertError::io(&job.scene, e))?;
-    summary.scene = job.scene.clone();
-    Ok(summary)
+}
+
+/// Adds `provenance` to the done marker the converter wrote in `scene`.
+fn stamp(scene: &Path, provenance: &Provenance) -> Result<()> {
+    let mut marker: DoneMarker = read_done(scene).ok_or_else(|| {
+        let missing = std::io::Error::new(std::io::ErrorKind::NotFound, "the converter wrote no done marker");
+        ConvertError::io(&scene.join(crate::DONE_MARKER), missing)
+    })?;
+    marker.provenance = Some(provenance.clone());
+    write_done(scene, &marker)
+}
+
+/// Renames the finished `partial` folder to `scene`; what was at `scene` is moved aside first and removed
+/// after.
+fn move_into_place(partial: &Path, scene: &Path) -> Result<()> {
+    let replaced = scene.with_extension("replaced");
+    let had_scene = scene.exists();
+    if had_scene {
+        remove_folder(&replaced)?;
+        std::fs::rename(scene, &replaced).map_err(|e| ConvertError::io(scene, e))?;
+    }
+    std::fs::rename(partial, scene).map_err(|e| ConvertError::io(scene, e))?;
+    if had_scene {
+        remove_folder(&replaced)?;
+    }
+    Ok(())
+}
+
+/// Removes `folder` and everything in it, if it exists.
+fn remove_folder(folder: &Path) -> Result<()> {
+    match std::fs::remove_dir_all(folder) {
+        Err(error) if error.kind() != std::io::ErrorKind::NotFound => Err(ConvertError::io(folder, error)),
+        _ => Ok(()),
+    }
 }

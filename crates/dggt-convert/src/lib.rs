@@ -6,10 +6,11 @@
 //! - [`waymo`]: Waymo Open Dataset v1 segments into drivestudio's Waymo export.
 //! - [`argoverse2`]: Argoverse 2 sensor logs into drivestudio's Argoverse 2 export.
 //! - [`nuscenes`]: nuScenes devkit tables and files into drivestudio's nuScenes export.
-//! - [`batch`]: many segments in parallel into numbered scene folders, finished ones skipped.
+//! - [`batch`]: many segments in parallel into numbered scene folders, finished ones skipped when their done
+//!   marker records the same conversion.
 //! - Shared by the datasets: [`camera`] (projection with lens distortion), [`boxes`] (annotated 3D boxes),
 //!   [`masks`] (dynamic masks from projected boxes), [`sky`] (approximate sky masks from lidar), [`instances`]
-//!   (`instances/`), [`marker`] (the done marker a finished scene gets, so that re-runs skip it).
+//!   (`instances/`), [`marker`] (the done marker a finished scene gets, recording what it was converted from).
 //!
 //! Every error names the file and the record in it ([`ConvertError`]); bad input never panics.
 

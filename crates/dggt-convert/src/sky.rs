@@ -24,6 +24,16 @@ pub enum SkyMasks {
     Lidar,
 }
 
+impl SkyMasks {
+    /// The name a done marker records.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::Lidar => "lidar",
+        }
+    }
+}
+
 /// Rows left unmarked above the highest return of a column, as a fraction of the image height.
 pub const MARGIN_OF_HEIGHT: f64 = 0.02;
 /// Columns either side whose returns also bound a column (lidar columns are sparser than pixels), as a fraction

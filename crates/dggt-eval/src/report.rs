@@ -12,6 +12,7 @@
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
+use dggt_data::Preprocess;
 use dggt_infer::CheckpointInfo;
 use serde::Serialize;
 
@@ -124,6 +125,8 @@ pub struct EvalReport {
     pub protocol: Protocol,
     pub input_frames: Vec<usize>,
     pub checkpoint: CheckpointInfo,
+    /// How the inputs were prepared for the network (its input width among them).
+    pub preprocess: Preprocess,
     pub device: String,
     /// Where the predicted motion comes from.
     pub motion_source: String,

@@ -93,7 +93,8 @@ pub struct EvalOptions {
     /// Architecture of `.pt` / `.safetensors` checkpoints (default: the `dggt` preset).
     pub architecture: Option<Architecture>,
     pub protocol: Protocol,
-    /// Network input width (a multiple of 14); default: the `--config` training file's, else 518.
+    /// Network input width (a multiple of 14); default: the width the network was trained at (recorded in a
+    /// trainer checkpoint, or the `--config` training file's), else 518.
     pub width: Option<u32>,
     /// Frames per chunk of the dense heads.
     pub chunk_frames: usize,
@@ -163,11 +164,7 @@ pub fn evaluate(options: &EvalOptions, device: &Device) -> Result<EvalReport, Ev
     let started = Instant::now();
     let network = load_network(&options.checkpoint, options.architecture.as_ref(), device)?;
     let mut warnings = network.warnings.clone();
-    let mut preprocess = network.preprocess.unwrap_or_default();
-    if let Some(width) = options.width {
-        preprocess.target_width = width;
-    }
-    preprocess.patch_size = network.config.aggregator.patch_size as u32;
+    let preprocess = network.input_preprocess(options.width);
     let (lpips, lpips_note) = match &options.lpips {
         Some(weights) => (Some(Lpips::load(LpipsKind::Alex, &weights.alexnet, &weights.linear, device)?), None),
         None => (None, Some("not computed: no weights given (--lpips-weights alex.pth --alexnet FILE)".to_string())),
@@ -212,6 +209,7 @@ pub fn evaluate(options: &EvalOptions, device: &Device) -> Result<EvalReport, Ev
         protocol: protocol.clone(),
         input_frames: protocol.input_frames(),
         checkpoint: network.info.clone(),
+        preprocess,
         device: format!("{device:?}"),
         motion_source: motion.label().into(),
         depth_protocol: "rendered expected depth vs lidar depth (depth_flows_4, else the lidar sweep binned on the same grid), least-squares scale and shift, at \

@@ -1,9 +1,10 @@
 //! Reading the network of this project's training checkpoints.
 //!
 //! A run writes `checkpoints/step-NNNNNNNN/` folders and a `checkpoints/latest` pointer naming the newest
-//! complete one. Each folder holds the network (`model.bpk`, burnpack) and its configuration (`model.json`);
-//! the optimiser and run state beside them are the trainer's. This module reads what inference needs: the
-//! pointer, the configuration and the weights.
+//! complete one. Each folder holds the network (`model.bpk`, burnpack), its configuration (`model.json`) and
+//! the input preprocessing it was trained with (`preprocess.json`; older checkpoints lack it); the optimiser
+//! and run state beside them are the trainer's. This module reads what inference needs: the pointer, the
+//! configuration, the preprocessing and the weights.
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -11,6 +12,7 @@ use std::path::{Path, PathBuf};
 use burn::module::Module;
 use burn::store::ModuleRecord;
 use burn::tensor::Bytes;
+use dggt_data::Preprocess;
 use dggt_model::ModelConfig;
 
 use crate::error::InferError;
@@ -21,6 +23,8 @@ pub const LATEST: &str = "latest";
 pub const MODEL_FILE: &str = "model.bpk";
 /// The network's configuration in a checkpoint folder.
 pub const MODEL_CONFIG_FILE: &str = "model.json";
+/// The input preprocessing of training in a checkpoint folder.
+pub const PREPROCESS_FILE: &str = "preprocess.json";
 /// The run state in a checkpoint folder; its presence marks the folder complete.
 pub const STATE_FILE: &str = "state.json";
 
@@ -65,6 +69,17 @@ fn newest_complete(root: &Path) -> Result<Option<PathBuf>, InferError> {
 pub fn read_model_config(dir: &Path) -> Result<ModelConfig, InferError> {
     let path = dir.join(MODEL_CONFIG_FILE);
     serde_json::from_slice(&read(&path)?).map_err(|e| InferError::checkpoint(&path, e))
+}
+
+/// The input preprocessing a checkpoint folder records; `None` for a checkpoint written before it was recorded.
+pub fn read_preprocess(dir: &Path) -> Result<Option<Preprocess>, InferError> {
+    let path = dir.join(PREPROCESS_FILE);
+    if !path.exists() {
+        return Ok(None);
+    }
+    let preprocess: Preprocess = serde_json::from_slice(&read(&path)?).map_err(|e| InferError::checkpoint(&path, e))?;
+    preprocess.validate().map_err(|e| InferError::checkpoint(&path, e))?;
+    Ok(Some(preprocess))
 }
 
 /// Loads the network of a checkpoint folder into `model` (built from the stored configuration); any module

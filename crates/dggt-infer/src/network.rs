@@ -58,12 +58,26 @@ pub struct LoadedNetwork {
     pub model: Dggt,
     pub config: ModelConfig,
     pub info: CheckpointInfo,
-    /// The preprocessing of a training `.toml` given as `--config`.
+    /// The input preprocessing the network was trained with, when known: recorded in a trainer checkpoint,
+    /// else that of a training `.toml` given as `--config`.
     pub preprocess: Option<Preprocess>,
     /// How targets are assembled and rasterised: as the training `.toml` given as `--config` rendered them
     /// (its `render` section: dynamic blend, `eps2d`, far plane), else as the release does.
     pub assembly: AssemblySettings,
     pub warnings: Vec<String>,
+}
+
+impl LoadedNetwork {
+    /// The preprocessing to run the network with: at `width` when given, else at the training's width (see
+    /// [`Self::preprocess`]), else at the release's 518; always with the network's patch size.
+    pub fn input_preprocess(&self, width: Option<u32>) -> Preprocess {
+        let mut preprocess = self.preprocess.unwrap_or_default();
+        if let Some(width) = width {
+            preprocess.target_width = width;
+        }
+        preprocess.patch_size = self.config.aggregator.patch_size as u32;
+        preprocess
+    }
 }
 
 /// Loads `path` on `device`.
@@ -93,6 +107,7 @@ pub fn load_network(
             warnings
                 .push(format!("{} stores its own architecture; the one from {arch_name} is ignored", dir.display()));
         }
+        let preprocess = trained_preprocess(&dir, preprocess, &arch_name, &mut warnings)?;
         let model = checkpoint::load_model(&dir, Dggt::new(&config, device)?)?;
         let info = CheckpointInfo {
             path: dir.clone(),
@@ -125,6 +140,31 @@ pub fn load_network(
         fresh_modules: fresh,
     };
     Ok(LoadedNetwork { model, config, info, preprocess, assembly, warnings })
+}
+
+/// The input preprocessing of the trainer checkpoint `dir`: the one it records, else `configured` (a training
+/// `.toml` given as `--config`), else none (the default applies), with a warning where that is a guess.
+fn trained_preprocess(
+    dir: &Path,
+    configured: Option<Preprocess>,
+    arch_name: &str,
+    warnings: &mut Vec<String>,
+) -> Result<Option<Preprocess>, InferError> {
+    let recorded = checkpoint::read_preprocess(dir)?;
+    match (recorded, configured) {
+        (Some(recorded), Some(configured)) if configured != recorded => warnings.push(format!(
+            "{} records the preprocessing it was trained with; the one from {arch_name} is ignored",
+            dir.display()
+        )),
+        (None, None) => warnings.push(format!(
+            "{} does not record the input preprocessing it was trained with (a checkpoint of an older version): the \
+             default width {} applies unless --width (or a training --config) is given",
+            dir.display(),
+            Preprocess::default().target_width
+        )),
+        _ => {}
+    }
+    Ok(recorded.or(configured))
 }
 
 /// The top-level modules a release-format load left fresh; an error when it matched nothing or left the core

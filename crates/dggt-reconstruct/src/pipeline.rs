@@ -23,7 +23,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use burn::tensor::{Device, Tensor, TensorData};
-use dggt_data::{PlanarImage, Preprocess};
+use dggt_data::PlanarImage;
 use dggt_export::cameras_json::{CameraRecord, Convention, write_cameras_json};
 use dggt_export::colmap::{ColmapCamera, ColmapImage, write_colmap};
 use dggt_export::depth::{scale_for, write_depth_npy, write_depth_png16};
@@ -33,8 +33,7 @@ use dggt_export::nerfstudio::{NerfstudioFrame, write_transforms};
 use dggt_export::ply::{GaussianCloud, write_ply};
 use dggt_geom::{ImageSize, PosedCamera, WorldFromCamera};
 use dggt_infer::{
-    InputCameras, InputSet, LoadedNetwork, MotionPath, Scene4d, SceneOptions, ViewSlot, forward_chunked, input_views,
-    load_network,
+    InputCameras, InputSet, MotionPath, Scene4d, SceneOptions, ViewSlot, forward_chunked, input_views, load_network,
 };
 use dggt_scene::{
     AssemblyCounts, InputView, MIN_OPACITY, PixelGaussians, TargetView, Timeline, nearest_in_time, nearest_view,
@@ -70,7 +69,8 @@ pub struct ReconstructOptions {
     /// Frame positions (folders) or indices (exports), end exclusive.
     pub frames: Option<Range<usize>>,
     pub times: TimeRequest,
-    /// Network input width (a multiple of 14); default: the `--config` training file's, else 518.
+    /// Network input width (a multiple of 14); default: the width the network was trained at (recorded in a
+    /// trainer checkpoint, or the `--config` training file's), else 518.
     pub width: Option<u32>,
     /// Frames per chunk of the dense heads.
     pub chunk_frames: usize,
@@ -135,7 +135,7 @@ pub fn reconstruct(options: &ReconstructOptions, device: &Device) -> Result<Summ
     }
     stages.done("load checkpoint");
 
-    let preprocess = preprocess_for(&network, options.width);
+    let preprocess = network.input_preprocess(options.width);
     let (images, size) = inputs.load(&preprocess)?;
     let times_s = requested_times(&inputs, &options.times)?;
     tracing::info!(
@@ -221,16 +221,6 @@ pub fn reconstruct(options: &ReconstructOptions, device: &Device) -> Result<Summ
     let text = serde_json::to_string_pretty(&summary).expect("summaries serialise");
     std::fs::write(&path, text).map_err(|e| ReconstructError::input(&path, e.to_string()))?;
     Ok(summary)
-}
-
-/// The preprocessing of the network's training configuration (or the default), at `width` when given.
-fn preprocess_for(network: &LoadedNetwork, width: Option<u32>) -> Preprocess {
-    let mut preprocess = network.preprocess.clone().unwrap_or_default();
-    if let Some(width) = width {
-        preprocess.target_width = width;
-    }
-    preprocess.patch_size = network.config.aggregator.patch_size as u32;
-    preprocess
 }
 
 /// What the Gaussians are exported and the views rendered for.

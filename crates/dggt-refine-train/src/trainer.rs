@@ -76,6 +76,9 @@ impl RefineTrainer {
     /// one.
     pub fn new(config: RefineTrainConfig, plain_device: Device, start: Start) -> Result<Self, RefineTrainError> {
         config.validate()?;
+        if start == Start::Fresh {
+            dggt_train::run_folder::ensure_no_run(&config.run.out_dir)?;
+        }
         let device = plain_device.clone().autodiff();
         let tokens = prompt_tokens(&config)?;
         let model = load_model_of(&config, &tokens, &device)?;

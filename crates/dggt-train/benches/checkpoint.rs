@@ -54,7 +54,10 @@ fn main() {
     let before = status_bytes("VmRSS");
     reset_peak();
     let started = Instant::now();
-    let written = checkpoint::save(dir.path(), &model, &config, &optimizer, &state, 1).expect("the checkpoint writes");
+    let settings =
+        checkpoint::Settings { model: config.clone(), preprocess: Default::default(), configured: Default::default() };
+    let written =
+        checkpoint::save(dir.path(), &model, &settings, &optimizer, &state, 1).expect("the checkpoint writes");
     let seconds = started.elapsed().as_secs_f64();
     let added = status_bytes("VmHWM").saturating_sub(before) as f64 / GIB;
     let files = folder_bytes(&written) as f64 / GIB;

@@ -6,7 +6,9 @@
 //!
 //! A checkpoint is a folder `checkpoints/step-NNNNNNNN/` holding the network (`model.bpk`, burnpack, parameter
 //! ids included so the optimiser state stays attached), the AdamW state (`optimizer.bpk`), the network's
-//! configuration (`model.json`) and the run state (`state.json`: the next step, seed and counters). The
+//! configuration (`model.json`), the input preprocessing it was trained with (`preprocess.json`, inference's
+//! default), the `[model]` and `[optim]` sections as configured (`training.json`, which a resume compares with
+//! its own: [`resume`](crate::resume)) and the run state (`state.json`: the next step, seed and counters). The
 //! learning-rate schedule is a function of the step and the sampler draws sample `k` from `(seed, k)`, so no
 //! random-generator state needs saving. The weights and moments are written tensor by tensor (peak host memory
 //! is one tensor, not the 16 GB of a full-size model and its AdamW state). Every file is written through a
@@ -19,9 +21,11 @@ use std::path::{Path, PathBuf};
 
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::tensor::Tensor;
+use dggt_data::Preprocess;
 use dggt_data::io::write_atomically;
 pub use dggt_infer::checkpoint::{
-    LATEST, MODEL_CONFIG_FILE, MODEL_FILE, STATE_FILE, latest, load_model, read_model_config,
+    LATEST, MODEL_CONFIG_FILE, MODEL_FILE, PREPROCESS_FILE, STATE_FILE, latest, load_model, read_model_config,
+    read_preprocess,
 };
 use dggt_model::{Dggt, ModelConfig};
 use serde::{Deserialize, Serialize};
@@ -29,6 +33,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::TrainError;
 use crate::failpoint;
 use crate::optimizer::{Optimizer, deferred_tensor};
+use crate::resume::{ConfiguredSections, TRAINING_FILE};
 
 /// The counters of a run.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -62,17 +67,36 @@ fn checkpoint_error(path: &Path, detail: impl ToString) -> TrainError {
     TrainError::Checkpoint { path: path.to_path_buf(), detail: detail.to_string() }
 }
 
+/// What a checkpoint records beside the weights about how its network was made.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Settings {
+    /// The network's configuration (`model.json`).
+    pub model: ModelConfig,
+    /// The input preprocessing of training (`preprocess.json`).
+    pub preprocess: Preprocess,
+    /// The `[model]` and `[optim]` sections (`training.json`).
+    pub configured: ConfiguredSections,
+}
+
 /// Writes a checkpoint under `root` (`run/checkpoints`) and points `latest` at it; keeps the newest `keep`.
 pub fn save(
     root: &Path,
     model: &Dggt,
-    config: &ModelConfig,
+    settings: &Settings,
     optimizer: &Optimizer,
     state: &RunState,
     keep: usize,
 ) -> Result<PathBuf, TrainError> {
-    let config = serde_json::to_string_pretty(config).expect("configs serialise");
-    save_folder(root, model, optimizer, state, keep, &[(MODEL_CONFIG_FILE, config.as_bytes())])
+    fn json(value: &impl Serialize) -> String {
+        serde_json::to_string_pretty(value).expect("settings serialise")
+    }
+    let files = [
+        (MODEL_CONFIG_FILE, json(&settings.model)),
+        (PREPROCESS_FILE, json(&settings.preprocess)),
+        (TRAINING_FILE, json(&settings.configured)),
+    ];
+    let extra: Vec<(&str, &[u8])> = files.iter().map(|(name, text)| (*name, text.as_bytes())).collect();
+    save_folder(root, model, optimizer, state, keep, &extra)
 }
 
 /// [`save`] for any trained module: its parameters, the optimiser, `extra` files (name, bytes) and the run

@@ -240,16 +240,22 @@ impl TrainConfig {
         if !(o.lr > 0.0 && o.lr.is_finite()) || o.groups.values().any(|lr| !(*lr >= 0.0 && lr.is_finite())) {
             return Err(setting("optim", "learning rates must be finite, lr > 0, group rates >= 0"));
         }
-        if o.accumulation == 0 || self.run.steps == 0 || self.run.checkpoint_every == 0 {
-            return Err(setting("optim.accumulation, run.steps and run.checkpoint_every", "must be at least 1"));
+        for (name, value) in [
+            ("optim.accumulation", o.accumulation as u64),
+            ("run.steps", self.run.steps),
+            ("run.checkpoint_every", self.run.checkpoint_every),
+        ] {
+            if value == 0 {
+                return Err(setting(name, "must be at least 1, got 0"));
+            }
         }
-        if !(0.0..=1.0).contains(&o.min_lr_ratio) {
-            return Err(setting("optim.min_lr_ratio", format!("must lie in [0, 1], got {}", o.min_lr_ratio)));
-        }
-        if let Some(clip) = o.clip_grad_norm
-            && !(clip > 0.0)
-        {
-            return Err(setting("optim.clip_grad_norm", format!("must be positive, got {clip}")));
+        number("optim.min_lr_ratio", o.min_lr_ratio, "[0, 1]", |v| (0.0..=1.0).contains(&v))?;
+        number("optim.weight_decay", o.weight_decay, "[0, inf)", |v| v >= 0.0)?;
+        number("optim.beta1", o.beta1, "[0, 1)", |v| (0.0..1.0).contains(&v))?;
+        number("optim.beta2", o.beta2, "[0, 1)", |v| (0.0..1.0).contains(&v))?;
+        number("optim.epsilon", o.epsilon, "(0, inf)", |v| v > 0.0)?;
+        if let Some(clip) = o.clip_grad_norm {
+            number("optim.clip_grad_norm", clip, "(0, inf)", |v| v > 0.0)?;
         }
         if o.pose_warmup_steps > 0 && !(self.loss.camera > 0.0) {
             return Err(setting("optim.pose_warmup_steps", "trains the camera loss alone: it needs loss.camera > 0"));
@@ -306,27 +312,37 @@ impl TrainConfig {
     }
 
     fn validate_render_and_run(&self) -> Result<(), TrainError> {
-        if !(self.render.eps2d.is_finite() && self.render.eps2d > 0.0) {
-            // Zero leaves flat Gaussians seen edge-on with a singular footprint.
-            return Err(setting(
-                "render.eps2d",
-                format!("must be a positive, finite variance, got {}", self.render.eps2d),
-            ));
-        }
-        if !(self.render.far_plane > 0.01) {
-            return Err(setting(
-                "render.far_plane",
-                format!("must exceed the near plane 0.01, got {}", self.render.far_plane),
-            ));
-        }
+        // Zero leaves flat Gaussians seen edge-on with a singular footprint.
+        number("render.eps2d", self.render.eps2d, "(0, inf)", |v| v > 0.0)?;
+        number("render.far_plane", self.render.far_plane, "(0.01, inf), beyond the near plane", |v| v > 0.01)?;
         if self.run.devices.is_empty() {
             return Err(setting("run.devices", "must name at least one device"));
         }
+        if self.run.keep_checkpoints == 0 {
+            return Err(setting("run.keep_checkpoints", "must be at least 1, got 0"));
+        }
+        if let Some(limit) = self.run.time_limit_s {
+            number("run.time_limit_s", limit, "(0, inf)", |v| v > 0.0)?;
+        }
+        self.validate_data()
+    }
+
+    fn validate_data(&self) -> Result<(), TrainError> {
+        let data = &self.data;
+        if let Some([start, end]) = data.frames
+            && start >= end
+        {
+            return Err(setting(
+                "data.frames",
+                format!("[{start}, {end}) is empty: give [start, end) with start < end"),
+            ));
+        }
+        data.preprocess.validate().map_err(|e| setting("data.preprocess", e.to_string()))?;
         self.sampler.check_input_counts().map_err(|e| setting("sampler", e.to_string()))?;
-        for spec in &self.data.datasets {
+        for spec in &data.datasets {
             spec.validate().map_err(|e| setting("data.datasets", e.to_string()))?;
         }
-        if self.data.validation.inputs.is_empty() != self.data.validation.targets.is_empty() {
+        if data.validation.inputs.is_empty() != data.validation.targets.is_empty() {
             return Err(setting("data.validation", "give both inputs and targets, or neither"));
         }
         Ok(())
@@ -348,4 +364,12 @@ const MODULES: [&str; 9] = [
 
 fn setting(setting: &'static str, detail: impl Into<String>) -> TrainError {
     TrainError::Setting { setting, detail: detail.into() }
+}
+
+/// Refuses the value of `name` unless it is finite and `valid`; `range` says which values are (`[0, 1)`).
+fn number(name: &'static str, value: f64, range: &str, valid: impl Fn(f64) -> bool) -> Result<(), TrainError> {
+    if value.is_finite() && valid(value) {
+        return Ok(());
+    }
+    Err(setting(name, format!("must lie in {range}, got {value}")))
 }

@@ -27,4 +27,15 @@ pub enum TrainError {
     Infer(#[from] dggt_infer::InferError),
     #[error("{0}")]
     Objective(#[from] dggt_objective::ObjectiveError),
+    /// A fresh run asked to write where another run's files are.
+    #[error("{} already holds a training run ({}); a new run would overwrite it", dir.display(), found.join(", "))]
+    RunExists { dir: PathBuf, found: Vec<&'static str> },
+    /// A resume whose configuration describes another network than the checkpoint's.
+    #[error(
+        "cannot resume from {}: the configuration describes another network ({}); the weights fix the network, so \
+         resume with the checkpoint's settings or start a new run in another folder",
+        checkpoint.display(),
+        changes.iter().map(ToString::to_string).collect::<Vec<_>>().join("; ")
+    )]
+    ArchitectureChanged { checkpoint: PathBuf, changes: Vec<crate::resume::Change> },
 }

@@ -14,6 +14,8 @@ mod error;
 pub mod failpoint;
 pub mod optimizer;
 pub mod replicas;
+pub mod resume;
+pub mod run_folder;
 pub mod schedule;
 pub mod trainer;
 pub mod validate;

@@ -35,6 +35,8 @@ use crate::config::TrainConfig;
 use crate::error::TrainError;
 use crate::optimizer::{Optimizer, freeze};
 use crate::replicas::{Replica, Replicas};
+use crate::resume::{self, ConfiguredSections};
+use crate::run_folder;
 use crate::schedule::WarmupCosine;
 use crate::validate::{Validation, Validator};
 
@@ -65,10 +67,11 @@ pub struct RunOptions {
 /// How a run starts.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Start {
-    /// From the configured starting weights (or random ones), at step 0.
+    /// From the configured starting weights (or random ones), at step 0, in an output folder that holds no
+    /// other run's files ([`run_folder`](crate::run_folder)).
     Fresh,
-    /// From the newest checkpoint in the output folder when there is one, exactly where it stopped; fresh
-    /// otherwise.
+    /// From the newest checkpoint in the output folder when there is one, exactly where it stopped, with the
+    /// checkpoint's network ([`resume`](crate::resume)); fresh otherwise.
     Resume,
 }
 
@@ -99,14 +102,11 @@ impl Trainer {
         })?;
         let autodiff: Vec<Device> = devices.iter().map(|d| d.clone().autodiff()).collect();
         let device = autodiff[0].clone();
+        // Checked before anything is written into the output folder.
+        let resume_from = resume_point(&config, start)?;
         let (sampling, validation_scenes) = index_datasets(&config)?;
         let objective = Objective::new(config.loss.clone(), config.render.clone(), &device)?;
 
-        let checkpoints = config.run.out_dir.join("checkpoints");
-        let resume_from = match start {
-            Start::Resume => checkpoint::latest(&checkpoints)?,
-            Start::Fresh => None,
-        };
         let (model, model_config, optimizer, state) = match resume_from {
             Some(dir) => {
                 let model_config = checkpoint::read_model_config(&dir)?;
@@ -237,7 +237,7 @@ impl Trainer {
     pub fn run(&mut self, options: RunOptions) -> Result<RunSummary, TrainError> {
         let run = self.config.run.clone();
         fs::create_dir_all(&run.out_dir).map_err(|source| TrainError::Io { path: run.out_dir.clone(), source })?;
-        let metrics_path = run.out_dir.join("metrics.jsonl");
+        let metrics_path = run.out_dir.join(run_folder::METRICS);
         truncate_metrics(&metrics_path, self.state.step)?;
         let mut metrics = fs::OpenOptions::new()
             .create(true)
@@ -309,7 +309,7 @@ impl Trainer {
                 summary.checkpoint = Some(self.save_checkpoint()?);
             }
             if (run.validate_every > 0 && self.state.step.is_multiple_of(run.validate_every)) || done {
-                let renders = run.out_dir.join("validation").join(format!("step-{:08}", self.state.step));
+                let renders = run.out_dir.join(run_folder::VALIDATION).join(format!("step-{:08}", self.state.step));
                 if let Some(validation) = self.validate_into(Some(&renders))? {
                     tracing::info!(
                         step = self.state.step,
@@ -490,10 +490,15 @@ impl Trainer {
     fn save_checkpoint(&self) -> Result<PathBuf, TrainError> {
         let run = &self.config.run;
         let master = self.replicas.master();
+        let settings = checkpoint::Settings {
+            model: self.model_config.clone(),
+            preprocess: self.config.data.preprocess,
+            configured: ConfiguredSections::of(&self.config),
+        };
         checkpoint::save(
-            &run.out_dir.join("checkpoints"),
+            &run.out_dir.join(run_folder::CHECKPOINTS),
             &master.model,
-            &self.model_config,
+            &settings,
             &master.optimizer,
             &self.state,
             run.keep_checkpoints,
@@ -523,6 +528,24 @@ impl Trainer {
     }
 }
 
+/// The checkpoint a run continues from, if any, once its output folder is checked: a fresh run refuses a folder
+/// holding another run ([`run_folder`]), a resume a configuration of another network ([`resume`]).
+fn resume_point(config: &TrainConfig, start: Start) -> Result<Option<PathBuf>, TrainError> {
+    let dir = match start {
+        Start::Fresh => {
+            run_folder::ensure_no_run(&config.run.out_dir)?;
+            return Ok(None);
+        }
+        Start::Resume => checkpoint::latest(&config.run.out_dir.join(run_folder::CHECKPOINTS))?,
+    };
+    if let Some(dir) = &dir {
+        for change in resume::compare(dir, &checkpoint::read_model_config(dir)?, config)? {
+            tracing::warn!("resuming with a changed optimiser setting: {change}");
+        }
+    }
+    Ok(dir)
+}
+
 /// LPIPS-Alex for validation when `data.validation` names its weights.
 fn validation_lpips(config: &TrainConfig, device: &Device) -> Result<Option<Lpips>, TrainError> {
     let v = &config.data.validation;
@@ -538,7 +561,7 @@ fn index_datasets(config: &TrainConfig) -> Result<(DatasetSampling, Vec<IndexedS
     let specs = config.data.dataset_specs(&config.sampler.cameras);
     fs::create_dir_all(&config.run.out_dir)
         .map_err(|source| TrainError::Io { path: config.run.out_dir.clone(), source })?;
-    let cache = config.run.out_dir.join("scene-index.json");
+    let cache = config.run.out_dir.join(run_folder::SCENE_INDEX);
     // Drawn only when stderr is a terminal.
     let template = "indexing scenes {elapsed_precise} [{bar:30}] {pos}/{len} ({per_sec}, {eta})";
     let bar = styled_bar(template, ProgressDrawTarget::stderr(), None);
@@ -548,6 +571,7 @@ fn index_datasets(config: &TrainConfig) -> Result<(DatasetSampling, Vec<IndexedS
     };
     let mut index = DatasetIndex::load_or_build(&specs, config.run.seed, &cache, &show)?;
     bar.finish_and_clear();
+    check_single_scene(config, &index)?;
     index.exclude_shorter_than(config.sampler.window);
     if !index.excluded.is_empty() {
         tracing::warn!(excluded = index.excluded.len(), indexed = index.scenes.len(), "scenes excluded (see the log)");
@@ -579,6 +603,34 @@ fn index_datasets(config: &TrainConfig) -> Result<(DatasetSampling, Vec<IndexedS
     let sampling =
         DatasetSampling { index: Arc::new(index), mix, sampler: config.sampler.clone(), seed: config.run.seed };
     Ok((sampling, validation_scenes))
+}
+
+/// A run on one scene (`data.scene`) uses all of the frames `data.frames` names: a range reaching outside the
+/// scene, or a scene that cannot be indexed, is an error rather than a quietly smaller run. (A dataset's
+/// `frames` is clipped to each of its scenes, as documented.)
+fn check_single_scene(config: &TrainConfig, index: &DatasetIndex) -> Result<(), TrainError> {
+    if !config.data.datasets.is_empty() {
+        return Ok(());
+    }
+    if let Some(excluded) = index.excluded.first() {
+        return Err(TrainError::Invalid {
+            what: format!("data.scene {}", excluded.root.display()),
+            detail: excluded.reason.clone(),
+        });
+    }
+    let (Some([start, end]), Some(scene)) = (config.data.frames, index.scenes.first()) else { return Ok(()) };
+    // The index clips the range to the scene's frames: each bound it moved lies outside them.
+    let (first, last) = (scene.frames.start, scene.frames.end);
+    let valid = match (start < first, end > last) {
+        (false, false) => return Ok(()),
+        (true, false) => format!("a start of at least {first}"),
+        (false, true) => format!("an end of at most {last}"),
+        (true, true) => format!("a range within [{first}, {last})"),
+    };
+    Err(TrainError::Setting {
+        setting: "data.frames",
+        detail: format!("[{start}, {end}) reaches outside the frames of {}: give {valid}", scene.root.display()),
+    })
 }
 
 /// What one sample of a step measured.

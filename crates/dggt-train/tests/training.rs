@@ -256,3 +256,36 @@ fn the_model_section_describes_the_network_the_trainer_builds() {
     let trainer = Trainer::new(config, vec![Device::flex()], Start::Fresh).unwrap();
     assert_eq!(trainer.model_config(), &architecture, "what `--config` gives reconstruct and eval");
 }
+
+/// Every setting with a valid range is checked against it, the error naming the key and the range; a run on
+/// one scene uses all of `data.frames`, so a range reaching past the fixture's 20 frames is refused too.
+#[test]
+fn settings_out_of_their_range_are_refused_naming_the_key_and_the_range() {
+    let out = tempfile::tempdir().unwrap();
+    type Edit = fn(&mut TrainConfig);
+    let cases: [(Edit, &str); 11] = [
+        (|c| c.optim.weight_decay = -1.0, "optim.weight_decay: must lie in [0, inf), got -1"),
+        (|c| c.optim.beta1 = 1.0, "optim.beta1: must lie in [0, 1), got 1"),
+        (|c| c.optim.beta2 = -0.1, "optim.beta2: must lie in [0, 1), got -0.1"),
+        (|c| c.optim.epsilon = 0.0, "optim.epsilon: must lie in (0, inf), got 0"),
+        (|c| c.optim.min_lr_ratio = 2.0, "optim.min_lr_ratio: must lie in [0, 1], got 2"),
+        (|c| c.optim.clip_grad_norm = Some(f64::INFINITY), "optim.clip_grad_norm: must lie in (0, inf), got inf"),
+        (|c| c.run.steps = 0, "run.steps: must be at least 1, got 0"),
+        (|c| c.run.keep_checkpoints = 0, "run.keep_checkpoints: must be at least 1, got 0"),
+        (|c| c.run.time_limit_s = Some(-5.0), "run.time_limit_s: must lie in (0, inf), got -5"),
+        (|c| c.data.frames = Some([5, 5]), "data.frames: [5, 5) is empty"),
+        (|c| c.data.preprocess.target_width = 50, "data.preprocess: "),
+    ];
+    for (edit, expected) in cases {
+        let mut config = small_config(out.path(), 1);
+        edit(&mut config);
+        let error = config.validate().expect_err(expected).to_string();
+        assert!(error.contains(expected), "{expected} missing from: {error}");
+    }
+    let mut config = small_config(out.path(), 1);
+    config.data.frames = Some([0, 500]);
+    let error = Trainer::new(config, vec![Device::flex()], Start::Fresh).err().expect("frames past the scene");
+    let error = error.to_string();
+    assert!(error.contains("data.frames: [0, 500) reaches outside the frames of"), "{error}");
+    assert!(error.contains("synth-s0") && error.contains("an end of at most 20"), "{error}");
+}

@@ -197,6 +197,7 @@ pub fn convert_log(
         cameras: cameras.iter().map(|c| c.id).collect(),
         instances: instances.len(),
         lidar_frames: kept.len(),
+        provenance: None,
     };
     write_done(scene, &marker)?;
     progress(sweeps.len() as u64);

@@ -215,6 +215,7 @@ pub fn convert_scene(
         cameras: options.cameras.clone(),
         instances: instances.len(),
         lidar_frames: frames.len(),
+        provenance: None,
     };
     write_done(scene, &marker)?;
     progress(frames.len() as u64);

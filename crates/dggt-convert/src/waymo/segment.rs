@@ -127,6 +127,7 @@ pub fn convert_segment(
         cameras: options.cameras.clone(),
         instances: instances.len(),
         lidar_frames,
+        provenance: None,
     };
     write_done(scene, &marker)?;
     Ok(SegmentSummary { scene: scene.to_owned(), frames, images, lidar_frames, instances: instances.len() })
