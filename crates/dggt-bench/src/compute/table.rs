@@ -70,8 +70,9 @@ impl RecordFile {
 
 /// The Markdown table of `ours` with, per key, the first reference record of that key; with a `baseline` (our
 /// own records of another build, e.g. without fusion and autotune), its figures and ours' gain over it too.
+/// Every key of any file gets a row: ours first, then the baseline's, then the references' (`—` where ours has
+/// none).
 pub fn markdown(ours: &RecordFile, baseline: Option<&RecordFile>, references: &[RecordFile]) -> String {
-    let reference_records: Vec<&Record> = references.iter().flat_map(|file| &file.records).collect();
     let mut text = format!("Device: {}\n\n", ours.device);
     if !ours.build.is_empty() {
         text.push_str(&format!("dggt-rs build: {}\n\n", ours.build));
@@ -82,60 +83,62 @@ pub fn markdown(ours: &RecordFile, baseline: Option<&RecordFile>, references: &[
     for file in references {
         text.push_str(&format!("Reference `{}`: {}\n\n", file.implementation, file.device));
     }
-    let baseline_headers = if baseline.is_some() { " baseline | gain |" } else { "" };
-    let baseline_rule = if baseline.is_some() { "---:|---:|" } else { "" };
+    let (baseline_headers, baseline_rule) =
+        if baseline.is_some() { (" baseline | gain |", "---:|---:|") } else { ("", "") };
     text.push_str(&format!("| work | dggt-rs | MiB |{baseline_headers} reference | MiB | advantage | notes |\n"));
     text.push_str(&format!("|---|---:|---:|{baseline_rule}---|---:|---:|---|\n"));
+    let ours_records: Vec<&Record> = ours.records.iter().collect();
     let baseline_records: Vec<&Record> = baseline.map(|file| file.records.iter().collect()).unwrap_or_default();
-    for record in &ours.records {
-        let before = baseline.map(|_| find(&baseline_records, &record.key));
-        text.push_str(&row(record, before, find(&reference_records, &record.key)));
+    let reference_records: Vec<&Record> = references.iter().flat_map(|file| &file.records).collect();
+    let mut keys: Vec<&str> = Vec::new();
+    for record in ours_records.iter().chain(&baseline_records).chain(&reference_records) {
+        if !keys.contains(&record.key.as_str()) {
+            keys.push(&record.key);
+        }
     }
-    let empty_baseline = if baseline.is_some() { " | |" } else { "" };
-    for orphan in reference_records.iter().filter(|r| !ours.records.iter().any(|o| o.key == r.key)) {
-        text.push_str(&format!(
-            "| `{}` | — | {empty_baseline} | {} ({}) | {} | | {} |\n",
-            orphan.key,
-            value(orphan),
-            orphan.implementation,
-            mib(orphan),
-            cell(&orphan.note)
-        ));
+    for key in keys {
+        let ours = find(&ours_records, key);
+        let before = baseline.map(|_| find(&baseline_records, key));
+        text.push_str(&row(key, ours, before, find(&reference_records, key)));
     }
     text
 }
 
-/// One row: ours, then (when a baseline file is given) the baseline's figure of the key and our gain over it,
-/// then the reference's.
 fn find<'a>(records: &[&'a Record], key: &str) -> Option<&'a Record> {
     records.iter().find(|r| r.key == key).copied()
 }
 
-fn row(record: &Record, baseline: Option<Option<&Record>>, reference: Option<&Record>) -> String {
+/// One row: ours (`—` when we have no record of the key), then (when a baseline file is given) the baseline's
+/// figure and our gain over it, then the reference's with our advantage.
+fn row(key: &str, ours: Option<&Record>, baseline: Option<Option<&Record>>, reference: Option<&Record>) -> String {
+    let ratio = |other: &Record| match ours.and_then(|ours| advantage(ours, other)) {
+        Some(ratio) => format!("{ratio:.2}x"),
+        None => String::new(),
+    };
     let baseline_cells = match baseline {
         None => String::new(),
         Some(None) => " | |".into(),
-        Some(Some(before)) => {
-            let gain = advantage(record, before).map_or(String::new(), |a| format!("{a:.2}x"));
-            format!(" {} | {gain} |", value(before))
-        }
+        Some(Some(before)) => format!(" {} | {} |", value(before), ratio(before)),
     };
     let (reference_value, reference_mib, advantage, reference_note) = match reference {
         Some(reference) => (
             format!("{} ({})", value(reference), reference.implementation),
             mib(reference),
-            advantage(record, reference).map_or(String::new(), |a| format!("{a:.2}x")),
-            if reference.note.is_empty() { String::new() } else { format!("; reference: {}", reference.note) },
+            ratio(reference),
+            if reference.note.is_empty() { String::new() } else { format!("reference: {}", reference.note) },
         ),
         None => (String::new(), String::new(), String::new(), String::new()),
     };
+    let notes = [ours.map(|o| o.note.as_str()).unwrap_or_default(), reference_note.as_str()]
+        .into_iter()
+        .filter(|note| !note.is_empty())
+        .collect::<Vec<_>>()
+        .join("; ");
     format!(
-        "| `{}` | {} | {} |{baseline_cells} {reference_value} | {reference_mib} | {advantage} | {}{} |\n",
-        record.key,
-        value(record),
-        mib(record),
-        cell(&record.note),
-        cell(&reference_note)
+        "| `{key}` | {} | {} |{baseline_cells} {reference_value} | {reference_mib} | {advantage} | {} |\n",
+        ours.map_or("—".into(), value),
+        ours.map_or(String::new(), mib),
+        cell(&notes)
     )
 }
 
@@ -264,7 +267,7 @@ mod tests {
         };
         let baseline = RecordFile {
             build: "no fusion, no autotune".into(),
-            records: vec![timed("forward/4/f32", "dggt-rs", 700.0)],
+            records: vec![timed("forward/4/f32", "dggt-rs", 700.0), timed("forward/12/f32", "dggt-rs", 2000.0)],
             ..ours.clone()
         };
         let reference = RecordFile {
@@ -280,5 +283,7 @@ mod tests {
             "{table}"
         );
         assert!(table.contains("| `raster/1x1/forward` | 5.0 ms |  | | | "), "{table}");
+        // A key only the baseline measured still has its row.
+        assert!(table.contains("| `forward/12/f32` | — |  | 2.00 s |  | "), "{table}");
     }
 }
