@@ -54,11 +54,11 @@ pub use forward::{Images, Rasterized, rasterize};
 pub use gaussians::{Gaussians, Opacities};
 #[cfg(any(feature = "wgpu", feature = "cuda"))]
 pub use op::CubeForward;
+pub use op::{HostForward, PACKED_EXTRA_CHANNELS, SplatGrads, SplatInputs, SplatKernels, SplatOps, SplatOutputs};
 /// The device radix sort of tile intersections on host data, for tests.
 #[cfg(any(feature = "wgpu", feature = "cuda"))]
 #[doc(hidden)]
 pub use op::{SortedIntersections, prefix_sums, sort_intersections};
-pub use op::{HostForward, PACKED_EXTRA_CHANNELS, SplatGrads, SplatInputs, SplatKernels, SplatOps, SplatOutputs};
 pub use projection::Projection;
 pub use render::{
     CameraTensors, GaussianTensors, OpacityTensor, RenderSettings, RenderTensors, render, render_with_stats,

@@ -119,4 +119,3 @@ fn collect(name: &str, checkpoint: &Value, configured: &Value, found: &mut Vec<C
         _ => {}
     }
 }
-

@@ -69,7 +69,8 @@ fn radix_sort_handles_many_lists_and_empty_ones() {
     let depths = rng.ranges(30_001, 0.01, 50.0);
     check_sort("many lists", &lists, &depths, 100_000);
     // Views without intersections: lists only in the first and last of five views of 12 tiles.
-    let lists: Vec<u32> = (0..3000).map(|i| if i % 2 == 0 { rng.below(12) } else { 48 + rng.below(12) } as u32).collect();
+    let lists: Vec<u32> =
+        (0..3000).map(|i| if i % 2 == 0 { rng.below(12) } else { 48 + rng.below(12) } as u32).collect();
     let depths = tied_depths(&mut rng, 3000);
     check_sort("empty views", &lists, &depths, 60);
 }

@@ -89,8 +89,8 @@ use dggt_geom::ImageSize;
 use super::{PACKED_EXTRA_CHANNELS, SplatGrads, SplatInputs, SplatKernels, SplatOutputs};
 use crate::cull::CullStats;
 use crate::settings::RasterSettings;
-use math::{NativeAdd, SwapAdd};
 use lists::{FootprintBuffers, ListBatch};
+use math::{NativeAdd, SwapAdd};
 pub use probe::{SortedIntersections, prefix_sums, sort_intersections};
 
 /// Units per cube of the per-element kernels.

@@ -1,8 +1,8 @@
 //! Single device stages on host data, for the integration tests: the radix sort of intersection keys and the
 //! list ranges cut from it, and the prefix sum they rest on, which a render only exercises on the keys its scene happens to produce.
 
-use burn::backend::ops::IntTensorOps;
 use burn::backend::DispatchDevice;
+use burn::backend::ops::IntTensorOps;
 use burn::tensor::TensorData;
 use burn_cubecl::ops::into_data_sync;
 use burn_cubecl::tensor::CubeTensor;
@@ -61,7 +61,11 @@ pub fn sort_intersections(
         let (cubes, dim) = element_launch(&client, len);
         bin::ranges_kernel::launch(&client, cubes, dim, arg(&sorted), arg(&ranges), len as u32);
     }
-    SortedIntersections { lists: download(sorted, len), order: download(order, len), ranges: download(ranges, 2 * list_count) }
+    SortedIntersections {
+        lists: download(sorted, len),
+        order: download(order, len),
+        ranges: download(ranges, 2 * list_count),
+    }
 }
 
 /// The exclusive prefix sum of `values` (`len + 1` entries, the last the total) with the rasteriser's
