@@ -39,3 +39,6 @@ pub const DEFAULT_FAR_PLANE: f32 = 1e10;
 pub const DEFAULT_EPS2D: f32 = 0.3;
 /// Side of the square screen tiles (the default).
 pub const DEFAULT_TILE_SIZE: u32 = 16;
+/// The largest tile side: the GPU rasteriser composites a tile with one cube of `tile_size²` units, and 256
+/// units is what every wgpu adapter offers (WebGPU's guaranteed workgroup size).
+pub const MAX_TILE_SIZE: u32 = 16;

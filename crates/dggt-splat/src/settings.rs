@@ -1,6 +1,6 @@
 //! Rasteriser settings: clipping planes, the 2D blur, the tile size and the background colour.
 
-use crate::constants::{DEFAULT_EPS2D, DEFAULT_FAR_PLANE, DEFAULT_NEAR_PLANE, DEFAULT_TILE_SIZE};
+use crate::constants::{DEFAULT_EPS2D, DEFAULT_FAR_PLANE, DEFAULT_NEAR_PLANE, DEFAULT_TILE_SIZE, MAX_TILE_SIZE};
 use crate::error::SplatError;
 
 /// How a batch is rasterised. The defaults are gsplat's (and DGGT's): near 0.01, far 1e10, eps2d 0.3,
@@ -14,7 +14,7 @@ pub struct RasterSettings {
     /// Added to the diagonal of every projected 2D covariance (a one-pixel-scale low-pass filter; "classic"
     /// mode: the opacity is not compensated for it).
     pub eps2d: f32,
-    /// Side of the square screen tiles Gaussians are binned into.
+    /// Side of the square screen tiles Gaussians are binned into, 1 to [`MAX_TILE_SIZE`].
     pub tile_size: u32,
     /// `[K]` colour behind the Gaussians, composited with the final transmittance; `None` is black.
     pub background: Option<Vec<f32>>,
@@ -50,8 +50,8 @@ impl RasterSettings {
         if !(self.eps2d.is_finite() && self.eps2d >= 0.0) {
             return invalid(format!("eps2d must be finite and >= 0, got {}", self.eps2d));
         }
-        if self.tile_size == 0 {
-            return invalid("tile_size must be positive".into());
+        if !(1..=MAX_TILE_SIZE).contains(&self.tile_size) {
+            return invalid(format!("tile_size must be in 1..={MAX_TILE_SIZE}, got {}", self.tile_size));
         }
         if let Some(background) = &self.background {
             if background.len() != channels {

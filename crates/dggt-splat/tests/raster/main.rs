@@ -15,3 +15,5 @@ mod radix;
 mod scenes;
 mod stress;
 mod tensor_op;
+#[cfg(feature = "wgpu")]
+mod tile_cubes;

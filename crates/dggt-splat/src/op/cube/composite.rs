@@ -1,15 +1,59 @@
-//! Compositing: each pixel's sorted list blended front to back into colour, alpha and expected depth, with the
+//! Compositing: each pixel's tile list blended front to back into colour, alpha and expected depth, with the
 //! early stop at the transmittance floor.
+//!
+//! One cube per tile, one unit per pixel of it. The tile's footprints are staged through shared memory in
+//! batches of up to `stage` footprints, each loaded by one unit, so that every footprint is read from global
+//! memory once per tile instead of once per pixel; every unit then blends its pixel from shared memory. A
+//! shared count of the units that are done (outside the image, or stopped at the transmittance floor) ends the
+//! walk of the whole cube once it reaches the cube's size. Loop bounds that gate barriers are read with
+//! `workgroup_uniform_load`, so that WGSL's uniformity rules hold.
 
 use burn_cubecl::cubecl;
 use cubecl::prelude::*;
 
 use crate::constants::{ALPHA_THRESHOLD, MAX_ALPHA, MIN_DEPTH_ALPHA, MIN_TRANSMITTANCE};
 
-/// Front-to-back compositing, one unit per pixel (`ABSOLUTE_POS_X/Y` the pixel, `ABSOLUTE_POS_Z` the view).
+/// The range `[start, end)` of the cube's tile list, the same value in every unit of the cube.
+#[cube]
+pub fn tile_range(ranges: &Tensor<u32>, list: usize) -> (u32, u32) {
+    let mut bounds = Shared::<[u32]>::new_slice(2usize);
+    if UNIT_POS == 0 {
+        bounds[0] = ranges[2 * list];
+        bounds[1] = ranges[2 * list + 1];
+    }
+    let start = workgroup_uniform_load(&bounds[0]);
+    let end = workgroup_uniform_load(&bounds[1]);
+    (start, end)
+}
+
+/// One staged footprint: where its values sit in global memory.
+#[derive(CubeType)]
+pub struct Staged {
+    /// Index of the Gaussian.
+    pub id: usize,
+    /// Index of the (view, Gaussian) pair.
+    pub pair: usize,
+    /// Where its opacity is: `id` (shared opacities) or `pair` (per view).
+    pub opacity_slot: usize,
+}
+
+/// The footprint of list entry `entry` for view offset `base` (`base = v * count`).
+#[cube]
+pub fn staged(ids: &Tensor<u32>, entry: usize, base: usize, per_view: u32) -> Staged {
+    let id = ids[entry] as usize;
+    let pair = base + id;
+    let mut opacity_slot = id;
+    if per_view == 1 {
+        opacity_slot = pair;
+    }
+    Staged { id, pair, opacity_slot }
+}
+
+/// Front-to-back compositing, one cube per tile (`CUBE_POS_X/Y` the tile, `CUBE_POS_Z` the view within the
+/// batch of views starting at `first_view`), `tile_size²` units, footprints staged `stage` at a time.
 ///
 /// Writes the packed image `[V, H, W, K + 2]` (colours, alpha, expected depth), the final transmittance and the
-/// list end per pixel.
+/// list end (entries of the list up to the last one blended) per pixel.
 #[cube(launch)]
 #[allow(clippy::too_many_arguments)]
 pub fn composite_kernel(
@@ -29,25 +73,39 @@ pub fn composite_kernel(
     per_view: u32,
     width: u32,
     height: u32,
-    tile_size: u32,
     tiles_x: u32,
     tiles_y: u32,
+    #[comptime] tile_size: u32,
+    #[comptime] stage: u32,
     #[comptime] channels: usize,
 ) {
-    let x = ABSOLUTE_POS_X;
-    let y = ABSOLUTE_POS_Y;
-    let batch_view = ABSOLUTE_POS_Z as usize;
+    let units = comptime!(tile_size * tile_size);
+    let slots = comptime!(stage as usize);
+    let batch_view = CUBE_POS_Z as usize;
     let v = first_view as usize + batch_view;
-    if x >= width || y >= height {
-        terminate!();
-    }
-    let pixel = (v * height as usize + y as usize) * width as usize + x as usize;
-    let list = batch_view * (tiles_x * tiles_y) as usize + ((y / tile_size) * tiles_x + x / tile_size) as usize;
-    let start = ranges[2 * list] as usize;
-    let end = ranges[2 * list + 1] as usize;
+    let x = CUBE_POS_X * tile_size + UNIT_POS_X;
+    let y = CUBE_POS_Y * tile_size + UNIT_POS_Y;
+    let list = batch_view * (tiles_x * tiles_y) as usize + (CUBE_POS_Y * tiles_x + CUBE_POS_X) as usize;
+    let (start, end) = tile_range(ranges, list);
     let base = v * count as usize;
     let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
 
+    let mut s_means = Shared::<[f32]>::new_slice(2 * slots);
+    let mut s_conics = Shared::<[f32]>::new_slice(3 * slots);
+    let mut s_opacities = Shared::<[f32]>::new_slice(slots);
+    let mut s_depths = Shared::<[f32]>::new_slice(slots);
+    let mut s_colors = Shared::<[f32]>::new_slice(channels * slots);
+    let finished = Shared::<[Atomic<u32>]>::new_slice(1usize);
+    if UNIT_POS == 0 {
+        finished[0].store(0u32);
+    }
+    sync_cube();
+
+    let inside = x < width && y < height;
+    let mut done = !inside;
+    if done {
+        finished[0].fetch_add(1u32);
+    }
     let mut accumulated = Array::<f32>::new(channels);
     for ch in 0..channels {
         accumulated[ch] = 0.0;
@@ -55,44 +113,69 @@ pub fn composite_kernel(
     let mut depth = 0.0f32;
     let mut transmittance = 1.0f32;
     let mut last = 0u32;
-    let mut j = start;
+    let mut batch_start = start;
     loop {
-        if j >= end {
+        // The barrier of the uniform load also keeps the previous batch in place until every unit used it.
+        let finished_units = workgroup_uniform_load_atomic(&finished[0]);
+        if batch_start >= end || finished_units == units {
             break;
         }
-        let id = ids[j] as usize;
-        let k = base + id;
-        let mut opacity = opacities[id];
-        if per_view == 1 {
-            opacity = opacities[k];
-        }
-        let dx = means2d[2 * k] - px;
-        let dy = means2d[2 * k + 1] - py;
-        let (a, b, c) = (conics[3 * k], conics[3 * k + 1], conics[3 * k + 2]);
-        let sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy;
-        let alpha = (opacity * (-sigma).exp()).min(MAX_ALPHA);
-        if !(sigma.is_nan() || sigma < 0.0 || alpha < ALPHA_THRESHOLD) {
-            let next = transmittance * (1.0 - alpha);
-            if next <= MIN_TRANSMITTANCE {
-                break;
-            }
-            let weight = alpha * transmittance;
+        let slot = UNIT_POS as usize;
+        let entry = batch_start + UNIT_POS;
+        if UNIT_POS < stage && entry < end {
+            let f = staged(ids, entry as usize, base, per_view);
+            s_means[2 * slot] = means2d[2 * f.pair];
+            s_means[2 * slot + 1] = means2d[2 * f.pair + 1];
+            s_conics[3 * slot] = conics[3 * f.pair];
+            s_conics[3 * slot + 1] = conics[3 * f.pair + 1];
+            s_conics[3 * slot + 2] = conics[3 * f.pair + 2];
+            s_opacities[slot] = opacities[f.opacity_slot];
+            s_depths[slot] = depths[f.pair];
             for ch in 0..channels {
-                accumulated[ch] += colors[id * channels + ch] * weight;
+                s_colors[channels * slot + ch] = colors[f.id * channels + ch];
             }
-            depth += depths[k] * weight;
-            transmittance = next;
-            last = (j - start + 1) as u32;
         }
-        j += 1;
+        sync_cube();
+        let batch = (end - batch_start).min(stage);
+        if !done {
+            for i in 0..batch {
+                let s = i as usize;
+                let dx = s_means[2 * s] - px;
+                let dy = s_means[2 * s + 1] - py;
+                let (a, b, c) = (s_conics[3 * s], s_conics[3 * s + 1], s_conics[3 * s + 2]);
+                let sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy;
+                let alpha = (s_opacities[s] * (-sigma).exp()).min(MAX_ALPHA);
+                if !(sigma.is_nan() || sigma < 0.0 || alpha < ALPHA_THRESHOLD) {
+                    let next = transmittance * (1.0 - alpha);
+                    if next <= MIN_TRANSMITTANCE {
+                        done = true;
+                        break;
+                    }
+                    let weight = alpha * transmittance;
+                    for ch in 0..channels {
+                        accumulated[ch] += s_colors[channels * s + ch] * weight;
+                    }
+                    depth += s_depths[s] * weight;
+                    transmittance = next;
+                    last = batch_start + i - start + 1;
+                }
+            }
+            if done {
+                finished[0].fetch_add(1u32);
+            }
+        }
+        batch_start += stage;
     }
-    let alpha = 1.0 - transmittance;
-    let out = pixel * (channels + 2);
-    for ch in 0..channels {
-        images[out + ch] = accumulated[ch] + transmittance * background[ch];
+    if inside {
+        let pixel = (v * height as usize + y as usize) * width as usize + x as usize;
+        let alpha = 1.0 - transmittance;
+        let out = pixel * (channels + 2);
+        for ch in 0..channels {
+            images[out + ch] = accumulated[ch] + transmittance * background[ch];
+        }
+        images[out + channels] = alpha;
+        images[out + channels + 1] = depth / alpha.max(MIN_DEPTH_ALPHA);
+        transmittances[pixel] = transmittance;
+        list_ends[pixel] = last;
     }
-    images[out + channels] = alpha;
-    images[out + channels + 1] = depth / alpha.max(MIN_DEPTH_ALPHA);
-    transmittances[pixel] = transmittance;
-    list_ends[pixel] = last;
 }

@@ -1,17 +1,106 @@
-//! The backward pass of compositing: each pixel's list walked back to front, each footprint's gradient (mean,
+//! The backward pass of compositing: each tile's list walked back to front, each footprint's gradient (mean,
 //! conic, depth, opacity, colour) added into one shared buffer.
+//!
+//! One cube per tile, one unit per pixel, as in the forward pass: the footprints are staged through shared
+//! memory `stage` at a time, from the end of the tile's longest pixel list backwards; every unit computes its
+//! pixel's contribution to each staged footprint in the same back-to-front order as the host. With plane
+//! operations the contributions are summed across each plane (`plane_sum`) and one unit of the plane adds the
+//! sum, one atomic per footprint and plane instead of one per pixel; without them every unit adds its own.
 
 use burn_cubecl::cubecl;
 use cubecl::prelude::*;
 
+use super::composite::{staged, tile_range};
 use super::math::*;
 use crate::constants::{ALPHA_THRESHOLD, MAX_ALPHA, MIN_DEPTH_ALPHA};
 
-/// Backward of compositing, one unit per pixel: walks the pixel's list back to front from its end and adds
-/// each footprint's gradient into one buffer holding, in this order, the per-(view, Gaussian) gradients of
-/// `means2d [V, N, 2]`, `conics [V, N, 3]` and `depths [V, N]`, then the input gradients of the opacities
-/// (`[N]` or `[V, N]`, starting at `opacity_offset`) and the colours (`[N, K]`, at `color_offset`). One buffer
-/// keeps the kernel within the storage-buffer bindings every wgpu adapter offers.
+/// How the units of a cube add their gradients.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum GradientSum {
+    /// Summed over each plane first; one add per plane. Every unit of the cube calls the add.
+    PerPlane,
+    /// One add per unit (devices without plane operations).
+    PerUnit,
+}
+
+/// `grads[index] += value`, summed per [`GradientSum`].
+#[cube]
+fn add_gradient<A: FloatAdd>(
+    grads: &Tensor<Atomic<A::Slot>>,
+    index: usize,
+    value: f32,
+    #[comptime] sum: GradientSum,
+) {
+    if comptime!(sum == GradientSum::PerPlane) {
+        let total = plane_sum(value);
+        if UNIT_POS_PLANE == 0 {
+            A::add(grads, index, total);
+        }
+    } else {
+        A::add(grads, index, value);
+    }
+}
+
+/// The loss's gradients at one pixel's outputs, as the walk back needs them.
+#[derive(CubeType)]
+struct PixelGrads {
+    /// `dL/dcolour` per channel.
+    colors: Array<f32>,
+    /// `dL/d(Σ w·depth)`: the expected depth divides by the (clamped) alpha.
+    sum_depth: f32,
+    /// `dL/dT_final`: through the background and the alpha `1 - T_final`.
+    final_transmittance: f32,
+    /// `T_final`.
+    transmittance: f32,
+}
+
+/// The output gradients of `pixel` (zeros for a pixel that blended nothing or lies outside the image).
+#[cube]
+#[allow(clippy::too_many_arguments)]
+fn pixel_grads(
+    images: &Tensor<f32>,
+    transmittances: &Tensor<f32>,
+    grad_images: &Tensor<f32>,
+    background: &Tensor<f32>,
+    pixel: usize,
+    blended_any: bool,
+    #[comptime] channels: usize,
+) -> PixelGrads {
+    let mut colors = Array::<f32>::new(channels);
+    for ch in 0..channels {
+        colors[ch] = 0.0;
+    }
+    let mut grads = PixelGrads { colors, sum_depth: 0.0, final_transmittance: 0.0, transmittance: 1.0 };
+    if blended_any {
+        let packed = pixel * (channels + 2);
+        grads.transmittance = transmittances[pixel];
+        let alpha_out = images[packed + channels];
+        let depth_out = images[packed + channels + 1];
+        let grad_depth_out = grad_images[packed + channels + 1];
+        // depth = D / max(alpha, eps): dD = g / max(alpha, eps); dalpha -= g depth / alpha (unless clamped).
+        let clamped_alpha = alpha_out.max(MIN_DEPTH_ALPHA);
+        grads.sum_depth = grad_depth_out / clamped_alpha;
+        let mut grad_alpha_out = grad_images[packed + channels];
+        if alpha_out >= MIN_DEPTH_ALPHA {
+            grad_alpha_out -= grad_depth_out * depth_out / clamped_alpha;
+        }
+        let mut grad_final = -grad_alpha_out;
+        for ch in 0..channels {
+            let g = grad_images[packed + ch];
+            grads.colors[ch] = g;
+            grad_final += g * background[ch];
+        }
+        grads.final_transmittance = grad_final;
+    }
+    grads
+}
+
+/// Backward of compositing, one cube per tile and one unit per pixel (as `composite_kernel`): walks the tile's
+/// list back to front from the end of its longest pixel list and adds each footprint's gradient into one
+/// buffer holding, in this order, the per-(view, Gaussian) gradients of `means2d [V, N, 2]`, `conics [V, N, 3]`
+/// and `depths [V, N]`, then the input gradients of the opacities (`[N]` or `[V, N]`, starting at
+/// `opacity_offset`) and the colours (`[N, K]`, at `color_offset`). One buffer keeps the kernel within the
+/// storage-buffer bindings every wgpu adapter offers.
 #[cube(launch)]
 #[allow(clippy::too_many_arguments)]
 pub fn composite_backward_kernel<A: FloatAdd>(
@@ -36,104 +125,153 @@ pub fn composite_backward_kernel<A: FloatAdd>(
     per_view: u32,
     width: u32,
     height: u32,
-    tile_size: u32,
     tiles_x: u32,
     tiles_y: u32,
+    #[comptime] tile_size: u32,
+    #[comptime] stage: u32,
     #[comptime] channels: usize,
+    #[comptime] sum: GradientSum,
 ) {
-    let x = ABSOLUTE_POS_X;
-    let y = ABSOLUTE_POS_Y;
-    let batch_view = ABSOLUTE_POS_Z as usize;
+    let slots = comptime!(stage as usize);
+    let batch_view = CUBE_POS_Z as usize;
     let v = first_view as usize + batch_view;
-    if x >= width || y >= height {
-        terminate!();
-    }
+    let x = CUBE_POS_X * tile_size + UNIT_POS_X;
+    let y = CUBE_POS_Y * tile_size + UNIT_POS_Y;
+    let list = batch_view * (tiles_x * tiles_y) as usize + (CUBE_POS_Y * tiles_x + CUBE_POS_X) as usize;
+    let (start, _) = tile_range(ranges, list);
+    let inside = x < width && y < height;
     let pixel = (v * height as usize + y as usize) * width as usize + x as usize;
-    let last = list_ends[pixel] as usize;
-    if last == 0 {
-        terminate!();
+    let mut last = 0u32;
+    if inside {
+        last = list_ends[pixel];
     }
-    let list = batch_view * (tiles_x * tiles_y) as usize + ((y / tile_size) * tiles_x + x / tile_size) as usize;
-    let start = ranges[2 * list] as usize;
+    let longest = Shared::<[Atomic<u32>]>::new_slice(1usize);
+    if UNIT_POS == 0 {
+        longest[0].store(0u32);
+    }
+    sync_cube();
+    longest[0].fetch_max(last);
+    let tile_last = workgroup_uniform_load_atomic(&longest[0]);
+
     let base = v * count as usize;
     let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
-    let packed = pixel * (channels + 2);
     let pairs = views as usize * count as usize;
     let conic_offset = 2 * pairs;
     let depth_offset = 5 * pairs;
     let opacity_offset = opacity_offset as usize;
     let color_offset = color_offset as usize;
 
-    let final_transmittance = transmittances[pixel];
-    let alpha_out = images[packed + channels];
-    let depth_out = images[packed + channels + 1];
-    let grad_depth_out = grad_images[packed + channels + 1];
-    // depth = D / max(alpha, eps): dD = g / max(alpha, eps); dalpha -= g depth / alpha (unless clamped).
-    let clamped_alpha = alpha_out.max(MIN_DEPTH_ALPHA);
-    let grad_sum_depth = grad_depth_out / clamped_alpha;
-    let mut grad_alpha_out = grad_images[packed + channels];
-    if alpha_out >= MIN_DEPTH_ALPHA {
-        grad_alpha_out -= grad_depth_out * depth_out / clamped_alpha;
-    }
-    let mut grad_final = -grad_alpha_out;
-    for ch in 0..channels {
-        grad_final += grad_images[packed + ch] * background[ch];
-    }
-
+    let out = pixel_grads(images, transmittances, grad_images, background, pixel, last > 0, channels);
     let mut behind = Array::<f32>::new(channels);
     for ch in 0..channels {
         behind[ch] = 0.0;
     }
     let mut depth_behind = 0.0f32;
-    let mut transmittance = final_transmittance;
-    let mut j = start + last;
+    let mut transmittance = out.transmittance;
+
+    let mut s_ids = Shared::<[u32]>::new_slice(slots);
+    let mut s_means = Shared::<[f32]>::new_slice(2 * slots);
+    let mut s_conics = Shared::<[f32]>::new_slice(3 * slots);
+    let mut s_opacities = Shared::<[f32]>::new_slice(slots);
+    let mut s_depths = Shared::<[f32]>::new_slice(slots);
+    let mut s_colors = Shared::<[f32]>::new_slice(channels * slots);
+
+    // Entries `[start, batch_end)` remain; each batch stages the last `stage` of them, slot 0 the backmost.
+    let mut batch_end = start + tile_last;
     loop {
-        if j == start {
+        if batch_end <= start {
             break;
         }
-        j -= 1;
-        let id = ids[j] as usize;
-        let k = base + id;
-        let mut opacity = opacities[id];
-        let mut opacity_slot = id;
-        if per_view == 1 {
-            opacity = opacities[k];
-            opacity_slot = k;
-        }
-        let dx = means2d[2 * k] - px;
-        let dy = means2d[2 * k + 1] - py;
-        let (a, b, c) = (conics[3 * k], conics[3 * k + 1], conics[3 * k + 2]);
-        let sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy;
-        let falloff = (-sigma).exp();
-        let raw = opacity * falloff;
-        let alpha = raw.min(MAX_ALPHA);
-        if !(sigma.is_nan() || sigma < 0.0 || alpha < ALPHA_THRESHOLD) {
-            let remaining = 1.0 - alpha;
-            transmittance /= remaining;
-            let weight = alpha * transmittance;
-            let mut grad_alpha = 0.0f32;
+        let batch = (batch_end - start).min(stage);
+        let slot = UNIT_POS as usize;
+        // Every unit is done with the previous batch before it is overwritten.
+        sync_cube();
+        if UNIT_POS < batch {
+            let f = staged(ids, (batch_end - 1 - UNIT_POS) as usize, base, per_view);
+            s_ids[slot] = f.id as u32;
+            s_means[2 * slot] = means2d[2 * f.pair];
+            s_means[2 * slot + 1] = means2d[2 * f.pair + 1];
+            s_conics[3 * slot] = conics[3 * f.pair];
+            s_conics[3 * slot + 1] = conics[3 * f.pair + 1];
+            s_conics[3 * slot + 2] = conics[3 * f.pair + 2];
+            s_opacities[slot] = opacities[f.opacity_slot];
+            s_depths[slot] = depths[f.pair];
             for ch in 0..channels {
-                let color = colors[id * channels + ch];
-                let g = grad_images[packed + ch];
-                A::add(grads, color_offset + id * channels + ch, g * weight);
-                grad_alpha += g * (color - behind[ch]);
-                behind[ch] = alpha * color + remaining * behind[ch];
-            }
-            let depth = depths[k];
-            A::add(grads, depth_offset + k, grad_sum_depth * weight);
-            grad_alpha += grad_sum_depth * (depth - depth_behind);
-            depth_behind = alpha * depth + remaining * depth_behind;
-            grad_alpha = grad_alpha * transmittance - grad_final * final_transmittance / remaining;
-            if raw <= MAX_ALPHA {
-                A::add(grads, opacity_offset + opacity_slot, grad_alpha * falloff);
-                // alpha = o exp(-sigma): dalpha/dsigma = -alpha.
-                let grad_sigma = -grad_alpha * alpha;
-                A::add(grads, conic_offset + 3 * k, grad_sigma * 0.5 * dx * dx);
-                A::add(grads, conic_offset + 3 * k + 1, grad_sigma * dx * dy);
-                A::add(grads, conic_offset + 3 * k + 2, grad_sigma * 0.5 * dy * dy);
-                A::add(grads, 2 * k, grad_sigma * (a * dx + b * dy));
-                A::add(grads, 2 * k + 1, grad_sigma * (b * dx + c * dy));
+                s_colors[channels * slot + ch] = colors[f.id * channels + ch];
             }
         }
+        sync_cube();
+        for i in 0..batch {
+            let s = i as usize;
+            let id = s_ids[s] as usize;
+            let k = base + id;
+            let mut opacity_slot = id;
+            if per_view == 1 {
+                opacity_slot = k;
+            }
+            // This pixel blended entry `batch_end - 1 - i` only if it lies before its own list end.
+            let entry = batch_end - 1 - i;
+            let dx = s_means[2 * s] - px;
+            let dy = s_means[2 * s + 1] - py;
+            let (a, b, c) = (s_conics[3 * s], s_conics[3 * s + 1], s_conics[3 * s + 2]);
+            let sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy;
+            let falloff = (-sigma).exp();
+            let raw = s_opacities[s] * falloff;
+            let alpha = raw.min(MAX_ALPHA);
+            let blended = entry < start + last && !(sigma.is_nan() || sigma < 0.0 || alpha < ALPHA_THRESHOLD);
+            // Zero unless blended, so that a footprint this pixel did not blend adds nothing (not even a
+            // NaN from an extreme offset times a zero gradient).
+            let mut grad_colors = Array::<f32>::new(channels);
+            for ch in 0..channels {
+                grad_colors[ch] = 0.0;
+            }
+            let mut grad_depth = 0.0f32;
+            let mut grad_opacity = 0.0f32;
+            let mut grad_conic = Array::<f32>::new(3usize);
+            let mut grad_mean = Array::<f32>::new(2usize);
+            for e in 0..3usize {
+                grad_conic[e] = 0.0;
+            }
+            grad_mean[0] = 0.0;
+            grad_mean[1] = 0.0;
+            if blended {
+                let remaining = 1.0 - alpha;
+                transmittance /= remaining;
+                let weight = alpha * transmittance;
+                let mut grad_alpha = 0.0f32;
+                for ch in 0..channels {
+                    let color = s_colors[channels * s + ch];
+                    grad_colors[ch] = out.colors[ch] * weight;
+                    grad_alpha += out.colors[ch] * (color - behind[ch]);
+                    behind[ch] = alpha * color + remaining * behind[ch];
+                }
+                let depth = s_depths[s];
+                grad_depth = out.sum_depth * weight;
+                grad_alpha += out.sum_depth * (depth - depth_behind);
+                depth_behind = alpha * depth + remaining * depth_behind;
+                grad_alpha = grad_alpha * transmittance - out.final_transmittance * out.transmittance / remaining;
+                if raw <= MAX_ALPHA {
+                    grad_opacity = grad_alpha * falloff;
+                    // alpha = o exp(-sigma): dalpha/dsigma = -alpha.
+                    let grad_sigma = -grad_alpha * alpha;
+                    grad_conic[0] = grad_sigma * 0.5 * dx * dx;
+                    grad_conic[1] = grad_sigma * dx * dy;
+                    grad_conic[2] = grad_sigma * 0.5 * dy * dy;
+                    grad_mean[0] = grad_sigma * (a * dx + b * dy);
+                    grad_mean[1] = grad_sigma * (b * dx + c * dy);
+                }
+            }
+            for ch in 0..channels {
+                add_gradient::<A>(grads, color_offset + id * channels + ch, grad_colors[ch], sum);
+            }
+            add_gradient::<A>(grads, depth_offset + k, grad_depth, sum);
+            add_gradient::<A>(grads, opacity_offset + opacity_slot, grad_opacity, sum);
+            for e in 0..3usize {
+                add_gradient::<A>(grads, conic_offset + 3 * k + e, grad_conic[e], sum);
+            }
+            add_gradient::<A>(grads, 2 * k, grad_mean[0], sum);
+            add_gradient::<A>(grads, 2 * k + 1, grad_mean[1], sum);
+        }
+        batch_end -= batch;
     }
 }

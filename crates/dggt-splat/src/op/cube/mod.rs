@@ -22,11 +22,14 @@
 //! 4. Per batch: `fill_kernel` writes each pair's entries at its own offset (deterministic, no atomics): key
 //!    (list, depth bits), payload Gaussian index; `radix` sorts them stably by depth, then by list (so equal
 //!    depths keep index order, the host's); `ranges_kernel` finds each list's range; `composite_kernel`
-//!    blends one pixel per unit, front to back with gsplat's classic rules.
+//!    blends front to back with gsplat's classic rules, one cube per tile and one unit per pixel, the tile's
+//!    footprints staged through shared memory so that each is read from global memory once per tile.
 //!
-//! Backward: per batch, `composite_backward_kernel` walks each pixel's list back to front and adds footprint
-//! gradients with atomics (native `f32` atomic add where the device has it, a compare-and-swap loop on `u32`
-//! bits otherwise); `project_backward_kernel` pulls them through the projection, one unit per Gaussian summing
+//! Backward: per batch, `composite_backward_kernel` walks each tile's list back to front (one cube per tile,
+//! footprints staged as in the forward) and adds footprint gradients with atomics, summed across each plane
+//! first where the device has plane operations (one add per plane instead of one per pixel); the adds are
+//! native `f32` atomics where the device has them, a compare-and-swap loop on `u32` bits otherwise;
+//! `project_backward_kernel` pulls them through the projection, one unit per Gaussian summing
 //! its views in order; the background gradient `Σ_pixels dL/dcolour · T_final` is a reduction on tensors.
 //!
 //! Launches and passes over memory, for `V = 12` views of 518x350 (16-pixel tiles: `726 · 12 = 8712` lists,
@@ -50,8 +53,9 @@
 //! what wgpu adapters offer.
 //!
 //! Lavapipe (Mesa 22.3, the software Vulkan of the CI machine) cannot compile the shared memory CubeCL 0.11.3
-//! emits for devices without Vulkan's explicit workgroup layout (it crashes in pipeline creation), so the
-//! scan and the sort use none: each unit works serially on its own block or run.
+//! emits as SPIR-V for devices without Vulkan's explicit workgroup layout (it crashes in pipeline creation);
+//! through WGSL (the `wgpu` feature) it runs the compositing kernels' shared memory. The scan and the sort use
+//! none: each unit works serially on its own block or run.
 //!
 //! Against the host implementation: the images agree to float rounding (the host projects in `f64`, these
 //! kernels in `f32`, and accumulation orders differ under atomics), so the GPU path is tested against the host
@@ -76,7 +80,7 @@ use burn::backend::ops::FloatTensorOps;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{DType, Shape, TensorMetadata};
 use burn::tensor::Slice;
-use burn_cubecl::cubecl::features::AtomicUsage;
+use burn_cubecl::cubecl::features::{AtomicUsage, Plane};
 use burn_cubecl::cubecl::ir::{FloatKind, Type};
 use burn_cubecl::cubecl::prelude::*;
 use burn_cubecl::cubecl::{self, calculate_cube_count_elemwise};
@@ -89,14 +93,15 @@ use dggt_geom::ImageSize;
 use super::{PACKED_EXTRA_CHANNELS, SplatGrads, SplatInputs, SplatKernels, SplatOutputs};
 use crate::cull::CullStats;
 use crate::settings::RasterSettings;
+use composite_backward::GradientSum;
 use lists::{FootprintBuffers, ListBatch};
 use math::{NativeAdd, SwapAdd};
 pub use probe::{SortedIntersections, prefix_sums, sort_intersections};
 
 /// Units per cube of the per-element kernels.
 const ELEMENT_UNITS: u32 = 256;
-/// Side of the square of pixels one cube composites.
-const PIXEL_BLOCK: u32 = 16;
+/// Shared memory a compositing cube stages footprints in, at most: WebGPU's guaranteed workgroup storage.
+const SHARED_STAGE_BYTES: usize = 16 * 1024;
 
 /// Sizes and settings of one call.
 #[derive(Debug, Clone, Copy)]
@@ -193,12 +198,31 @@ fn element_launch(client: &cubecl::client::Client, elements: usize) -> (CubeCoun
     (calculate_cube_count_elemwise(client, elements, dim), dim)
 }
 
-/// One unit per pixel of the `views` views of a batch.
-fn pixel_launch(layout: &Layout, views: usize) -> (CubeCount, CubeDim) {
+/// One cube per tile of the `views` views of a batch, one unit per pixel of the tile.
+fn tile_launch(layout: &Layout, views: usize) -> (CubeCount, CubeDim) {
     (
-        CubeCount::new_3d(layout.width.div_ceil(PIXEL_BLOCK), layout.height.div_ceil(PIXEL_BLOCK), views as u32),
-        CubeDim::new_2d(PIXEL_BLOCK, PIXEL_BLOCK),
+        CubeCount::new_3d(layout.tiles_x, layout.tiles_y, views as u32),
+        CubeDim::new_2d(layout.tile_size, layout.tile_size),
     )
+}
+
+/// How many footprints a compositing cube stages in shared memory at a time: one per unit, fewer when
+/// `bytes_per_footprint` of them would pass [`SHARED_STAGE_BYTES`].
+fn stage_len(layout: &Layout, bytes_per_footprint: usize) -> u32 {
+    let units = layout.tile_size * layout.tile_size;
+    units.min((SHARED_STAGE_BYTES / bytes_per_footprint).max(1) as u32)
+}
+
+/// How the compositing backward sums its units' gradients: across each plane where the device has plane
+/// operations, unless the environment variable `DGGT_SPLAT_UNIT_SUMS` is set (to test the other path on any
+/// device).
+fn gradient_sum(client: &cubecl::client::Client) -> GradientSum {
+    if std::env::var_os("DGGT_SPLAT_UNIT_SUMS").is_none() && client.properties().features.plane.contains(Plane::Ops)
+    {
+        GradientSum::PerPlane
+    } else {
+        GradientSum::PerUnit
+    }
 }
 
 /// Whether the backward pass adds gradients with native `f32` atomics: when the device supports them, unless
@@ -348,7 +372,9 @@ fn composite_batch(
     out: &Composited,
 ) {
     let client = device.client();
-    let (cubes, dim) = pixel_launch(layout, batch.views);
+    let (cubes, dim) = tile_launch(layout, batch.views);
+    // Per staged footprint: mean (2), conic (3), opacity, depth and the colours, 4 bytes each.
+    let stage = stage_len(layout, 4 * (7 + layout.channels));
     composite::composite_kernel::launch(
         &client,
         cubes,
@@ -369,9 +395,10 @@ fn composite_batch(
         layout.per_view as u32,
         layout.width,
         layout.height,
-        layout.tile_size,
         layout.tiles_x,
         layout.tiles_y,
+        layout.tile_size,
+        stage,
         layout.channels,
     );
 }
@@ -466,7 +493,9 @@ fn composite_backward_batch(
     let client = saved.means.client.clone();
     let pairs = layout.pairs();
     let opacity_len = if layout.per_view { pairs } else { layout.count };
-    let (cubes, dim) = pixel_launch(layout, batch.views);
+    let (cubes, dim) = tile_launch(layout, batch.views);
+    // Per staged footprint: as the forward's, plus the Gaussian's index.
+    let stage = stage_len(layout, 4 * (8 + layout.channels));
     let launch = if native {
         composite_backward::composite_backward_kernel::launch::<NativeAdd>
     } else {
@@ -497,10 +526,12 @@ fn composite_backward_batch(
         layout.per_view as u32,
         layout.width,
         layout.height,
-        layout.tile_size,
         layout.tiles_x,
         layout.tiles_y,
+        layout.tile_size,
+        stage,
         layout.channels,
+        gradient_sum(&client),
     );
 }
 
