@@ -4,13 +4,17 @@
 # build without fusion and autotune beside it, then one table with every ratio (docs/BENCHMARKS.md).
 #
 #   scripts/gpu-bench.sh OUT_DIR [--dggt BIN] [--baseline-dggt BIN] [--release-src DIR] [--gsplat-src DIR]
-#                        [--device wgpu|cuda] [--scale full|reduced] [--budget-s S] [--no-reference]
+#                        [--raster-tests BIN] [--device wgpu|cuda] [--scale full|reduced] [--budget-s S]
+#                        [--no-reference]
 #
 # --dggt:          the binary to measure (default target/release/dggt, `cargo build --release --features wgpu`).
 # --baseline-dggt: a build without fusion and autotune (`--features wgpu-backend`); its forward and rasteriser
 #                  rows appear beside ours with the gain. Without it that part is skipped.
 # --release-src:   the DGGT release's source tree (the folder holding `dggt/`); without it only gsplat is timed.
 # --gsplat-src:    a gsplat source tree to import (prepended to PYTHONPATH) where gsplat is not installed.
+# --raster-tests:  the rasteriser's test binary (`cargo test --features wgpu --test raster --no-run`): its GPU
+#                  tests run first, so that the kernels' paths a software driver lacks (plane operations) are
+#                  checked against the host on this card.
 # --budget-s:      the whole run's wall-clock limit (default 540); each part gets its share and is stopped at
 #                  it, keeping the records it finished. Parts in order of importance: ours, the references, the
 #                  baseline.
@@ -20,7 +24,7 @@
 # reference.json, compute.md (the table), machine.txt and each part's log.
 set -uo pipefail
 
-usage() { sed -n '6,18p' "$0" >&2; exit 2; }
+usage() { sed -n '6,22p' "$0" >&2; exit 2; }
 [[ $# -ge 1 && $1 != -* ]] || usage
 out=$1
 shift
@@ -28,6 +32,7 @@ dggt="target/release/dggt"
 baseline=""
 release_src=""
 gsplat_src=""
+raster_tests=""
 device="wgpu"
 scale="full"
 budget=540
@@ -38,6 +43,7 @@ while [[ $# -gt 0 ]]; do
         --baseline-dggt) baseline=$2; shift 2 ;;
         --release-src) release_src=$2; shift 2 ;;
         --gsplat-src) gsplat_src=$2; shift 2 ;;
+        --raster-tests) raster_tests=$2; shift 2 ;;
         --device) device=$2; shift 2 ;;
         --scale) scale=$2; shift 2 ;;
         --budget-s) budget=$2; shift 2 ;;
@@ -47,6 +53,7 @@ while [[ $# -gt 0 ]]; do
 done
 [[ -x $dggt ]] || { echo "no dggt binary at $dggt (cargo build --release --features $device)" >&2; exit 1; }
 [[ -z $baseline || -x $baseline ]] || { echo "no baseline binary at $baseline" >&2; exit 1; }
+[[ -z $raster_tests || -x $raster_tests ]] || { echo "no raster test binary at $raster_tests" >&2; exit 1; }
 [[ $scale == full || $scale == reduced ]] || usage
 mkdir -p "$out"
 here=$(cd "$(dirname "$0")" && pwd)
@@ -56,6 +63,7 @@ deadline=$(($(date +%s) + budget))
 shares_left=100
 ((reference)) || shares_left=$((shares_left - 30))
 [[ -n $baseline ]] || shares_left=$((shares_left - 18))
+[[ -n $raster_tests ]] || shares_left=$((shares_left - 4))
 
 # Seconds a part with share $1 may take: that share of what is left for it and the parts after it (less 10 s
 # for the table).
@@ -98,8 +106,15 @@ else
 fi
 common=(bench compute --device "$device" --scale "$scale" --repeat 3 --warmup 1)
 
+if [[ -n $raster_tests ]]; then
+    # Without the cases that read the shared parity vectors (the device machine may not have them).
+    part raster-tests 4 "$raster_tests" --test-threads=1 --skip shared_reference cube:: tile_cubes:: radix:: batches::
+fi
 part ours-raster 6 "$dggt" "${common[@]}" --out "$out/ours-raster" --workloads raster
-part ours-forward 22 "$dggt" "${common[@]}" --out "$out/ours-forward" --workloads forward --precisions f32,f16,bf16
+# Each precision tunes its own kernels on first use: f32 alone first, so that its figures survive a slow tuning.
+part ours-forward 12 "$dggt" "${common[@]}" --out "$out/ours-forward" --workloads forward --precisions f32
+part ours-forward-half 10 "$dggt" "${common[@]}" --out "$out/ours-forward-half" --workloads forward \
+    --precisions f16,bf16
 part ours-train-step 10 "$dggt" "${common[@]}" --out "$out/ours-train-step" --workloads train-step
 part ours-longest 14 "$dggt" "${common[@]}" --out "$out/ours-longest" --workloads longest \
     --longest-budget-s "$(allowance 9)" "${longest[@]}"

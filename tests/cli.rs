@@ -128,6 +128,8 @@ fn bench_compute_runs_every_workload_at_reduced_size() {
         let ms = record["median_ms"].as_f64().unwrap_or_else(|| panic!("{key} has no time: {record}"));
         assert!(ms.is_finite() && ms > 0.0, "{key}: {ms}");
         assert_eq!(record["runs_ms"].as_array().unwrap().len(), 2, "{key}");
+        // Without untimed runs, the first run (the one that compiles kernels) is the first timed one.
+        assert_eq!(record["first_run_ms"], record["runs_ms"][0], "{key}");
     }
     let longest = records.iter().find(|r| r["key"] == "longest/bf16").expect("a longest-sequence record");
     // The CPU backend may not compute in bf16; then the record says why instead of a figure.

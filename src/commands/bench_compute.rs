@@ -201,5 +201,6 @@ fn one_line(record: &Record) -> String {
         (None, None, None) => "no figure".into(),
     };
     let memory = record.peak_mib.map_or(String::new(), |m| format!(", {m:.0} MiB held"));
-    format!("  {:<34} {value}{memory}", record.key)
+    let first = record.first_run_ms.map_or(String::new(), |ms| format!(", first run {:.1} s", ms / 1e3));
+    format!("  {:<34} {value}{memory}{first}", record.key)
 }

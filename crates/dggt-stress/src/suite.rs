@@ -60,6 +60,8 @@ pub struct CaseOutcome {
     pub checked: Vec<usize>,
     /// Why the case did not run on this device (a float type it lacks); listed, never counted as a pass.
     pub skipped: Option<String>,
+    /// Wall-clock seconds the case took (kernel compilation and tuning included on a GPU's first use).
+    pub seconds: f64,
 }
 
 impl CaseOutcome {
@@ -117,7 +119,7 @@ impl StressReport {
     /// A plain-text table: one row per case, then the findings of the failed ones and the totals by stage.
     pub fn table(&self) -> String {
         let mut out = String::new();
-        let _ = writeln!(out, "{:<9} {:<44} {:<8} {:>12}  result", "group", "case", "expect", "values");
+        let _ = writeln!(out, "{:<9} {:<44} {:<8} {:>12} {:>8}  result", "group", "case", "expect", "values", "seconds");
         for case in &self.cases {
             let result = match (&case.skipped, case.passed()) {
                 (Some(reason), _) => format!("skipped: {reason}"),
@@ -129,7 +131,11 @@ impl StressReport {
                 Expect::Rejected => "rejected",
             };
             let values: usize = case.checked.iter().sum();
-            let _ = writeln!(out, "{:<9} {:<44} {expect:<8} {values:>12}  {result}", case.group, case.name);
+            let _ = writeln!(
+                out,
+                "{:<9} {:<44} {expect:<8} {values:>12} {:>8.1}  {result}",
+                case.group, case.name, case.seconds
+            );
         }
         for case in self.failures() {
             let _ = writeln!(out, "\n{} / {}:", case.group, case.name);
@@ -173,7 +179,9 @@ fn run_case(case: Case<'_>) -> CaseOutcome {
     tracing::info!("stress case {} / {}", case.group, case.name);
     let mut probe = Probe::default();
     let run = case.run;
+    let started = std::time::Instant::now();
     let result = catch_unwind(AssertUnwindSafe(|| run(&mut probe)));
+    let seconds = started.elapsed().as_secs_f64();
     let (error, panic) = match result {
         Ok(Ok(())) => (None, None),
         Ok(Err(error)) => (Some(error), None),
@@ -195,6 +203,7 @@ fn run_case(case: Case<'_>) -> CaseOutcome {
         error,
         panic,
         skipped: None,
+        seconds,
     }
 }
 
@@ -210,6 +219,7 @@ fn skipped_case(group: &'static str, name: String, reason: String) -> CaseOutcom
         panic: None,
         checked: vec![0; Stage::ALL.len()],
         skipped: Some(reason),
+        seconds: 0.0,
     }
 }
 

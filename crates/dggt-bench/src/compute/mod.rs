@@ -173,6 +173,10 @@ pub struct Record {
     pub median_ms: Option<f64>,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub runs_ms: Vec<f64>,
+    /// The first (untimed) run: it compiles the kernels and, in a build with autotune, tunes them for these
+    /// shapes, so it is what a user waits for once per machine and shape (later runs read the kept results).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub first_run_ms: Option<f64>,
     /// Device memory the allocator held at the end of the work (after a clean-up at its start), MiB.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub peak_mib: Option<f64>,
@@ -195,6 +199,7 @@ impl Record {
             implementation: IMPLEMENTATION.into(),
             median_ms: None,
             runs_ms: Vec::new(),
+            first_run_ms: None,
             peak_mib: None,
             frames: None,
             note: String::new(),
@@ -251,14 +256,26 @@ fn timed(
 ) -> Record {
     let memory = DeviceMemory::start(device);
     let mut runs_ms = Vec::with_capacity(options.repeat);
+    let mut first_run_ms = None;
     for run in 0..options.warmup + options.repeat.max(1) {
+        if run < options.warmup {
+            tracing::info!("{key}: untimed run {} of {} (compiles and tunes kernels)", run + 1, options.warmup);
+        }
         let started = Instant::now();
         if let Err(error) = memory::guarded(&mut work) {
-            return Record::failed(key, error);
+            return Record { first_run_ms, ..Record::failed(key, error) };
         }
+        let elapsed_ms = started.elapsed().as_secs_f64() * 1e3;
+        first_run_ms.get_or_insert(elapsed_ms);
         if run >= options.warmup {
-            runs_ms.push(started.elapsed().as_secs_f64() * 1e3);
+            runs_ms.push(elapsed_ms);
         }
     }
-    Record { median_ms: Some(median(runs_ms.clone())), runs_ms, peak_mib: memory.held_mib(), ..Record::new(key) }
+    Record {
+        median_ms: Some(median(runs_ms.clone())),
+        runs_ms,
+        first_run_ms,
+        peak_mib: memory.held_mib(),
+        ..Record::new(key)
+    }
 }

@@ -129,7 +129,11 @@ fn row(key: &str, ours: Option<&Record>, baseline: Option<Option<&Record>>, refe
         ),
         None => (String::new(), String::new(), String::new(), String::new()),
     };
-    let notes = [ours.map(|o| o.note.as_str()).unwrap_or_default(), reference_note.as_str()]
+    let first_run = match ours.and_then(|o| o.first_run_ms) {
+        Some(ms) => format!("first run (compiling, tuning) {:.1} s", ms / 1e3),
+        None => String::new(),
+    };
+    let notes = [ours.map(|o| o.note.as_str()).unwrap_or_default(), first_run.as_str(), reference_note.as_str()]
         .into_iter()
         .filter(|note| !note.is_empty())
         .collect::<Vec<_>>()
@@ -191,7 +195,7 @@ mod tests {
             device: "GPU".into(),
             build: String::new(),
             records: vec![
-                timed("forward/4/f32", "dggt-rs", 100.0),
+                Record { first_run_ms: Some(12_345.0), ..timed("forward/4/f32", "dggt-rs", 100.0) },
                 Record { frames: Some(96), ..Record::new("longest/bf16") },
                 Record::failed("raster/10x2/forward", "out of memory | really"),
             ],
@@ -209,6 +213,7 @@ mod tests {
         let table = markdown(&ours, None, &[reference]);
         assert!(table.contains("| `forward/4/f32` | 100.0 ms |  | 250.0 ms (release) |  | 2.50x |"), "{table}");
         assert!(table.contains("| 96 frames |  | 48 frames (release) |  | 2.00x |"), "{table}");
+        assert!(table.contains("| first run (compiling, tuning) 12.3 s |"), "{table}");
         assert!(table.contains("failed: out of memory / really"), "{table}");
         assert!(table.contains("| `train-step/4+8/f32` | — |"), "{table}");
     }
