@@ -19,7 +19,9 @@ pub enum BenchError {
     #[error(transparent)]
     Infer(#[from] dggt_infer::InferError),
     #[error(transparent)]
-    Metric(#[from] dggt_losses::LossError),
+    Loss(#[from] dggt_losses::LossError),
+    #[error(transparent)]
+    Metric(#[from] dggt_metrics::MetricError),
 }
 
 impl BenchError {

@@ -20,7 +20,8 @@ use dggt_geom::{ImageSize, PixelConvention, PosedCamera};
 use dggt_infer::{
     InputCameras, MotionPath, Scene4d, SceneOptions, SkyChoice, ViewSlot, fresh_model, input_views, load_network,
 };
-use dggt_losses::{ImageShape, Lpips, LpipsKind};
+use dggt_losses::{Lpips, LpipsKind};
+use dggt_metrics::ImageShape;
 use dggt_model::{Dggt, ModelConfig};
 use dggt_refine::{Latent, ReferenceView, Refiner, RefinerSpec, frame_from_interleaved, frame_to_interleaved};
 use dggt_scene::{AssemblyCounts, AssemblySettings, TargetView, Timeline, nearest_in_time};
@@ -811,8 +812,8 @@ fn compare(
     let shape = ImageShape::new(size.height as usize, size.width as usize, 3);
     let (mut psnr, mut ssim) = (0.0, 0.0);
     for (image, reference) in images.iter().zip(references) {
-        psnr += dggt_losses::psnr(image, reference)?;
-        ssim += dggt_losses::ssim(image, reference, shape)?.value;
+        psnr += dggt_metrics::psnr(image, reference)?;
+        ssim += dggt_metrics::ssim(image, reference, shape)?.value;
     }
     let n = images.len().max(1) as f64;
     let lpips = match lpips {

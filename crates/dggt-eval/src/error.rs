@@ -21,7 +21,7 @@ pub enum EvalError {
     #[error("{0}")]
     Loss(#[from] dggt_losses::LossError),
     #[error("{0}")]
-    Metric(#[from] crate::metrics::MetricError),
+    Metric(#[from] dggt_metrics::MetricError),
 }
 
 impl EvalError {

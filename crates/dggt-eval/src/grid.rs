@@ -4,14 +4,14 @@
 //! and is sampled at its centre, continuous coordinates `(4 col + 2, 4 row + 2)` of the original image. The
 //! network sees the image resized by `(sx, sy) = (resized / original)` per axis and cropped by `crop_top`
 //! rows, so that point lies at `(x sx, y sy - crop_top)` in the rendered view; the rendered expected depth is
-//! read there bilinearly ([`crate::metrics::sample_bilinear`]). A cell takes part when its lidar depth is
+//! read there bilinearly ([`dggt_metrics::sample_bilinear`]). A cell takes part when its lidar depth is
 //! positive, none of its 16 full-resolution pixels is sky in the export's sky mask (mask value at least 128,
 //! the binarisation the preprocessing uses), and its centre lies inside the cropped view.
 
 use dggt_data::PreprocessPlan;
 use dggt_data::depth_flow::DEPTH_FLOW_STRIDE;
 
-use crate::metrics::sample_bilinear;
+use dggt_metrics::sample_bilinear;
 
 /// The map from original-image coordinates to network-image coordinates of one preprocessing plan.
 #[derive(Debug, Clone, Copy, PartialEq)]

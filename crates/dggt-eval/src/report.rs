@@ -16,7 +16,7 @@ use dggt_data::Preprocess;
 use dggt_infer::CheckpointInfo;
 use serde::Serialize;
 
-use crate::metrics::{FlowMetrics, mean_present};
+use dggt_metrics::{FlowMetrics, mean_present};
 use crate::protocol::{Protocol, Split};
 
 /// How the predicted 3D motion was obtained.

@@ -8,7 +8,7 @@
 //! the same rig camera's inputs (`dggt_scene::interpolate_camera`; extrapolated beyond the last input). The
 //! render is scored against the export's image preprocessed as the network's inputs are (network
 //! resolution), its expected depth against the export's lidar depth ([`crate::grid`],
-//! [`crate::metrics`]), and the predicted motion against the export's scene flow.
+//! `dggt-metrics`), and the predicted motion against the export's scene flow.
 //!
 //! Motion: without predicted velocities, dynamic Gaussians are held where they were predicted and the
 //! predicted motion of every surface point is zero ([`MotionSource::Held`]); its metrics are computed anyway
@@ -28,13 +28,13 @@ use dggt_infer::{
     Architecture, GroundTruth, InputCameras, InputSet, LoadedNetwork, MotionPath, Scene4d, SceneOptions, ViewSlot,
     forward_chunked, input_views, load_network,
 };
-use dggt_losses::{ImageShape, Lpips, LpipsKind, psnr, ssim};
+use dggt_losses::{Lpips, LpipsKind};
 use dggt_refine::{ReferenceView, Refiner, RefinerSpec, frame_from_interleaved, frame_to_interleaved};
 use dggt_scene::{TargetView, Timeline, nearest_in_time};
 
 use crate::error::EvalError;
 use crate::grid::{CellMapping, cell_has_sky};
-use crate::metrics::{MetricError, aligned_depth_rmse, scene_flow_metrics};
+use dggt_metrics::{ImageShape, MetricError, aligned_depth_rmse, psnr, scene_flow_metrics, ssim};
 use crate::protocol::Protocol;
 use crate::report::{
     EvalReport, ImageScores, MOTION_HELD, SceneReport, StageTime, ViewRecord, summarise_scenes, summarise_views,

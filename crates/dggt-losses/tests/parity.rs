@@ -18,7 +18,8 @@ use std::sync::OnceLock;
 use burn::tensor::{Device, Tensor};
 use common::{Host, max_err_rel_to_max, metrics_dir, nchw_to_nhwc, read_safetensors, rel_err, values};
 use dggt_losses::lpips::LpipsInput;
-use dggt_losses::{GramLoss, ImageShape, Lpips, LpipsKind, image_metrics, psnr, ssim, ssim_map};
+use dggt_losses::{GramLoss, Lpips, LpipsKind};
+use dggt_metrics::{ImageShape, image_metrics, psnr, ssim, ssim_map};
 
 const SCALAR_RTOL: f64 = 1e-4;
 const MAP_RTOL: f64 = 1e-4;

@@ -16,6 +16,8 @@ pub enum ObjectiveError {
     Scene(#[from] SceneError),
     #[error("{0}")]
     Loss(#[from] dggt_losses::LossError),
+    #[error(transparent)]
+    Metric(#[from] dggt_metrics::MetricError),
     #[error("{0}")]
     Geom(#[from] dggt_geom::GeomError),
 }

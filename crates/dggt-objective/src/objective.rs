@@ -21,7 +21,8 @@ use dggt_infer::{
     CameraSource, InputCameras, MotionPath, RenderSection, Scene4d, SceneOptions, SkyChoice, ViewSlot, forward_chunked,
     input_views,
 };
-use dggt_losses::{GramLoss, Lpips, bce_with_logits, l2, lifespan_l1, opacity_loss, psnr};
+use dggt_losses::{GramLoss, Lpips, bce_with_logits, l2, lifespan_l1, opacity_loss};
+use dggt_metrics::psnr;
 use dggt_model::Dggt;
 use dggt_scene::{AssemblyCounts, PixelGaussians, TargetView};
 

@@ -12,6 +12,8 @@ pub enum RefineTrainError {
     Train(#[from] dggt_train::TrainError),
     #[error("{0}")]
     Loss(#[from] dggt_losses::LossError),
+    #[error(transparent)]
+    Metric(#[from] dggt_metrics::MetricError),
     #[error("{path}: {source}")]
     Io { path: PathBuf, source: std::io::Error },
     #[error("configuration {path}: {detail}")]

@@ -18,7 +18,7 @@ use std::time::Instant;
 use burn::optim::GradientsParams;
 use burn::tensor::Device;
 use dggt_infer::checkpoint::{STATE_FILE, latest, load_model};
-use dggt_losses::psnr;
+use dggt_metrics::psnr;
 use dggt_refine::{Latent, Prompt};
 use dggt_train::Start;
 use dggt_train::checkpoint::{RunState, optimizer_file, save_folder};

@@ -18,6 +18,8 @@ pub enum TrainError {
     Model(#[from] dggt_model::ModelError),
     #[error("{0}")]
     Loss(#[from] dggt_losses::LossError),
+    #[error(transparent)]
+    Metric(#[from] dggt_metrics::MetricError),
     #[error("{what}: {detail}")]
     Invalid { what: String, detail: String },
     /// A configuration value out of its range, or settings that contradict each other.

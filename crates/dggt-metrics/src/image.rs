@@ -1,4 +1,4 @@
-//! Image quality metrics for evaluation, computed on the host in f64 (not differentiable): PSNR and SSIM
+//! Image quality: PSNR and SSIM
 //! as scikit-image computes them with the arguments the project's evaluation uses (data range 1).
 //!
 //! Buffers are channel-last `[H, W, C]` f32 slices (row-major, the layout of one view of the rasteriser's
@@ -16,7 +16,7 @@
 
 use burn::tensor::Tensor;
 
-use crate::error::LossError;
+use crate::error::MetricError;
 
 /// Side of the SSIM window.
 pub const SSIM_WINDOW: usize = 7;
@@ -65,22 +65,17 @@ pub struct ImageMetrics {
     pub ssim: f64,
 }
 
-fn check_buffers(a: &[f32], b: &[f32], shape: ImageShape) -> Result<(), LossError> {
+fn check_buffers(metric: &'static str, a: &[f32], b: &[f32], shape: ImageShape) -> Result<(), MetricError> {
     if shape.is_empty() || a.len() != shape.len() || b.len() != shape.len() {
-        return Err(LossError::InvalidInput(format!(
-            "image buffers of {} and {} values for a non-empty {shape:?} image",
-            a.len(),
-            b.len()
-        )));
+        let ImageShape { height, width, channels } = shape;
+        return Err(MetricError::ImageBuffers { metric, rendered: a.len(), truth: b.len(), height, width, channels });
     }
     Ok(())
 }
 
 /// PSNR in dB of two equally long buffers with values clamped to [0, 1] (data range 1).
-pub fn psnr(a: &[f32], b: &[f32]) -> Result<f64, LossError> {
-    if a.is_empty() || a.len() != b.len() {
-        return Err(LossError::InvalidInput(format!("PSNR of buffers of {} and {} values", a.len(), b.len())));
-    }
+pub fn psnr(a: &[f32], b: &[f32]) -> Result<f64, MetricError> {
+    crate::error::check_lengths("PSNR", a.len(), b.len())?;
     let sum: f64 = a
         .iter()
         .zip(b)
@@ -153,27 +148,24 @@ fn channel_map(a: &[f32], b: &[f32], shape: ImageShape, channel: usize) -> Vec<f
         .collect()
 }
 
-fn check_ssim_size(shape: ImageShape) -> Result<(), LossError> {
+fn check_ssim_size(shape: ImageShape) -> Result<(), MetricError> {
     if shape.height < SSIM_WINDOW || shape.width < SSIM_WINDOW {
-        return Err(LossError::InvalidInput(format!(
-            "SSIM needs images of at least {SSIM_WINDOW}x{SSIM_WINDOW}, got {}x{}",
-            shape.height, shape.width
-        )));
+        return Err(MetricError::TooSmall { window: SSIM_WINDOW, height: shape.height, width: shape.width });
     }
     Ok(())
 }
 
 /// The full SSIM map `[H, W, C]` (skimage's `full=True` map, reflected borders).
-pub fn ssim_map(a: &[f32], b: &[f32], shape: ImageShape) -> Result<Vec<f64>, LossError> {
-    check_buffers(a, b, shape)?;
+pub fn ssim_map(a: &[f32], b: &[f32], shape: ImageShape) -> Result<Vec<f64>, MetricError> {
+    check_buffers("SSIM", a, b, shape)?;
     check_ssim_size(shape)?;
     let maps: Vec<Vec<f64>> = (0..shape.channels).map(|c| channel_map(a, b, shape, c)).collect();
     Ok((0..shape.height * shape.width).flat_map(|i| maps.iter().map(move |m| m[i])).collect())
 }
 
 /// SSIM of two `[H, W, C]` buffers (H, W >= 7): per channel and the mean over channels.
-pub fn ssim(a: &[f32], b: &[f32], shape: ImageShape) -> Result<Ssim, LossError> {
-    check_buffers(a, b, shape)?;
+pub fn ssim(a: &[f32], b: &[f32], shape: ImageShape) -> Result<Ssim, MetricError> {
+    check_buffers("SSIM", a, b, shape)?;
     check_ssim_size(shape)?;
     let pad = SSIM_WINDOW / 2;
     let (h, w) = (shape.height, shape.width);
@@ -190,21 +182,21 @@ pub fn ssim(a: &[f32], b: &[f32], shape: ImageShape) -> Result<Ssim, LossError> 
 }
 
 /// PSNR and SSIM per view of two `[V, H, W, C]` tensors (read to the host).
-pub fn image_metrics(rendered: Tensor<4>, target: Tensor<4>) -> Result<Vec<ImageMetrics>, LossError> {
+pub fn image_metrics(rendered: Tensor<4>, target: Tensor<4>) -> Result<Vec<ImageMetrics>, MetricError> {
     let dims = rendered.dims();
     if dims != target.dims() {
-        return Err(LossError::InvalidInput(format!("image batches differ: {dims:?} vs {:?}", target.dims())));
+        return Err(MetricError::BatchShapes { rendered: dims, truth: target.dims() });
     }
     let [views, height, width, channels] = dims;
     let shape = ImageShape::new(height, width, channels);
-    let host = |t: Tensor<4>| -> Result<Vec<f32>, LossError> {
+    let host = |t: Tensor<4>, which: &'static str| -> Result<Vec<f32>, MetricError> {
         t.detach()
             .into_data()
             .convert::<f32>()
             .try_into_vec::<f32>()
-            .map_err(|e| LossError::InvalidInput(format!("reading images: {e:?}")))
+            .map_err(|e| MetricError::Unreadable { which, detail: format!("{e:?}") })
     };
-    let (a, b) = (host(rendered)?, host(target)?);
+    let (a, b) = (host(rendered, "rendered")?, host(target, "true")?);
     let n = shape.len();
     (0..views)
         .map(|v| {
