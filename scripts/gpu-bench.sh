@@ -5,7 +5,7 @@
 #
 #   scripts/gpu-bench.sh OUT_DIR [--dggt BIN] [--baseline-dggt BIN] [--release-src DIR] [--gsplat-src DIR]
 #                        [--raster-tests BIN] [--device wgpu|cuda] [--scale full|reduced] [--budget-s S]
-#                        [--no-reference]
+#                        [--no-reference] [--reference-records FILE]... [--baseline-records FILE]
 #
 # --dggt:          the binary to measure (default target/release/dggt, `cargo build --release --features wgpu`).
 # --baseline-dggt: a build without fusion and autotune (`--features wgpu-backend`); its forward and rasteriser
@@ -19,12 +19,15 @@
 #                  it, keeping the records it finished. Parts in order of importance: ours, the references, the
 #                  baseline.
 # --no-reference:  skip the release and gsplat (a machine without CUDA PyTorch).
+# --reference-records, --baseline-records: records an earlier run on the same card kind wrote (its
+#                  reference.json, its baseline's compute.json), shown in the table instead of measuring again, so
+#                  that the whole budget goes to our build.
 #
 # Outputs in OUT_DIR (keep them as docs/gpu-bench-<card>/): ours-*/compute.json, baseline/compute.json,
 # reference.json, compute.md (the table), machine.txt and each part's log.
 set -uo pipefail
 
-usage() { sed -n '6,22p' "$0" >&2; exit 2; }
+usage() { sed -n '6,25p' "$0" >&2; exit 2; }
 [[ $# -ge 1 && $1 != -* ]] || usage
 out=$1
 shift
@@ -33,6 +36,8 @@ baseline=""
 release_src=""
 gsplat_src=""
 raster_tests=""
+reference_records=()
+baseline_records=""
 device="wgpu"
 scale="full"
 budget=540
@@ -48,12 +53,17 @@ while [[ $# -gt 0 ]]; do
         --scale) scale=$2; shift 2 ;;
         --budget-s) budget=$2; shift 2 ;;
         --no-reference) reference=0; shift ;;
+        --reference-records) reference_records+=("$2"); reference=0; shift 2 ;;
+        --baseline-records) baseline_records=$2; shift 2 ;;
         *) usage ;;
     esac
 done
 [[ -x $dggt ]] || { echo "no dggt binary at $dggt (cargo build --release --features $device)" >&2; exit 1; }
 [[ -z $baseline || -x $baseline ]] || { echo "no baseline binary at $baseline" >&2; exit 1; }
 [[ -z $raster_tests || -x $raster_tests ]] || { echo "no raster test binary at $raster_tests" >&2; exit 1; }
+for file in "${reference_records[@]}" $baseline_records; do
+    [[ -f $file ]] || { echo "no record file at $file" >&2; exit 1; }
+done
 [[ $scale == full || $scale == reduced ]] || usage
 mkdir -p "$out"
 here=$(cd "$(dirname "$0")" && pwd)
@@ -134,6 +144,8 @@ fi
 table_args=()
 for file in "$out"/ours-*/compute.json; do [[ -f $file ]] && table_args+=(--ours "$file"); done
 [[ -f $out/baseline/compute.json ]] && table_args+=(--baseline "$out/baseline/compute.json")
+[[ -n $baseline_records && ! -f $out/baseline/compute.json ]] && table_args+=(--baseline "$baseline_records")
 [[ -f $out/reference.json ]] && table_args+=(--reference "$out/reference.json")
+for file in "${reference_records[@]}"; do table_args+=(--reference "$file"); done
 ((${#table_args[@]})) || { echo "no part wrote records (see $out/*.log)" >&2; exit 1; }
 "$dggt" bench table "${table_args[@]}" --out "$out/compute.md"

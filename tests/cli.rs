@@ -196,4 +196,24 @@ fn gpu_bench_script_measures_every_part_at_reduced_scale() {
     let raster_row = table.lines().find(|line| line.starts_with("| `raster/20000x2/forward` |")).unwrap();
     let gain = raster_row.split('|').nth(5).unwrap().trim();
     assert!(gain.ends_with('x') && gain.trim_end_matches('x').parse::<f64>().is_ok(), "no gain: {raster_row}");
+
+    // Again with the first run's baseline and a reference's records reused: neither is measured, both are in
+    // the table.
+    let reference = dir.path().join("reference.json");
+    let record = serde_json::json!({"key": "forward/4/f32", "impl": "release", "median_ms": 1.0});
+    std::fs::write(&reference, serde_json::json!({"implementation": "reference", "records": [record]}).to_string())
+        .unwrap();
+    let again = dir.path().join("again");
+    let run = Command::new("bash")
+        .args([&script, again.to_str().unwrap(), "--scale", "reduced", "--device", "cpu", "--dggt", binary])
+        .args(["--reference-records", reference.to_str().unwrap()])
+        .args(["--baseline-records", out.join("baseline/compute.json").to_str().unwrap(), "--budget-s", "900"])
+        .output()
+        .expect("bash runs the script");
+    let log = format!("{}\n{}", String::from_utf8_lossy(&run.stdout), String::from_utf8_lossy(&run.stderr));
+    assert!(run.status.success(), "{log}");
+    let parts = std::fs::read_to_string(again.join("parts.txt")).unwrap();
+    assert!(!parts.contains("baseline") && !parts.contains("reference"), "measured again: {parts}");
+    let table = std::fs::read_to_string(again.join("compute.md")).unwrap();
+    assert!(table.contains("Baseline: dggt-rs, ") && table.contains("1.0 ms (release)"), "{table}");
 }

@@ -10,9 +10,10 @@ use crate::backend::DeviceList;
 /// does.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// The larger suite (bigger scenarios, more random extreme mixtures).
-    #[arg(long)]
-    full: bool,
+    /// Which cases: `bounded` (every case at small sizes), `full` (bigger scenarios, more random extreme
+    /// mixtures) or `device` (what a GPU adds to the CPU suite: every crafted case and one network case).
+    #[arg(long, value_enum, default_value = "bounded")]
+    scope: Scope,
     /// A folder with `lpips_alex.safetensors` and `vgg16_features.safetensors`: adds LPIPS and Gram terms.
     #[arg(long)]
     loss_weights: Option<PathBuf>,
@@ -24,11 +25,29 @@ pub struct Args {
     json: Option<PathBuf>,
 }
 
+/// [`dggt_stress::StressScope`] on the command line.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+enum Scope {
+    Bounded,
+    Full,
+    Device,
+}
+
+impl From<Scope> for dggt_stress::StressScope {
+    fn from(scope: Scope) -> Self {
+        match scope {
+            Scope::Bounded => Self::Bounded,
+            Scope::Full => Self::Full,
+            Scope::Device => Self::Device,
+        }
+    }
+}
+
 /// Runs the suite, prints the table; an error when any case fails.
 pub fn run(args: Args) -> Result<()> {
     let device = args.device.single()?;
     let started = std::time::Instant::now();
-    let options = dggt_stress::StressOptions { full: args.full, loss_weights: args.loss_weights };
+    let options = dggt_stress::StressOptions { scope: args.scope.into(), loss_weights: args.loss_weights };
     let report = dggt_stress::run_suite(&options, &device).map_err(|e| anyhow::anyhow!("stress suite: {e}"))?;
     print!("{}", report.table());
     println!("({:.1} s on {device:?})", started.elapsed().as_secs_f64());

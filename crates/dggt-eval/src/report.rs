@@ -16,8 +16,8 @@ use dggt_data::Preprocess;
 use dggt_infer::CheckpointInfo;
 use serde::Serialize;
 
-use dggt_metrics::{FlowMetrics, mean_present};
 use crate::protocol::{Protocol, Split};
+use dggt_metrics::{FlowMetrics, mean_present};
 
 /// How the predicted 3D motion was obtained.
 pub const MOTION_HELD: &str = "held (no motion head)";

@@ -34,11 +34,11 @@ use dggt_scene::{TargetView, Timeline, nearest_in_time};
 
 use crate::error::EvalError;
 use crate::grid::{CellMapping, cell_has_sky};
-use dggt_metrics::{ImageShape, MetricError, aligned_depth_rmse, psnr, scene_flow_metrics, ssim};
 use crate::protocol::Protocol;
 use crate::report::{
     EvalReport, ImageScores, MOTION_HELD, SceneReport, StageTime, ViewRecord, summarise_scenes, summarise_views,
 };
+use dggt_metrics::{ImageShape, MetricError, aligned_depth_rmse, psnr, scene_flow_metrics, ssim};
 
 /// Motion is scored only in windows where some true flow is longer than this (STORM's rule; m/s for
 /// velocity-valued exports).

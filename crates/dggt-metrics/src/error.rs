@@ -10,7 +10,9 @@ pub enum MetricError {
     #[error("{metric}: non-finite {which} value at point {index}")]
     NonFinite { metric: &'static str, which: &'static str, index: usize },
     /// Image buffers that do not hold the image's values.
-    #[error("{metric}: image buffers of {rendered} and {truth} values for a non-empty {height}x{width}x{channels} image")]
+    #[error(
+        "{metric}: image buffers of {rendered} and {truth} values for a non-empty {height}x{width}x{channels} image"
+    )]
     ImageBuffers { metric: &'static str, rendered: usize, truth: usize, height: usize, width: usize, channels: usize },
     /// Images smaller than the SSIM window.
     #[error("SSIM needs images of at least {window}x{window}, got {height}x{width}")]
@@ -23,7 +25,6 @@ pub enum MetricError {
     Unreadable { which: &'static str, detail: String },
 }
 
-
 /// Rejects paired inputs of different lengths, or none.
 pub(crate) fn check_lengths(metric: &'static str, predicted: usize, truth: usize) -> Result<(), MetricError> {
     if predicted != truth {
@@ -34,4 +35,3 @@ pub(crate) fn check_lengths(metric: &'static str, predicted: usize, truth: usize
     }
     Ok(())
 }
-

@@ -24,4 +24,4 @@ mod scenario;
 pub mod suite;
 
 pub use probe::{Finding, Probe, Stage};
-pub use suite::{CaseOutcome, Expect, StressOptions, StressReport, run_suite};
+pub use suite::{CaseOutcome, Expect, StressOptions, StressReport, StressScope, run_suite};

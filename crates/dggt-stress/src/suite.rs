@@ -35,11 +35,28 @@ pub enum Expect {
     Rejected,
 }
 
+/// Which cases the suite runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StressScope {
+    /// Every case at small sizes: CI's suite on the CPU.
+    #[default]
+    Bounded,
+    /// Every case with larger scenarios and more random extreme mixtures.
+    Full,
+    /// What a device adds to the CPU suite, at a fraction of its cost: every crafted case (the rasteriser's
+    /// kernels, scene assembly, the objective and the backward pass at their extremes) and the first network
+    /// case in `f32` (the network's forward and backward through the device's kernels once). The network's
+    /// other extremes exercise the same operations as on the CPU; on a device every new shape compiles (and,
+    /// with autotune, tunes) its kernels, which on a software driver costs minutes a case.
+    Device,
+}
+
 /// What to run.
 #[derive(Debug, Clone, Default)]
 pub struct StressOptions {
-    /// The full suite: larger scenarios, more random extreme mixtures. The default (bounded) suite is CI's.
-    pub full: bool,
+    /// Which cases, at which sizes.
+    pub scope: StressScope,
     /// A folder holding `lpips_alex.safetensors` and `vgg16_features.safetensors` (the layout of the shared
     /// metrics vectors): adds the LPIPS and Gram terms to the objective.
     pub loss_weights: Option<PathBuf>,
@@ -89,7 +106,7 @@ impl CaseOutcome {
 #[derive(Debug, Clone, Serialize)]
 pub struct StressReport {
     pub device: String,
-    pub full: bool,
+    pub scope: StressScope,
     pub cases: Vec<CaseOutcome>,
 }
 
@@ -119,7 +136,8 @@ impl StressReport {
     /// A plain-text table: one row per case, then the findings of the failed ones and the totals by stage.
     pub fn table(&self) -> String {
         let mut out = String::new();
-        let _ = writeln!(out, "{:<9} {:<44} {:<8} {:>12} {:>8}  result", "group", "case", "expect", "values", "seconds");
+        let _ =
+            writeln!(out, "{:<9} {:<44} {:<8} {:>12} {:>8}  result", "group", "case", "expect", "values", "seconds");
         for case in &self.cases {
             let result = match (&case.skipped, case.passed()) {
                 (Some(reason), _) => format!("skipped: {reason}"),
@@ -329,7 +347,7 @@ pub fn run_suite(options: &StressOptions, device: &Device) -> Result<StressRepor
     let config = ModelConfig::tiny();
     outcomes.extend(crafted_group(options, &config, &device)?);
     outcomes.extend(network_group(options, &config, &device)?);
-    Ok(StressReport { device: format!("{device:?}"), full: options.full, cases: outcomes })
+    Ok(StressReport { device: format!("{device:?}"), scope: options.scope, cases: outcomes })
 }
 
 /// Camera geometry at its extremes: rotations, translations, timelines, pose encodings.
@@ -361,11 +379,12 @@ fn crafted_group(options: &StressOptions, config: &ModelConfig, device: &Device)
     };
     let crafted_objective =
         Objective::new(loss_weights(options, 0.0), crafted_render, device).map_err(|e| e.to_string())?;
-    let (size, inputs) = if options.full { (ImageSize::new(70, 56), 3) } else { (ImageSize::new(56, 42), 2) };
+    let full = options.scope == StressScope::Full;
+    let (size, inputs) = if full { (ImageSize::new(70, 56), 3) } else { (ImageSize::new(56, 42), 2) };
     let size = size.map_err(|e| e.to_string())?;
     let mut crafted_cases: Vec<(String, Expect, Edit)> =
         crafted_extremes().into_iter().map(|(name, expect, edit)| (name.to_string(), expect, edit)).collect();
-    for seed in 0..if options.full { 16 } else { 2 } {
+    for seed in 0..if full { 16 } else { 2 } {
         crafted_cases.push((format!("random extremes, seed {seed}"), Expect::Finite, mixed_extremes));
     }
     let mut outcomes = Vec::new();
@@ -395,7 +414,7 @@ type NetworkCase = (&'static str, ImageSize, usize, fn(&mut Scenario), bool);
 fn network_cases(options: &StressOptions) -> Result<Vec<NetworkCase>, String> {
     let normal = ImageSize::new(70, 56).map_err(|e| e.to_string())?;
     let small = ImageSize::new(42, 42).map_err(|e| e.to_string())?;
-    let many = if options.full { (normal, 64) } else { (small, 64) };
+    let many = if options.scope == StressScope::Full { (normal, 64) } else { (small, 64) };
     Ok(vec![
         ("random images", normal, 3, |_| {}, true),
         (
@@ -447,9 +466,14 @@ fn network_group(options: &StressOptions, config: &ModelConfig, device: &Device)
         Objective::new(loss_weights(options, 1.0), network_render.clone(), device).map_err(|e| e.to_string())?;
     let network_cases = network_cases(options)?;
     let mut outcomes = Vec::new();
-    for dtype in [FloatDType::F32, FloatDType::F16, FloatDType::BF16] {
+    let (dtypes, cases_per_type): (&[FloatDType], usize) = match options.scope {
+        StressScope::Device => (&[FloatDType::F32], 1),
+        StressScope::Bounded | StressScope::Full => (&[FloatDType::F32, FloatDType::F16, FloatDType::BF16], usize::MAX),
+    };
+    for &dtype in dtypes {
         let reduced = dtype != FloatDType::F32;
-        let cases: Vec<&NetworkCase> = network_cases.iter().filter(|case| !reduced || case.4).collect();
+        let cases: Vec<&NetworkCase> =
+            network_cases.iter().filter(|case| !reduced || case.4).take(cases_per_type).collect();
         let suffix = if reduced { format!(", {}", dtype_name(dtype)) } else { String::new() };
         if reduced && !device.supports_dtype(dtype) {
             for &&(name, size, inputs, _, _) in &cases {

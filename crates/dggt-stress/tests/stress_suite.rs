@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use burn::tensor::{Device, Tensor, TensorData};
-use dggt_stress::{Expect, Probe, Stage, StressOptions, run_suite};
+use dggt_stress::{Expect, Probe, Stage, StressOptions, StressScope, run_suite};
 
 /// The shared metrics vectors (LPIPS-Alex and VGG-16 weights): the LPIPS and Gram terms are part of the suite,
 /// so a missing folder fails the test, naming where it looked.
@@ -26,7 +26,7 @@ fn loss_weights() -> PathBuf {
 
 #[test]
 fn the_bounded_suite_finds_nothing_non_finite() {
-    let options = StressOptions { full: false, loss_weights: Some(loss_weights()) };
+    let options = StressOptions { scope: StressScope::Bounded, loss_weights: Some(loss_weights()) };
     let report = run_suite(&options, &Device::flex()).expect("the suite runs");
     println!("{}", report.table());
     assert!(report.passed(), "{}", report.table());
@@ -45,17 +45,23 @@ fn the_bounded_suite_finds_nothing_non_finite() {
     }
 }
 
-/// The same suite through the CubeCL kernels and burn's wgpu backend, training included. Without the LPIPS and
-/// Gram terms: their VGG features of the 64-frame case need a buffer larger than the 128 MiB storage binding
-/// that Mesa's software Vulkan driver allows.
+/// What the wgpu device adds, through the CubeCL kernels and burn's wgpu backend with fusion and autotune:
+/// every crafted case (the rasteriser at its extremes, training included) and one network case, each new
+/// shape compiled and tuned once (minutes on the software driver, hence not the whole network group). Without
+/// the LPIPS and Gram terms: their VGG features need buffers beyond the 128 MiB storage binding of Mesa's
+/// software Vulkan driver.
 #[cfg(feature = "wgpu")]
 #[test]
-fn the_bounded_suite_finds_nothing_non_finite_on_wgpu() {
-    let options = StressOptions { full: false, loss_weights: None };
+fn the_device_suite_finds_nothing_non_finite_on_wgpu() {
+    let options = StressOptions { scope: StressScope::Device, loss_weights: None };
     let device = Device::wgpu(burn::tensor::DeviceKind::default());
     let report = run_suite(&options, &device).expect("the suite runs");
     println!("{}", report.table());
     assert!(report.passed(), "{}", report.table());
+    assert_eq!(report.skipped().count(), 0, "{}", report.table());
+    assert!(report.cases.iter().filter(|c| c.group == "crafted").count() >= 20, "{}", report.table());
+    let network: Vec<&str> = report.cases.iter().filter(|c| c.group == "network").map(|c| c.name.as_str()).collect();
+    assert_eq!(network, ["random images (3 at 70x56)"], "the device scope runs one network case");
 }
 
 #[test]

@@ -38,7 +38,7 @@ fn wgpu_tile_cubes_match_the_host_for_one_three_and_four_channels() {
 
 #[test]
 fn wgpu_tile_cubes_stage_fewer_footprints_than_units_for_many_channels() {
-    // 40 channels: 188 bytes a staged footprint in the backward, so 87 of them fit the 16 KiB stage, fewer
+    // 40 channels: 192 bytes a staged footprint in the backward, so 85 of them fit the 16 KiB stage, fewer
     // than the 256 units of a cube.
     let mut rng = Rng::new(48);
     let scene = Scene::random(&mut rng, 400, 40, (0.03, 0.3));

@@ -25,12 +25,7 @@ pub enum GradientSum {
 
 /// `grads[index] += value`, summed per [`GradientSum`].
 #[cube]
-fn add_gradient<A: FloatAdd>(
-    grads: &Tensor<Atomic<A::Slot>>,
-    index: usize,
-    value: f32,
-    #[comptime] sum: GradientSum,
-) {
+fn add_gradient<A: FloatAdd>(grads: &Tensor<Atomic<A::Slot>>, index: usize, value: f32, #[comptime] sum: GradientSum) {
     if comptime!(sum == GradientSum::PerPlane) {
         let total = plane_sum(value);
         if UNIT_POS_PLANE == 0 {

@@ -217,8 +217,7 @@ fn stage_len(layout: &Layout, bytes_per_footprint: usize) -> u32 {
 /// operations, unless the environment variable `DGGT_SPLAT_UNIT_SUMS` is set (to test the other path on any
 /// device).
 fn gradient_sum(client: &cubecl::client::Client) -> GradientSum {
-    if std::env::var_os("DGGT_SPLAT_UNIT_SUMS").is_none() && client.properties().features.plane.contains(Plane::Ops)
-    {
+    if std::env::var_os("DGGT_SPLAT_UNIT_SUMS").is_none() && client.properties().features.plane.contains(Plane::Ops) {
         GradientSum::PerPlane
     } else {
         GradientSum::PerUnit
