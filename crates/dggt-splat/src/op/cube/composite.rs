@@ -11,6 +11,7 @@
 use burn_cubecl::cubecl;
 use cubecl::prelude::*;
 
+use super::stage::{FootprintStage, load_footprint};
 use crate::constants::{ALPHA_THRESHOLD, MAX_ALPHA, MIN_DEPTH_ALPHA, MIN_TRANSMITTANCE};
 
 /// The range `[start, end)` of the cube's tile list, the same value in every unit of the cube.
@@ -24,29 +25,6 @@ pub fn tile_range(ranges: &Tensor<u32>, list: usize) -> (u32, u32) {
     let start = workgroup_uniform_load(&bounds[0]);
     let end = workgroup_uniform_load(&bounds[1]);
     (start, end)
-}
-
-/// One staged footprint: where its values sit in global memory.
-#[derive(CubeType)]
-pub struct Staged {
-    /// Index of the Gaussian.
-    pub id: usize,
-    /// Index of the (view, Gaussian) pair.
-    pub pair: usize,
-    /// Where its opacity is: `id` (shared opacities) or `pair` (per view).
-    pub opacity_slot: usize,
-}
-
-/// The footprint of list entry `entry` for view offset `base` (`base = v * count`).
-#[cube]
-pub fn staged(ids: &Tensor<u32>, entry: usize, base: usize, per_view: u32) -> Staged {
-    let id = ids[entry] as usize;
-    let pair = base + id;
-    let mut opacity_slot = id;
-    if per_view == 1 {
-        opacity_slot = pair;
-    }
-    Staged { id, pair, opacity_slot }
 }
 
 /// Front-to-back compositing, one cube per tile (`CUBE_POS_X/Y` the tile, `CUBE_POS_Z` the view within the
@@ -90,11 +68,7 @@ pub fn composite_kernel(
     let base = v * count as usize;
     let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
 
-    let mut s_means = Shared::<[f32]>::new_slice(2 * slots);
-    let mut s_conics = Shared::<[f32]>::new_slice(3 * slots);
-    let mut s_opacities = Shared::<[f32]>::new_slice(slots);
-    let mut s_depths = Shared::<[f32]>::new_slice(slots);
-    let mut s_colors = Shared::<[f32]>::new_slice(channels * slots);
+    let mut staged = FootprintStage::new(slots, channels);
     let finished = Shared::<[Atomic<u32>]>::new_slice(1usize);
     if UNIT_POS == 0 {
         finished[0].store(0u32);
@@ -123,28 +97,32 @@ pub fn composite_kernel(
         let slot = UNIT_POS as usize;
         let entry = batch_start + UNIT_POS;
         if UNIT_POS < stage && entry < end {
-            let f = staged(ids, entry as usize, base, per_view);
-            s_means[2 * slot] = means2d[2 * f.pair];
-            s_means[2 * slot + 1] = means2d[2 * f.pair + 1];
-            s_conics[3 * slot] = conics[3 * f.pair];
-            s_conics[3 * slot + 1] = conics[3 * f.pair + 1];
-            s_conics[3 * slot + 2] = conics[3 * f.pair + 2];
-            s_opacities[slot] = opacities[f.opacity_slot];
-            s_depths[slot] = depths[f.pair];
-            for ch in 0..channels {
-                s_colors[channels * slot + ch] = colors[f.id * channels + ch];
-            }
+            let e = entry as usize;
+            load_footprint(
+                &mut staged,
+                slot,
+                ids,
+                means2d,
+                conics,
+                depths,
+                opacities,
+                colors,
+                e,
+                base,
+                per_view,
+                channels,
+            );
         }
         sync_cube();
         let batch = (end - batch_start).min(stage);
         if !done {
             for i in 0..batch {
                 let s = i as usize;
-                let dx = s_means[2 * s] - px;
-                let dy = s_means[2 * s + 1] - py;
-                let (a, b, c) = (s_conics[3 * s], s_conics[3 * s + 1], s_conics[3 * s + 2]);
+                let dx = staged.means[2 * s] - px;
+                let dy = staged.means[2 * s + 1] - py;
+                let (a, b, c) = (staged.conics[3 * s], staged.conics[3 * s + 1], staged.conics[3 * s + 2]);
                 let sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy;
-                let alpha = (s_opacities[s] * (-sigma).exp()).min(MAX_ALPHA);
+                let alpha = (staged.opacities[s] * (-sigma).exp()).min(MAX_ALPHA);
                 if !(sigma.is_nan() || sigma < 0.0 || alpha < ALPHA_THRESHOLD) {
                     let next = transmittance * (1.0 - alpha);
                     if next <= MIN_TRANSMITTANCE {
@@ -153,9 +131,9 @@ pub fn composite_kernel(
                     }
                     let weight = alpha * transmittance;
                     for ch in 0..channels {
-                        accumulated[ch] += s_colors[channels * s + ch] * weight;
+                        accumulated[ch] += staged.colors[channels * s + ch] * weight;
                     }
-                    depth += s_depths[s] * weight;
+                    depth += staged.depths[s] * weight;
                     transmittance = next;
                     last = batch_start + i - start + 1;
                 }

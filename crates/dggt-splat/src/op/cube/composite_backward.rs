@@ -10,8 +10,9 @@
 use burn_cubecl::cubecl;
 use cubecl::prelude::*;
 
-use super::composite::{staged, tile_range};
+use super::composite::tile_range;
 use super::math::*;
+use super::stage::{FootprintStage, load_footprint};
 use crate::constants::{ALPHA_THRESHOLD, MAX_ALPHA, MIN_DEPTH_ALPHA};
 
 /// How the units of a cube add their gradients.
@@ -164,12 +165,7 @@ pub fn composite_backward_kernel<A: FloatAdd>(
     let mut depth_behind = 0.0f32;
     let mut transmittance = out.transmittance;
 
-    let mut s_ids = Shared::<[u32]>::new_slice(slots);
-    let mut s_means = Shared::<[f32]>::new_slice(2 * slots);
-    let mut s_conics = Shared::<[f32]>::new_slice(3 * slots);
-    let mut s_opacities = Shared::<[f32]>::new_slice(slots);
-    let mut s_depths = Shared::<[f32]>::new_slice(slots);
-    let mut s_colors = Shared::<[f32]>::new_slice(channels * slots);
+    let mut staged = FootprintStage::new(slots, channels);
 
     // Entries `[start, batch_end)` remain; each batch stages the last `stage` of them, slot 0 the backmost.
     let mut batch_end = start + tile_last;
@@ -182,23 +178,26 @@ pub fn composite_backward_kernel<A: FloatAdd>(
         // Every unit is done with the previous batch before it is overwritten.
         sync_cube();
         if UNIT_POS < batch {
-            let f = staged(ids, (batch_end - 1 - UNIT_POS) as usize, base, per_view);
-            s_ids[slot] = f.id as u32;
-            s_means[2 * slot] = means2d[2 * f.pair];
-            s_means[2 * slot + 1] = means2d[2 * f.pair + 1];
-            s_conics[3 * slot] = conics[3 * f.pair];
-            s_conics[3 * slot + 1] = conics[3 * f.pair + 1];
-            s_conics[3 * slot + 2] = conics[3 * f.pair + 2];
-            s_opacities[slot] = opacities[f.opacity_slot];
-            s_depths[slot] = depths[f.pair];
-            for ch in 0..channels {
-                s_colors[channels * slot + ch] = colors[f.id * channels + ch];
-            }
+            let e = (batch_end - 1 - UNIT_POS) as usize;
+            load_footprint(
+                &mut staged,
+                slot,
+                ids,
+                means2d,
+                conics,
+                depths,
+                opacities,
+                colors,
+                e,
+                base,
+                per_view,
+                channels,
+            );
         }
         sync_cube();
         for i in 0..batch {
             let s = i as usize;
-            let id = s_ids[s] as usize;
+            let id = staged.ids[s] as usize;
             let k = base + id;
             let mut opacity_slot = id;
             if per_view == 1 {
@@ -206,12 +205,12 @@ pub fn composite_backward_kernel<A: FloatAdd>(
             }
             // This pixel blended entry `batch_end - 1 - i` only if it lies before its own list end.
             let entry = batch_end - 1 - i;
-            let dx = s_means[2 * s] - px;
-            let dy = s_means[2 * s + 1] - py;
-            let (a, b, c) = (s_conics[3 * s], s_conics[3 * s + 1], s_conics[3 * s + 2]);
+            let dx = staged.means[2 * s] - px;
+            let dy = staged.means[2 * s + 1] - py;
+            let (a, b, c) = (staged.conics[3 * s], staged.conics[3 * s + 1], staged.conics[3 * s + 2]);
             let sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy;
             let falloff = (-sigma).exp();
-            let raw = s_opacities[s] * falloff;
+            let raw = staged.opacities[s] * falloff;
             let alpha = raw.min(MAX_ALPHA);
             let blended = entry < start + last && !(sigma.is_nan() || sigma < 0.0 || alpha < ALPHA_THRESHOLD);
             // Zero unless blended, so that a footprint this pixel did not blend adds nothing (not even a
@@ -235,12 +234,12 @@ pub fn composite_backward_kernel<A: FloatAdd>(
                 let weight = alpha * transmittance;
                 let mut grad_alpha = 0.0f32;
                 for ch in 0..channels {
-                    let color = s_colors[channels * s + ch];
+                    let color = staged.colors[channels * s + ch];
                     grad_colors[ch] = out.colors[ch] * weight;
                     grad_alpha += out.colors[ch] * (color - behind[ch]);
                     behind[ch] = alpha * color + remaining * behind[ch];
                 }
-                let depth = s_depths[s];
+                let depth = staged.depths[s];
                 grad_depth = out.sum_depth * weight;
                 grad_alpha += out.sum_depth * (depth - depth_behind);
                 depth_behind = alpha * depth + remaining * depth_behind;

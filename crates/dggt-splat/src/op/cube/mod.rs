@@ -72,6 +72,7 @@ mod project;
 mod project_backward;
 mod radix;
 mod scan;
+mod stage;
 
 use std::fmt;
 use std::sync::Arc;
@@ -206,9 +207,11 @@ fn tile_launch(layout: &Layout, views: usize) -> (CubeCount, CubeDim) {
     )
 }
 
-/// How many footprints a compositing cube stages in shared memory at a time: one per unit, fewer when
-/// `bytes_per_footprint` of them would pass [`SHARED_STAGE_BYTES`].
-fn stage_len(layout: &Layout, bytes_per_footprint: usize) -> u32 {
+/// How many footprints a compositing cube stages in shared memory at a time: one per unit, fewer when they
+/// would pass [`SHARED_STAGE_BYTES`] (4 bytes each for the Gaussian's index, mean (2), conic (3), opacity, depth
+/// and the colours: `stage::FootprintStage`).
+fn stage_len(layout: &Layout) -> u32 {
+    let bytes_per_footprint = 4 * (8 + layout.channels);
     let units = layout.tile_size * layout.tile_size;
     units.min((SHARED_STAGE_BYTES / bytes_per_footprint).max(1) as u32)
 }
@@ -372,8 +375,7 @@ fn composite_batch(
 ) {
     let client = device.client();
     let (cubes, dim) = tile_launch(layout, batch.views);
-    // Per staged footprint: mean (2), conic (3), opacity, depth and the colours, 4 bytes each.
-    let stage = stage_len(layout, 4 * (7 + layout.channels));
+    let stage = stage_len(layout);
     composite::composite_kernel::launch(
         &client,
         cubes,
@@ -493,8 +495,7 @@ fn composite_backward_batch(
     let pairs = layout.pairs();
     let opacity_len = if layout.per_view { pairs } else { layout.count };
     let (cubes, dim) = tile_launch(layout, batch.views);
-    // Per staged footprint: as the forward's, plus the Gaussian's index.
-    let stage = stage_len(layout, 4 * (8 + layout.channels));
+    let stage = stage_len(layout);
     let launch = if native {
         composite_backward::composite_backward_kernel::launch::<NativeAdd>
     } else {
