@@ -43,15 +43,21 @@ pub fn plan_frames(frames: usize, targets: Option<&[usize]>) -> Result<FramePlan
     Ok(FramePlan { targets, pool })
 }
 
+/// An input frame count the plan cannot give: between 2 and the frames that are not targets.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("{requested} input frames requested, but {available} non-target frames are available (2 to {available})")]
+pub struct InputFrameCount {
+    pub requested: usize,
+    pub available: usize,
+}
+
 impl FramePlan {
     /// `count` input frames spread evenly over the pool, the first and last included; an error naming the
     /// largest possible count when the pool is too small.
-    pub fn inputs(&self, count: usize) -> Result<Vec<usize>, String> {
+    pub fn inputs(&self, count: usize) -> Result<Vec<usize>, InputFrameCount> {
         let available = self.pool.len();
         if count < 2 || count > available {
-            return Err(format!(
-                "{count} input frames requested, but {available} non-target frames are available (2 to {available})"
-            ));
+            return Err(InputFrameCount { requested: count, available });
         }
         let last = (available - 1) as f64;
         let picked: Vec<usize> =

@@ -30,7 +30,7 @@ use crate::error::BenchError;
 use crate::frames::{FramePlan, plan_frames};
 use crate::knobs::{Configuration, Culling, Knobs, Precision, SweepSpec, Varied};
 use crate::pareto::pareto_front;
-use crate::precision::{cast_model, panic_message, precision_support};
+use crate::precision::{PrecisionUnsupported, cast_model, panic_message, precision_support};
 use crate::stages::{self, settle};
 
 /// Where the cameras that place the Gaussians and view the targets come from.
@@ -354,20 +354,20 @@ pub fn run_bench(options: &BenchOptions, device: &Device) -> Result<BenchReport,
     }
     let reference_size = runner.cache.get(reference_width, runner.plan.targets[0], 0)?.image.size;
 
-    let mut support: HashMap<Precision, Result<(), String>> = HashMap::new();
+    let mut support: HashMap<Precision, Result<(), PrecisionUnsupported>> = HashMap::new();
     let mut reference: Option<Vec<Vec<f32>>> = None;
     let mut rows = Vec::new();
     for configuration in configurations {
         let knobs = configuration.knobs;
         let supported = support.entry(knobs.precision).or_insert_with(|| precision_support(device, knobs.precision));
         if let Err(reason) = supported.clone() {
-            rows.push(RowOutcome::Skipped { configuration, reason });
+            rows.push(RowOutcome::Skipped { configuration, reason: reason.to_string() });
             continue;
         }
         let inputs = match runner.plan.inputs(knobs.input_frames) {
             Ok(inputs) => inputs,
             Err(reason) => {
-                rows.push(RowOutcome::Skipped { configuration, reason });
+                rows.push(RowOutcome::Skipped { configuration, reason: reason.to_string() });
                 continue;
             }
         };

@@ -77,7 +77,7 @@ fn twenty_frames_give_four_targets_and_sixteen_inputs() {
     assert_eq!((four[0], four[3]), (0, 19));
     assert!(four.iter().all(|f| !plan.targets.contains(f)));
     assert!(four.windows(2).all(|w| w[0] < w[1]));
-    assert!(plan.inputs(17).unwrap_err().contains("16 non-target frames"));
+    assert!(plan.inputs(17).unwrap_err().to_string().contains("16 non-target frames"));
 }
 
 #[test]

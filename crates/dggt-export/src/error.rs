@@ -10,6 +10,9 @@ pub enum ExportError {
     Malformed { path: PathBuf, expected: String, found: String },
     #[error("{}: {detail}", path.display())]
     Invalid { path: PathBuf, detail: String },
+    /// A PLY file (or the cloud to write as one) that is not what this project writes.
+    #[error("{}: expected a binary little-endian float32 vertex PLY: {source}", path.display())]
+    Ply { path: PathBuf, source: crate::ply::PlyError },
     /// Writing a file (the error names it).
     #[error(transparent)]
     Write(#[from] dggt_data::DataError),

@@ -54,14 +54,12 @@ impl GaussianCloud {
     }
 
     /// Checks that every field has one entry per Gaussian.
-    pub fn check(&self) -> Result<(), String> {
-        let n = self.means.len();
-        let lengths = [self.quats_wxyz.len(), self.scales.len(), self.opacities.len(), self.colors.len()];
-        if lengths.iter().any(|&l| l != n) {
-            return Err(format!(
-                "field lengths differ: {n} means, {} rotations, {} scales, {} opacities, {} colours",
-                lengths[0], lengths[1], lengths[2], lengths[3]
-            ));
+    pub fn check(&self) -> Result<(), PlyError> {
+        let means = self.means.len();
+        let (rotations, scales) = (self.quats_wxyz.len(), self.scales.len());
+        let (opacities, colors) = (self.opacities.len(), self.colors.len());
+        if [rotations, scales, opacities, colors].iter().any(|&l| l != means) {
+            return Err(PlyError::FieldLengths { means, rotations, scales, opacities, colors });
         }
         Ok(())
     }
@@ -113,7 +111,7 @@ pub fn inria_header(count: usize) -> String {
 }
 
 /// Encodes `cloud` as an INRIA-layout binary PLY.
-pub fn encode_ply(cloud: &GaussianCloud) -> Result<Vec<u8>, String> {
+pub fn encode_ply(cloud: &GaussianCloud) -> Result<Vec<u8>, PlyError> {
     cloud.check()?;
     let header = inria_header(cloud.len());
     let mut bytes = Vec::with_capacity(header.len() + cloud.len() * INRIA_PROPERTIES.len() * 4);
@@ -128,8 +126,36 @@ pub fn encode_ply(cloud: &GaussianCloud) -> Result<Vec<u8>, String> {
 
 /// Writes `cloud` to `path` as an INRIA-layout binary PLY.
 pub fn write_ply(path: &Path, cloud: &GaussianCloud) -> Result<(), ExportError> {
-    let bytes = encode_ply(cloud).map_err(|detail| ExportError::invalid(path, detail))?;
+    let bytes = encode_ply(cloud).map_err(|source| ExportError::Ply { path: path.to_owned(), source })?;
     crate::write_file(path, &bytes)
+}
+
+/// What is wrong with a cloud to write or with PLY bytes read; [`write_ply`] and [`read_ply`] add the file.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum PlyError {
+    #[error(
+        "field lengths differ: {means} means, {rotations} rotations, {scales} scales, {opacities} opacities, {colors} colours"
+    )]
+    FieldLengths { means: usize, rotations: usize, scales: usize, opacities: usize, colors: usize },
+    #[error("no `{0}` property")]
+    MissingProperty(&'static str),
+    #[error("no `end_header` line")]
+    NoEndHeader,
+    #[error("a header that is not UTF-8")]
+    HeaderNotUtf8,
+    #[error("the first line is not `ply`")]
+    NotPly,
+    #[error("no `format` line")]
+    NoFormat,
+    #[error("no `element vertex` line")]
+    NoVertexElement,
+    #[error("vertex count `{0}` (not a count, or too large)")]
+    VertexCount(String),
+    /// A header line this reader does not take (only what this project writes and 3DGS viewers read).
+    #[error("header line `{line}`: {what} (only one `vertex` element of float32 properties is read)")]
+    Unsupported { line: String, what: String },
+    #[error("{count} vertices x {properties} properties = {expected} bytes after the header, found {found}")]
+    BodyLength { count: usize, properties: usize, expected: usize, found: usize },
 }
 
 /// A binary little-endian PLY with one `vertex` element of float32 properties, as read.
@@ -154,10 +180,10 @@ impl PlyVertices {
     }
 
     /// The activated Gaussians (inverse of the writer's conversion). Errors name the missing property.
-    pub fn to_cloud(&self) -> Result<GaussianCloud, String> {
+    pub fn to_cloud(&self) -> Result<GaussianCloud, PlyError> {
         let columns = INRIA_PROPERTIES
             .iter()
-            .map(|name| self.column(name).ok_or_else(|| format!("no `{name}` property")))
+            .map(|&name| self.column(name).ok_or(PlyError::MissingProperty(name)))
             .collect::<Result<Vec<_>, _>>()?;
         let width = self.properties.len();
         let mut cloud = GaussianCloud::default();
@@ -175,46 +201,42 @@ impl PlyVertices {
 
 /// Parses a binary little-endian PLY holding one `vertex` element of float32 properties (other elements and
 /// types are rejected: they are not what this project writes or what the viewers' 3DGS loaders read).
-pub fn parse_ply(bytes: &[u8]) -> Result<PlyVertices, String> {
+pub fn parse_ply(bytes: &[u8]) -> Result<PlyVertices, PlyError> {
     const END: &[u8] = b"end_header\n";
-    let end = bytes.windows(END.len()).position(|w| w == END).ok_or("no `end_header` line")? + END.len();
-    let header = std::str::from_utf8(&bytes[..end]).map_err(|_| "a header that is not UTF-8")?;
+    let end = bytes.windows(END.len()).position(|w| w == END).ok_or(PlyError::NoEndHeader)? + END.len();
+    let header = std::str::from_utf8(&bytes[..end]).map_err(|_| PlyError::HeaderNotUtf8)?;
     let mut lines = header.lines();
     if lines.next() != Some("ply") {
-        return Err("the first line is not `ply`".into());
+        return Err(PlyError::NotPly);
     }
     let mut count = None;
     let mut properties = Vec::new();
     let mut format_seen = false;
     for line in lines {
         let words: Vec<&str> = line.split_whitespace().collect();
+        let unsupported = |what: &str| Err(PlyError::Unsupported { line: line.to_string(), what: what.to_string() });
         match words.as_slice() {
             ["format", "binary_little_endian", "1.0"] => format_seen = true,
-            ["format", other, ..] => return Err(format!("format `{other}` (only binary_little_endian 1.0 is read)")),
+            ["format", ..] => return unsupported("a format other than binary_little_endian 1.0"),
             ["comment", ..] | ["obj_info", ..] | ["end_header"] => {}
             ["element", "vertex", n] if count.is_none() => {
-                count = Some(n.parse::<usize>().map_err(|_| format!("vertex count `{n}`"))?)
+                count = Some(n.parse::<usize>().map_err(|_| PlyError::VertexCount(n.to_string()))?)
             }
-            ["element", name, ..] => return Err(format!("element `{name}` (only one `vertex` element is read)")),
+            ["element", ..] => return unsupported("an element besides the one `vertex` element"),
             ["property", "float", name] if count.is_some() => properties.push(name.to_string()),
-            ["property", kind, ..] => return Err(format!("property type `{kind}` in `{line}` (float32 only)")),
+            ["property", ..] => return unsupported("a property that is not a vertex float32"),
             [] => {}
-            _ => return Err(format!("header line `{line}`")),
+            _ => return unsupported("a header line of no known kind"),
         }
     }
     if !format_seen {
-        return Err("no `format` line".into());
+        return Err(PlyError::NoFormat);
     }
-    let count = count.ok_or("no `element vertex` line")?;
+    let count = count.ok_or(PlyError::NoVertexElement)?;
     let body = &bytes[end..];
-    let expected =
-        count.checked_mul(properties.len() * 4).ok_or_else(|| format!("a vertex count {count} that overflows"))?;
+    let expected = count.checked_mul(properties.len() * 4).ok_or(PlyError::VertexCount(count.to_string()))?;
     if body.len() != expected {
-        return Err(format!(
-            "{count} vertices x {} properties = {expected} bytes after the header, found {}",
-            properties.len(),
-            body.len()
-        ));
+        return Err(PlyError::BodyLength { count, properties: properties.len(), expected, found: body.len() });
     }
     let values = body.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
     Ok(PlyVertices { properties, count, values })
@@ -223,7 +245,7 @@ pub fn parse_ply(bytes: &[u8]) -> Result<PlyVertices, String> {
 /// Reads a PLY written by [`write_ply`] (or any binary float32 vertex PLY).
 pub fn read_ply(path: &Path) -> Result<PlyVertices, ExportError> {
     let bytes = crate::read_file(path)?;
-    parse_ply(&bytes).map_err(|found| ExportError::malformed(path, "a binary little-endian float32 vertex PLY", found))
+    parse_ply(&bytes).map_err(|source| ExportError::Ply { path: path.to_owned(), source })
 }
 
 #[cfg(test)]

@@ -17,6 +17,7 @@ use dggt_model::sky::SkyModel;
 use dggt_objective::{Forward, Objective};
 use dggt_scene::{InputView, MeansGradient, PixelGaussians};
 
+use crate::error::StressError;
 use crate::pipeline::{probe_gradient, render_and_differentiate};
 use crate::probe::{Probe, Stage};
 use crate::scenario::Scenario;
@@ -90,7 +91,7 @@ pub fn run(
     objective: &Objective,
     sky_model: &SkyModel,
     device: &Device,
-) -> Result<(), String> {
+) -> Result<(), StressError> {
     let frames = scenario.input_frames.len();
     let (width, height) = (scenario.size.width as usize, scenario.size.height as usize);
     let batch = scenario.batch(device);
@@ -113,15 +114,12 @@ pub fn run(
         views,
         MeansGradient::Through,
         PixelConvention::Integer,
-    )
-    .map_err(|e| e.to_string())?;
+    )?;
     let velocity = prediction.velocity.as_ref().map(|values| {
         Tensor::<5>::from_data(TensorData::new(values.clone(), [1, frames, height, width, 3]), device).require_grad()
     });
     let pixels = match &velocity {
-        Some(velocity) => {
-            pixels.with_motion(velocity.clone(), batch.timeline.frames_per_time()).map_err(|e| e.to_string())?
-        }
+        Some(velocity) => pixels.with_motion(velocity.clone(), batch.timeline.frames_per_time())?,
         None => pixels,
     };
     let cameras: Vec<_> =

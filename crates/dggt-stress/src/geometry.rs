@@ -10,15 +10,15 @@ use dggt_geom::{ImageSize, PinholeIntrinsics, PoseEncoding, PosedCamera, WorldFr
 use dggt_scene::{InputView, Timeline, interpolate_camera};
 use glam::{DQuat, DVec3};
 
+use crate::error::StressError;
 use crate::probe::{Probe, Stage};
 
 /// Times at which the cases interpolate between inputs at times 0 and 1 (outside: extrapolated).
 const TIMES: [f64; 7] = [-1.0, 0.0, 1e-12, 0.25, 0.5, 1.0, 3.0];
 
-fn camera(rotation: DQuat, translation: DVec3) -> Result<PosedCamera, String> {
-    let world_from_camera =
-        WorldFromCamera::from_rotation_translation(rotation, translation).map_err(|e| e.to_string())?;
-    let intrinsics = PinholeIntrinsics::new(60.0, 60.0, 35.0, 28.0).map_err(|e| e.to_string())?;
+fn camera(rotation: DQuat, translation: DVec3) -> Result<PosedCamera, StressError> {
+    let world_from_camera = WorldFromCamera::from_rotation_translation(rotation, translation)?;
+    let intrinsics = PinholeIntrinsics::new(60.0, 60.0, 35.0, 28.0)?;
     Ok(PosedCamera { world_from_camera, intrinsics })
 }
 
@@ -34,17 +34,17 @@ pub(crate) fn check_camera(probe: &mut Probe, what: &str, camera: &PosedCamera) 
 }
 
 /// Interpolates between two cameras of one rig camera at inputs times 0 and 1, at every time of [`TIMES`].
-fn interpolate_pair(probe: &mut Probe, a: PosedCamera, b: PosedCamera) -> Result<(), String> {
+fn interpolate_pair(probe: &mut Probe, a: PosedCamera, b: PosedCamera) -> Result<(), StressError> {
     let views = [InputView { rig_camera: 0, time: 0.0, camera: a }, InputView { rig_camera: 0, time: 1.0, camera: b }];
     for time in TIMES {
-        let camera = interpolate_camera(&views, 0, time).map_err(|e| e.to_string())?;
+        let camera = interpolate_camera(&views, 0, time)?;
         check_camera(probe, &format!("camera at t={time}"), &camera);
     }
     Ok(())
 }
 
 /// Rotations 1e-12 rad apart: SLERP's angle is at the edge of its small-angle branch.
-pub fn near_identical_rotations(probe: &mut Probe) -> Result<(), String> {
+pub fn near_identical_rotations(probe: &mut Probe) -> Result<(), StressError> {
     let a = camera(DQuat::IDENTITY, DVec3::ZERO)?;
     let b = camera(DQuat::from_rotation_y(1e-12), DVec3::new(0.0, 0.0, 1.5))?;
     interpolate_pair(probe, a, b)?;
@@ -53,7 +53,7 @@ pub fn near_identical_rotations(probe: &mut Probe) -> Result<(), String> {
 }
 
 /// Rotations half a turn apart, and a rotation against its own negated quaternion (the same rotation).
-pub fn opposite_rotations(probe: &mut Probe) -> Result<(), String> {
+pub fn opposite_rotations(probe: &mut Probe) -> Result<(), StressError> {
     let a = camera(DQuat::IDENTITY, DVec3::ZERO)?;
     let b = camera(DQuat::from_rotation_y(std::f64::consts::PI), DVec3::X)?;
     interpolate_pair(probe, a, b)?;
@@ -66,7 +66,7 @@ pub fn opposite_rotations(probe: &mut Probe) -> Result<(), String> {
 }
 
 /// Camera centres at 1e6 and 1e15 (metres, or the network's units).
-pub fn huge_translations(probe: &mut Probe) -> Result<(), String> {
+pub fn huge_translations(probe: &mut Probe) -> Result<(), StressError> {
     for scale in [1e6, 1e15] {
         let a = camera(DQuat::IDENTITY, DVec3::splat(scale))?;
         let b = camera(DQuat::from_rotation_y(0.1), DVec3::splat(-scale))?;
@@ -76,10 +76,10 @@ pub fn huge_translations(probe: &mut Probe) -> Result<(), String> {
 }
 
 /// The release's frame-to-time mapping for one frame, repeated frames and huge frame indices.
-pub fn timelines(probe: &mut Probe) -> Result<(), String> {
+pub fn timelines(probe: &mut Probe) -> Result<(), StressError> {
     let cases: [&[usize]; 4] = [&[7], &[3, 3, 3], &[0, 1_000_000_000], &[usize::MAX / 2, usize::MAX / 2 + 8]];
     for frames in cases {
-        let timeline = Timeline::new(frames).map_err(|e| e.to_string())?;
+        let timeline = Timeline::new(frames)?;
         let first = frames[0] as f64;
         let times = [first - 1.0, first, first + 0.5, first + 8.0].map(|f| timeline.time(f));
         probe.values(Stage::Geometry, &format!("timeline {frames:?}"), times);
@@ -89,8 +89,8 @@ pub fn timelines(probe: &mut Probe) -> Result<(), String> {
 
 /// Extreme camera-head encodings: tiny and huge quaternions and translations, fields of view at their limits.
 /// A zero quaternion must be an error; everything else must decode to a valid camera.
-pub fn extreme_pose_encodings(probe: &mut Probe) -> Result<(), String> {
-    let size = ImageSize::new(70, 56).map_err(|e| e.to_string())?;
+pub fn extreme_pose_encodings(probe: &mut Probe) -> Result<(), StressError> {
+    let size = ImageSize::new(70, 56)?;
     let encodings: [[f64; 9]; 5] = [
         [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1e-20, 1.0, 1.2],
         [1e9, -1e9, 1e9, 0.0, 0.0, 0.0, 1e20, 1.0, 1.2],

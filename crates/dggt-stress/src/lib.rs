@@ -13,9 +13,11 @@
 //!   input frames, with its own predicted cameras, through to every parameter's gradient; again with the
 //!   network computing and training in f16 and in bf16 (listed as skipped where the device lacks the type).
 //!
-//! `dggt stress` runs it (`--full` for the larger version); the `stress_suite` test runs the bounded version.
+//! `dggt stress` runs it (`--scope full` for the larger version, `--scope device` for what a GPU adds to the
+//! CPU suite); the `stress_suite` test runs the bounded scope on the CPU and the device scope on wgpu.
 
 mod crafted;
+mod error;
 mod geometry;
 mod network;
 mod pipeline;
@@ -23,5 +25,6 @@ pub mod probe;
 mod scenario;
 pub mod suite;
 
+pub use error::StressError;
 pub use probe::{Finding, Probe, Stage};
 pub use suite::{CaseOutcome, Expect, StressOptions, StressReport, StressScope, run_suite};

@@ -10,6 +10,7 @@ use dggt_infer::RenderSection;
 use dggt_model::Dggt;
 use dggt_objective::{Forward, Objective};
 
+use crate::error::StressError;
 use crate::pipeline::render_and_differentiate;
 use crate::probe::{Probe, Stage};
 use crate::scenario::Scenario;
@@ -22,9 +23,9 @@ pub fn run(
     objective: &Objective,
     render: &RenderSection,
     device: &Device,
-) -> Result<(), String> {
+) -> Result<(), StressError> {
     let batch = scenario.batch(device);
-    let forward = Forward::run(model, &batch, render).map_err(|e| e.to_string())?;
+    let forward = Forward::run(model, &batch, render)?;
     probe.tensor(Stage::Network, "depth", &forward.depth);
     if let Some(logit) = &forward.dynamic_logit {
         probe.tensor(Stage::Network, "dynamic logits", logit);

@@ -4,6 +4,7 @@
 use burn::tensor::{Gradients, Tensor};
 use dggt_objective::{Forward, Objective, StepBatch, ViewsToRender};
 
+use crate::error::StressError;
 use crate::probe::{Probe, Stage};
 
 /// Probes the per-pixel and sky Gaussians of `forward`.
@@ -41,15 +42,15 @@ pub(crate) fn render_and_differentiate(
     objective: &Objective,
     forward: Forward,
     batch: &StepBatch,
-) -> Result<Gradients, String> {
+) -> Result<Gradients, StressError> {
     probe_gaussians(probe, &forward);
-    let views = objective.render_views(&forward, batch, ViewsToRender::TargetsAndInputs).map_err(|e| e.to_string())?;
+    let views = objective.render_views(&forward, batch, ViewsToRender::TargetsAndInputs)?;
     for view in &views {
         let kind = if view.is_target { "target" } else { "input" };
         probe.tensor(Stage::Render, &format!("{kind} {} rgb", view.truth_index), &view.rgb);
         probe.tensor(Stage::Render, &format!("{kind} {} alpha", view.truth_index), &view.alpha);
     }
-    let loss = objective.loss_of(forward, batch).map_err(|e| e.to_string())?;
+    let loss = objective.loss_of(forward, batch)?;
     for (term, value) in &loss.terms {
         probe.values(Stage::Losses, term.name(), [*value]);
     }

@@ -19,6 +19,7 @@ use dggt_scene::MeansGradient;
 use serde::Serialize;
 
 use crate::crafted::{self, LIFESPAN, OPACITY, Prediction, RGB, ROTATION, SCALE};
+use crate::error::StressError;
 use crate::geometry;
 use crate::network;
 use crate::probe::{Finding, Probe, Stage};
@@ -190,7 +191,7 @@ struct Case<'a> {
     group: &'static str,
     name: String,
     expect: Expect,
-    run: Box<dyn FnOnce(&mut Probe) -> Result<(), String> + 'a>,
+    run: Box<dyn FnOnce(&mut Probe) -> Result<(), StressError> + 'a>,
 }
 
 fn run_case(case: Case<'_>) -> CaseOutcome {
@@ -202,7 +203,7 @@ fn run_case(case: Case<'_>) -> CaseOutcome {
     let seconds = started.elapsed().as_secs_f64();
     let (error, panic) = match result {
         Ok(Ok(())) => (None, None),
-        Ok(Err(error)) => (Some(error), None),
+        Ok(Err(error)) => (Some(error.to_string()), None),
         Err(payload) => {
             let message = payload
                 .downcast_ref::<String>()
@@ -341,7 +342,7 @@ fn loss_weights(options: &StressOptions, camera: f64) -> LossWeights {
 }
 
 /// Runs the suite on `device` (training runs on its autodiff form).
-pub fn run_suite(options: &StressOptions, device: &Device) -> Result<StressReport, String> {
+pub fn run_suite(options: &StressOptions, device: &Device) -> Result<StressReport, StressError> {
     let device = device.clone().autodiff();
     let mut outcomes = geometry_group();
     let config = ModelConfig::tiny();
@@ -352,7 +353,7 @@ pub fn run_suite(options: &StressOptions, device: &Device) -> Result<StressRepor
 
 /// Camera geometry at its extremes: rotations, translations, timelines, pose encodings.
 fn geometry_group() -> Vec<CaseOutcome> {
-    let geometry_cases: [(&str, fn(&mut Probe) -> Result<(), String>); 5] = [
+    let geometry_cases: [(&str, fn(&mut Probe) -> Result<(), StressError>); 5] = [
         ("SLERP between near-identical rotations", geometry::near_identical_rotations),
         ("SLERP between opposite rotations", geometry::opposite_rotations),
         ("huge translations", geometry::huge_translations),
@@ -369,19 +370,22 @@ fn geometry_group() -> Vec<CaseOutcome> {
 
 /// Network outputs crafted at their extremes (no network runs), through the scene, the objective and the
 /// backward pass, with ground-truth cameras.
-fn crafted_group(options: &StressOptions, config: &ModelConfig, device: &Device) -> Result<Vec<CaseOutcome>, String> {
-    let sky_config = config.sky_model.clone().ok_or("the tiny preset has no sky model")?;
+fn crafted_group(
+    options: &StressOptions,
+    config: &ModelConfig,
+    device: &Device,
+) -> Result<Vec<CaseOutcome>, StressError> {
+    let sky_config = config.sky_model.clone().ok_or(StressError::NoSkyModel)?;
     let sky_model = SkyModel::initialised(&sky_config, device);
     let crafted_render = RenderSection {
         cameras: CameraSource::GroundTruth,
         means_gradient: MeansGradient::Through,
         ..RenderSection::default()
     };
-    let crafted_objective =
-        Objective::new(loss_weights(options, 0.0), crafted_render, device).map_err(|e| e.to_string())?;
+    let crafted_objective = Objective::new(loss_weights(options, 0.0), crafted_render, device)?;
     let full = options.scope == StressScope::Full;
     let (size, inputs) = if full { (ImageSize::new(70, 56), 3) } else { (ImageSize::new(56, 42), 2) };
-    let size = size.map_err(|e| e.to_string())?;
+    let size = size?;
     let mut crafted_cases: Vec<(String, Expect, Edit)> =
         crafted_extremes().into_iter().map(|(name, expect, edit)| (name.to_string(), expect, edit)).collect();
     for seed in 0..if full { 16 } else { 2 } {
@@ -411,9 +415,9 @@ type NetworkCase = (&'static str, ImageSize, usize, fn(&mut Scenario), bool);
 
 /// The network's own cases: extreme images, masks and input counts through the fresh tiny network with its own
 /// predicted cameras, the objective and the backward pass.
-fn network_cases(options: &StressOptions) -> Result<Vec<NetworkCase>, String> {
-    let normal = ImageSize::new(70, 56).map_err(|e| e.to_string())?;
-    let small = ImageSize::new(42, 42).map_err(|e| e.to_string())?;
+fn network_cases(options: &StressOptions) -> Result<Vec<NetworkCase>, StressError> {
+    let normal = ImageSize::new(70, 56)?;
+    let small = ImageSize::new(42, 42)?;
     let many = if options.scope == StressScope::Full { (normal, 64) } else { (small, 64) };
     Ok(vec![
         ("random images", normal, 3, |_| {}, true),
@@ -455,15 +459,18 @@ fn network_cases(options: &StressOptions) -> Result<Vec<NetworkCase>, String> {
 /// Every network case in f32; those marked also with the network computing in f16 and in bf16 (parameters,
 /// activations and constants; the scene is assembled and rendered in f32), trained in that type, where the
 /// device declares the type.
-fn network_group(options: &StressOptions, config: &ModelConfig, device: &Device) -> Result<Vec<CaseOutcome>, String> {
-    let model = fresh_model(config, None, 0, device).map_err(|e| e.to_string())?;
+fn network_group(
+    options: &StressOptions,
+    config: &ModelConfig,
+    device: &Device,
+) -> Result<Vec<CaseOutcome>, StressError> {
+    let model = fresh_model(config, None, 0, device)?;
     let network_render = RenderSection {
         cameras: CameraSource::Predicted,
         means_gradient: MeansGradient::Through,
         ..RenderSection::default()
     };
-    let network_objective =
-        Objective::new(loss_weights(options, 1.0), network_render.clone(), device).map_err(|e| e.to_string())?;
+    let network_objective = Objective::new(loss_weights(options, 1.0), network_render.clone(), device)?;
     let network_cases = network_cases(options)?;
     let mut outcomes = Vec::new();
     let (dtypes, cases_per_type): (&[FloatDType], usize) = match options.scope {

@@ -17,7 +17,7 @@ use super::memory::{DeviceMemory, guarded};
 use super::{ComputeOptions, Record, ScaleSpec, timed};
 use crate::error::BenchError;
 use crate::knobs::Precision;
-use crate::precision::{cast_model, precision_support};
+use crate::precision::{PrecisionUnsupported, cast_model, precision_support};
 use crate::stages::settle;
 
 const HEADS_NOTE: &str = "camera, depth, Gaussian and dynamic heads (the point and semantic heads, which nothing \
@@ -128,7 +128,7 @@ impl Network {
     }
 
     /// The network computing in `precision`, or why the device cannot.
-    fn in_precision(&self, precision: Precision) -> Result<Dggt, String> {
+    fn in_precision(&self, precision: Precision) -> Result<Dggt, PrecisionUnsupported> {
         precision_support(&self.device, precision)?;
         Ok(if precision == Precision::F32 { self.model.clone() } else { cast_model(&self.model, precision) })
     }
