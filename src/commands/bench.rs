@@ -9,6 +9,7 @@ use dggt_bench::knobs::parse_opacity;
 use dggt_bench::{
     BenchOptions, Culling, Knobs, LpipsFiles, PoseSource, Precision, Skips, SweepSpec, report, run_bench, write_outputs,
 };
+use dggt_infer::SkyChoice;
 
 use crate::backend::DeviceList;
 use crate::commands::refine::RefineArgs;
@@ -137,10 +138,10 @@ pub struct SweepArgs {
     pub refine: RefineArgs,
 }
 
-fn parse_sky(text: &str) -> Result<bool> {
+fn parse_sky(text: &str) -> Result<SkyChoice> {
     match text.trim().to_ascii_lowercase().as_str() {
-        "on" | "true" | "yes" => Ok(true),
-        "off" | "false" | "no" => Ok(false),
+        "on" | "true" | "yes" => Ok(SkyChoice::Render),
+        "off" | "false" | "no" => Ok(SkyChoice::Skip),
         other => anyhow::bail!("--sky: `{other}`: expected on or off"),
     }
 }
@@ -154,7 +155,7 @@ impl SweepArgs {
                 input_frames: self.frames,
                 culling: Culling::MinOpacity(parse_opacity(&self.min_opacity)?),
                 precision: Precision::parse(&self.precision)?,
-                sky: !self.no_sky,
+                sky: if self.no_sky { SkyChoice::Skip } else { SkyChoice::Render },
                 skips: Skips::parse(&self.skip)?,
             },
             widths: self.widths.clone(),

@@ -9,6 +9,7 @@ use std::fmt;
 use burn::tensor::FloatDType;
 
 use crate::error::BenchError;
+use dggt_infer::SkyChoice;
 
 /// The float type the network (aggregator and heads) computes in. Assembly, the sky model and the rasteriser
 /// always compute in f32 (the rasteriser works on flat `f32` buffers).
@@ -158,8 +159,8 @@ pub struct Knobs {
     pub input_frames: usize,
     pub culling: Culling,
     pub precision: Precision,
-    /// Composite the sky model's Gaussians behind the scene (else a black background).
-    pub sky: bool,
+    /// Composite the sky model's Gaussians behind the scene, or a black background.
+    pub sky: SkyChoice,
     pub skips: Skips,
 }
 
@@ -172,7 +173,10 @@ impl Knobs {
             self.input_frames,
             self.culling.label(),
             self.precision,
-            if self.sky { "sky" } else { "nosky" },
+            match self.sky {
+                SkyChoice::Render => "sky",
+                SkyChoice::Skip => "nosky",
+            },
             self.skips.name()
         )
     }
@@ -226,7 +230,7 @@ pub struct SweepSpec {
     /// Culling thresholds (off-screen culling is on with every threshold).
     pub min_opacities: Vec<f32>,
     pub precisions: Vec<Precision>,
-    pub sky: Vec<bool>,
+    pub sky: Vec<SkyChoice>,
     pub skips: Vec<Skips>,
     /// Also every combination of the values above.
     pub full_grid: bool,
@@ -243,18 +247,23 @@ impl Default for SweepSpec {
                 input_frames: 8,
                 culling: Culling::MinOpacity(dggt_scene::MIN_OPACITY),
                 precision: Precision::F32,
-                sky: true,
+                sky: SkyChoice::Render,
                 skips: Skips::Nothing,
             },
             widths: vec![56, 84, 112, 168],
             input_frames: vec![4, 8, 16],
             min_opacities: vec![dggt_scene::MIN_OPACITY, 0.01, 0.05],
             precisions: Precision::ALL.to_vec(),
-            sky: vec![true, false],
+            sky: vec![SkyChoice::Render, SkyChoice::Skip],
             skips: Skips::ALL.to_vec(),
             full_grid: false,
         }
     }
+}
+
+/// The values to sweep, or the baseline's alone when none are given.
+fn or_base<T: Copy>(values: &[T], base: T) -> Vec<T> {
+    if values.is_empty() { vec![base] } else { values.to_vec() }
 }
 
 impl SweepSpec {
@@ -317,7 +326,6 @@ impl SweepSpec {
             push(Varied::Skips, Knobs { skips, ..base });
         }
         if self.full_grid {
-            let or_base = |values: &[bool], base: bool| if values.is_empty() { vec![base] } else { values.to_vec() };
             let widths = if self.widths.is_empty() { vec![base.width] } else { self.widths.clone() };
             let frames = if self.input_frames.is_empty() { vec![base.input_frames] } else { self.input_frames.clone() };
             let cullings: Vec<Culling> = if self.min_opacities.is_empty() {

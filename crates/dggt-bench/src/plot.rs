@@ -17,6 +17,7 @@ use plotters::prelude::*;
 use crate::error::BenchError;
 use crate::knobs::{Configuration, Varied};
 use crate::run::{BenchReport, MeasuredRow};
+use dggt_infer::SkyChoice;
 
 /// Width and height of `bench.png` (and of `bench.svg`) in pixels.
 pub const PNG_SIZE: (u32, u32) = (1280, 560);
@@ -131,7 +132,7 @@ pub fn short_label(configuration: &Configuration) -> String {
         Varied::InputFrames => format!("{} frames", k.input_frames),
         Varied::MinOpacity => format!("o{}", k.culling.label()),
         Varied::Precision => k.precision.name().into(),
-        Varied::Sky => if k.sky { "sky" } else { "no sky" }.into(),
+        Varied::Sky => if k.sky == SkyChoice::Render { "sky" } else { "no sky" }.into(),
         Varied::Skips => format!("skip {}", k.skips.name()),
         Varied::Grid => k.label(),
     }

@@ -6,6 +6,7 @@ use std::path::Path;
 
 use crate::error::BenchError;
 use crate::run::{BenchReport, ErrorMetrics, MeasuredRow, RowOutcome};
+use dggt_infer::SkyChoice;
 
 /// The CSV header; the unit of each column is in its name (`_ms`, `_px`, `_db`) or is none.
 pub const CSV_HEADER: &str = "row,varied,label,width_px,height_px,input_frames,min_opacity,precision,sky,skips,\
@@ -49,7 +50,7 @@ pub fn csv_text(report: &BenchReport) -> String {
                     knobs.input_frames.to_string(),
                     field(&knobs.culling.label()),
                     knobs.precision.name().into(),
-                    knobs.sky.to_string(),
+                    (knobs.sky == SkyChoice::Render).to_string(),
                     knobs.skips.name().into(),
                 ]);
                 fields
@@ -74,7 +75,7 @@ pub fn csv_text(report: &BenchReport) -> String {
                     knobs.input_frames.to_string(),
                     field(&knobs.culling.label()),
                     knobs.precision.name().into(),
-                    knobs.sky.to_string(),
+                    (knobs.sky == SkyChoice::Render).to_string(),
                     knobs.skips.name().into(),
                 ]);
                 fields.extend(std::iter::repeat_n(String::new(), 22));

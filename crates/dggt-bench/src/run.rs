@@ -510,7 +510,7 @@ fn standing_notes(options: &BenchOptions, reference_size: ImageSize) -> Vec<Stri
              a triangle filter (bilinear, antialiased when shrinking); PSNR is infinite where they are identical",
             base.width,
             base.input_frames,
-            if base.sky { "on" } else { "off" },
+            if base.sky == SkyChoice::Render { "on" } else { "off" },
             reference_size
         ),
         format!(
@@ -625,8 +625,7 @@ impl Runner<'_> {
             Culling::MinOpacity(min_opacity) => AssemblySettings { min_opacity, ..AssemblySettings::default() },
         };
         let assembly = AssemblySettings { hidden_sky: knobs.skips.hidden_sky(), ..assembly };
-        let sky = if knobs.sky { SkyChoice::Render } else { SkyChoice::Skip };
-        let scene_options = SceneOptions { sky, assembly, ..SceneOptions::default() };
+        let scene_options = SceneOptions { sky: knobs.sky, assembly, ..SceneOptions::default() };
         let motion = knobs.skips.motion();
         Ok(RowSetup {
             images,

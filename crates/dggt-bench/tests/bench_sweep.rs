@@ -12,7 +12,7 @@ use dggt_bench::report::CSV_HEADER;
 use dggt_bench::run::fresh_tiny_config;
 use dggt_bench::{BenchOptions, RowOutcome, run_bench, stages, write_outputs};
 use dggt_geom::{PinholeIntrinsics, PosedCamera, WorldFromCamera};
-use dggt_infer::Scene4d;
+use dggt_infer::{Scene4d, SkyChoice};
 use dggt_refine::{Latent, Prompt, ReferenceView, RefinerSpec};
 use dggt_scene::{AssemblySettings, InputView, MeansGradient, PixelGaussians, TargetView, render_target};
 
@@ -36,7 +36,7 @@ fn bounded_sweep_writes_table_and_plot() {
             input_frames: 3,
             culling: Culling::MinOpacity(dggt_scene::MIN_OPACITY),
             precision: Precision::F32,
-            sky: true,
+            sky: SkyChoice::Render,
             skips: Skips::Nothing,
         },
         widths: vec![],

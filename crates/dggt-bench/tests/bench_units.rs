@@ -4,6 +4,7 @@
 use dggt_bench::frames::plan_frames;
 use dggt_bench::knobs::*;
 use dggt_bench::pareto_front;
+use dggt_infer::SkyChoice;
 
 #[test]
 fn one_knob_at_a_time_without_duplicates() {
@@ -36,7 +37,7 @@ fn full_grid_adds_every_combination_once() {
         input_frames: vec![2, 3],
         min_opacities: vec![0.1],
         precisions: vec![Precision::F32],
-        sky: vec![true, false],
+        sky: vec![SkyChoice::Render, SkyChoice::Skip],
         skips: vec![],
         full_grid: true,
         baseline: Knobs {
@@ -44,7 +45,7 @@ fn full_grid_adds_every_combination_once() {
             input_frames: 2,
             culling: Culling::MinOpacity(0.1),
             precision: Precision::F32,
-            sky: true,
+            sky: SkyChoice::Render,
             skips: Skips::Nothing,
         },
     };

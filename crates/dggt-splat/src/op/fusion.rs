@@ -30,11 +30,21 @@ fn resolve(tensor: FusionTensor<Runtime>) -> CubeTensor {
     client.resolve_tensor_float::<CubeBackend>(tensor)
 }
 
+/// Which kind of burn tensor a computed device tensor becomes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum TensorKind {
+    Float,
+    Int,
+}
+
 /// Registers a computed device tensor in the current fusion stream.
-fn publish(tensor: CubeTensor, int: bool) -> FusionTensor<Runtime> {
+fn publish(tensor: CubeTensor, kind: TensorKind) -> FusionTensor<Runtime> {
     let client = get_client::<CubeBackend>(&tensor.device);
     let (shape, dtype) = (tensor.shape(), tensor.dtype);
-    let handle = if int { CubeBackend::int_tensor_handle(tensor) } else { CubeBackend::float_tensor_handle(tensor) };
+    let handle = match kind {
+        TensorKind::Float => CubeBackend::float_tensor_handle(tensor),
+        TensorKind::Int => CubeBackend::int_tensor_handle(tensor),
+    };
     let desc = InitOperationIr::create(shape, dtype, || client.register_tensor_handle(handle));
     client.register(StreamId::current(), OperationIr::Init(desc), NoOp::<CubeBackend>::new()).output()
 }
@@ -61,18 +71,24 @@ impl SplatKernels for Fused {
         size: ImageSize,
     ) -> (SplatOutputs<Self>, Self::Saved) {
         let (outputs, saved) = CubeBackend::splat_forward_saved(resolve_inputs(inputs), settings, size);
-        (SplatOutputs { images: publish(outputs.images, false), stats: publish(outputs.stats, true) }, saved)
+        (
+            SplatOutputs {
+                images: publish(outputs.images, TensorKind::Float),
+                stats: publish(outputs.stats, TensorKind::Int),
+            },
+            saved,
+        )
     }
 
     fn splat_backward(saved: Self::Saved, grad_images: FloatTensor<Self>) -> SplatGrads<Self> {
         let grads = CubeBackend::splat_backward(saved, resolve(grad_images));
         SplatGrads {
-            means: publish(grads.means, false),
-            quats: publish(grads.quats, false),
-            scales: publish(grads.scales, false),
-            opacities: publish(grads.opacities, false),
-            colors: publish(grads.colors, false),
-            background: publish(grads.background, false),
+            means: publish(grads.means, TensorKind::Float),
+            quats: publish(grads.quats, TensorKind::Float),
+            scales: publish(grads.scales, TensorKind::Float),
+            opacities: publish(grads.opacities, TensorKind::Float),
+            colors: publish(grads.colors, TensorKind::Float),
+            background: publish(grads.background, TensorKind::Float),
         }
     }
 }
