@@ -20,6 +20,7 @@ pub mod export;
 pub mod fresh;
 pub mod loss;
 pub mod model;
+mod pair;
 pub mod pair_files;
 pub mod pairs;
 pub mod render_pairs;

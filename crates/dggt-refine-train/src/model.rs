@@ -23,7 +23,6 @@ use dggt_refine::weights::{HostTensor, ParamNames, StoredLayout};
 use dggt_refine::{Latent, Refiner, RefinerParts, Trace};
 
 use crate::error::RefineTrainError;
-use crate::export::read_checkpoint;
 
 /// The refiner's parameters: what the optimiser steps and checkpoints hold.
 #[derive(Module, Debug)]
@@ -76,7 +75,7 @@ impl TrainableRefiner {
         prompt_tokens: &[i64],
         device: &Device,
     ) -> Result<Self, RefineTrainError> {
-        Self::from_checkpoint(base_dir, read_checkpoint(checkpoint_path)?, checkpoint_path, prompt_tokens, device)
+        Self::from_checkpoint(base_dir, DifixCheckpoint::read(checkpoint_path)?, checkpoint_path, prompt_tokens, device)
     }
 
     /// [`TrainableRefiner::load`] with the checkpoint given (`source` names it in messages), for example a

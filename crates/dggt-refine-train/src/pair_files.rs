@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use dggt_refine::safetensors_file::SafetensorsFile;
 
 use crate::error::RefineTrainError;
-use crate::pairs::{Image, Pair, unit_values};
+use crate::pair::{Image, Pair, unit_values};
 use crate::render_pairs::{RenderedPair, TENSORS, VIEWS_KEY};
 
 /// The pairs of a pairs file or of a folder of shards, in file-name order, read one at a time.

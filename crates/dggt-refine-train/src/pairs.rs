@@ -14,24 +14,9 @@ use rand::rngs::Xoshiro256PlusPlus;
 use rand::{RngExt, SeedableRng};
 
 use crate::error::RefineTrainError;
+use crate::pair::unit_values;
+pub use crate::pair::{Image, Pair};
 use crate::pair_files::PairFiles;
-
-/// A host image `[3, height, width]`, values in [0, 1].
-#[derive(Debug, Clone, PartialEq)]
-pub struct Image {
-    pub height: usize,
-    pub width: usize,
-    pub values: Vec<f32>,
-}
-
-/// A frame with artifacts and its ground truth, the same size, with the reference view (an input view)
-/// the refiner may attend to.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Pair {
-    pub render: Image,
-    pub target: Image,
-    pub reference: Option<Image>,
-}
 
 /// Where a run's pairs are: in memory (synthetic pairs), or in pairs files read a pair at a time.
 #[derive(Debug, Clone)]
@@ -135,16 +120,6 @@ pub fn read_images(path: &Path, names: &[String]) -> Result<Vec<Image>, RefineTr
         return Err(RefineTrainError::invalid(path.display().to_string(), "no image tensor named"));
     }
     Ok(images)
-}
-
-/// Little-endian float32 `bytes` as values, each checked to lie in [0, 1] (not a number fails too); `what`
-/// names them in the error.
-pub(crate) fn unit_values(bytes: &[u8], what: impl FnOnce() -> String) -> Result<Vec<f32>, RefineTrainError> {
-    let values: Vec<f32> = bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
-    match values.iter().find(|v| !(0.0..=1.0).contains(*v)) {
-        Some(bad) => Err(RefineTrainError::invalid(what(), format!("value {bad} outside [0, 1]"))),
-        None => Ok(values),
-    }
 }
 
 /// `variants` degraded copies of each image (seeds `0..variants` per image), the last `held_out` pairs held out.

@@ -19,7 +19,7 @@ use dggt_scene::nearest_in_time;
 use dggt_train::{TrainError, Trainer};
 
 use crate::error::RefineTrainError;
-use crate::pairs::{Image, Pair};
+use crate::pair::{Image, Pair};
 
 /// A rendered pair and the view it shows.
 #[derive(Debug, Clone, PartialEq)]

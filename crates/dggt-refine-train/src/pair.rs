@@ -1,0 +1,31 @@
+//! One training pair of the refiner: a frame with artifacts, its ground truth and the reference view, as host
+//! images; and the check every image read from a file passes (float32 values in [0, 1]).
+
+use crate::error::RefineTrainError;
+
+/// A host image `[3, height, width]`, values in [0, 1].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Image {
+    pub height: usize,
+    pub width: usize,
+    pub values: Vec<f32>,
+}
+
+/// A frame with artifacts and its ground truth, the same size, with the reference view (an input view)
+/// the refiner may attend to.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Pair {
+    pub render: Image,
+    pub target: Image,
+    pub reference: Option<Image>,
+}
+
+/// Little-endian float32 `bytes` as values, each checked to lie in [0, 1] (not a number fails too); `what`
+/// names them in the error.
+pub(crate) fn unit_values(bytes: &[u8], what: impl FnOnce() -> String) -> Result<Vec<f32>, RefineTrainError> {
+    let values: Vec<f32> = bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+    match values.iter().find(|v| !(0.0..=1.0).contains(*v)) {
+        Some(bad) => Err(RefineTrainError::invalid(what(), format!("value {bad} outside [0, 1]"))),
+        None => Ok(values),
+    }
+}
