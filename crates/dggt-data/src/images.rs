@@ -79,12 +79,3 @@ pub fn write_png_gray(path: &Path, image: &GrayImage) -> Result<()> {
         .map_err(|source| DataError::Image { path: path.to_owned(), source })?;
     crate::io::write_atomically(path, &bytes.into_inner())
 }
-
-/// Encodes an RGB PNG and writes it atomically.
-pub fn write_png_rgb(path: &Path, image: &RgbImage) -> Result<()> {
-    let mut bytes = Cursor::new(Vec::new());
-    image
-        .write_to(&mut bytes, ImageFormat::Png)
-        .map_err(|source| DataError::Image { path: path.to_owned(), source })?;
-    crate::io::write_atomically(path, &bytes.into_inner())
-}

@@ -104,7 +104,7 @@ pub fn attend(q: Tensor<4>, k: Tensor<4>, v: Tensor<4>) -> Tensor<4> {
 /// for a short sequence; otherwise aligned blocks within the score budget, then the unaligned remainder.
 fn query_blocks(queries: usize, scores_per_query: usize) -> Vec<std::ops::Range<usize>> {
     if queries <= SINGLE_CALL_TOKENS && queries * scores_per_query <= MAX_SCORE_ELEMENTS {
-        return vec![0..queries];
+        return std::iter::once(0..queries).collect();
     }
     let budget_rows = (MAX_SCORE_ELEMENTS / scores_per_query.max(1)).max(1);
     let block = if budget_rows >= QUERY_ALIGN {

@@ -1,7 +1,7 @@
 //! The cameras a batch is rendered from: world-to-camera extrinsics (OpenCV axes) and pinhole intrinsics, all
 //! views of a batch sharing one image size so that the outputs stack into `[V, H, W, ...]` buffers.
 
-use dggt_geom::{CameraFromWorld, ImageSize, PinholeIntrinsics};
+use dggt_geom::ImageSize;
 
 use crate::error::{SplatError, expect_len};
 
@@ -17,17 +17,6 @@ pub struct PinholeView {
 }
 
 impl PinholeView {
-    /// From the project's typed geometry (already validated, converted to `f32`).
-    pub fn from_geometry(camera_from_world: &CameraFromWorld, intrinsics: &PinholeIntrinsics) -> Self {
-        Self {
-            world_to_camera: camera_from_world.to_rows_3x4_f32(),
-            fx: intrinsics.fx as f32,
-            fy: intrinsics.fy as f32,
-            cx: intrinsics.cx as f32,
-            cy: intrinsics.cy as f32,
-        }
-    }
-
     /// The rotation block as rows, in `f64`.
     pub(crate) fn rotation(&self) -> [[f64; 3]; 3] {
         std::array::from_fn(|i| std::array::from_fn(|j| self.world_to_camera[i][j] as f64))

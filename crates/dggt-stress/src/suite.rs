@@ -186,12 +186,18 @@ impl StressReport {
     }
 }
 
+/// What a case does with its probe.
+type CaseRun<'a> = Box<dyn FnOnce(&mut Probe) -> Result<(), StressError> + 'a>;
+
+/// A case to run on the geometry alone.
+type GeometryCase = fn(&mut Probe) -> Result<(), StressError>;
+
 /// A case to run: its identity, and what it does with a probe.
 struct Case<'a> {
     group: &'static str,
     name: String,
     expect: Expect,
-    run: Box<dyn FnOnce(&mut Probe) -> Result<(), StressError> + 'a>,
+    run: CaseRun<'a>,
 }
 
 fn run_case(case: Case<'_>) -> CaseOutcome {
@@ -353,7 +359,7 @@ pub fn run_suite(options: &StressOptions, device: &Device) -> Result<StressRepor
 
 /// Camera geometry at its extremes: rotations, translations, timelines, pose encodings.
 fn geometry_group() -> Vec<CaseOutcome> {
-    let geometry_cases: [(&str, fn(&mut Probe) -> Result<(), StressError>); 5] = [
+    let geometry_cases: [(&str, GeometryCase); 5] = [
         ("SLERP between near-identical rotations", geometry::near_identical_rotations),
         ("SLERP between opposite rotations", geometry::opposite_rotations),
         ("huge translations", geometry::huge_translations),

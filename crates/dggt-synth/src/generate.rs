@@ -333,7 +333,6 @@ pub fn generate(config: &SynthConfig) -> Result<SynthScene> {
         size,
         intrinsics,
         rig,
-        ego,
         ego_pose_rows,
         world_from_ego,
         street,

@@ -10,7 +10,7 @@ use serde::Serialize;
 
 use crate::config::SynthConfig;
 use crate::grid::StreetGrid;
-use crate::motion::{CarMotion, CarState, EgoMotion, Object, WorldFromObject};
+use crate::motion::{CarMotion, CarState, Object, WorldFromObject};
 use crate::rig::RigCamera;
 use crate::shading::{Material, Surface, albedo, lit, sky};
 use crate::shapes::{Aabb, Shape, T_MIN};
@@ -80,12 +80,6 @@ impl SceneObject {
         self.kind
     }
 
-    /// The box enclosing the object in its own frame. For cars it is centred on the origin and its size is
-    /// `[length, width, height]`.
-    pub fn local_bounds(&self) -> Aabb {
-        self.bounds
-    }
-
     /// `[length, width, height]` of the enclosing box (m).
     pub fn box_size(&self) -> [f64; 3] {
         self.bounds.size().to_array()
@@ -115,11 +109,6 @@ impl SceneObject {
             Placement::Driving(motion) => motion.state(time).point_velocity(point),
         }
     }
-
-    /// Whether the object moves faster than [`MOVING_SPEED_THRESHOLD`] at `time`.
-    pub fn is_moving(&self, time: f64) -> bool {
-        self.motion().is_some_and(|m| m.state(time).velocity.length() > MOVING_SPEED_THRESHOLD)
-    }
 }
 
 /// A procedural driving scene: everything needed to render any frame from any camera.
@@ -129,7 +118,6 @@ pub struct SynthScene {
     pub(crate) size: ImageSize,
     pub(crate) intrinsics: PinholeIntrinsics,
     pub(crate) rig: Vec<RigCamera>,
-    pub(crate) ego: EgoMotion,
     /// The rows written to `ego_pose/{t}.txt` and the poses read back from them.
     pub(crate) ego_pose_rows: Vec<[[f64; 4]; 4]>,
     pub(crate) world_from_ego: Vec<WorldFromEgo>,
@@ -154,10 +142,6 @@ impl SynthScene {
 
     pub fn rig(&self) -> &[RigCamera] {
         &self.rig
-    }
-
-    pub fn ego_motion(&self) -> &EgoMotion {
-        &self.ego
     }
 
     pub fn street(&self) -> &Street {
@@ -197,11 +181,6 @@ impl SynthScene {
     /// sky (and for non-finite input). Builds a [`SceneAt`]; cast through [`SynthScene::at`] for many rays.
     pub fn cast(&self, origin: DVec3, direction: DVec3, time: f64) -> Option<Hit> {
         self.at(time)?.cast(origin, direction)
-    }
-
-    /// The sky colour along the world direction `direction`, in `[0, 1]`.
-    pub fn sky_colour(&self, direction: DVec3) -> [f32; 3] {
-        sky(direction.normalize_or_zero(), self.sky_salt).as_vec3().to_array()
     }
 }
 
