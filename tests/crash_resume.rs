@@ -85,7 +85,9 @@ fn finish(child: Child) -> u64 {
 
 /// Every tensor of the final checkpoint's weights, by name.
 fn final_weights(out: &Path) -> Vec<(String, Vec<u8>)> {
-    let dir = dggt_train::checkpoint::latest(&out.join("checkpoints")).unwrap().expect("a checkpoint");
+    let dir = dggt_train::checkpoint::latest(&out.join("checkpoints"), dggt_train::checkpoint::Purpose::Resume)
+        .unwrap()
+        .expect("a checkpoint");
     assert!(dir.ends_with(format!("step-{STEPS:08}")), "{}", dir.display());
     let reader = burn_pack::Reader::from_file(dir.join("model.bpk")).unwrap();
     let mut tensors: Vec<(String, Vec<u8>)> = reader

@@ -3,8 +3,9 @@
 //! A run writes `checkpoints/step-NNNNNNNN/` folders and a `checkpoints/latest` pointer naming the newest
 //! complete one. Each folder holds the network (`model.bpk`, burnpack), its configuration (`model.json`) and
 //! the input preprocessing it was trained with (`preprocess.json`; older checkpoints lack it); the optimiser
-//! and run state beside them are the trainer's. This module reads what inference needs: the pointer, the
-//! configuration, the preprocessing and the weights.
+//! and run state beside them are the trainer's, and `checksums.json` the checksums of them all
+//! ([`checksums`]). This module finds the checkpoint to use (complete, its files intact) and reads what
+//! inference needs: the configuration, the preprocessing and the weights.
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -15,6 +16,7 @@ use burn::tensor::Bytes;
 use dggt_data::Preprocess;
 use dggt_model::ModelConfig;
 
+use crate::checksums::{self, Purpose, Verified};
 use crate::error::InferError;
 
 /// The pointer file naming the newest complete checkpoint folder.
@@ -32,29 +34,59 @@ fn read(path: &Path) -> Result<Vec<u8>, InferError> {
     fs::read(path).map_err(|e| InferError::checkpoint(path, e))
 }
 
-/// The checkpoint `latest` points to under `root` (`run/checkpoints`), if any. When that folder is incomplete
-/// (a run killed while rewriting it), the newest complete `step-*` folder instead.
-pub fn latest(root: &Path) -> Result<Option<PathBuf>, InferError> {
+/// The checkpoint to use under `root` (`run/checkpoints`), if any: the one `latest` names when it is complete
+/// and its files match their checksums ([`checksums`]) for `purpose`; otherwise, with a warning naming what is
+/// wrong (a run killed while rewriting it, a damaged file), the newest other complete checkpoint that matches.
+/// An error when none does.
+pub fn latest(root: &Path, purpose: Purpose) -> Result<Option<PathBuf>, InferError> {
     let pointer = root.join(LATEST);
     if !pointer.exists() {
         return Ok(None);
     }
     let name = fs::read_to_string(&pointer).map_err(|e| InferError::checkpoint(&pointer, e))?;
-    let dir = root.join(name.trim());
-    if dir.join(STATE_FILE).is_file() {
-        return Ok(Some(dir));
-    }
-    match newest_complete(root)? {
-        Some(complete) => {
-            tracing::warn!(incomplete = %dir.display(), using = %complete.display(), "`latest` names an incomplete checkpoint");
-            Ok(Some(complete))
+    let named = root.join(name.trim());
+    let others = complete_folders(root)?.into_iter().rev().filter(|dir| dir != &named);
+    let mut passed_over: Vec<String> = Vec::new();
+    for dir in std::iter::once(named.clone()).chain(others) {
+        match usable(&dir, purpose) {
+            Ok(()) => {
+                if !passed_over.is_empty() {
+                    tracing::warn!(using = %dir.display(), "passed over: {}", passed_over.join("; "));
+                }
+                return Ok(Some(dir));
+            }
+            Err(reason) => passed_over.push(reason),
         }
-        None => Err(InferError::checkpoint(&dir, format!("`{LATEST}` points to a folder without {STATE_FILE}"))),
+    }
+    Err(InferError::checkpoint(root, format!("no usable checkpoint: {}", passed_over.join("; "))))
+}
+
+/// Why the checkpoint folder `dir` cannot be used for `purpose`: incomplete or damaged.
+fn usable(dir: &Path, purpose: Purpose) -> Result<(), String> {
+    if !dir.join(STATE_FILE).is_file() {
+        return Err(format!("{} is incomplete (no {STATE_FILE})", dir.display()));
+    }
+    verified(dir, purpose).map_err(|e| e.to_string())
+}
+
+/// Checks the files of the checkpoint folder `dir` that `purpose` reads against their checksums: an error
+/// naming the damaged file, a warning when the folder records none (an older version's).
+pub fn verified(dir: &Path, purpose: Purpose) -> Result<(), InferError> {
+    match checksums::verify(dir, purpose) {
+        Ok(Verified::Intact) => Ok(()),
+        Ok(Verified::Unrecorded) => {
+            tracing::warn!(
+                checkpoint = %dir.display(),
+                "the checkpoint records no checksums (written by an older version): its files are not verified"
+            );
+            Ok(())
+        }
+        Err(damage) => Err(InferError::DamagedCheckpoint { dir: dir.to_path_buf(), damage }),
     }
 }
 
-/// The `step-*` folder under `root` with the highest step that holds a run state.
-fn newest_complete(root: &Path) -> Result<Option<PathBuf>, InferError> {
+/// The complete `step-*` folders under `root` (those holding a run state), oldest first.
+fn complete_folders(root: &Path) -> Result<Vec<PathBuf>, InferError> {
     let entries = fs::read_dir(root).map_err(|e| InferError::checkpoint(root, e))?;
     let mut complete: Vec<PathBuf> = entries
         .filter_map(|entry| entry.ok().map(|e| e.path()))
@@ -62,7 +94,7 @@ fn newest_complete(root: &Path) -> Result<Option<PathBuf>, InferError> {
         .filter(|p| p.join(STATE_FILE).is_file())
         .collect();
     complete.sort();
-    Ok(complete.pop())
+    Ok(complete)
 }
 
 /// The network configuration stored in a checkpoint folder.
@@ -91,14 +123,17 @@ pub fn load_model<M: Module>(dir: &Path, model: M) -> Result<M, InferError> {
     model.try_load_record(record).map_err(|e| InferError::checkpoint(&path, format!("does not fit the network: {e:?}")))
 }
 
-/// The checkpoint folder of a `step-N` folder, a run's `checkpoints/` folder or a run folder.
+/// The checkpoint folder of a `step-N` folder, a run's `checkpoints/` folder or a run folder, its network's
+/// files verified: a `step-N` folder named directly must be intact; of a run, the newest intact checkpoint
+/// is used ([`latest`]).
 pub fn checkpoint_dir(path: &Path) -> Result<PathBuf, InferError> {
     if path.join(MODEL_CONFIG_FILE).is_file() {
+        verified(path, Purpose::Inference)?;
         return Ok(path.to_path_buf());
     }
     for root in [path.to_path_buf(), path.join("checkpoints")] {
         if root.join(LATEST).is_file()
-            && let Some(dir) = latest(&root)?
+            && let Some(dir) = latest(&root, Purpose::Inference)?
         {
             return Ok(dir);
         }

@@ -8,6 +8,13 @@ pub enum InferError {
     Input { path: PathBuf, detail: String },
     #[error("checkpoint {}: {detail}", path.display())]
     Checkpoint { path: PathBuf, detail: String },
+    /// A checkpoint folder whose files do not match its manifest ([`crate::checksums`]).
+    #[error(
+        "checkpoint {}: {damage}: the checkpoint is damaged and not used (an earlier checkpoint of the run may be \
+         intact)",
+        dir.display()
+    )]
+    DamagedCheckpoint { dir: PathBuf, damage: crate::checksums::Damage },
     #[error("configuration {}: {detail}", path.display())]
     Config { path: PathBuf, detail: String },
     #[error("{what}: {detail}")]

@@ -5,7 +5,8 @@
 //!
 //! 1. [`network`]: a network from any checkpoint users have (this project's runs, the release's `.pt`,
 //!    VGGT-1B) with its configuration ([`settings`]: the `[model]` and `[render]` sections of a training
-//!    configuration; [`checkpoint`]: this project's checkpoint folders), or a fresh one;
+//!    configuration; [`checkpoint`]: this project's checkpoint folders, [`checksums`]: their integrity), or a
+//!    fresh one;
 //! 2. [`inputs`]: the views of an image folder, glob or scene export, preprocessed to the network's size;
 //! 3. [`forward`]: the forward pass, dense heads a few frames at a time;
 //! 4. [`cameras`]: the input views' cameras, predicted or given;
@@ -18,6 +19,7 @@
 
 pub mod cameras;
 pub mod checkpoint;
+pub mod checksums;
 mod error;
 pub mod forward;
 pub mod inputs;

@@ -1,5 +1,11 @@
-//! `dggt reconstruct` end to end on the bundled fixture (CPU): a tiny network trained briefly, then one
-//! reconstruction from its checkpoint, checked file by file; and the errors bad inputs give.
+//! `dggt reconstruct` end to end on the bundled fixture (CPU): a tiny network trained for a few steps, then
+//! one reconstruction from its checkpoint, checked file by file and render by render against the trainer's own
+//! renders of the same weights; and the errors bad inputs give.
+//!
+//! Nothing here depends on how well the network trained: a few steps from scratch land anywhere, and where they
+//! land moves with every rounding difference between processors (AVX2, FMA, AVX-512). What must hold on any
+//! processor is that the reconstruction pipeline (checkpoint files, preprocessing, chunked forward pass, scene
+//! assembly, rasteriser, PNG export) renders exactly what training renders from the same weights.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -12,28 +18,24 @@ use dggt_export::images::read_rgb_png;
 use dggt_export::masks::read_mask_png;
 use dggt_export::nerfstudio::read_transforms;
 use dggt_export::ply::{INRIA_PROPERTIES, read_ply};
-use dggt_infer::Architecture;
+use dggt_infer::{Architecture, CameraSource};
 use dggt_reconstruct::align::pose_error;
 use dggt_reconstruct::{ReconstructOptions, Summary, TimeRequest, reconstruct};
 use dggt_train::{RunOptions, Start, TrainConfig, Trainer};
 
-/// Pose warm-up steps (the camera loss alone, about 0.04 s each), then full training steps, of the checkpoint
-/// under test.
-const POSE_WARMUP_STEPS: u64 = 1500;
-const TRAIN_STEPS: u64 = 100;
-/// Every render at an input time must reach this PSNR against that input (dB). Loose on purpose: short runs
-/// from scratch land between about 16 and 21 dB on average depending on the initial draw, one step about
-/// 14.5 dB; a render from a misplaced camera or with misassigned colours falls far below.
-const PSNR_FLOOR_DB: f64 = 13.0;
-/// Poses after similarity alignment to the fixture's: the RMS camera-centre error as a fraction of the
-/// trajectory's spread (the warm-up alone reaches about 0.12; without the warm-up the network predicts one
-/// common offset for every view after the first, about 0.82)...
-const CENTRE_TOLERANCE_RELATIVE: f64 = 0.35;
-/// ...every view's rotation relative to the first within this many degrees (warmed up: under 1)...
-const ROTATION_TOLERANCE_DEG: f64 = 3.0;
-/// ...and the direction of travel from the first view within this cosine of the fixture's (a flipped or
-/// transposed pose convention gives about -1 or 0).
-const TRAVEL_COSINE_FLOOR: f64 = 0.95;
+/// Training steps of the checkpoint under test: enough for every head to have moved off its initial draw.
+const TRAIN_STEPS: u64 = 4;
+/// The frames of camera 0 reconstructed, which the trainer's validation also renders.
+const FRAMES: usize = 8;
+/// A reconstruction render against the trainer's render of the same view, in 8-bit levels: the largest
+/// difference of any channel of any pixel, and the mean over all of them. Both run the same arithmetic on the
+/// same processor, so they can differ only where the order of a floating-point sum does (the reconstruction
+/// runs the dense heads a few frames at a time), far below a level except for a value on a rounding boundary;
+/// they were identical where this was written. A wrong camera, time, colour order, preprocessing or
+/// rasteriser setting moves most pixels: the release's `eps2d` instead of the run's gave up to 102 levels,
+/// 12.8 on average.
+const MAX_LEVELS: u8 = 3;
+const MEAN_LEVELS: f64 = 0.05;
 
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
@@ -43,7 +45,9 @@ fn fixture() -> PathBuf {
     repo().join("data-fixtures/synth-s0")
 }
 
-/// The tiny overfit configuration at 56 pixels wide, front camera, four inputs, a pose warm-up and a short run.
+/// The tiny overfit configuration at 56 pixels wide, front camera, four inputs and a few steps; its final
+/// validation renders the reconstruction's views (the first eight frames as inputs and as targets) from the
+/// predicted cameras, as the reconstruction does.
 fn train_config(out: &Path) -> TrainConfig {
     let mut config = TrainConfig::load(&repo().join("configs/tiny-overfit.toml")).expect("tiny-overfit.toml loads");
     config.data.scene = fixture();
@@ -51,56 +55,49 @@ fn train_config(out: &Path) -> TrainConfig {
     config.sampler.min_inputs = 4;
     config.sampler.max_inputs = 4;
     config.render.render_inputs = false;
-    // Optimiser and sampling pinned here rather than taken from the shipped file, whose tuning targets long runs.
-    config.data.frames = Some([0, 12]);
-    config.sampler.window = 12;
-    config.optim.lr = 1e-3;
-    config.optim.groups.insert("sky_model".into(), 1e-3);
     config.optim.warmup_steps = 2;
-    config.optim.pose_warmup_steps = POSE_WARMUP_STEPS;
-    config.run.steps = POSE_WARMUP_STEPS + TRAIN_STEPS;
-    // The camera head learns faster than the shipped configuration lets it, so that a short run predicts
-    // usable poses.
-    config.loss.camera = 1.0;
-    // Seed 0's short run leaves one input view near the render floor, where rounding-level changes to the
-    // network's arithmetic move it across (to 11.6 dB against frame 6); seed 1's keeps every view well above it
-    // (mean 19.9 dB).
-    config.run.seed = 1;
-    config.optim.groups.insert("camera_head".into(), 1e-2);
-    config.unattended(out)
+    config.run.steps = TRAIN_STEPS;
+    let mut config = config.unattended(out);
+    config.render.cameras = CameraSource::Predicted;
+    config.data.validation.inputs = (0..FRAMES).collect();
+    config.data.validation.targets = (0..FRAMES).collect();
+    config
 }
 
 #[test]
 fn reconstructs_the_fixture_from_a_trained_checkpoint() {
     let started = Instant::now();
     let run = tempfile::tempdir().unwrap();
-    let mut trainer = Trainer::new(train_config(run.path()), vec![Device::flex()], Start::Fresh).unwrap();
+    let config = train_config(run.path());
+    let mut trainer = Trainer::new(config.clone(), vec![Device::flex()], Start::Fresh).unwrap();
     let trained = trainer.run(RunOptions::default()).unwrap();
     assert!(trained.checkpoint.is_some(), "the run ends with a checkpoint");
-    eprintln!(
-        "trained {POSE_WARMUP_STEPS} pose warm-up and {TRAIN_STEPS} full steps in {:.1} s",
-        started.elapsed().as_secs_f64()
-    );
+    assert_eq!(trained.validation.as_ref().map(|v| v.views.len()), Some(FRAMES), "the final validation");
+    eprintln!("trained {TRAIN_STEPS} steps in {:.1} s", started.elapsed().as_secs_f64());
+    // The reconstruction assembles and rasterises as training did (`render.eps2d`, the dynamic blend).
+    let settings = run.path().join("train.toml");
+    std::fs::write(&settings, toml::to_string(&config).unwrap()).unwrap();
 
-    // The run folder is accepted (its latest checkpoint is used).
+    // The run folder is accepted (its latest checkpoint is used), at the width it records.
     let out = tempfile::tempdir().unwrap();
     let out = out.path();
     let mut options = ReconstructOptions::new(fixture(), run.path(), out);
+    options.architecture = Some(Architecture::Config(settings));
     options.cameras = Some(vec![0]);
-    options.frames = Some(0..8);
-    options.width = Some(56);
+    options.frames = Some(0..FRAMES);
     options.chunk_frames = 3;
     options.times = TimeRequest::Every(2);
     let summary = reconstruct(&options, &Device::flex()).unwrap();
     eprintln!("{summary}");
 
-    let names: Vec<String> = (0..8).map(|f| format!("{f:03}_0")).collect();
+    let names: Vec<String> = (0..FRAMES).map(|f| format!("{f:03}_0")).collect();
     check_files(&summary, out, &names);
     check_gaussians(&summary, out);
     let records = check_cameras(out, &names);
     check_poses(&summary, &records);
     check_maps(out, &names);
-    check_renders(&summary, out);
+    let validation = run.path().join(format!("validation/step-{TRAIN_STEPS:08}"));
+    check_renders(&summary, out, &validation);
     let elapsed = started.elapsed().as_secs_f64();
     eprintln!("total {elapsed:.1} s");
 }
@@ -141,7 +138,7 @@ fn check_files(summary: &Summary, out: &Path, names: &[String]) {
     }
     assert_eq!(summary.files.len(), expected.len(), "{:?}", summary.files);
     let on_disk: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
-    assert_eq!(on_disk["frames"], 8);
+    assert_eq!(on_disk["frames"], FRAMES);
     assert_eq!(on_disk["checkpoint"]["format"], "trainer");
     assert!(on_disk["peak_memory_mib"].as_f64().unwrap() > 0.0);
     assert!(on_disk["stages"].as_array().unwrap().len() >= 5);
@@ -149,19 +146,19 @@ fn check_files(summary: &Summary, out: &Path, names: &[String]) {
 
 /// PLY headers are INRIA's and vertex counts are the Gaussians kept.
 fn check_gaussians(summary: &Summary, out: &Path) {
-    // PLY headers are INRIA's and vertex counts are the Gaussians kept.
     let g = &summary.gaussians;
     assert_eq!(g.per_pixel, 8 * 56 * 42);
     let ply = |file: &str| read_ply(&out.join(file)).unwrap();
     let statics = ply("gaussians/static.ply");
     assert_eq!(statics.properties, INRIA_PROPERTIES.map(String::from).to_vec());
     assert_eq!(statics.count, g.static_kept);
-    assert!(g.static_kept > g.per_pixel / 2, "{g:?}");
+    // How many culling keeps depends on what the few steps learnt; the counts must be those of the files.
+    assert!(g.static_kept <= g.per_pixel, "{g:?}");
     let cloud = statics.to_cloud().unwrap();
     assert!(cloud.opacities.iter().all(|&o| (1.0 / 255.0 - 1e-6..=1.0).contains(&o)));
     assert!(cloud.means.iter().flatten().all(|v| v.is_finite()));
     assert_eq!(ply("gaussians/sky.ply").count, g.sky_kept);
-    assert!(g.sky_kept > 0, "{g:?}");
+    assert!(g.sky_kept <= 60 * 60, "the overfit configuration's 60 x 60 sky Gaussians at most: {g:?}");
     for (k, &count) in g.dynamic_kept.iter().enumerate() {
         assert_eq!(ply(&format!("gaussians/dynamic_t{k:04}.ply")).count, count);
         assert!(count <= 56 * 42, "one view's pixels at most");
@@ -190,26 +187,17 @@ fn check_cameras(out: &Path, names: &[String]) -> Vec<CameraRecord> {
     records
 }
 
-/// Poses against the fixture's ground truth, relative to the first view, after similarity alignment.
+/// The summary's pose error is that of the exported cameras against the fixture's, after similarity alignment.
 fn check_poses(summary: &Summary, records: &[CameraRecord]) {
-    // Poses against the fixture's ground truth, relative to the first view, after similarity alignment.
-    let scene = dggt_data::open_scene(&fixture(), Some(0..8), Some(vec![0])).unwrap();
-    let truth: Vec<_> =
-        (0..8).map(|f| scene.view(f, 0).world_from_camera.relative_to(&scene.view(0, 0).world_from_camera)).collect();
+    let scene = dggt_data::open_scene(&fixture(), Some(0..FRAMES), Some(vec![0])).unwrap();
+    let truth: Vec<_> = (0..FRAMES)
+        .map(|f| scene.view(f, 0).world_from_camera.relative_to(&scene.view(0, 0).world_from_camera))
+        .collect();
     let predicted: Vec<_> = records.iter().map(|r| r.world_from_camera).collect();
+    assert!(predicted.iter().all(|pose| pose.translation().is_finite()), "{predicted:?}");
     let error = pose_error(&predicted, &truth).expect("distinct camera centres");
     eprintln!("{error:?}");
     assert!(error.centre_rmse.is_finite() && error.scale > 0.0, "{error:?}");
-    // The direction of travel: mean displacement of the later views from the first, predicted and true.
-    let travel = |poses: &[dggt_geom::WorldFromCamera]| {
-        let origin = poses[0].translation();
-        poses[1..].iter().map(|p| p.translation() - origin).sum::<dggt_geom::glam::DVec3>().normalize()
-    };
-    let cosine = travel(&predicted).dot(travel(&truth));
-    eprintln!("direction of travel: cosine {cosine:.3}");
-    assert!(cosine > TRAVEL_COSINE_FLOOR, "direction of travel off: cosine {cosine:.3}");
-    assert!(error.rotation_max_deg < ROTATION_TOLERANCE_DEG, "{error:?}");
-    assert!(error.centre_rmse_relative < CENTRE_TOLERANCE_RELATIVE, "{error:?}");
     let reported = summary.pose_error.as_ref().expect("scene exports report pose errors");
     assert!(
         (reported.centre_rmse - error.centre_rmse).abs() < 1e-9
@@ -225,32 +213,49 @@ fn check_maps(out: &Path, names: &[String]) {
         assert_eq!((size.width, size.height), (56, 42));
         assert!(npy.iter().all(|d| d.is_finite() && *d > 0.0));
         let (_, png, meta) = read_depth_png16(&out.join(format!("depth/{name}.png"))).unwrap();
-        assert!(npy.iter().zip(&png).all(|(a, b)| ((a - b).abs() as f64) <= meta.scale / 2.0 + 1e-4));
+        // Rounded to the scale's multiples, and the smallest non-zero value where a depth is below half the scale
+        // (a network trained briefly may span more than 16 bits of depth).
+        let tolerance =
+            |depth: f64| if depth < meta.scale / 2.0 { meta.scale } else { meta.scale / 2.0 + 1e-6 * depth };
+        let off = npy.iter().zip(&png).find(|(a, b)| f64::from((**a - **b).abs()) > tolerance(f64::from(**a)));
+        assert!(off.is_none(), "depth/{name}.png: {off:?} at scale {}", meta.scale);
         let (size, _) = read_mask_png(&out.join(format!("dynamic/{name}.png"))).unwrap();
         assert_eq!((size.width, size.height), (56, 42));
         read_mask_png(&out.join(format!("sky/{name}.png"))).unwrap();
     }
 }
 
-/// Renders at the input times reproduce the inputs; renders between them exist.
-fn check_renders(summary: &Summary, out: &Path) {
-    // Renders at the input times reproduce the inputs; renders between them exist.
-    let mut at_inputs = 0;
+/// Every render at an input time is the trainer's validation render of that view (the left panel of its
+/// `frameNNN_camera0.png`), and the summary's input PSNR is that of the files.
+fn check_renders(summary: &Summary, out: &Path, validation: &Path) {
     let mut psnrs = Vec::new();
-    for render in &summary.renders {
-        if !render.at_input {
-            continue;
-        }
-        at_inputs += 1;
+    for render in summary.renders.iter().filter(|r| r.at_input) {
         let frame = (render.time_s * 10.0).round() as usize;
+        let rendered = image::open(out.join(&render.file)).unwrap().to_rgb8();
+        let panels = image::open(validation.join(format!("frame{frame:03}_camera0.png"))).unwrap().to_rgb8();
+        assert_eq!(panels.dimensions(), (3 * rendered.width(), rendered.height()), "{}", render.file);
+        let trainer = image::imageops::crop_imm(&panels, 0, 0, rendered.width(), rendered.height()).to_image();
+        let differences: Vec<u8> =
+            rendered.as_raw().iter().zip(trainer.as_raw()).map(|(a, b)| a.abs_diff(*b)).collect();
+        let largest = differences.iter().copied().max().unwrap_or(0);
+        let mean = differences.iter().map(|&d| f64::from(d)).sum::<f64>() / differences.len() as f64;
+        eprintln!(
+            "{}: against the trainer's render of frame {frame}, at most {largest}, mean {mean:.4} levels",
+            render.file
+        );
+        assert!(
+            largest <= MAX_LEVELS && mean <= MEAN_LEVELS,
+            "{}: up to {largest} levels, mean {mean:.3}",
+            render.file
+        );
+
         let (_, rgb) = read_rgb_png(&out.join(&render.file)).unwrap();
         let (_, input) = read_rgb_png(&out.join(format!("images/{frame:03}_0.png"))).unwrap();
+        assert!(rgb.iter().all(|v| v.is_finite() && (0.0..=1.0).contains(v)), "{}", render.file);
         let mse = rgb.iter().zip(&input).map(|(a, b)| ((a - b) as f64).powi(2)).sum::<f64>() / rgb.len() as f64;
-        let psnr = -10.0 * mse.log10();
-        assert!(psnr > PSNR_FLOOR_DB, "{}: PSNR {psnr:.2} dB against frame {frame}", render.file);
-        psnrs.push(psnr);
+        psnrs.push(-10.0 * mse.log10());
     }
-    assert_eq!(at_inputs, 8);
+    assert_eq!(psnrs.len(), FRAMES);
     let mean_psnr = psnrs.iter().sum::<f64>() / psnrs.len() as f64;
     let reported = summary.input_psnr_db.iter().sum::<f64>() / summary.input_psnr_db.len() as f64;
     assert!((mean_psnr - reported).abs() < 0.5, "summary says {reported:.2} dB, the files {mean_psnr:.2} dB");

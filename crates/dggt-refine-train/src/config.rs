@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 
 use dggt_losses::LpipsKind;
 use dggt_train::config::OptimSection;
+use dggt_train::divergence::{self, DEFAULT_MAX_FAILED_STEPS_IN_A_ROW};
 use serde::{Deserialize, Serialize};
 
 use crate::error::RefineTrainError;
@@ -138,6 +139,9 @@ pub struct OptimSettings {
     pub epsilon: f64,
     pub warmup_steps: u64,
     pub clip_grad_norm: Option<f64>,
+    /// Steps in a row that may fail (non-finite loss or gradient, or an update rolled back) before the run
+    /// stops as diverged.
+    pub max_failed_steps_in_a_row: u64,
 }
 
 impl Default for OptimSettings {
@@ -150,6 +154,7 @@ impl Default for OptimSettings {
             epsilon: 1e-8,
             warmup_steps: 0,
             clip_grad_norm: Some(1.0),
+            max_failed_steps_in_a_row: DEFAULT_MAX_FAILED_STEPS_IN_A_ROW,
         }
     }
 }
@@ -170,6 +175,7 @@ impl OptimSettings {
             clip_grad_norm: self.clip_grad_norm,
             accumulation: 1,
             pose_warmup_steps: 0,
+            max_failed_steps_in_a_row: self.max_failed_steps_in_a_row,
         }
     }
 }
@@ -260,6 +266,7 @@ impl RefineTrainConfig {
         check(self.run.checkpoint_every > 0, "run.checkpoint_every", "must be at least 1")?;
         check(self.optim.lr > 0.0, "optim.lr", "must be positive")?;
         check(self.optim.beta1 < 1.0 && self.optim.beta2 < 1.0, "optim.beta1/beta2", "must be below 1")?;
+        divergence::validate_limit("optim.max_failed_steps_in_a_row", self.optim.max_failed_steps_in_a_row)?;
         let weights = [self.loss.l2, self.loss.lpips, self.loss.gram];
         check(weights.iter().all(|w| w.is_finite() && *w >= 0.0), "loss", "weights must be finite and >= 0")
     }

@@ -20,6 +20,9 @@ pub enum RefineTrainError {
     Config { path: PathBuf, detail: String },
     #[error("{what}: {detail}")]
     Invalid { what: String, detail: String },
+    /// An error of a validation pass, with the step it validated.
+    #[error("validation at step {step}: {source}")]
+    Validation { step: u64, source: Box<RefineTrainError> },
 }
 
 impl RefineTrainError {

@@ -6,8 +6,11 @@
 //! with the seed `seed ^ step`, and steps AdamW on the loss; everything is a function of the seed, the step
 //! and the saved weights and moments, so a resumed run continues exactly. Validation refines the held-out
 //! pairs from the posterior mean and reports their PSNR against the targets (and that of the unrefined
-//! renders). Records go to `out_dir/metrics.jsonl`, one JSON object a line with its `kind` and `step`, as the
-//! project's trainer writes them (a resumed run first drops the records it is about to write again).
+//! renders). A step that fails (a non-finite loss or gradient, or an update rolled back) is counted, and too
+//! many in a row stop the run; a checkpoint falling due meanwhile waits for a step that trains
+//! ([`dggt_train::divergence`]). Records go to `out_dir/metrics.jsonl`, one JSON
+//! object a line with its `kind` and `step`, as the project's trainer writes them (a resumed run first drops
+//! the records it is about to write again).
 
 use std::borrow::Cow;
 use std::fs;
@@ -21,7 +24,8 @@ use dggt_infer::checkpoint::{STATE_FILE, latest, load_model};
 use dggt_metrics::psnr;
 use dggt_refine::{Latent, Prompt};
 use dggt_train::Start;
-use dggt_train::checkpoint::{RunState, optimizer_file, save_folder};
+use dggt_train::checkpoint::{Purpose, RunState, optimizer_file, save_folder};
+use dggt_train::divergence::{self, CheckpointDue, CheckpointGate, DivergenceLimit, StepFailure};
 use dggt_train::optimizer::Optimizer;
 use dggt_train::schedule::WarmupCosine;
 use dggt_train::trainer::{progress_bar, truncate_metrics};
@@ -43,8 +47,10 @@ pub struct StepRecord {
     pub l2: f64,
     pub lpips: f64,
     pub gram: f64,
-    /// `None` for a skipped (non-finite) step.
+    /// `None` for a step skipped before its update (a non-finite loss or gradient).
     pub grad_norm: Option<f64>,
+    /// Why the step made no update (skipped or rolled back), when it did not.
+    pub failure: Option<String>,
 }
 
 /// PSNR of the held-out pairs.
@@ -68,6 +74,10 @@ pub struct RefineTrainer {
     device: Device,
     /// The same device without autodiff (validation).
     plain_device: Device,
+    /// Why the last step failed, when it did.
+    last_failure: Option<StepFailure>,
+    /// Holds back checkpoints while steps fail.
+    checkpoint_gate: CheckpointGate,
 }
 
 impl RefineTrainer {
@@ -86,9 +96,20 @@ impl RefineTrainer {
         let pairs = load_pairs(&config.pairs)?;
         let optimizer = Optimizer::ungrouped(&config.optim.section());
         let state = RunState::starting(config.run.seed, config.run.batch as u64);
-        let mut trainer = Self { config, model, optimizer, loss, pairs, state, device, plain_device };
+        let mut trainer = Self {
+            config,
+            model,
+            optimizer,
+            loss,
+            pairs,
+            state,
+            device,
+            plain_device,
+            last_failure: None,
+            checkpoint_gate: CheckpointGate::default(),
+        };
         if start == Start::Resume
-            && let Some(dir) = latest(&trainer.checkpoints()).map_err(dggt_train::TrainError::from)?
+            && let Some(dir) = latest(&trainer.checkpoints(), Purpose::Resume).map_err(dggt_train::TrainError::from)?
         {
             trainer.resume_from(&dir)?;
         }
@@ -121,7 +142,8 @@ impl RefineTrainer {
         }
     }
 
-    /// One optimiser step. A non-finite loss or gradient leaves the weights untouched (counted as skipped).
+    /// One optimiser step. A non-finite loss or gradient leaves the weights untouched (counted as skipped), an
+    /// update that makes a weight non-finite is rolled back (counted as such).
     pub fn step(&mut self) -> Result<StepRecord, RefineTrainError> {
         let step = self.state.step;
         let indices = step_indices(self.state.seed, step, self.config.run.batch, self.pairs.train_len());
@@ -135,21 +157,36 @@ impl RefineTrainer {
         let refined = self.model.refine(render, reference, Latent::Sampled { seed: self.state.seed ^ step })?;
         let value = self.loss.compute(refined, target, step)?;
         let loss: f32 = value.total.clone().into_scalar();
-        let mut record =
-            StepRecord { step, loss: loss.into(), l2: value.l2, lpips: value.lpips, gram: value.gram, grad_norm: None };
+        let mut record = StepRecord {
+            step,
+            loss: loss.into(),
+            l2: value.l2,
+            lpips: value.lpips,
+            gram: value.gram,
+            grad_norm: None,
+            failure: None,
+        };
+        let mut failure = Some(StepFailure::NonFiniteLoss);
         if loss.is_finite() {
             let grads = GradientsParams::from_grads(value.total.backward(), &self.model.weights);
             let factor = self.schedule().factor(step);
-            let (weights, report) = self.optimizer.step(self.model.weights.clone(), grads, factor);
+            let (weights, outcome) = self.optimizer.step(self.model.weights.clone(), grads, factor);
             self.model.weights = weights;
-            record.grad_norm = report.map(|r| r.grad_norm);
+            record.grad_norm = outcome.report().map(|r| r.grad_norm);
+            failure = StepFailure::of(&outcome);
         }
-        if record.grad_norm.is_none() {
-            self.state.skipped_steps += 1;
-            tracing::warn!(step, "non-finite loss or gradient: step skipped, weights untouched");
-        }
+        record.failure = failure.as_ref().map(StepFailure::describe);
+        divergence::count_step(&mut self.state, step, failure.as_ref());
+        self.last_failure = failure;
         self.state.step += 1;
         Ok(record)
+    }
+
+    /// [`dggt_train::TrainError::Diverged`] once `optim.max_failed_steps_in_a_row` steps in a row have failed.
+    fn check_divergence(&self) -> Result<(), RefineTrainError> {
+        let optim = &self.config.optim;
+        let limit = DivergenceLimit { max_failed_in_a_row: optim.max_failed_steps_in_a_row, lr: optim.lr };
+        Ok(divergence::check(&self.state, self.last_failure.as_ref(), limit)?)
     }
 
     /// Trains to `run.steps` with a progress bar (when `progress`), validating and checkpointing on the
@@ -175,12 +212,15 @@ impl RefineTrainer {
             bar.set_message(format!("loss {:.4}", record.loss));
             bar.inc(1);
             self.append_metrics("train", &record)?;
+            // No checkpoint then: the weights are those the last one holds, and a new one could prune it.
+            self.check_divergence()?;
             let step = self.state.step;
             self.state.elapsed_s = elapsed_before + started.elapsed().as_secs_f64();
             if run.validate_every > 0 && step % run.validate_every == 0 && step < run.steps {
                 last = Some(self.validate_and_record()?);
             }
-            if step % run.checkpoint_every == 0 && step < run.steps {
+            let due = if step % run.checkpoint_every == 0 { CheckpointDue::Periodic } else { CheckpointDue::No };
+            if step < run.steps && self.checkpoint_gate.write_now(&self.state, due) {
                 self.save_checkpoint()?;
             }
         }
@@ -193,7 +233,9 @@ impl RefineTrainer {
     }
 
     fn validate_and_record(&self) -> Result<Validation, RefineTrainError> {
-        let validation = self.validate()?;
+        let validation = self
+            .validate()
+            .map_err(|source| RefineTrainError::Validation { step: self.state.step, source: Box::new(source) })?;
         tracing::info!(
             step = validation.step,
             refined_psnr = validation.refined_psnr,

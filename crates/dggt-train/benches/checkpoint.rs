@@ -50,7 +50,7 @@ fn main() {
     );
 
     let dir = tempfile::tempdir().expect("a temporary folder");
-    let state = RunState { step: 1, seed: 0, skipped_steps: 0, elapsed_s: 0.0, bad_samples: 0, samples_per_step: 1 };
+    let state = RunState { step: 1, ..RunState::starting(0, 1) };
     let before = status_bytes("VmRSS");
     reset_peak();
     let started = Instant::now();

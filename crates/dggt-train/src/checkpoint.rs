@@ -12,9 +12,11 @@
 //! learning-rate schedule is a function of the step and the sampler draws sample `k` from `(seed, k)`, so no
 //! random-generator state needs saving. The weights and moments are written tensor by tensor (peak host memory
 //! is one tensor, not the 16 GB of a full-size model and its AdamW state). Every file is written through a
-//! temporary file and a rename, `state.json` marks a folder complete and the `checkpoints/latest` pointer is
-//! replaced last: a run killed at any moment, in the middle of a checkpoint included, resumes from the last
-//! complete one.
+//! temporary file and a rename; `checksums.json` records every file's size and CRC-32C
+//! ([`dggt_infer::checksums`]), `state.json` then marks the folder complete and the `checkpoints/latest`
+//! pointer is replaced last: a run killed at any moment, in the middle of a checkpoint included, resumes from
+//! the last complete one, and one whose newest checkpoint was damaged afterwards from the newest intact one.
+//! No checkpoint is written with a non-finite weight or moment.
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -25,13 +27,16 @@ use dggt_data::Preprocess;
 use dggt_data::io::write_atomically;
 pub use dggt_infer::checkpoint::{
     LATEST, MODEL_CONFIG_FILE, MODEL_FILE, PREPROCESS_FILE, STATE_FILE, latest, load_model, read_model_config,
-    read_preprocess,
+    read_preprocess, verified,
 };
+use dggt_infer::checksums;
+pub use dggt_infer::checksums::{MANIFEST_FILE, Purpose};
 use dggt_model::{Dggt, ModelConfig};
 use serde::{Deserialize, Serialize};
 
 use crate::error::TrainError;
 use crate::failpoint;
+use crate::finite::first_non_finite;
 use crate::optimizer::{Optimizer, deferred_tensor};
 use crate::resume::{ConfiguredSections, TRAINING_FILE};
 
@@ -43,6 +48,12 @@ pub struct RunState {
     pub seed: u64,
     /// Steps skipped for a non-finite loss or gradient.
     pub skipped_steps: u64,
+    /// Steps whose update made a weight or moment non-finite and was undone.
+    #[serde(default)]
+    pub rolled_back_steps: u64,
+    /// Steps skipped or rolled back since the last step that trained ([`crate::divergence`]).
+    #[serde(default)]
+    pub failed_in_a_row: u64,
     /// Training seconds before this checkpoint (summed over resumed segments).
     pub elapsed_s: f64,
     /// Samples that failed to load and were replaced.
@@ -56,7 +67,16 @@ pub struct RunState {
 impl RunState {
     /// The counters of a run that has not taken a step yet.
     pub fn starting(seed: u64, samples_per_step: u64) -> Self {
-        Self { step: 0, seed, skipped_steps: 0, elapsed_s: 0.0, bad_samples: 0, samples_per_step }
+        Self {
+            step: 0,
+            seed,
+            skipped_steps: 0,
+            rolled_back_steps: 0,
+            failed_in_a_row: 0,
+            elapsed_s: 0.0,
+            bad_samples: 0,
+            samples_per_step,
+        }
     }
 }
 
@@ -100,7 +120,8 @@ pub fn save(
 }
 
 /// [`save`] for any trained module: its parameters, the optimiser, `extra` files (name, bytes) and the run
-/// state, written last, in `root/step-NNNNNNNN/`; then `latest` and pruning to the newest `keep`.
+/// state, written last, in `root/step-NNNNNNNN/`; then `latest` and pruning to the newest `keep`. Nothing is
+/// written when a weight or moment is not finite.
 pub fn save_folder<M: Module>(
     root: &Path,
     model: &M,
@@ -111,6 +132,9 @@ pub fn save_folder<M: Module>(
 ) -> Result<PathBuf, TrainError> {
     let name = format!("step-{:08}", state.step);
     let dir = root.join(&name);
+    if let Some(non_finite) = first_non_finite(model, Some(optimizer)) {
+        return Err(TrainError::NonFiniteCheckpoint { dir, non_finite });
+    }
     fs::create_dir_all(&dir).map_err(|e| checkpoint_error(&dir, e))?;
     let write = |file: &str, bytes: &[u8]| -> Result<(), TrainError> {
         write_atomically(&dir.join(file), bytes).map_err(|e| checkpoint_error(&dir.join(file), e))
@@ -123,7 +147,11 @@ pub fn save_folder<M: Module>(
     for (file, bytes) in extra {
         write(file, bytes)?;
     }
-    write(STATE_FILE, serde_json::to_string_pretty(state).expect("states serialise").as_bytes())?;
+    let state_bytes = serde_json::to_string_pretty(state).expect("states serialise").into_bytes();
+    let written: Vec<&str> =
+        [MODEL_FILE, OPTIMIZER_FILE].into_iter().chain(extra.iter().map(|(name, _)| *name)).collect();
+    checksums::write_manifest(&dir, &written, &[(STATE_FILE, &state_bytes)])?;
+    write(STATE_FILE, &state_bytes)?;
     write_atomically(&root.join(LATEST), name.as_bytes()).map_err(|e| checkpoint_error(&root.join(LATEST), e))?;
     prune(root, keep.max(1))?;
     Ok(dir)

@@ -9,6 +9,7 @@ use dggt_objective::LossTerm;
 pub use dggt_objective::LossWeights;
 use serde::{Deserialize, Serialize};
 
+use crate::divergence::{self, DEFAULT_MAX_FAILED_STEPS_IN_A_ROW};
 use crate::error::TrainError;
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
@@ -119,6 +120,9 @@ pub struct OptimSection {
     /// from scratch, where the camera head otherwise learns per-frame positions last. Counted in `run.steps`
     /// and the schedule.
     pub pose_warmup_steps: u64,
+    /// Steps in a row that may fail (skipped for a non-finite loss or gradient, or rolled back for an update
+    /// that made a weight non-finite) before the run stops as diverged ([`crate::divergence`]).
+    pub max_failed_steps_in_a_row: u64,
 }
 
 impl Default for OptimSection {
@@ -136,6 +140,7 @@ impl Default for OptimSection {
             clip_grad_norm: Some(1.0),
             accumulation: 1,
             pose_warmup_steps: 0,
+            max_failed_steps_in_a_row: DEFAULT_MAX_FAILED_STEPS_IN_A_ROW,
         }
     }
 }
@@ -257,6 +262,7 @@ impl TrainConfig {
         if let Some(clip) = o.clip_grad_norm {
             number("optim.clip_grad_norm", clip, "(0, inf)", |v| v > 0.0)?;
         }
+        divergence::validate_limit("optim.max_failed_steps_in_a_row", o.max_failed_steps_in_a_row)?;
         if o.pose_warmup_steps > 0 && !(self.loss.camera > 0.0) {
             return Err(setting("optim.pose_warmup_steps", "trains the camera loss alone: it needs loss.camera > 0"));
         }

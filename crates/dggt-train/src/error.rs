@@ -40,4 +40,23 @@ pub enum TrainError {
         changes.iter().map(ToString::to_string).collect::<Vec<_>>().join("; ")
     )]
     ArchitectureChanged { checkpoint: PathBuf, changes: Vec<crate::resume::Change> },
+    /// Too many steps in a row made no update ([`crate::divergence`]).
+    #[error(
+        "training diverged: the {} steps {first_step}..={last_step} in a row made no update (the last: \
+         {last_failure}); the weights are those from before step {first_step}. Lower the learning rate (optim.lr \
+         is {lr}, and any optim.groups rate), set or lower optim.clip_grad_norm, or lengthen optim.warmup_steps, \
+         then continue from the last checkpoint with --resume (optim.max_failed_steps_in_a_row = {limit} failed \
+         steps in a row stop a run)",
+        last_step + 1 - first_step
+    )]
+    Diverged { first_step: u64, last_step: u64, last_failure: String, lr: f64, limit: u64 },
+    /// A checkpoint that would hold non-finite values is not written.
+    #[error(
+        "checkpoint {}: not written, the {non_finite} holds non-finite values (the earlier checkpoints are kept)",
+        dir.display()
+    )]
+    NonFiniteCheckpoint { dir: PathBuf, non_finite: crate::finite::NonFinite },
+    /// An error of a validation pass, with the step it validated.
+    #[error("validation at step {step}: {source}")]
+    Validation { step: u64, source: Box<TrainError> },
 }

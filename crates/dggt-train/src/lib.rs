@@ -4,14 +4,16 @@
 //! reached through `dggt-infer`.
 //!
 //! The loop is this crate's own rather than burn-train's learner: a step renders views assembled from a
-//! forward pass with a host-side culling stage, skips non-finite steps without touching the weights, and
-//! resumes bit-for-bit from `(weights, AdamW state, step)` because sampling and the schedule are pure functions
+//! forward pass with a host-side culling stage, skips or rolls back non-finite steps (stopping a diverged run),
+//! and resumes bit-for-bit from `(weights, AdamW state, step)` because sampling and the schedule are pure functions
 //! of the seed and the step. Those needs do not fit burn-train's supervised learner.
 
 pub mod checkpoint;
 pub mod config;
+pub mod divergence;
 mod error;
 pub mod failpoint;
+pub mod finite;
 pub mod optimizer;
 pub mod replicas;
 pub mod resume;

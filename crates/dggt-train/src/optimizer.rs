@@ -5,6 +5,11 @@
 //! map (keyed by parameter id, so it survives checkpoints) and is stepped with its own rate; clipping scales all
 //! gradients together so that their joint L2 norm is at most the limit. The state is saved and loaded tensor by
 //! tensor, so a checkpoint of a 1.3B-parameter run never holds a second copy of its 10 GB of moments.
+//!
+//! A step never leaves a non-finite value behind: one whose gradient norm is not finite is not applied, and
+//! one whose update makes a weight or moment non-finite is rolled back ([`StepOutcome`]). The rollback keeps
+//! the previous weights and moments alive until the updated ones are checked, so the update's peak memory holds
+//! both (burn's tensors are shared, not copied, so nothing else is spent on it).
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -16,6 +21,7 @@ use dggt_model::Dggt;
 
 use crate::config::OptimSection;
 use crate::error::TrainError;
+use crate::finite::{NonFinite, first_non_finite};
 
 /// Freezes the named top-level modules: their parameters get no gradient and are never updated.
 pub fn freeze(mut model: Dggt, names: &[String]) -> Result<Dggt, TrainError> {
@@ -84,13 +90,35 @@ pub struct Optimizer {
     clip_norm: Option<f64>,
 }
 
-/// What one optimiser step did.
+/// What an applied optimiser step measured.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StepReport {
     /// Global gradient norm before clipping.
     pub grad_norm: f64,
     /// Whether the gradients were scaled down.
     pub clipped: bool,
+}
+
+/// What one optimiser step did.
+#[derive(Debug, Clone, PartialEq)]
+pub enum StepOutcome {
+    /// The update was applied.
+    Applied(StepReport),
+    /// The gradient norm was not finite: nothing was updated.
+    NonFiniteGradient,
+    /// The update made a weight or moment non-finite (the first one found is named): the weights and moments
+    /// are those from before the step.
+    RolledBack { report: StepReport, non_finite: NonFinite },
+}
+
+impl StepOutcome {
+    /// The report of a step that computed an update (applied or rolled back).
+    pub fn report(&self) -> Option<StepReport> {
+        match self {
+            Self::Applied(report) | Self::RolledBack { report, .. } => Some(*report),
+            Self::NonFiniteGradient => None,
+        }
+    }
 }
 
 impl Optimizer {
@@ -128,13 +156,14 @@ impl Optimizer {
         norm.sum.sqrt()
     }
 
-    /// Applies one step at schedule factor `factor` (the fraction of each peak rate). Returns `None` and leaves
-    /// the model untouched when the gradient norm is not finite. Parameters of a group whose rate is zero are
-    /// not stepped.
-    pub fn step<M: Module>(&mut self, model: M, mut grads: GradientsParams, factor: f64) -> (M, Option<StepReport>) {
+    /// Applies one step at schedule factor `factor` (the fraction of each peak rate) and returns the model
+    /// after it: the updated one, or `model` itself when the gradient norm is not finite or the update made a
+    /// weight or moment non-finite (then the moments are restored too). Parameters of a group whose rate is
+    /// zero are not stepped.
+    pub fn step<M: Module>(&mut self, model: M, mut grads: GradientsParams, factor: f64) -> (M, StepOutcome) {
         let grad_norm = Self::grad_norm(&model, &grads);
         if !grad_norm.is_finite() {
-            return (model, None);
+            return (model, StepOutcome::NonFiniteGradient);
         }
         let mut clipped = false;
         if let Some(limit) = self.clip_norm
@@ -144,8 +173,21 @@ impl Optimizer {
             model.visit(&mut scale);
             clipped = true;
         }
-        let model = model.map(&mut Update { optimizer: self, grads: &mut grads, factor });
-        (model, Some(StepReport { grad_norm, clipped }))
+        let report = StepReport { grad_norm, clipped };
+        let (model_before, states_before) = (model.clone(), self.states.clone());
+        let updated = model.map(&mut Update { optimizer: self, grads: &mut grads, factor });
+        match first_non_finite(&updated, Some(&*self)) {
+            None => (updated, StepOutcome::Applied(report)),
+            Some(non_finite) => {
+                self.states = states_before;
+                (model_before, StepOutcome::RolledBack { report, non_finite })
+            }
+        }
+    }
+
+    /// The two moments kept for parameter `id`, once it has been stepped.
+    pub(crate) fn moments(&self, id: &ParamId) -> Option<[&Tensor<1>; 2]> {
+        self.states.get(id).map(|state| [&state.momentum.moment_1, &state.momentum.moment_2])
     }
 
     /// A copy of this optimiser, its state moved to `device` (for the replica there).

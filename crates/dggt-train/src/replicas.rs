@@ -12,7 +12,7 @@ use burn::optim::{GradientsAccumulator, GradientsParams};
 use burn::tensor::{Device, Tensor};
 use dggt_model::Dggt;
 
-use crate::optimizer::{Optimizer, StepReport};
+use crate::optimizer::{Optimizer, StepOutcome};
 
 /// The network and its optimiser on one device.
 pub struct Replica {
@@ -76,18 +76,19 @@ impl Replicas {
         copies
     }
 
-    /// Steps every replica with its copy of the all-reduced gradients at schedule factor `factor`. The report
-    /// is the master's; every replica takes the same decision (all see the same gradients).
-    pub fn step(&mut self, grads: Vec<GradientsParams>, factor: f64) -> Option<StepReport> {
-        let mut master_report = None;
+    /// Steps every replica with its copy of the all-reduced gradients at schedule factor `factor`. The outcome
+    /// is the master's; every replica takes the same decision (all hold the same weights and moments and see
+    /// the same gradients), a rollback included.
+    pub fn step(&mut self, grads: Vec<GradientsParams>, factor: f64) -> StepOutcome {
+        let mut master_outcome = StepOutcome::NonFiniteGradient;
         for (position, (replica, grads)) in self.0.iter_mut().zip(grads).enumerate() {
-            let (model, report) = replica.optimizer.step(replica.model.clone(), grads, factor);
+            let (model, outcome) = replica.optimizer.step(replica.model.clone(), grads, factor);
             replica.model = model;
             if position == 0 {
-                master_report = report;
+                master_outcome = outcome;
             }
         }
-        master_report
+        master_outcome
     }
 }
 

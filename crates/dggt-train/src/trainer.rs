@@ -5,7 +5,11 @@
 //! the network (one thread each), the gradients are all-reduced ([`replicas`](crate::replicas)), and every
 //! replica clips the global norm and steps AdamW per parameter group at the scheduled rate. A sample with
 //! a non-finite loss or network output (a depth that overflowed, say), or a step with a non-finite gradient
-//! norm, is skipped with a warning and leaves the weights untouched. Metrics go to `metrics.jsonl`, checkpoints to `checkpoints/` (see [`checkpoint`]).
+//! norm, is skipped with a warning and leaves the weights untouched; an update that makes a weight or moment
+//! non-finite is rolled back; a checkpoint falling due meanwhile waits for a step that trains, and too many
+//! such steps in a row stop the run ([`divergence`]). Metrics go to
+//! `metrics.jsonl`, checkpoints to `checkpoints/` (see [`checkpoint`]); an error of a validation pass names
+//! the step it validated.
 //!
 //! [`checkpoint`]: crate::checkpoint
 
@@ -30,8 +34,9 @@ use serde_json::json;
 
 use dggt_objective::{LossTerm, Objective, StepBatch};
 
-use crate::checkpoint::{self, RunState};
+use crate::checkpoint::{self, Purpose, RunState};
 use crate::config::TrainConfig;
+use crate::divergence::{self, CheckpointDue, CheckpointGate, DivergenceLimit, StepFailure};
 use crate::error::TrainError;
 use crate::optimizer::{Optimizer, freeze};
 use crate::replicas::{Replica, Replicas};
@@ -46,6 +51,8 @@ pub struct RunSummary {
     pub steps_run: u64,
     pub final_step: u64,
     pub skipped_steps: u64,
+    /// Steps whose update was undone for making a weight non-finite.
+    pub rolled_back_steps: u64,
     pub first_loss: Option<f64>,
     pub last_loss: Option<f64>,
     pub first_target_psnr: Option<f64>,
@@ -90,6 +97,10 @@ pub struct Trainer {
     /// LPIPS-Alex for validation, when configured.
     validation_lpips: Option<Lpips>,
     state: RunState,
+    /// Why the last step failed, when it did.
+    last_failure: Option<StepFailure>,
+    /// Holds back checkpoints while steps fail.
+    checkpoint_gate: CheckpointGate,
 }
 
 impl Trainer {
@@ -160,6 +171,8 @@ impl Trainer {
             validation_lpips,
             plain_device,
             state,
+            last_failure: None,
+            checkpoint_gate: CheckpointGate::default(),
         })
     }
 
@@ -264,6 +277,7 @@ impl Trainer {
             steps_run: 0,
             final_step: self.state.step,
             skipped_steps: self.state.skipped_steps,
+            rolled_back_steps: self.state.rolled_back_steps,
             first_loss: None,
             last_loss: None,
             first_target_psnr: None,
@@ -301,16 +315,26 @@ impl Trainer {
             record["time_s"] = json!(elapsed);
             log(record)?;
             bar.inc(1);
+            // No checkpoint then: the weights are those the last one holds, and a new one could prune it.
+            self.check_divergence()?;
 
             let done = self.state.step >= last_step
                 || run.time_limit_s.is_some_and(|limit| started.elapsed().as_secs_f64() >= limit);
+            let due = match (done, self.state.step.is_multiple_of(run.checkpoint_every)) {
+                (true, _) => CheckpointDue::EndOfRun,
+                (false, true) => CheckpointDue::Periodic,
+                (false, false) => CheckpointDue::No,
+            };
             // Saved before validating, so that a failing validation never loses the step's weights.
-            if self.state.step.is_multiple_of(run.checkpoint_every) || done {
+            if self.checkpoint_gate.write_now(&self.state, due) {
                 summary.checkpoint = Some(self.save_checkpoint()?);
             }
             if (run.validate_every > 0 && self.state.step.is_multiple_of(run.validate_every)) || done {
                 let renders = run.out_dir.join(run_folder::VALIDATION).join(format!("step-{:08}", self.state.step));
-                if let Some(validation) = self.validate_into(Some(&renders))? {
+                let validated = self
+                    .validate_into(Some(&renders))
+                    .map_err(|source| TrainError::Validation { step: self.state.step, source: Box::new(source) })?;
+                if let Some(validation) = validated {
                     tracing::info!(
                         step = self.state.step,
                         psnr = validation.psnr,
@@ -336,12 +360,14 @@ impl Trainer {
         bar.finish_and_clear();
         summary.final_step = self.state.step;
         summary.skipped_steps = self.state.skipped_steps;
+        summary.rolled_back_steps = self.state.rolled_back_steps;
         summary.elapsed_s = self.state.elapsed_s;
         Ok(summary)
     }
 
     /// One optimiser step on `samples` at schedule factor `factor`: returns the step's metrics record. A
-    /// non-finite loss or gradient norm skips the step (counted, logged) and leaves the weights untouched.
+    /// non-finite loss or gradient norm skips the step, an update that makes a weight non-finite is rolled
+    /// back; either leaves the weights as they were and is counted ([`divergence`]).
     pub fn train_step(
         &mut self,
         samples: &[LoadedSample],
@@ -352,20 +378,14 @@ impl Trainer {
         let started = Instant::now();
         let outcome = self.accumulate(samples, with_depth_flow)?;
         let mut record = json!({ "kind": "train", "step": step, "lr_factor": factor });
-        match outcome {
+        let failure = match outcome {
             Some(outcome) => {
                 let update = Instant::now();
                 let grads = self.replicas.all_reduce(outcome.grads);
-                match self.replicas.step(grads, factor) {
-                    Some(report) => {
-                        record["grad_norm"] = json!(report.grad_norm);
-                        record["clipped"] = json!(report.clipped);
-                    }
-                    None => {
-                        self.state.skipped_steps += 1;
-                        tracing::warn!(step, "non-finite gradient norm: step skipped, weights untouched");
-                        record["skipped"] = json!("non-finite gradient");
-                    }
+                let stepped = self.replicas.step(grads, factor);
+                if let Some(report) = stepped.report() {
+                    record["grad_norm"] = json!(report.grad_norm);
+                    record["clipped"] = json!(report.clipped);
                 }
                 record["loss"] = json!(outcome.loss);
                 record["terms"] = json!(outcome.terms);
@@ -374,16 +394,30 @@ impl Trainer {
                 let mut stages = outcome.stages;
                 stages.insert("update".into(), update.elapsed().as_secs_f64());
                 record["stage_s"] = json!(stages);
+                StepFailure::of(&stepped)
             }
-            None => {
-                self.state.skipped_steps += 1;
-                tracing::warn!(step, "non-finite loss: step skipped, weights untouched");
-                record["skipped"] = json!("non-finite loss");
-            }
+            None => Some(StepFailure::NonFiniteLoss),
+        };
+        match &failure {
+            Some(StepFailure::RolledBack(tensor)) => record["rolled_back"] = json!(tensor.to_string()),
+            Some(StepFailure::NonFiniteGradient) => record["skipped"] = json!("non-finite gradient"),
+            Some(StepFailure::NonFiniteLoss) => record["skipped"] = json!("non-finite loss"),
+            None => {}
         }
         record["step_s"] = json!(started.elapsed().as_secs_f64());
+        divergence::count_step(&mut self.state, step, failure.as_ref());
+        self.last_failure = failure;
         self.state.step += 1;
         Ok(record)
+    }
+
+    /// [`TrainError::Diverged`] once `optim.max_failed_steps_in_a_row` steps in a row have failed.
+    fn check_divergence(&self) -> Result<(), TrainError> {
+        let limit = DivergenceLimit {
+            max_failed_in_a_row: self.config.optim.max_failed_steps_in_a_row,
+            lr: self.config.optim.lr,
+        };
+        divergence::check(&self.state, self.last_failure.as_ref(), limit)
     }
 
     /// Loss and gradients of the samples of one step: every device takes its own consecutive
@@ -536,7 +570,7 @@ fn resume_point(config: &TrainConfig, start: Start) -> Result<Option<PathBuf>, T
             run_folder::ensure_no_run(&config.run.out_dir)?;
             return Ok(None);
         }
-        Start::Resume => checkpoint::latest(&config.run.out_dir.join(run_folder::CHECKPOINTS))?,
+        Start::Resume => checkpoint::latest(&config.run.out_dir.join(run_folder::CHECKPOINTS), Purpose::Resume)?,
     };
     if let Some(dir) = &dir {
         for change in resume::compare(dir, &checkpoint::read_model_config(dir)?, config)? {

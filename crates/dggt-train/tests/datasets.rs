@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::weights;
+use common::{repo, weights};
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
@@ -13,10 +13,6 @@ use burn::tensor::Device;
 use dggt_data::{DatasetSpec, ExportVariant, HeldOut};
 use dggt_objective::StepBatch;
 use dggt_train::{RunOptions, Start, TrainConfig, Trainer};
-
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
 
 /// `count` synthetic scenes `root/000, 001, ...` in `variant`, 10 frames of one camera.
 fn scenes(root: &Path, variant: ExportVariant, seeds: std::ops::Range<u64>) {

@@ -6,29 +6,11 @@
 
 mod common;
 
-use common::{parameters, weights};
-use std::path::{Path, PathBuf};
+use common::{parameters, repo, small_config, weights};
 
 use burn::tensor::Device;
 use dggt_train::{RunOptions, Start, TrainConfig, Trainer};
 
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-/// The overfit configuration made small: 56-pixel-wide images, four inputs, no input re-renders.
-fn small_config(out: &Path, steps: u64) -> TrainConfig {
-    let mut config = TrainConfig::load(&repo().join("configs/tiny-overfit.toml")).expect("tiny-overfit.toml loads");
-    config.data.preprocess.target_width = 56;
-    config.sampler.min_inputs = 4;
-    config.sampler.max_inputs = 4;
-    config.render.render_inputs = false;
-    config.optim.warmup_steps = 2;
-    config.run.steps = steps;
-    config.unattended(out)
-}
-
-/// Every parameter value, in visiting order.
 #[test]
 fn a_few_dozen_steps_reduce_the_loss_and_raise_target_psnr() {
     let out = tempfile::tempdir().unwrap();
@@ -263,13 +245,14 @@ fn the_model_section_describes_the_network_the_trainer_builds() {
 fn settings_out_of_their_range_are_refused_naming_the_key_and_the_range() {
     let out = tempfile::tempdir().unwrap();
     type Edit = fn(&mut TrainConfig);
-    let cases: [(Edit, &str); 11] = [
+    let cases: [(Edit, &str); 12] = [
         (|c| c.optim.weight_decay = -1.0, "optim.weight_decay: must lie in [0, inf), got -1"),
         (|c| c.optim.beta1 = 1.0, "optim.beta1: must lie in [0, 1), got 1"),
         (|c| c.optim.beta2 = -0.1, "optim.beta2: must lie in [0, 1), got -0.1"),
         (|c| c.optim.epsilon = 0.0, "optim.epsilon: must lie in (0, inf), got 0"),
         (|c| c.optim.min_lr_ratio = 2.0, "optim.min_lr_ratio: must lie in [0, 1], got 2"),
         (|c| c.optim.clip_grad_norm = Some(f64::INFINITY), "optim.clip_grad_norm: must lie in (0, inf), got inf"),
+        (|c| c.optim.max_failed_steps_in_a_row = 0, "optim.max_failed_steps_in_a_row: must lie in [1, 10000], got 0"),
         (|c| c.run.steps = 0, "run.steps: must be at least 1, got 0"),
         (|c| c.run.keep_checkpoints = 0, "run.keep_checkpoints: must be at least 1, got 0"),
         (|c| c.run.time_limit_s = Some(-5.0), "run.time_limit_s: must lie in (0, inf), got -5"),

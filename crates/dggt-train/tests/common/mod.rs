@@ -1,10 +1,28 @@
 //! Helpers shared by the trainer's integration tests.
 #![allow(dead_code)]
 
+use std::path::{Path, PathBuf};
+
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::tensor::Tensor;
 use dggt_model::Dggt;
-use dggt_train::Trainer;
+use dggt_train::{TrainConfig, Trainer};
+
+pub fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// The overfit configuration made small: 56-pixel-wide images, four inputs, no input re-renders.
+pub fn small_config(out: &Path, steps: u64) -> TrainConfig {
+    let mut config = TrainConfig::load(&repo().join("configs/tiny-overfit.toml")).expect("tiny-overfit.toml loads");
+    config.data.preprocess.target_width = 56;
+    config.sampler.min_inputs = 4;
+    config.sampler.max_inputs = 4;
+    config.render.render_inputs = false;
+    config.optim.warmup_steps = 2;
+    config.run.steps = steps;
+    config.unattended(out)
+}
 
 /// Every float parameter of `model`, flattened in visiting order.
 pub fn parameters(model: &Dggt) -> Vec<f32> {
