@@ -96,7 +96,7 @@ if [[ $scale == full ]]; then
 else
     longest=(--longest-frames 2..4 --longest-precisions f32)
 fi
-common=(bench compute --device "$device" --scale "$scale" --repeat 3 --warmup 1)
+common=(bench compute --device "$device" --scale "$scale" --repeat 3 --warmup 1 --overwrite)
 
 part ours-raster 6 "$dggt" "${common[@]}" --out "$out/ours-raster" --workloads raster
 part ours-forward 22 "$dggt" "${common[@]}" --out "$out/ours-forward" --workloads forward --precisions f32,f16,bf16
@@ -121,4 +121,4 @@ for file in "$out"/ours-*/compute.json; do [[ -f $file ]] && table_args+=(--ours
 [[ -f $out/baseline/compute.json ]] && table_args+=(--baseline "$out/baseline/compute.json")
 [[ -f $out/reference.json ]] && table_args+=(--reference "$out/reference.json")
 ((${#table_args[@]})) || { echo "no part wrote records (see $out/*.log)" >&2; exit 1; }
-"$dggt" bench table "${table_args[@]}" --out "$out/compute.md"
+"$dggt" bench table "${table_args[@]}" --out "$out/compute.md" --overwrite
