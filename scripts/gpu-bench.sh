@@ -114,7 +114,7 @@ if [[ $scale == full ]]; then
 else
     longest=(--longest-frames 2..4 --longest-precisions f32)
 fi
-common=(bench compute --device "$device" --scale "$scale" --repeat 3 --warmup 1)
+common=(bench compute --device "$device" --scale "$scale" --repeat 3 --warmup 1 --overwrite)
 
 if [[ -n $raster_tests ]]; then
     # Without the cases that read the shared parity vectors (the device machine may not have them).
@@ -148,4 +148,4 @@ for file in "$out"/ours-*/compute.json; do [[ -f $file ]] && table_args+=(--ours
 [[ -f $out/reference.json ]] && table_args+=(--reference "$out/reference.json")
 for file in "${reference_records[@]}"; do table_args+=(--reference "$file"); done
 ((${#table_args[@]})) || { echo "no part wrote records (see $out/*.log)" >&2; exit 1; }
-"$dggt" bench table "${table_args[@]}" --out "$out/compute.md"
+"$dggt" bench table "${table_args[@]}" --out "$out/compute.md" --overwrite

@@ -1,8 +1,13 @@
 //! `dggt`: feedforward 4D reconstruction of dynamic driving scenes — the command-line entry point. Each
-//! subcommand lives in [`commands`]; [`backend`] turns `--device` into burn devices.
+//! subcommand lives in [`commands`]; [`backend`] turns `--device` into burn devices; [`failure`] says what went
+//! wrong when a command fails.
 
 mod backend;
 mod commands;
+mod failure;
+
+use std::io::IsTerminal;
+use std::process::ExitCode;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -37,12 +42,30 @@ enum Command {
     Refine(refine::Args),
 }
 
-fn main() -> Result<()> {
+fn main() -> ExitCode {
+    init_logging();
+    match run(Cli::parse().command) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("{}", failure::describe(&error, failure::Backtraces::from_env()));
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Log lines on stderr, at the level `RUST_LOG` names (info by default), coloured only on a terminal and
+/// without `NO_COLOR`, so that a log written to a file or a pipe holds no colour codes.
+fn init_logging() {
+    let no_color = std::env::var_os("NO_COLOR").is_some_and(|value| !value.is_empty());
     tracing_subscriber::fmt()
         .with_env_filter(EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info")))
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal() && !no_color)
         .init();
-    match Cli::parse().command {
+}
+
+fn run(command: Command) -> Result<()> {
+    match command {
         Command::Synth(args) => synth::run(args),
         Command::Convert(args) => convert::run(args),
         Command::Inspect(args) => inspect::run(args),

@@ -83,6 +83,121 @@ fn train_refuses_zero_steps_naming_where_the_zero_comes_from() {
     assert!(stderr.contains("zero.toml") && stderr.contains("run.steps: must be at least 1"), "{stderr}");
 }
 
+/// The stderr of a run of `dggt args` that must fail.
+fn refused(args: &[&str]) -> String {
+    let out = dggt(args);
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!out.status.success(), "dggt {args:?} succeeded:\n{stderr}");
+    stderr
+}
+
+/// A failed command says what went wrong in words: no backtrace, even with `RUST_BACKTRACE=1` in the
+/// environment (as it often is, for panics), and no colour codes in a log that is not written to a terminal;
+/// `RUST_LIB_BACKTRACE=1` asks for the backtrace.
+#[test]
+fn errors_are_words_without_backtraces_or_colour_codes() {
+    let dir = tempfile::tempdir().unwrap();
+    let (scene, out) = (fixture(), dir.path().join("out"));
+    let args =
+        ["reconstruct", "--images", scene.as_str(), "--checkpoint", "/no/such/run", "--out", out.to_str().unwrap()];
+    let run = |variable: &str| {
+        let mut command = Command::new(env!("CARGO_BIN_EXE_dggt"));
+        command.args(args).env_remove("NO_COLOR").env_remove("RUST_LIB_BACKTRACE").env("RUST_BACKTRACE", "1");
+        let output = command.env(variable, "1").output().expect("the dggt binary runs");
+        assert!(!output.status.success());
+        String::from_utf8_lossy(&output.stderr).into_owned()
+    };
+    let stderr = run("RUST_BACKTRACE");
+    assert!(stderr.contains("reconstructing") && stderr.contains("/no/such/run"), "{stderr}");
+    assert!(!stderr.contains('\x1b'), "colour codes in a log written to a pipe:\n{stderr:?}");
+    assert!(!stderr.to_lowercase().contains("backtrace") && stderr.lines().count() < 10, "{stderr}");
+    assert!(run("RUST_LIB_BACKTRACE").contains("Stack backtrace:"));
+}
+
+/// `--every` and `--times` past the input frames' time window, and `--frames` past the scene's frames, are
+/// refused before any work (here before the checkpoint is even opened), naming the flag, the value and the
+/// valid range; an evaluation's stride that leaves one input, and a scene given twice, likewise.
+#[test]
+fn time_and_frame_arguments_past_the_scene_are_refused_naming_the_valid_range() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let (scene, out) = (fixture(), out.to_str().unwrap().to_string());
+    let reconstruct = |extra: &[&str]| {
+        let args = ["reconstruct", "--images", scene.as_str(), "--checkpoint", "/no/such/run", "--out", out.as_str()];
+        refused(&[&args[..], extra].concat())
+    };
+    let past = reconstruct(&["--frames", "0..1000"]);
+    assert!(past.contains("window 0..1000") && past.contains("the scene's 20 frames (0..=19)"), "{past}");
+    assert!(!past.contains("ego_pose"), "{past}");
+    let every = reconstruct(&["--frames", "0..2", "--every", "100000"]);
+    assert!(every.contains("--every: 100000 is outside 1..=100"), "{every}");
+    let times = reconstruct(&["--frames", "0..2", "--times", "1e9"]);
+    assert!(times.contains("--times: 1000000000 s lies outside") && times.contains("0.000..=0.100"), "{times}");
+
+    let eval = |extra: &[&str]| {
+        let args = ["eval", "--scene", scene.as_str(), "--checkpoint", "/no/such/run", "--out", out.as_str()];
+        refused(&[&args[..], extra].concat())
+    };
+    let stride = eval(&["--protocol", "interpolation", "--every", "30"]);
+    assert!(
+        stride.contains("--every: 30 leaves one input in the window 0..20") && stride.contains("1..=19"),
+        "{stride}"
+    );
+    let twice = eval(&["--scene", format!("{scene}/.").as_str()]);
+    assert!(twice.contains("--scene") && twice.contains("is given twice"), "{twice}");
+    assert!(!std::path::Path::new(&out).exists(), "a refused command wrote {out}");
+}
+
+/// An output that could outgrow `--max-output-gb` is refused before anything is written, with the estimate
+/// and the flag that raises the bound.
+#[test]
+fn synth_refuses_an_output_over_the_bound() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("big");
+    let args = ["synth", "--out", out.to_str().unwrap(), "--frames", "1000", "--width", "8192", "--height", "8192"];
+    let stderr = refused(&args);
+    assert!(stderr.contains("1000 frames x 3 cameras at 8192x8192") && stderr.contains("over the bound of 10.00 GB"));
+    assert!(stderr.contains("--max-output-gb") && !out.exists(), "{stderr}");
+    let small = refused(&["synth", "--out", out.to_str().unwrap(), "--max-output-gb", "0.0001"]);
+    assert!(small.contains("over the bound of 0.00 GB"), "{small}");
+}
+
+/// A command writing one file the user names never replaces an existing one without `--overwrite`.
+#[test]
+fn single_file_outputs_are_not_replaced_without_overwrite() {
+    let dir = tempfile::tempdir().unwrap();
+    let existing = dir.path().join("kept.txt");
+    std::fs::write(&existing, "the user's").unwrap();
+    let file = existing.to_str().unwrap();
+    let commands: [&[&str]; 3] = [
+        &["refine", "convert", "--checkpoint", "/no/such/model_difix.pkl", "--out", file],
+        &["stress", "--json", file],
+        &["bench", "table", "--ours", "/no/such/compute.json", "--out", file],
+    ];
+    for args in commands {
+        let stderr = refused(args);
+        assert!(stderr.contains(&format!("{file} exists")) && stderr.contains("--overwrite"), "{args:?}: {stderr}");
+        assert_eq!(std::fs::read_to_string(&existing).unwrap(), "the user's");
+    }
+    let replaced =
+        refused(&["refine", "convert", "--checkpoint", "/no/such/model_difix.pkl", "--out", file, "--overwrite"]);
+    assert!(replaced.contains("/no/such/model_difix.pkl"), "{replaced}");
+}
+
+/// A sampler window too short for its inputs is a configuration error at `--dry-run`, not a run whose every
+/// sample fails to load.
+#[test]
+fn train_dry_run_refuses_a_window_shorter_than_its_inputs() {
+    let config = format!("{}/configs/tiny-overfit.toml", env!("CARGO_MANIFEST_DIR"));
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(&config).unwrap().replace("window = 13", "window = 3");
+    let file = dir.path().join("short-window.toml");
+    std::fs::write(&file, text).unwrap();
+    let out = dir.path().join("run");
+    let stderr = refused(&["train", "--config", file.to_str().unwrap(), "--dry-run", "--out", out.to_str().unwrap()]);
+    assert!(stderr.contains("short-window.toml") && stderr.contains("a window of 3 frames cannot hold max_inputs = 6"));
+}
+
 #[test]
 fn devices_checks_the_default_cpu_backend() {
     let out = dggt(&["devices", "--device", "cpu"]);

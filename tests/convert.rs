@@ -193,7 +193,31 @@ fn convert_nuscenes_numbers_the_scene_table_and_names_a_failed_scene() {
         "--version",
         "v1.0-trainval",
     ]);
-    assert!(!missing.status.success() && text(&missing).contains("v1.0-trainval/scene.json"), "{}", text(&missing));
+    let report = text(&missing);
+    assert!(!missing.status.success() && report.contains("v1.0-trainval: no such nuScenes version folder"), "{report}");
+    assert!(report.contains("holds v1.0-mini"), "{report}");
+}
+
+/// Any version folder holding the devkit tables converts (the official test split's `v1.0-test` among them);
+/// a version folder lacking a table is refused naming the table's file.
+#[test]
+fn convert_nuscenes_reads_any_version_folder_that_holds_the_tables() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = nuscenes_scene::write_root(dir.path(), |_| {});
+    std::fs::rename(root.join("v1.0-mini"), root.join("v1.0-test")).unwrap();
+    let out = dir.path().join("scenes");
+    let args = ["convert", "nuscenes", "--input", root.to_str().unwrap(), "--out", out.to_str().unwrap()];
+    let converted = dggt(&[&args[..], &["--version", "v1.0-test"]].concat());
+    assert!(converted.status.success(), "{}", text(&converted));
+    assert!(out.join("000").join(dggt_convert::DONE_MARKER).is_file(), "{}", text(&converted));
+
+    std::fs::create_dir(root.join("v1.0-custom")).unwrap();
+    std::fs::copy(root.join("v1.0-test/scene.json"), root.join("v1.0-custom/scene.json")).unwrap();
+    let lacking = dggt(&[&args[..], &["--version", "v1.0-custom"]].concat());
+    assert!(!lacking.status.success(), "{}", text(&lacking));
+    assert!(text(&lacking).contains("v1.0-custom/sample.json"), "{}", text(&lacking));
+    let path = dggt(&[&args[..], &["--version", "../elsewhere"]].concat());
+    assert!(!path.status.success() && text(&path).contains("is not a folder name"), "{}", text(&path));
 }
 
 /// A scene is skipped only when its done marker records this run's source and options. Any other conversion

@@ -6,19 +6,16 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use dggt_train::TrainConfig;
+mod common;
 
 #[allow(dead_code)]
 #[path = "../crates/dggt-convert/tests/nuscenes_scene/mod.rs"]
 mod nuscenes_scene;
 
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
 fn real_data() -> PathBuf {
-    let dir =
-        std::env::var_os("DGGT_REAL_DATA").map(PathBuf::from).unwrap_or_else(|| repo().join("../shared/real-data"));
+    let dir = std::env::var_os("DGGT_REAL_DATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| common::repo().join("../shared/real-data"));
     assert!(dir.is_dir(), "real driving data not found at {} (set DGGT_REAL_DATA)", dir.display());
     dir
 }
@@ -45,18 +42,15 @@ fn inspect(scene: &Path) -> serde_json::Value {
 
 /// One step of the tiny model on one frame of camera 0; returns the step's record.
 fn train_one_step(scene: &Path, dir: &Path) -> serde_json::Value {
-    let mut config = TrainConfig::load(&repo().join("configs/tiny-overfit.toml")).unwrap();
+    let mut config = common::small_config(&dir.join("run"));
     config.data.scene = scene.to_owned();
     config.data.frames = None;
-    config.data.preprocess.target_width = 56;
     config.sampler.min_inputs = 1;
     config.sampler.max_inputs = 1;
     config.sampler.window = 1;
     config.optim.warmup_steps = 1;
-    let mut config = config.unattended(&dir.join("run"));
     config.run.steps = 1;
-    let path = dir.join("train.toml");
-    std::fs::write(&path, toml::to_string(&config).unwrap()).unwrap();
+    let path = common::write_config(dir.join("train.toml"), &config);
     dggt(&["train", "--config", path.to_str().unwrap(), "--out", dir.join("run").to_str().unwrap()]);
     let text = std::fs::read_to_string(dir.join("run/metrics.jsonl")).unwrap();
     let record =

@@ -7,30 +7,19 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use dggt_train::TrainConfig;
 use dggt_train::failpoint::{FAILPOINT_VARIABLE, INSIDE_CHECKPOINT};
+
+mod common;
 
 const STEPS: u64 = 6;
 
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-/// The overfit configuration made small, checkpointing every step, written to `dir/train.toml`.
+/// The small configuration, checkpointing every step, written to `dir/train.toml`.
 fn write_config(dir: &Path) -> PathBuf {
-    let mut config = TrainConfig::load(&repo().join("configs/tiny-overfit.toml")).unwrap();
-    config.data.preprocess.target_width = 56;
-    config.sampler.min_inputs = 2;
-    config.sampler.max_inputs = 2;
-    config.sampler.window = 8;
-    config.optim.warmup_steps = 2;
-    let mut config = config.unattended(&dir.join("unused"));
+    let mut config = common::small_config(&dir.join("unused"));
     config.run.steps = STEPS;
     config.run.checkpoint_every = 1;
     config.run.keep_checkpoints = 2;
-    let path = dir.join("train.toml");
-    std::fs::write(&path, toml::to_string(&config).unwrap()).unwrap();
-    path
+    common::write_config(dir.join("train.toml"), &config)
 }
 
 fn train(config: &Path, out: &Path, resume: bool, failpoint: Option<&str>) -> Child {

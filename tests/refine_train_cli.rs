@@ -74,6 +74,16 @@ fn refine_pairs_writes_shards_that_a_rerun_keeps_and_training_reads() {
     assert!(second.contains("from 2 samples rendered (1 kept"), "{second}");
     assert_eq!(std::fs::metadata(shard(0)).unwrap().modified().unwrap(), written, "sample 0 was rewritten");
 
+    // Shards of another checkpoint never join them: a folder recording another source is refused, naming it.
+    let record = shards.join("pairs-source.json");
+    let recorded = std::fs::read_to_string(&record).unwrap();
+    std::fs::write(&record, recorded.replace("\"step\": 1", "\"step\": 7")).unwrap();
+    let args = ["refine-pairs", "--config", &path(&overfit), "--run", &path(&run), "--samples", "0..3", "--shards"];
+    let other = dggt(&[&args[..], &["--out", &path(&shards)]].concat());
+    let stderr = String::from_utf8_lossy(&other.stderr);
+    assert!(!other.status.success() && stderr.contains("\"step\":7") && stderr.contains("--overwrite"), "{stderr}");
+    std::fs::write(&record, recorded).unwrap();
+
     // The refiner trains on the folder (the tiny configuration with absolute paths and rendered pairs).
     let shared = repo.join("../shared");
     let text = std::fs::read_to_string(config()).unwrap().replace("\"../../shared", &format!("\"{}", shared.display()));
@@ -111,6 +121,9 @@ fn refine_pairs_survives_a_damaged_image_and_names_it() {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(stderr.contains("sample skipped") && stderr.contains("012_0.jpg"), "{stderr}");
     assert!(text.contains("from 6 samples rendered") && out.is_file(), "{text}");
+    let again = dggt(&[&args[..], &["--out", &path(&out)]].concat());
+    let stderr = String::from_utf8_lossy(&again.stderr);
+    assert!(!again.status.success() && stderr.contains("exists") && stderr.contains("--overwrite"), "{stderr}");
 }
 
 fn copy_folder(from: &std::path::Path, to: &std::path::Path) {

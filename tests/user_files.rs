@@ -8,12 +8,10 @@ use std::process::{Command, Output};
 
 use dggt_train::TrainConfig;
 
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
+mod common;
 
 fn fixture() -> PathBuf {
-    repo().join("data-fixtures/synth-s0")
+    common::repo().join("data-fixtures/synth-s0")
 }
 
 fn dggt(args: &[&str]) -> Output {
@@ -38,22 +36,13 @@ fn path(p: &Path) -> &str {
     p.to_str().expect("a UTF-8 path")
 }
 
-/// The overfit configuration made small (two inputs at width 56, a checkpoint every step, two kept), changed
-/// by `edit`, written to `dir/name`.
+/// The small configuration (a checkpoint every step, two kept), changed by `edit`, written to `dir/name`.
 fn write_config(dir: &Path, name: &str, edit: impl FnOnce(&mut TrainConfig)) -> PathBuf {
-    let mut config = TrainConfig::load(&repo().join("configs/tiny-overfit.toml")).unwrap();
-    config.data.preprocess.target_width = 56;
-    config.sampler.min_inputs = 2;
-    config.sampler.max_inputs = 2;
-    config.sampler.window = 8;
-    config.optim.warmup_steps = 2;
-    let mut config = config.unattended(&dir.join("unused"));
+    let mut config = common::small_config(&dir.join("unused"));
     config.run.checkpoint_every = 1;
     config.run.keep_checkpoints = 2;
     edit(&mut config);
-    let file = dir.join(name);
-    std::fs::write(&file, toml::to_string(&config).unwrap()).unwrap();
-    file
+    common::write_config(dir.join(name), &config)
 }
 
 fn train(config: &Path, out: &Path, extra: &[&str]) -> Output {
@@ -167,6 +156,23 @@ fn reconstruct_and_eval_refuse_a_used_output_folder_unless_told_to_replace_it() 
     let stderr = failed(evaluate(&run, &notes, &["--width", "56", "--overwrite"]));
     assert!(stderr.contains("holds no earlier `dggt eval` output"), "{stderr}");
     assert_eq!(std::fs::read_to_string(notes.join("todo.txt")).unwrap(), "the user's");
+}
+
+/// A reconstruction whose outputs could outgrow `--max-output-gb` is refused once the network's input size
+/// is known, before the forward pass and before anything is written, with the estimate and the flag; within
+/// the bound it runs.
+#[test]
+fn reconstruct_refuses_outputs_over_the_bound_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = trained_run(dir.path(), 1);
+    let out = dir.path().join("reconstruction");
+    let stderr = failed(reconstruct(&run, &out, &["--frames", "0..2", "--every", "100", "--max-output-gb", "0.001"]));
+    for expected in ["101 render times x 1 cameras and 2 input views", "over the bound of 0.00 GB", "--max-output-gb"] {
+        assert!(stderr.contains(expected), "{expected} missing from\n{stderr}");
+    }
+    assert!(!out.exists(), "a refused reconstruction wrote {}", out.display());
+    succeeded(reconstruct(&run, &out, &["--frames", "0..2", "--every", "3"]));
+    assert_eq!(std::fs::read_dir(out.join("renders")).unwrap().count(), 4);
 }
 
 /// `--resume` with a `[model]` that describes another network is refused, naming the setting and both

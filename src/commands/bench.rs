@@ -12,6 +12,7 @@ use dggt_bench::{
 use dggt_infer::SkyChoice;
 
 use crate::backend::DeviceList;
+use crate::commands::output::{self, OutputKind, OverwriteArg};
 use crate::commands::refine::RefineArgs;
 use crate::commands::{bench_compute, bench_refiner};
 
@@ -129,9 +130,11 @@ pub struct SweepArgs {
     /// Frames per chunk of the dense heads.
     #[arg(long, default_value_t = 4)]
     pub chunk: usize,
-    /// Output folder.
+    /// Output folder; must not exist or be empty.
     #[arg(long)]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub overwrite: OverwriteArg,
     /// With `--refine MODEL_DIR`, every row's renders are also refined: its time and its error against the
     /// truth beside the unrefined one.
     #[command(flatten)]
@@ -188,10 +191,14 @@ impl SweepArgs {
     }
 }
 
+/// A sweep's folder; `bench-notes.txt` is written last.
+const SWEEP_OUTPUT: OutputKind = OutputKind { command: "bench", signature: "bench-notes.txt" };
+
 /// Runs the sweep, writes the outputs and prints the table, the notes and where the files are.
 fn run_sweep(args: SweepArgs) -> Result<()> {
     let device = args.device.single()?;
     let options = args.options()?;
+    output::prepare(&args.out, SWEEP_OUTPUT, args.overwrite.existing())?;
     let report = run_bench(&options, &device)?;
     let files = write_outputs(&report, &args.out)?;
     print!("{}", report::table_text(&report));

@@ -10,6 +10,7 @@ use dggt_bench::compute::table::{RecordFile, markdown};
 use dggt_bench::compute::{ComputeOptions, IMPLEMENTATION, Record, Scale, Workload, run_compute};
 
 use crate::backend::DeviceList;
+use crate::commands::output::{self, OutputKind, OverwriteArg, OverwriteFileArg};
 
 /// Time the network (4 and 12 frames, f32 and bf16), one training step, the rasteriser (2.2M Gaussians into 12
 /// views) and find the longest sequence the forward pass fits, at the release's scale (`--scale reduced`: the
@@ -52,10 +53,16 @@ pub struct Args {
     /// A reference's record file (`scripts/reference_bench.py --out`); repeatable.
     #[arg(long)]
     reference: Vec<PathBuf>,
-    /// Output folder: `compute.json`, `compute.md`, and the training workload's scratch files.
+    /// Output folder: `compute.json`, `compute.md`, and the training workload's scratch files; must not exist
+    /// or be empty.
     #[arg(long)]
     out: PathBuf,
+    #[command(flatten)]
+    overwrite: OverwriteArg,
 }
+
+/// A compute suite's folder; `compute.json` is written from the first record on.
+const COMPUTE_OUTPUT: OutputKind = OutputKind { command: "bench compute", signature: "compute.json" };
 
 #[derive(Debug, Clone, Copy, clap::ValueEnum)]
 enum ScaleArg {
@@ -114,6 +121,7 @@ pub fn run(args: Args) -> Result<()> {
     let device = args.device.single()?;
     let options = args.options()?;
     let references = read_all(&args.reference)?;
+    output::prepare(&args.out, COMPUTE_OUTPUT, args.overwrite.existing())?;
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let json_path = args.out.join("compute.json");
     let mut file = RecordFile {
@@ -160,9 +168,14 @@ pub struct TableArgs {
     /// Where to write the table (it is printed too).
     #[arg(long)]
     out: Option<PathBuf>,
+    #[command(flatten)]
+    overwrite: OverwriteFileArg,
 }
 
 pub fn run_table(args: TableArgs) -> Result<()> {
+    if let Some(path) = &args.out {
+        output::prepare_file(path, "--out", args.overwrite.existing())?;
+    }
     let ours = RecordFile::merge(read_all(&args.ours)?)?;
     let baseline = if args.baseline.is_empty() { None } else { Some(RecordFile::merge(read_all(&args.baseline)?)?) };
     let table = markdown(&ours, baseline.as_ref(), &read_all(&args.reference)?);

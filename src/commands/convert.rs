@@ -23,15 +23,6 @@ pub enum Dataset {
     Nuscenes,
 }
 
-/// The nuScenes releases (folders under the data root).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum Version {
-    #[value(name = "v1.0-mini")]
-    Mini,
-    #[value(name = "v1.0-trainval")]
-    Trainval,
-}
-
 /// nuScenes frames: the annotated key frames, or drivestudio's `--interpolate_N` frames between them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum NuscenesRate {
@@ -71,17 +62,11 @@ pub enum SkyMasks {
 }
 
 impl Dataset {
-    fn converter(self, version: Version, rate: NuscenesRate) -> batch::Dataset {
+    fn converter(self, version: NuScenesVersion, rate: NuscenesRate) -> batch::Dataset {
         match self {
             Self::Waymo => batch::Dataset::Waymo,
             Self::Argoverse2 => batch::Dataset::Argoverse2,
-            Self::Nuscenes => batch::Dataset::NuScenes(
-                match version {
-                    Version::Mini => NuScenesVersion::Mini,
-                    Version::Trainval => NuScenesVersion::Trainval,
-                },
-                rate.frame_rate(),
-            ),
+            Self::Nuscenes => batch::Dataset::NuScenes(version, rate.frame_rate()),
         }
     }
 }
@@ -111,9 +96,10 @@ pub struct Args {
     /// Convert every segment that can be converted and list the others, instead of stopping at the first failure.
     #[arg(long)]
     keep_going: bool,
-    /// nuScenes release under the data root.
-    #[arg(long, value_enum, default_value = "v1.0-mini")]
-    version: Version,
+    /// nuScenes release: the folder of devkit tables under the data root (v1.0-mini, v1.0-trainval, v1.0-test,
+    /// or any other folder holding the tables).
+    #[arg(long, default_value = "v1.0-mini")]
+    version: NuScenesVersion,
     /// nuScenes frame rate: the 2 Hz key frames, or frames between them (nearest camera and lidar readings,
     /// interpolated boxes).
     #[arg(long, value_enum, default_value = "2hz")]
@@ -148,7 +134,7 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(unknown) = cameras.iter().find(|&&c| c >= names.len()) {
         anyhow::bail!("unknown camera {unknown}: {} export ids are 0..={}", dataset.variant(), names.len() - 1);
     }
-    let jobs = batch::jobs(dataset, &input, &out, scenes.as_deref()).context("listing the segments")?;
+    let jobs = batch::jobs(&dataset, &input, &out, scenes.as_deref()).context("listing the segments")?;
     let workers = workers.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     let policy = if keep_going { FailurePolicy::KeepGoing } else { FailurePolicy::Stop };
     let bars = Bars::new(jobs.len());
@@ -159,7 +145,7 @@ pub fn run(args: Args) -> Result<()> {
     };
     let options = batch::ConvertOptions { cameras, sky_masks };
     let existing = if overwrite { ExistingScenes::Replace } else { ExistingScenes::Keep };
-    let outcomes = batch::convert_segments(dataset, &jobs, &options, workers, policy, existing, &bars)?;
+    let outcomes = batch::convert_segments(&dataset, &jobs, &options, workers, policy, existing, &bars)?;
     bars.overall.finish_and_clear();
     report(&jobs, &outcomes, started.elapsed())
 }

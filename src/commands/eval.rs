@@ -27,7 +27,8 @@ pub enum ProtocolChoice {
     Paper,
     /// Every frame of the window is an input and is scored.
     Reconstruction,
-    /// Every `--every`-th frame is an input; inputs and in-between frames reported separately.
+    /// Every `--every`-th frame is an input; inputs, in-between frames and frames after the last input reported
+    /// separately.
     Interpolation,
 }
 
@@ -50,7 +51,7 @@ pub struct Args {
     pub preset: Option<Preset>,
     #[arg(long, value_enum, default_value = "paper")]
     pub protocol: ProtocolChoice,
-    /// Input stride of the interpolation protocol [default: 5].
+    /// Input stride of the interpolation protocol, 1..=(window length - 1) [default: 5].
     #[arg(long)]
     pub every: Option<usize>,
     /// The window, as frame indices `START..END` (end exclusive) [default: 0..20].
@@ -110,6 +111,7 @@ impl Args {
 
     /// The evaluation these arguments ask for.
     pub fn options(&self) -> Result<EvalOptions> {
+        check_distinct(&self.scenes)?;
         let mut options = EvalOptions::new(self.scenes.clone(), &self.checkpoint, &self.out);
         options.protocol = self.protocol()?;
         options.architecture = match (&self.config, &self.preset) {
@@ -126,6 +128,20 @@ impl Args {
         options.refine = self.refine.spec()?;
         Ok(options)
     }
+}
+
+/// Refuses a scene given twice (by the same path, or another path to the same folder): it would be scored
+/// twice and counted as two scenes in the means.
+fn check_distinct(scenes: &[PathBuf]) -> Result<()> {
+    let mut seen = Vec::new();
+    for scene in scenes {
+        let folder = std::fs::canonicalize(scene).unwrap_or_else(|_| scene.clone());
+        if seen.contains(&folder) {
+            anyhow::bail!("--scene {} is given twice: give each scene once", scene.display());
+        }
+        seen.push(folder);
+    }
+    Ok(())
 }
 
 /// Runs the evaluation; prints the Markdown report followed by where the files are.
@@ -165,6 +181,8 @@ mod tests {
         assert!(parse(&["--frames", "5..5"]).unwrap_err().contains("empty range"));
         assert!(parse(&["--protocol", "weird"]).is_err());
         assert!(parse(&["--device", "quantum"]).unwrap_err().contains("unknown device"));
+        assert!(parse(&["--scene", "s"]).unwrap_err().contains("--scene s is given twice"));
+        assert!(parse(&["--protocol", "interpolation", "--every", "30"]).unwrap_err().contains("give 1..=19"));
         let options =
             parse(&["--protocol", "interpolation", "--every", "3", "--frames", "4..11", "--cameras", "2"]).unwrap();
         assert_eq!(options.protocol.input_frames(), vec![4, 7, 10]);

@@ -10,7 +10,7 @@ use dggt_reconstruct::{ReconstructOptions, TimeRequest, reconstruct};
 use dggt_refine::ReferenceView;
 
 use crate::backend::DeviceList;
-use crate::commands::output::{self, OutputKind, OverwriteArg};
+use crate::commands::output::{self, OutputBoundArg, OutputKind, OverwriteArg};
 use crate::commands::parse_range;
 use crate::commands::refine::{RefineArgs, RefineJob, load_refiner, refine_files};
 
@@ -38,10 +38,11 @@ pub struct Args {
     /// Only these frames, as `START..END` (end exclusive).
     #[arg(long, value_parser = parse_range)]
     frames: Option<Range<usize>>,
-    /// Render at these times (seconds since the first chosen frame) [default: the input frames' times].
+    /// Render at these times (seconds since the first chosen frame, within the input frames' times) [default:
+    /// the input frames' times].
     #[arg(long, value_delimiter = ',', conflicts_with = "every")]
     times: Option<Vec<f64>>,
-    /// Render K evenly spaced times per interval between input frames.
+    /// Render K evenly spaced times per interval between input frames (1..=100).
     #[arg(long)]
     every: Option<usize>,
     /// Network input width, a multiple of 14 [default: the width the checkpoint was trained at, else the
@@ -59,6 +60,8 @@ pub struct Args {
     out: PathBuf,
     #[command(flatten)]
     overwrite: OverwriteArg,
+    #[command(flatten)]
+    bound: OutputBoundArg,
     #[command(flatten)]
     refine: RefineArgs,
 }
@@ -92,6 +95,7 @@ pub fn run(args: Args) -> Result<()> {
     };
     options.width = args.width;
     options.chunk_frames = args.chunk;
+    options.max_output_bytes = args.bound.bytes();
     options.progress = std::io::IsTerminal::is_terminal(&std::io::stderr());
     tracing::info!("reconstructing {} with {} on {device:?}", options.images.display(), options.checkpoint.display());
     let summary = reconstruct(&options, &device)?;

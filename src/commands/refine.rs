@@ -15,7 +15,7 @@ use dggt_refine::{
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::backend::DeviceList;
-use crate::commands::output::{self, OutputKind, OverwriteArg};
+use crate::commands::output::{self, OutputKind, OverwriteArg, OverwriteFileArg};
 
 /// The single-step diffusion refiner (Difix on sd-turbo): convert its checkpoint, refine images.
 #[derive(Debug, clap::Args)]
@@ -39,6 +39,8 @@ struct ConvertArgs {
     /// The `.safetensors` file to write.
     #[arg(long)]
     out: PathBuf,
+    #[command(flatten)]
+    overwrite: OverwriteFileArg,
 }
 
 /// Refine image files, each written under the same name into the output folder, with `refined.json` saying
@@ -91,6 +93,7 @@ pub fn run(args: Args) -> Result<()> {
 }
 
 fn convert(args: &ConvertArgs) -> Result<()> {
+    output::prepare_file(&args.out, "--out", args.overwrite.existing())?;
     let checkpoint = DifixCheckpoint::read(&args.checkpoint)?;
     checkpoint.write_safetensors(&args.out)?;
     println!(

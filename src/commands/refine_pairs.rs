@@ -5,10 +5,13 @@
 //!
 //! A sample that fails to load or render is reported and skipped; the run fails only when no sample gave
 //! pairs. With `--shards` each sample's file is written as soon as it is rendered (memory stays that of one
-//! sample) and samples whose file exists are kept, so a stopped run resumes where it stopped.
+//! sample) and samples whose file exists are kept, so a stopped run resumes where it stopped. The folder
+//! records what its pairs were rendered from (`pairs-source.json`: the run and its checkpoint's step), and a
+//! rerun continues only a folder rendered from the same; anything else is refused, so pairs of two
+//! checkpoints never mix. A pairs file (without `--shards`) is never replaced unless told to.
 
 use std::ops::Range;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use dggt_refine_train::render_pairs::{RenderedPair, render_pairs, shard_path, write_pairs};
@@ -16,6 +19,7 @@ use dggt_train::trainer::progress_bar;
 use dggt_train::{Start, TrainConfig, Trainer};
 
 use crate::backend::DeviceSpec;
+use crate::commands::output::{self, Existing, OutputKind, OverwriteArg};
 use crate::commands::parse_range;
 
 /// Render refiner training pairs (frames with reconstruction artifacts and their ground truth).
@@ -36,9 +40,18 @@ pub struct Args {
     /// Write one file per sample into the `--out` folder as it is rendered, keeping those already there.
     #[arg(long)]
     shards: bool,
+    /// Replace the `--out` pairs file, or the shards of another run or checkpoint in the `--out` folder.
+    #[command(flatten)]
+    overwrite: OverwriteArg,
     #[arg(long, default_value = "cpu")]
     device: DeviceSpec,
 }
+
+/// What a folder of shards records about its pairs, written before the first shard.
+const SHARD_SOURCE: &str = "pairs-source.json";
+
+/// A folder of shards: every one holds [`SHARD_SOURCE`].
+const SHARDS: OutputKind = OutputKind { command: "refine-pairs --shards", signature: SHARD_SOURCE };
 
 /// What became of the samples.
 #[derive(Debug, Default)]
@@ -50,6 +63,10 @@ struct Tally {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    let existing = args.overwrite.existing();
+    if !args.shards {
+        output::prepare_file(&args.out, "--out", existing)?;
+    }
     let mut config = TrainConfig::load(&args.config)?;
     if let Some(run) = &args.run {
         config.run.out_dir = run.clone();
@@ -60,7 +77,8 @@ pub fn run(args: Args) -> Result<()> {
         tracing::warn!("no checkpoint under the run's out_dir: rendering with the network as initialised");
     }
     if args.shards {
-        std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+        let source = shard_source(run.config().run.out_dir.as_path(), run.state().step);
+        prepare_shards(&args.out, &source, existing)?;
     }
     let bar = progress_bar(std::io::IsTerminal::is_terminal(&std::io::stderr()), 0, args.samples.len() as u64);
     let mut tally = Tally::default();
@@ -89,6 +107,35 @@ pub fn run(args: Args) -> Result<()> {
     }
     bar.finish_and_clear();
     finish(&args, &run, &tally, &collected)
+}
+
+/// What shards rendered by the run in `run` at checkpoint step `step` record.
+fn shard_source(run: &Path, step: u64) -> serde_json::Value {
+    let run = std::fs::canonicalize(run).unwrap_or_else(|_| run.to_owned());
+    serde_json::json!({ "run": run, "step": step })
+}
+
+/// Readies the shard folder `dir` for pairs from `source`: a new or empty folder gets the record; a folder
+/// recording the same source is continued; one recording another is refused, or emptied with `--overwrite`;
+/// any other folder that is not empty is refused.
+fn prepare_shards(dir: &Path, source: &serde_json::Value, existing: Existing) -> Result<()> {
+    let record = dir.join(SHARD_SOURCE);
+    let recorded: Option<serde_json::Value> = match std::fs::read(&record) {
+        Ok(bytes) => Some(serde_json::from_slice(&bytes).with_context(|| format!("reading {}", record.display()))?),
+        Err(_) => None,
+    };
+    match recorded {
+        Some(recorded) if &recorded == source => {}
+        Some(recorded) if existing == Existing::Refuse => anyhow::bail!(
+            "{} holds pairs rendered from {recorded}, this run renders from {source}: choose another folder with \
+             --out, or pass --overwrite to replace them",
+            dir.display()
+        ),
+        _ => output::prepare(dir, SHARDS, existing)?,
+    }
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    std::fs::write(&record, serde_json::to_string_pretty(source)?)
+        .with_context(|| format!("writing {}", record.display()))
 }
 
 /// Writes the collected pairs (without `--shards`) and prints what was done.

@@ -9,6 +9,7 @@ use dggt_refine_train::{RefineTrainConfig, RefineTrainError, RefineTrainer};
 use dggt_train::Start;
 
 use crate::backend::DeviceSpec;
+use crate::commands::output::{self, OverwriteFileArg};
 use crate::commands::train;
 
 /// Train the single-step diffusion refiner (Difix) on pairs of frames with artifacts and their ground truth.
@@ -30,12 +31,18 @@ pub struct Args {
     /// Override `run.out_dir`.
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Where to write the trained refiner (default `OUT/refiner.safetensors`).
+    /// Where to write the trained refiner (default `OUT/refiner.safetensors`, the run's own file).
     #[arg(long)]
     export: Option<PathBuf>,
+    /// Replace an existing `--export` file.
+    #[command(flatten)]
+    overwrite: OverwriteFileArg,
 }
 
 pub fn run(args: Args) -> Result<()> {
+    if let Some(export) = &args.export {
+        output::prepare_file(export, "--export", args.overwrite.existing())?;
+    }
     let mut config = RefineTrainConfig::load(&args.config)?;
     if let Some(steps) = args.steps {
         config.run.steps = steps;

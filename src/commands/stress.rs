@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 
 use crate::backend::DeviceList;
+use crate::commands::output::{self, OverwriteFileArg};
 
 /// Drive the pipeline through extreme inputs and report every non-finite value by stage; fails when any case
 /// does.
@@ -23,6 +24,8 @@ pub struct Args {
     /// Also write the report as JSON to this file.
     #[arg(long)]
     json: Option<PathBuf>,
+    #[command(flatten)]
+    overwrite: OverwriteFileArg,
 }
 
 /// [`dggt_stress::StressScope`] on the command line.
@@ -45,6 +48,9 @@ impl From<Scope> for dggt_stress::StressScope {
 
 /// Runs the suite, prints the table; an error when any case fails.
 pub fn run(args: Args) -> Result<()> {
+    if let Some(path) = &args.json {
+        output::prepare_file(path, "--json", args.overwrite.existing())?;
+    }
     let device = args.device.single()?;
     let started = std::time::Instant::now();
     let options = dggt_stress::StressOptions { scope: args.scope.into(), loss_weights: args.loss_weights };

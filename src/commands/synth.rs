@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 
-use crate::commands::output::{self, OutputKind, OverwriteArg};
+use crate::commands::output::{self, OutputBoundArg, OutputKind, OverwriteArg};
 
 /// A scene export written by `dggt synth`.
 const OUTPUT: OutputKind = OutputKind { command: "synth", signature: "synth.json" };
@@ -34,20 +34,21 @@ pub struct Args {
     /// Also write ray-cast lidar sweeps (`lidar/{t}.bin`, about 0.6 MB a frame).
     #[arg(long)]
     lidar: bool,
+    #[command(flatten)]
+    bound: OutputBoundArg,
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let Args { out, overwrite, seed, frames, cameras, width, height, layout, lidar } = args;
-    output::prepare(&out, OUTPUT, overwrite.existing())?;
+    let Args { out, overwrite, seed, frames, cameras, width, height, layout, lidar, bound } = args;
     let config = dggt_synth::SynthConfig { seed, frames, cameras, width, height };
+    config.validate()?;
+    let sweeps = if lidar { dggt_synth::Sweeps::Write } else { dggt_synth::Sweeps::Skip };
+    let what = format!("{frames} frames x {cameras} cameras at {width}x{height}");
+    bound.check(dggt_synth::largest_output_bytes(&config, sweeps), &what)?;
+    output::prepare(&out, OUTPUT, overwrite.existing())?;
     let started = std::time::Instant::now();
-    let summary = dggt_synth::synthesize(
-        &config,
-        &out,
-        layout,
-        if lidar { dggt_synth::Sweeps::Write } else { dggt_synth::Sweeps::Skip },
-    )
-    .with_context(|| format!("writing the synthetic scene to {}", out.display()))?;
+    let summary = dggt_synth::synthesize(&config, &out, layout, sweeps)
+        .with_context(|| format!("writing the synthetic scene to {}", out.display()))?;
     println!(
         "wrote {} images ({} frames x {} cameras at {width}x{height}) and {} instances ({} moving) to {} ({layout} layout) in {:.1} s",
         summary.images,

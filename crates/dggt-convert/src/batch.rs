@@ -20,7 +20,7 @@ use crate::sky::SkyMasks;
 use crate::waymo::{WaymoOptions, convert_segment};
 
 /// The raw datasets the converters read.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Dataset {
     /// Waymo Open Dataset v1: one `Frame` TFRecord per segment; input a `.tfrecord` file or a folder of them.
     Waymo,
@@ -48,7 +48,7 @@ pub struct ConvertOptions {
 
 impl Dataset {
     /// The dataset and its options, as a done marker records them.
-    pub fn describe(self) -> String {
+    pub fn describe(&self) -> String {
         match self {
             Self::Waymo => "waymo".into(),
             Self::Argoverse2 => "argoverse2".into(),
@@ -57,7 +57,7 @@ impl Dataset {
     }
 
     /// The export variant written.
-    pub fn variant(self) -> dggt_data::ExportVariant {
+    pub fn variant(&self) -> dggt_data::ExportVariant {
         match self {
             Self::Waymo => dggt_data::ExportVariant::Waymo,
             Self::Argoverse2 => dggt_data::ExportVariant::Argoverse2,
@@ -66,7 +66,7 @@ impl Dataset {
     }
 
     /// Whether `path` in a folder of segments is one (a `.tfrecord` file; a log folder with `calibration/`).
-    fn is_segment(self, path: &Path) -> bool {
+    fn is_segment(&self, path: &Path) -> bool {
         match self {
             Self::Waymo => path.is_file() && path.extension().is_some_and(|ext| ext == "tfrecord"),
             Self::Argoverse2 => path.join("calibration").is_dir(),
@@ -75,12 +75,12 @@ impl Dataset {
     }
 
     /// What the conversion of every segment needs read first: nuScenes' tables (jobs share the data root).
-    fn prepare(self, jobs: &[SegmentJob]) -> Result<Prepared> {
+    fn prepare(&self, jobs: &[SegmentJob]) -> Result<Prepared> {
         Ok(match (self, jobs.first()) {
             (Self::Waymo, _) => Prepared::Waymo,
             (Self::Argoverse2, _) => Prepared::Argoverse2,
             (Self::NuScenes(version, rate), Some(job)) => {
-                Prepared::NuScenes(Box::new(Tables::read(&job.input, version)?), rate)
+                Prepared::NuScenes(Box::new(Tables::read(&job.input, version)?), *rate)
             }
             (Self::NuScenes(..), None) => Prepared::Nothing,
         })
@@ -220,7 +220,7 @@ pub trait Progress: Sync {
 
 /// The segments of `dataset` at `input` (one segment, or a folder of them sorted by name), numbered, with their
 /// scene folders under `out`; `scenes` keeps only those numbers.
-pub fn jobs(dataset: Dataset, input: &Path, out: &Path, scenes: Option<&[usize]>) -> Result<Vec<SegmentJob>> {
+pub fn jobs(dataset: &Dataset, input: &Path, out: &Path, scenes: Option<&[usize]>) -> Result<Vec<SegmentJob>> {
     let not_found = |what: String| ConvertError::io(input, std::io::Error::new(std::io::ErrorKind::NotFound, what));
     let file_name = |path: &Path| path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let segments: Vec<(PathBuf, String)> = if let Dataset::NuScenes(version, _) = dataset {
@@ -258,7 +258,7 @@ pub fn jobs(dataset: Dataset, input: &Path, out: &Path, scenes: Option<&[usize]>
 
 /// Converts every job on `workers` threads; the outcomes come back in job order.
 pub fn convert_segments(
-    dataset: Dataset,
+    dataset: &Dataset,
     jobs: &[SegmentJob],
     options: &ConvertOptions,
     workers: usize,
@@ -292,7 +292,7 @@ pub fn convert_segments(
 
 fn convert_one(
     prepared: &Prepared,
-    dataset: Dataset,
+    dataset: &Dataset,
     job: &SegmentJob,
     options: &ConvertOptions,
     existing: ExistingScenes,
@@ -313,7 +313,7 @@ fn convert_one(
 }
 
 /// What converting `job` with `options` records in its done marker.
-fn provenance(dataset: Dataset, job: &SegmentJob, options: &ConvertOptions) -> Provenance {
+fn provenance(dataset: &Dataset, job: &SegmentJob, options: &ConvertOptions) -> Provenance {
     Provenance {
         source: std::fs::canonicalize(&job.input).unwrap_or_else(|_| job.input.clone()),
         segment: job.name.clone(),

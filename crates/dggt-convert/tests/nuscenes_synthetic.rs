@@ -19,7 +19,7 @@ fn convert(root: &Path, out: &Path, cameras: &[usize]) -> Result<usize, String> 
 }
 
 fn convert_at(root: &Path, out: &Path, cameras: &[usize], rate: FrameRate) -> Result<usize, String> {
-    let tables = Tables::read(root, NuScenesVersion::Mini).map_err(|e| e.to_string())?;
+    let tables = Tables::read(root, &NuScenesVersion::Mini).map_err(|e| e.to_string())?;
     let options = NuScenesOptions { cameras: cameras.to_vec(), sky_masks: SkyMasks::Lidar, rate };
     convert_scene(&tables, 0, out, &options, &|_| {}).map(|s| s.frames).map_err(|e| e.to_string())
 }

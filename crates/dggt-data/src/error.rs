@@ -15,6 +15,8 @@ pub enum DataError {
     Geometry { path: PathBuf, source: GeomError },
     #[error("{}: cannot decode image: {source}", path.display())]
     Image { path: PathBuf, source: image::ImageError },
+    #[error("{}: {outside}", root.display())]
+    FramesOutside { root: PathBuf, outside: crate::window::FramesOutside },
     #[error("invalid configuration: {0}")]
     Config(String),
     #[error("loading failed: {0}")]
@@ -40,7 +42,8 @@ impl DataError {
             Self::Io { path, .. }
             | Self::Malformed { path, .. }
             | Self::Geometry { path, .. }
-            | Self::Image { path, .. } => Some(path),
+            | Self::Image { path, .. }
+            | Self::FramesOutside { root: path, .. } => Some(path),
             Self::Config(_) | Self::Worker(_) => None,
         }
     }

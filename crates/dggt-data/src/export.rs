@@ -56,9 +56,13 @@ pub fn read_export(root: &Path, options: &ExportOptions) -> Result<Scene> {
         None => numbered_files(&root.join("intrinsics"), ".txt")?,
     };
     let poses = FramePoseFiles::new(&layout, variant);
+    let available = numbered_files(poses.folder(), ".txt")?;
     let frame_indices: Vec<usize> = match &options.frames {
-        Some(range) => range.clone().collect(),
-        None => numbered_files(poses.folder(), ".txt")?,
+        Some(window) => match crate::window::frames_outside(window, &available) {
+            None => window.clone().collect(),
+            Some(outside) => return Err(DataError::FramesOutside { root: root.to_owned(), outside }),
+        },
+        None => available,
     };
     if frame_indices.is_empty() {
         return Err(DataError::malformed(poses.folder(), "at least one frame", "none"));

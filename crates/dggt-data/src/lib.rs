@@ -11,7 +11,8 @@
 //! - [`sampler`]: which input and target frames each training step sees, reproducibly per step.
 //! - [`prefetch`]: worker threads that load upcoming items ahead of the consumer, in order, with bounded memory;
 //!   [`loader`] streams decoded training samples through it.
-//! - [`summary`]: what `dggt inspect` reports about a scene.
+//! - [`summary`]: what `dggt inspect` reports about a scene; [`window`]: a window of frames checked against a
+//!   scene's.
 //! - [`text`], [`npy`], [`images`], [`io`]: untrusted-input readers and atomic writers.
 //! - [`random`]: the seeded generator (SplitMix64) of the sampler, the stress suite, and test and bench scenes.
 //!
@@ -40,6 +41,7 @@ pub mod summary;
 pub mod text;
 pub mod variant;
 pub mod views;
+pub mod window;
 
 pub use depth_flow::{DepthFlowMap, DepthSource};
 pub use error::{DataError, Result};
@@ -57,3 +59,4 @@ pub use scene::{Scene, SceneCamera, SceneFrame, SceneSource, View, ViewFiles};
 pub use summary::SceneSummary;
 pub use variant::ExportVariant;
 pub use views::{PreparedView, prepare_view};
+pub use window::{FramesOutside, frames_outside};

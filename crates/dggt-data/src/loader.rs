@@ -103,10 +103,25 @@ impl DatasetSampling {
                 }
             }
         }
-        Err(DataError::Worker(format!(
-            "sample {sample}: {MAX_LOAD_ATTEMPTS} scenes failed to load: {}",
-            failures.join("; ")
-        )))
+        Err(DataError::Worker(format!("sample {sample}: {}", self.failed_scenes(&failed, &failures))))
+    }
+
+    /// The scenes of failed loads (`scenes[i]` gave `errors[i]`) in words, each scene named once with its first
+    /// error: a scene drawn again as its own replacement is one scene, not several.
+    fn failed_scenes(&self, scenes: &[usize], errors: &[String]) -> String {
+        let mut distinct: Vec<(usize, &str)> = Vec::new();
+        for (&scene, error) in scenes.iter().zip(errors) {
+            if !distinct.iter().any(|(seen, _)| *seen == scene) {
+                distinct.push((scene, error));
+            }
+        }
+        let count = match distinct.len() {
+            1 => "1 scene".to_string(),
+            n => format!("{n} scenes"),
+        };
+        let listed: Vec<String> =
+            distinct.iter().map(|(scene, error)| format!("{}: {error}", self.index.scenes[*scene].name)).collect();
+        format!("{count} failed to load in {} attempts: {}", scenes.len(), listed.join("; "))
     }
 
     /// Draws the frames of sample `sample` in scene `scene`, opens the window they span and decodes them.

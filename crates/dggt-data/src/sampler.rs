@@ -58,17 +58,26 @@ impl Default for SamplerConfig {
 }
 
 impl SamplerConfig {
-    /// Checks the input counts alone (`1 <= min_inputs <= max_inputs`), which need no log: a configuration
-    /// check, so that a wrong range is reported once rather than as every sample failing to load.
-    pub fn check_input_counts(&self) -> Result<()> {
+    /// Checks the counts alone (`1 <= min_inputs <= max_inputs <= window`, `targets_per_input >= 1`), which need
+    /// no log: a configuration check, so that a wrong count is reported once, before any work, rather than as
+    /// every sample failing to load.
+    pub fn check_counts(&self) -> Result<()> {
+        let fail = |message: String| Err(DataError::Config(format!("sampler: {message}")));
         if self.min_inputs == 0 {
-            return Err(DataError::Config("sampler: min_inputs must be at least 1".into()));
+            return fail("min_inputs must be at least 1".into());
         }
         if self.min_inputs > self.max_inputs {
-            return Err(DataError::Config(format!(
-                "sampler: min_inputs ({}) exceeds max_inputs ({})",
-                self.min_inputs, self.max_inputs
-            )));
+            return fail(format!("min_inputs ({}) exceeds max_inputs ({})", self.min_inputs, self.max_inputs));
+        }
+        if self.window < self.max_inputs {
+            return fail(format!(
+                "a window of {} frames cannot hold max_inputs = {} distinct input frames: give a window of at least \
+                 {} frames, or fewer inputs",
+                self.window, self.max_inputs, self.max_inputs
+            ));
+        }
+        if self.targets_per_input == 0 {
+            return fail("targets_per_input must be at least 1".into());
         }
         Ok(())
     }
@@ -76,18 +85,9 @@ impl SamplerConfig {
     /// Checks the settings against a log of `frame_count` frames seen by `camera_count` cameras.
     pub fn validate(&self, frame_count: usize, camera_count: usize) -> Result<()> {
         let fail = |message: String| Err(DataError::Config(format!("sampler: {message}")));
-        self.check_input_counts()?;
-        if self.window < self.max_inputs {
-            return fail(format!(
-                "a window of {} frames cannot hold max_inputs = {} distinct input frames",
-                self.window, self.max_inputs
-            ));
-        }
+        self.check_counts()?;
         if self.window > frame_count {
             return fail(format!("the window of {} frames is longer than the log ({frame_count} frames)", self.window));
-        }
-        if self.targets_per_input == 0 {
-            return fail("targets_per_input must be at least 1".into());
         }
         if camera_count == 0 {
             return fail("the scene has no cameras".into());

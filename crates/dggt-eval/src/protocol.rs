@@ -7,8 +7,9 @@
 //! - [`ProtocolKind::Reconstruction`] (the release's reconstruction mode): every frame of the window is an
 //!   input and is scored (*reconstruction*).
 //! - [`ProtocolKind::Interpolation`] (the release's interpolation mode): every `every`-th frame of the window
-//!   (offsets 0, I, 2I, ...) is an input; every frame is scored, the inputs as *reconstruction* and the frames
-//!   between them as *interpolated*.
+//!   (offsets 0, I, 2I, ...) is an input; every frame is scored, the inputs as *reconstruction*, the frames
+//!   between them as *interpolated* and those after the last input (when the stride does not end on the
+//!   window's last frame) as *extrapolated*. The stride leaves at least two inputs in the window.
 //!
 //! Frames are the export's frame indices; the window is `start..start + length` (end exclusive). Cameras are
 //! export camera ids (0 = FRONT, 1 = FRONT_LEFT, 2 = FRONT_RIGHT in Waymo exports).
@@ -56,6 +57,8 @@ pub enum Split {
     NovelView,
     /// A frame between inputs, interpolation protocol.
     Interpolated,
+    /// A frame after the last input, interpolation protocol.
+    Extrapolated,
 }
 
 impl Split {
@@ -65,6 +68,7 @@ impl Split {
             Self::Reconstruction => "reconstruction (input frames)",
             Self::NovelView => "novel view synthesis (frames that are no input)",
             Self::Interpolated => "interpolated (frames between inputs)",
+            Self::Extrapolated => "extrapolated (frames beyond the last input)",
         }
     }
 }
@@ -75,6 +79,7 @@ impl fmt::Display for Split {
             Self::Reconstruction => "reconstruction",
             Self::NovelView => "novel_view",
             Self::Interpolated => "interpolated",
+            Self::Extrapolated => "extrapolated",
         })
     }
 }
@@ -135,6 +140,9 @@ impl Protocol {
         if self.kind == ProtocolKind::Reconstruction && self.every != 1 {
             return Err(EvalError::invalid("--every", "the reconstruction protocol takes every frame as input"));
         }
+        if self.kind == ProtocolKind::Interpolation {
+            self.check_two_inputs()?;
+        }
         if self.cameras.is_empty() {
             return Err(EvalError::invalid("--cameras", "no camera chosen"));
         }
@@ -145,6 +153,30 @@ impl Protocol {
             return Err(EvalError::invalid("--cameras", format!("{:?} names a camera twice", self.cameras)));
         }
         Ok(())
+    }
+
+    /// Interpolation needs two inputs or more: a window of two frames or more, and a stride shorter than it.
+    fn check_two_inputs(&self) -> Result<(), EvalError> {
+        if self.length < 2 {
+            return Err(EvalError::invalid(
+                "--frames",
+                "the interpolation protocol needs a window of two frames or more",
+            ));
+        }
+        if self.every < self.length {
+            return Ok(());
+        }
+        Err(EvalError::invalid(
+            "--every",
+            format!(
+                "{} leaves one input in the window {:?} ({} frames); the interpolation protocol needs two or more: \
+                 give 1..={}",
+                self.every,
+                self.window(),
+                self.length,
+                self.length - 1
+            ),
+        ))
     }
 
     /// The window's frame indices.
@@ -160,11 +192,14 @@ impl Protocol {
     /// Every scored frame with its split, ascending.
     pub fn targets(&self) -> Vec<(usize, Split)> {
         let inputs = self.input_frames();
-        let other = match self.kind {
+        let last_input = inputs.last().copied().unwrap_or(self.start);
+        let split = |frame: usize| match self.kind {
+            _ if inputs.contains(&frame) => Split::Reconstruction,
             ProtocolKind::Paper => Split::NovelView,
+            ProtocolKind::Reconstruction | ProtocolKind::Interpolation if frame > last_input => Split::Extrapolated,
             ProtocolKind::Reconstruction | ProtocolKind::Interpolation => Split::Interpolated,
         };
-        self.window().map(|f| (f, if inputs.contains(&f) { Split::Reconstruction } else { other })).collect()
+        self.window().map(|f| (f, split(f))).collect()
     }
 
     /// The splits this protocol reports, in report order.
@@ -177,26 +212,12 @@ impl Protocol {
 
     /// Checks that a scene with frame indices `frames` (ascending) has the whole window.
     pub fn check_frames(&self, scene: &Path, frames: &[usize]) -> Result<(), EvalError> {
-        let missing: Vec<usize> = self.window().filter(|f| frames.binary_search(f).is_err()).collect();
-        if missing.is_empty() {
-            return Ok(());
+        match dggt_data::frames_outside(&self.window(), frames) {
+            None => Ok(()),
+            Some(outside) => Err(EvalError::scene(
+                scene,
+                format!("{outside}, for the {} protocol; choose another window with --frames", self.kind),
+            )),
         }
-        let have = match (frames.first(), frames.last()) {
-            (Some(first), Some(last)) => format!("{} frames ({first}..={last})", frames.len()),
-            _ => "no frames".into(),
-        };
-        Err(EvalError::scene(
-            scene,
-            format!(
-                "too few frames: the {} protocol's window {:?} needs frames {}..={}, the scene has {have} (missing \
-                 {} of them, first {}); choose another window with --frames",
-                self.kind,
-                self.window(),
-                self.start,
-                self.start + self.length - 1,
-                missing.len(),
-                missing[0]
-            ),
-        ))
     }
 }

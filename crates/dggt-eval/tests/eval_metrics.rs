@@ -62,7 +62,20 @@ fn protocols_plan_their_frames() {
     assert_eq!(interpolation.targets()[1], (3, Split::Interpolated));
     assert_eq!(interpolation.splits(), vec![Split::Reconstruction, Split::Interpolated]);
 
+    // A stride that does not end on the window's last frame: the frames after the last input are extrapolated,
+    // not "between inputs"; a stride that leaves one input is refused.
+    let beyond = Protocol::interpolation(0, 20, 6, vec![0]);
+    beyond.validate().unwrap();
+    assert_eq!(beyond.input_frames(), vec![0, 6, 12, 18]);
+    assert_eq!(
+        &beyond.targets()[17..],
+        &[(17, Split::Interpolated), (18, Split::Reconstruction), (19, Split::Extrapolated)]
+    );
+    assert_eq!(beyond.splits(), vec![Split::Reconstruction, Split::Interpolated, Split::Extrapolated]);
+    assert!(Split::Extrapolated.title().contains("beyond the last input"));
+
     let error = |p: Protocol| p.validate().unwrap_err().to_string();
+    assert!(error(Protocol::interpolation(0, 20, 30, vec![0])).contains("give 1..=19"));
     assert!(error(Protocol { every: 3, ..Protocol::paper() }).contains("--every"));
     assert!(error(Protocol::interpolation(0, 5, 0, vec![0])).contains("--every"));
     assert!(error(Protocol::reconstruction(0, 0, vec![0])).contains("--frames"));

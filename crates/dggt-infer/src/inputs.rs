@@ -167,8 +167,12 @@ impl InputSet {
             ));
         }
         let range = frames.unwrap_or(0..count);
-        if range.end > count || range.is_empty() {
-            return Err(InferError::input(root, format!("frames {range:?} requested but there are {count}")));
+        if range.is_empty() {
+            return Err(InferError::input(root, format!("no frames in {range:?}")));
+        }
+        let available: Vec<usize> = (0..count).collect();
+        if let Some(outside) = dggt_data::frames_outside(&range, &available) {
+            return Err(InferError::input(root, outside.to_string()));
         }
         let mut views = Vec::new();
         for frame in range.clone() {

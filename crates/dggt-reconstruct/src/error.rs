@@ -9,6 +9,10 @@ pub enum ReconstructError {
     #[error("{what}: {detail}")]
     Invalid { what: String, detail: String },
     #[error("{0}")]
+    OutputTooLarge(crate::volume::OutputTooLarge),
+    #[error("{0}")]
+    Data(#[from] dggt_data::DataError),
+    #[error("{0}")]
     Scene(#[from] dggt_scene::SceneError),
     #[error("{0}")]
     Infer(#[from] dggt_infer::InferError),

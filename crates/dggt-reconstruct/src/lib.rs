@@ -3,13 +3,16 @@
 //!
 //! - [`pipeline`]: cameras, maps, Gaussians and renders written in the formats of `dggt-export`;
 //! - [`align`]: similarity alignment of predicted to reference camera centres (the pose report);
-//! - [`summary`]: counts, times and peak memory, printed and saved as `summary.json`.
+//! - [`summary`]: counts, times and peak memory, printed and saved as `summary.json`;
+//! - [`volume`]: the requested times and the largest output they could give, checked before any work.
 
 pub mod align;
 mod error;
 pub mod pipeline;
 pub mod summary;
+pub mod volume;
 
 pub use error::ReconstructError;
 pub use pipeline::{ReconstructOptions, TimeRequest, reconstruct};
 pub use summary::Summary;
+pub use volume::{DEFAULT_MAX_OUTPUT_BYTES, GB, OutputEstimate};

@@ -43,6 +43,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use crate::align::pose_error;
 use crate::error::ReconstructError;
 use crate::summary::{GaussianCounts, RenderRecord, StageTime, Summary, peak_memory_mib};
+use crate::volume::{DEFAULT_MAX_OUTPUT_BYTES, OutputEstimate, check_every, check_times};
 
 /// Which times to render (and export dynamic Gaussians at).
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -50,7 +51,7 @@ pub enum TimeRequest {
     /// The input frames' times.
     #[default]
     Inputs,
-    /// These times, seconds since the first chosen frame (between, before or after input frames).
+    /// These times, seconds since the first chosen frame, within the input frames' times.
     Seconds(Vec<f64>),
     /// `K` evenly spaced times per interval between consecutive input frames (1 = the input times).
     Every(usize),
@@ -77,6 +78,8 @@ pub struct ReconstructOptions {
     pub out: PathBuf,
     /// Show a progress bar on stderr.
     pub progress: bool,
+    /// The most the outputs may take at most ([`OutputEstimate`]), checked before the forward pass.
+    pub max_output_bytes: u64,
 }
 
 impl ReconstructOptions {
@@ -93,6 +96,7 @@ impl ReconstructOptions {
             chunk_frames: 4,
             out: out.into(),
             progress: false,
+            max_output_bytes: DEFAULT_MAX_OUTPUT_BYTES,
         }
     }
 }
@@ -128,6 +132,7 @@ impl Written {
 pub fn reconstruct(options: &ReconstructOptions, device: &Device) -> Result<Summary, ReconstructError> {
     let mut stages = Stages { started: Instant::now(), list: Vec::new() };
     let inputs = InputSet::open(&options.images, options.frames.clone(), options.cameras.clone())?;
+    let times_s = requested_times(&inputs, &options.times)?;
     let network = load_network(&options.checkpoint, options.architecture.as_ref(), device)?;
     let mut warnings = network.warnings.clone();
     for warning in &warnings {
@@ -136,8 +141,10 @@ pub fn reconstruct(options: &ReconstructOptions, device: &Device) -> Result<Summ
     stages.done("load checkpoint");
 
     let preprocess = network.input_preprocess(options.width);
+    let network_size = preprocess.plan(inputs.size)?.output;
+    OutputEstimate::new(inputs.views.len(), inputs.cameras.len(), times_s.len(), network_size)
+        .check(options.max_output_bytes)?;
     let (images, size) = inputs.load(&preprocess)?;
-    let times_s = requested_times(&inputs, &options.times)?;
     tracing::info!(
         "{} views ({} frames x {} cameras) at {} -> {size}; {} times to render",
         inputs.views.len(),
@@ -336,21 +343,17 @@ fn input_image_file(name: &str) -> String {
     format!("images/{name}.png")
 }
 
-/// The requested times in seconds, ascending as given.
+/// The requested times in seconds, ascending as given; each within the input frames' times.
 fn requested_times(inputs: &InputSet, request: &TimeRequest) -> Result<Vec<f64>, ReconstructError> {
     let input_times = inputs.input_times();
     match request {
         TimeRequest::Inputs => Ok(input_times),
         TimeRequest::Seconds(times) => {
-            if times.is_empty() || times.iter().any(|t| !t.is_finite()) {
-                return Err(ReconstructError::invalid("--times", format!("{times:?}: give finite seconds")));
-            }
+            check_times(times, &input_times)?;
             Ok(times.clone())
         }
         TimeRequest::Every(k) => {
-            if *k == 0 {
-                return Err(ReconstructError::invalid("--every", "must be at least 1"));
-            }
+            check_every(*k)?;
             let mut times = Vec::new();
             for pair in input_times.windows(2) {
                 times.extend((0..*k).map(|i| pair[0] + (pair[1] - pair[0]) * i as f64 / *k as f64));

@@ -74,6 +74,24 @@ pub enum Sweeps {
     Skip,
 }
 
+/// A lidar sweep's bytes at most (a sweep is about 0.6 MB).
+const SWEEP_BYTES_AT_MOST: u64 = 1_000_000;
+/// Bytes per pixel of a view's files at most: the image (RGB before compression), the sky, dynamic and fine
+/// dynamic masks, and the quarter-resolution depth and flow (16 bytes a sample, one sample per 16 pixels).
+const VIEW_BYTES_PER_PIXEL: u64 = 3 + 3 + 1;
+
+/// The most the export of `config` can take on disk, in bytes: what a caller checks against its bound before
+/// writing anything.
+pub fn largest_output_bytes(config: &SynthConfig, sweeps: Sweeps) -> u64 {
+    let pixels = config.width as u64 * config.height as u64;
+    let views = config.frames as u64 * config.cameras as u64;
+    let lidar = match sweeps {
+        Sweeps::Write => config.frames as u64 * SWEEP_BYTES_AT_MOST,
+        Sweeps::Skip => 0,
+    };
+    views.saturating_mul(pixels * VIEW_BYTES_PER_PIXEL).saturating_add(lidar)
+}
+
 /// Generates the scene of `config` and writes it to `out_dir` in `variant`.
 pub fn synthesize(
     config: &SynthConfig,

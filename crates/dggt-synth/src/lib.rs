@@ -31,7 +31,7 @@ pub mod street;
 
 pub use config::SynthConfig;
 pub use error::{Result, SynthError};
-pub use export::{Sweeps, SynthSummary, synthesize, write_export};
+pub use export::{Sweeps, SynthSummary, largest_output_bytes, synthesize, write_export};
 pub use generate::generate;
 pub use motion::{CarMotion, CarState, EgoMotion, Object, Path, WorldFromObject};
 pub use render::RenderedView;

@@ -344,7 +344,7 @@ impl TrainConfig {
             ));
         }
         data.preprocess.validate().map_err(|e| setting("data.preprocess", e.to_string()))?;
-        self.sampler.check_input_counts().map_err(|e| setting("sampler", e.to_string()))?;
+        self.sampler.check_counts().map_err(|e| setting("sampler", e.to_string()))?;
         for spec in &data.datasets {
             spec.validate().map_err(|e| setting("data.datasets", e.to_string()))?;
         }

@@ -149,6 +149,21 @@ fn a_scene_with_corrupt_images_is_skipped_sample_by_sample_and_counted() {
     assert!(strict.path().join("checkpoints").is_dir(), "the weights so far are saved before stopping");
 }
 
+/// A sample that no scene can give names each scene that failed once: a dataset of one broken scene, drawn
+/// again as its own replacement, is one scene that failed, not four with the same error four times.
+#[test]
+fn a_sample_no_scene_can_give_names_each_failed_scene_once() {
+    let data = tempfile::tempdir().unwrap();
+    scenes(&data.path().join("waymo"), ExportVariant::Waymo, 60..61);
+    truncate_images(&data.path().join("waymo/000"));
+    let out = tempfile::tempdir().unwrap();
+    let datasets = vec![dataset(data.path().join("waymo"), &[])];
+    let trainer = Trainer::new(config(datasets, out.path(), 1), vec![Device::flex()], Start::Fresh).unwrap();
+    let error = trainer.sample(0).err().expect("no scene loads").to_string();
+    assert!(error.contains("1 scene failed to load in 4 attempts: ") && error.contains("000"), "{error}");
+    assert_eq!(error.matches("images/").count(), 1, "the scene's error once: {error}");
+}
+
 #[test]
 fn a_starting_checkpoint_that_does_not_cover_the_network_is_refused_by_name() {
     let parity =

@@ -18,21 +18,73 @@ use serde::de::DeserializeOwned;
 
 use crate::error::{ConvertError, Result};
 
-/// The releases the converter reads: the folder name under the data root.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// A nuScenes release: the folder of devkit tables under the data root. The official ones by name, any other
+/// folder (a custom split, say) as [`NuScenesVersion::Other`]; either is read when its folder holds the tables.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub enum NuScenesVersion {
     #[default]
     Mini,
     Trainval,
+    Test,
+    /// Another folder name (a single path component).
+    Other(String),
 }
 
 impl NuScenesVersion {
-    pub fn folder(self) -> &'static str {
+    /// The official releases.
+    pub const KNOWN: [NuScenesVersion; 3] = [Self::Mini, Self::Trainval, Self::Test];
+
+    pub fn folder(&self) -> &str {
         match self {
             Self::Mini => "v1.0-mini",
             Self::Trainval => "v1.0-trainval",
+            Self::Test => "v1.0-test",
+            Self::Other(name) => name,
         }
     }
+
+    /// The folder of this version's tables under the data root `root`, which must exist.
+    pub fn tables_folder(&self, root: &Path) -> Result<PathBuf> {
+        let dir = root.join(self.folder());
+        if dir.is_dir() {
+            return Ok(dir);
+        }
+        let found = version_folders(root);
+        let holds = if found.is_empty() { "no version folder".to_string() } else { found.join(", ") };
+        let detail = format!(
+            "no such nuScenes version folder: the data root {} holds {holds} (a folder with scene.json)",
+            root.display()
+        );
+        Err(ConvertError::io(&dir, std::io::Error::new(std::io::ErrorKind::NotFound, detail)))
+    }
+}
+
+impl std::str::FromStr for NuScenesVersion {
+    type Err = String;
+
+    /// An official release by name, or any other plain folder name.
+    fn from_str(name: &str) -> std::result::Result<Self, String> {
+        if let Some(known) = Self::KNOWN.into_iter().find(|v| v.folder() == name) {
+            return Ok(known);
+        }
+        let mut components = Path::new(name).components();
+        match (components.next(), components.next()) {
+            (Some(std::path::Component::Normal(_)), None) => Ok(Self::Other(name.to_owned())),
+            _ => Err(format!("{name:?} is not a folder name (a nuScenes version such as v1.0-mini)")),
+        }
+    }
+}
+
+/// The folders under `root` that hold a scene table, sorted.
+fn version_folders(root: &Path) -> Vec<String> {
+    let Ok(entries) = std::fs::read_dir(root) else { return Vec::new() };
+    let mut names: Vec<String> = entries
+        .filter_map(|entry| entry.ok())
+        .filter(|entry| entry.path().join("scene.json").is_file())
+        .map(|entry| entry.file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -192,8 +244,8 @@ impl<Row> Table<Row> {
 }
 
 /// The scene names of the `scene` table of `version` under the data root `root`, in table order.
-pub fn scene_names(root: &Path, version: NuScenesVersion) -> Result<Vec<String>> {
-    let table = Table::read(&root.join(version.folder()), "scene", |r: &SceneRow| &r.token)?;
+pub fn scene_names(root: &Path, version: &NuScenesVersion) -> Result<Vec<String>> {
+    let table = Table::read(&version.tables_folder(root)?, "scene", |r: &SceneRow| &r.token)?;
     Ok(table.rows.into_iter().map(|row| row.name).collect())
 }
 
@@ -219,8 +271,8 @@ pub struct Tables {
 
 impl Tables {
     /// Reads the tables of `version` under the data root `root`.
-    pub fn read(root: &Path, version: NuScenesVersion) -> Result<Self> {
-        let dir = root.join(version.folder());
+    pub fn read(root: &Path, version: &NuScenesVersion) -> Result<Self> {
+        let dir = version.tables_folder(root)?;
         let mut tables = Self {
             root: root.to_owned(),
             scene: Table::read(&dir, "scene", |r: &SceneRow| &r.token)?,

@@ -1,0 +1,154 @@
+//! How much a reconstruction may write, checked before any work: the requested times must lie within the
+//! input frames' time window, and the largest output they could give (every render as raw RGB, every input
+//! pixel's Gaussian in the static PLY and in each per-time dynamic PLY, the per-view maps) must stay under a
+//! bound, so that a mistyped `--every` or `--times` is refused rather than filling a disk for minutes.
+
+use std::fmt;
+
+use dggt_export::ply::INRIA_PROPERTIES;
+use dggt_geom::ImageSize;
+
+use crate::error::ReconstructError;
+
+/// A gigabyte (10^9 bytes), the unit of the bound.
+pub const GB: u64 = 1_000_000_000;
+/// The bound unless told otherwise.
+pub const DEFAULT_MAX_OUTPUT_BYTES: u64 = 10 * GB;
+/// The most render times `--every` puts in each interval between input frames (a render every millisecond
+/// between frames of a 10 Hz log).
+pub const MAX_EVERY: usize = 100;
+
+/// Bytes per Gaussian in a PLY file (float32 properties).
+const PLY_VERTEX_BYTES: u64 = INRIA_PROPERTIES.len() as u64 * 4;
+/// Bytes per pixel of an input view's files at most: the image (RGB), depth as `.npy` (float32) and 16-bit
+/// PNG, the dynamic and sky masks.
+const MAP_BYTES_PER_PIXEL: u64 = 3 + 4 + 2 + 1 + 1;
+/// Bytes per pixel of a render at most (raw RGB; PNG compresses it).
+const RENDER_BYTES_PER_PIXEL: u64 = 3;
+
+/// What a reconstruction would write at most.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct OutputEstimate {
+    pub views: usize,
+    pub cameras: usize,
+    pub times: usize,
+    pub size: ImageSize,
+    pub bytes: u64,
+}
+
+impl OutputEstimate {
+    /// The largest output of `views` input views from `cameras` cameras rendered at `times` times, at the
+    /// network's input size `size`.
+    pub fn new(views: usize, cameras: usize, times: usize, size: ImageSize) -> Self {
+        let pixels = size.width as u64 * size.height as u64;
+        let (views_n, cameras_n, times_n) = (views as u64, cameras as u64, times as u64);
+        let per_view = pixels * (MAP_BYTES_PER_PIXEL + PLY_VERTEX_BYTES);
+        let per_time = cameras_n * pixels * (RENDER_BYTES_PER_PIXEL + PLY_VERTEX_BYTES);
+        let bytes = views_n.saturating_mul(per_view).saturating_add(times_n.saturating_mul(per_time));
+        Self { views, cameras, times, size, bytes }
+    }
+
+    /// Refused when over `max_bytes`.
+    pub fn check(self, max_bytes: u64) -> Result<(), ReconstructError> {
+        if self.bytes <= max_bytes {
+            return Ok(());
+        }
+        Err(ReconstructError::OutputTooLarge(OutputTooLarge { estimate: self, max_bytes }))
+    }
+}
+
+/// An estimate over the bound.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct OutputTooLarge {
+    pub estimate: OutputEstimate,
+    pub max_bytes: u64,
+}
+
+impl fmt::Display for OutputTooLarge {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "the outputs could take {}, over the bound of {}: ask for fewer times (--times, --every), frames or \
+             cameras, or raise the bound with --max-output-gb",
+            self.estimate,
+            gigabytes(self.max_bytes)
+        )
+    }
+}
+
+impl fmt::Display for OutputEstimate {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "up to {} ({} render times x {} cameras and {} input views at {})",
+            gigabytes(self.bytes),
+            self.times,
+            self.cameras,
+            self.views,
+            self.size
+        )
+    }
+}
+
+/// `bytes` in gigabytes, in words.
+pub fn gigabytes(bytes: u64) -> String {
+    format!("{:.2} GB", bytes as f64 / GB as f64)
+}
+
+/// Checks requested times (seconds since the first chosen frame) against the input frames' times `inputs`
+/// (ascending): each must be finite and lie within them.
+pub fn check_times(times: &[f64], inputs: &[f64]) -> Result<(), ReconstructError> {
+    let (Some(&first), Some(&last)) = (inputs.first(), inputs.last()) else { return Ok(()) };
+    if times.is_empty() {
+        return Err(ReconstructError::invalid("--times", "no times given"));
+    }
+    let outside = times.iter().find(|t| !(t.is_finite() && (first..=last).contains(*t)));
+    match outside {
+        None => Ok(()),
+        Some(time) => Err(ReconstructError::invalid(
+            "--times",
+            format!(
+                "{time} s lies outside the input frames' time window: give seconds in {first:.3}..={last:.3} (the \
+                 chosen frames' times)"
+            ),
+        )),
+    }
+}
+
+/// Checks `--every K` against its range, `1..=MAX_EVERY`.
+pub fn check_every(every: usize) -> Result<(), ReconstructError> {
+    if (1..=MAX_EVERY).contains(&every) {
+        return Ok(());
+    }
+    Err(ReconstructError::invalid(
+        "--every",
+        format!("{every} is outside 1..={MAX_EVERY} (render times per interval between input frames)"),
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn times_past_the_inputs_and_outputs_over_the_bound_are_refused() {
+        let inputs = [0.0, 0.1, 0.2];
+        check_times(&[0.0, 0.15, 0.2], &inputs).unwrap();
+        let error = check_times(&[0.1, 1e9], &inputs).unwrap_err().to_string();
+        assert!(
+            error.contains("--times") && error.contains("1000000000") && error.contains("0.000..=0.200"),
+            "{error}"
+        );
+        assert!(check_times(&[f64::NAN], &inputs).is_err());
+        check_every(MAX_EVERY).unwrap();
+        let error = check_every(100_000).unwrap_err().to_string();
+        assert!(error.contains("--every") && error.contains("100000") && error.contains("1..=100"), "{error}");
+
+        let size = ImageSize { width: 518, height: 294 };
+        let estimate = OutputEstimate::new(6, 3, 100_001, size);
+        assert!(estimate.bytes > 1000 * GB, "{estimate}");
+        let error = estimate.check(DEFAULT_MAX_OUTPUT_BYTES).unwrap_err().to_string();
+        assert!(error.contains("100001 render times") && error.contains("--max-output-gb"), "{error}");
+        OutputEstimate::new(6, 3, 21, size).check(DEFAULT_MAX_OUTPUT_BYTES).unwrap();
+    }
+}
