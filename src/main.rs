@@ -25,7 +25,9 @@ struct Cli {
     command: Command,
 }
 
+/// The commands; parsed once per process, so the size of the largest arguments does not matter.
 #[derive(Debug, Subcommand)]
+#[allow(clippy::large_enum_variant)]
 enum Command {
     Synth(synth::Args),
     Convert(convert::Args),

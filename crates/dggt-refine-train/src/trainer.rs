@@ -216,10 +216,11 @@ impl RefineTrainer {
             self.check_divergence()?;
             let step = self.state.step;
             self.state.elapsed_s = elapsed_before + started.elapsed().as_secs_f64();
-            if run.validate_every > 0 && step % run.validate_every == 0 && step < run.steps {
+            if run.validate_every > 0 && step.is_multiple_of(run.validate_every) && step < run.steps {
                 last = Some(self.validate_and_record()?);
             }
-            let due = if step % run.checkpoint_every == 0 { CheckpointDue::Periodic } else { CheckpointDue::No };
+            let due =
+                if step.is_multiple_of(run.checkpoint_every) { CheckpointDue::Periodic } else { CheckpointDue::No };
             if step < run.steps && self.checkpoint_gate.write_now(&self.state, due) {
                 self.save_checkpoint()?;
             }

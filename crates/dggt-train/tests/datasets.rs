@@ -137,7 +137,7 @@ fn a_scene_with_corrupt_images_is_skipped_sample_by_sample_and_counted() {
     let summary = trainer.run(RunOptions::default()).unwrap();
     assert_eq!(summary.steps_run, 3);
     assert_eq!(trainer.state().bad_samples, 1, "one epoch of three scenes meets the broken one once");
-    let last_step = records(out.path()).into_iter().filter(|r| r["kind"] == "train").next_back().unwrap();
+    let last_step = records(out.path()).into_iter().rfind(|r| r["kind"] == "train").unwrap();
     assert_eq!(last_step["bad_samples"], 1);
 
     let strict = tempfile::tempdir().unwrap();
@@ -159,7 +159,8 @@ fn a_sample_no_scene_can_give_names_each_failed_scene_once() {
     let out = tempfile::tempdir().unwrap();
     let datasets = vec![dataset(data.path().join("waymo"), &[])];
     let trainer = Trainer::new(config(datasets, out.path(), 1), vec![Device::flex()], Start::Fresh).unwrap();
-    let error = trainer.sample(0).err().expect("no scene loads").to_string();
+    let Err(error) = trainer.sample(0) else { panic!("no scene loads, yet a sample was drawn") };
+    let error = error.to_string();
     assert!(error.contains("1 scene failed to load in 4 attempts: ") && error.contains("000"), "{error}");
     assert_eq!(error.matches("images/").count(), 1, "the scene's error once: {error}");
 }
@@ -181,7 +182,8 @@ fn a_starting_checkpoint_that_does_not_cover_the_network_is_refused_by_name() {
     let partial = dir.path().join("partial.safetensors");
     safetensors::serialize_to_file(kept, None, &partial).unwrap();
     let init = dggt_infer::StartingWeights { path: &partial, may_lack: &[] };
-    let error = dggt_infer::fresh_model(&tiny, Some(init), 0, &device).err().expect("refused").to_string();
+    let Err(error) = dggt_infer::fresh_model(&tiny, Some(init), 0, &device) else { panic!("accepted") };
+    let error = error.to_string();
     assert!(error.contains("gs_head.") && error.contains("init_may_lack"), "{error}");
     // ...and accepted when the configuration allows the head to start fresh.
     let allowed = ["gs_head.*".to_string()];
@@ -191,7 +193,8 @@ fn a_starting_checkpoint_that_does_not_cover_the_network_is_refused_by_name() {
     // The tiny weights given to the full-size network: every mismatched tensor is named.
     let full = dggt_infer::ModelSection { preset: dggt_model::Preset::Dggt, ..Default::default() }.architecture();
     let init = dggt_infer::StartingWeights { path: &weights, may_lack: &[] };
-    let error = dggt_infer::fresh_model(&full, Some(init), 0, &device).err().expect("refused").to_string();
+    let Err(error) = dggt_infer::fresh_model(&full, Some(init), 0, &device) else { panic!("accepted") };
+    let error = error.to_string();
     assert!(error.contains("aggregator.patch_embed") && error.contains("network [1024"), "{error}");
     assert!(error.len() < 4000, "the names are listed, not the whole file: {} bytes", error.len());
 }
