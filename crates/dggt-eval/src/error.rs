@@ -12,15 +12,15 @@ pub enum EvalError {
     File { path: PathBuf, detail: String },
     #[error("scene {}: {source}", path.display())]
     InScene { path: PathBuf, source: Box<EvalError> },
-    #[error("{0}")]
+    #[error(transparent)]
     Infer(#[from] dggt_infer::InferError),
-    #[error("{0}")]
+    #[error(transparent)]
     Data(#[from] dggt_data::DataError),
-    #[error("{0}")]
+    #[error(transparent)]
     Scene3d(#[from] dggt_scene::SceneError),
-    #[error("{0}")]
+    #[error(transparent)]
     Loss(#[from] dggt_losses::LossError),
-    #[error("{0}")]
+    #[error(transparent)]
     Metric(#[from] dggt_metrics::MetricError),
 }
 

@@ -19,13 +19,13 @@ pub enum InferError {
     Config { path: PathBuf, detail: String },
     #[error("{what}: {detail}")]
     Invalid { what: String, detail: String },
-    #[error("{0}")]
+    #[error(transparent)]
     Data(#[from] dggt_data::DataError),
-    #[error("{0}")]
+    #[error(transparent)]
     Model(#[from] dggt_model::ModelError),
-    #[error("{0}")]
+    #[error(transparent)]
     Scene(#[from] dggt_scene::SceneError),
-    #[error("{0}")]
+    #[error(transparent)]
     Geom(#[from] dggt_geom::GeomError),
 }
 

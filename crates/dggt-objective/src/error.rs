@@ -6,19 +6,19 @@ use dggt_scene::SceneError;
 pub enum ObjectiveError {
     #[error("{what}: {detail}")]
     Invalid { what: String, detail: String },
-    #[error("{0}")]
+    #[error(transparent)]
     Infer(#[from] dggt_infer::InferError),
-    #[error("{0}")]
+    #[error(transparent)]
     Data(#[from] dggt_data::DataError),
-    #[error("{0}")]
+    #[error(transparent)]
     Model(#[from] dggt_model::ModelError),
-    #[error("{0}")]
+    #[error(transparent)]
     Scene(#[from] SceneError),
-    #[error("{0}")]
+    #[error(transparent)]
     Loss(#[from] dggt_losses::LossError),
     #[error(transparent)]
     Metric(#[from] dggt_metrics::MetricError),
-    #[error("{0}")]
+    #[error(transparent)]
     Geom(#[from] dggt_geom::GeomError),
 }
 

@@ -10,13 +10,13 @@ pub enum ReconstructError {
     Invalid { what: String, detail: String },
     #[error("{0}")]
     OutputTooLarge(crate::volume::OutputTooLarge),
-    #[error("{0}")]
+    #[error(transparent)]
     Data(#[from] dggt_data::DataError),
-    #[error("{0}")]
+    #[error(transparent)]
     Scene(#[from] dggt_scene::SceneError),
-    #[error("{0}")]
+    #[error(transparent)]
     Infer(#[from] dggt_infer::InferError),
-    #[error("{0}")]
+    #[error(transparent)]
     Export(#[from] dggt_export::ExportError),
 }
 

@@ -6,11 +6,11 @@ use thiserror::Error;
 
 #[derive(Debug, Error)]
 pub enum RefineTrainError {
-    #[error("{0}")]
+    #[error(transparent)]
     Refine(#[from] dggt_refine::RefineError),
-    #[error("{0}")]
+    #[error(transparent)]
     Train(#[from] dggt_train::TrainError),
-    #[error("{0}")]
+    #[error(transparent)]
     Loss(#[from] dggt_losses::LossError),
     #[error(transparent)]
     Metric(#[from] dggt_metrics::MetricError),

@@ -12,11 +12,11 @@ pub enum TrainError {
     Config { path: PathBuf, detail: String },
     #[error("checkpoint {path}: {detail}")]
     Checkpoint { path: PathBuf, detail: String },
-    #[error("{0}")]
+    #[error(transparent)]
     Data(#[from] dggt_data::DataError),
-    #[error("{0}")]
+    #[error(transparent)]
     Model(#[from] dggt_model::ModelError),
-    #[error("{0}")]
+    #[error(transparent)]
     Loss(#[from] dggt_losses::LossError),
     #[error(transparent)]
     Metric(#[from] dggt_metrics::MetricError),
@@ -25,9 +25,9 @@ pub enum TrainError {
     /// A configuration value out of its range, or settings that contradict each other.
     #[error("{setting}: {detail}")]
     Setting { setting: &'static str, detail: String },
-    #[error("{0}")]
+    #[error(transparent)]
     Infer(#[from] dggt_infer::InferError),
-    #[error("{0}")]
+    #[error(transparent)]
     Objective(#[from] dggt_objective::ObjectiveError),
     /// A fresh run asked to write where another run's files are.
     #[error("{} already holds a training run ({}); a new run would overwrite it", dir.display(), found.join(", "))]
