@@ -61,14 +61,21 @@ pub struct StepBatch {
     pub targets: Vec<ViewTruth>,
 }
 
+/// Whether a batch reads the export's depth-and-flow maps (`depth_flows_4`) of its input views: only the depth
+/// and flow losses use them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DepthFlowMaps {
+    Read,
+    Skip,
+}
+
 impl StepBatch {
-    /// Moves a decoded sample to `device`. `with_depth_flow` reads the export's depth-and-flow maps of the input
-    /// views.
+    /// Moves a decoded sample to `device`, with the inputs' depth-and-flow maps as `maps` says.
     pub fn new(
         sample: &LoadedSample,
         scene: &Scene,
         preprocess: &Preprocess,
-        with_depth_flow: bool,
+        maps: DepthFlowMaps,
         device: &Device,
     ) -> Result<Self, ObjectiveError> {
         let first = sample.inputs.first().ok_or_else(|| ObjectiveError::Invalid {
@@ -84,7 +91,7 @@ impl StepBatch {
         }
         let timeline = Timeline::new(&sample.sample.input_frames)?;
         let reference = first.world_from_camera;
-        let truth = |view: &PreparedView, depth: bool| -> Result<ViewTruth, ObjectiveError> {
+        let truth = |view: &PreparedView, maps: DepthFlowMaps| -> Result<ViewTruth, ObjectiveError> {
             Ok(ViewTruth {
                 frame: view.frame,
                 rig_camera: view.camera,
@@ -96,11 +103,14 @@ impl StepBatch {
                 image: hwc_image(view, device),
                 sky: view.sky_mask.as_ref().map(|m| mask_tensor(&m.data, size, device)),
                 dynamic: view.dynamic_mask.as_ref().map(|m| mask_tensor(&m.data, size, device)),
-                depth_flow: if depth { depth_flow_samples(scene, preprocess, view)? } else { None },
+                depth_flow: match maps {
+                    DepthFlowMaps::Read => depth_flow_samples(scene, preprocess, view)?,
+                    DepthFlowMaps::Skip => None,
+                },
             })
         };
-        let inputs = sample.inputs.iter().map(|v| truth(v, with_depth_flow)).collect::<Result<Vec<_>, _>>()?;
-        let targets = sample.targets.iter().map(|v| truth(v, false)).collect::<Result<Vec<_>, _>>()?;
+        let inputs = sample.inputs.iter().map(|v| truth(v, maps)).collect::<Result<Vec<_>, _>>()?;
+        let targets = sample.targets.iter().map(|v| truth(v, DepthFlowMaps::Skip)).collect::<Result<Vec<_>, _>>()?;
         let (h, w) = (size.height as usize, size.width as usize);
         let planar: Vec<f32> = sample.inputs.iter().flat_map(|v| v.image.data.iter().copied()).collect();
         let images = Tensor::from_data(TensorData::new(planar, [1, sample.inputs.len(), 3, h, w]), device);

@@ -10,7 +10,7 @@ mod error;
 pub mod objective;
 pub mod weights;
 
-pub use batch::{DepthFlowSamples, MOVING_SPEED, StepBatch, ViewTruth, depth_flow_samples};
+pub use batch::{DepthFlowMaps, DepthFlowSamples, MOVING_SPEED, StepBatch, ViewTruth, depth_flow_samples};
 pub use error::ObjectiveError;
 pub use objective::{Forward, Objective, RenderedView, SampleLoss, ViewsToRender};
 pub use weights::{LossTerm, LossWeights};

@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 
 use burn::module::Module;
 use burn::tensor::{Device, Tensor};
-use dggt_objective::{StepBatch, ViewTruth, ViewsToRender};
+use dggt_objective::{DepthFlowMaps, StepBatch, ViewTruth, ViewsToRender};
 use dggt_scene::nearest_in_time;
 use dggt_train::{TrainError, Trainer};
 
@@ -47,7 +47,8 @@ pub fn render_pairs(
     let mut pairs = Vec::new();
     for index in samples {
         let loaded = trainer.sample(index)?;
-        let batch = StepBatch::new(&loaded, &loaded.scene, preprocess, false, device).map_err(TrainError::from)?;
+        let batch = StepBatch::new(&loaded, &loaded.scene, preprocess, DepthFlowMaps::Skip, device)
+            .map_err(TrainError::from)?;
         let (_, views) =
             trainer.objective().render(&model, &batch, ViewsToRender::Targets).map_err(TrainError::from)?;
         for view in views {

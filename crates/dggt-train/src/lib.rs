@@ -23,5 +23,7 @@ pub mod trainer;
 pub mod validate;
 
 pub use config::TrainConfig;
+/// Whether a training step reads the depth-and-flow maps ([`Trainer::train_step`] takes it).
+pub use dggt_objective::DepthFlowMaps;
 pub use error::TrainError;
 pub use trainer::{RunOptions, RunSummary, Start, Trainer};

@@ -32,7 +32,7 @@ use dggt_model::{Dggt, ModelConfig};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde_json::json;
 
-use dggt_objective::{LossTerm, Objective, StepBatch};
+use dggt_objective::{DepthFlowMaps, LossTerm, Objective, StepBatch};
 
 use crate::checkpoint::{self, Purpose, RunState};
 use crate::config::TrainConfig;
@@ -286,13 +286,17 @@ impl Trainer {
             elapsed_s: elapsed_before,
             checkpoint: None,
         };
-        let with_depth_flow = self.config.loss.depth > 0.0 || self.config.loss.flow > 0.0;
+        let maps = if self.config.loss.depth > 0.0 || self.config.loss.flow > 0.0 {
+            DepthFlowMaps::Read
+        } else {
+            DepthFlowMaps::Skip
+        };
 
         while self.state.step < last_step {
             let step = self.state.step;
             let samples = (0..samples_per_step).map(|_| next_sample(&mut stream)).collect::<Result<Vec<_>, _>>()?;
             self.count_bad_samples(&samples)?;
-            let mut record = self.train_step(&samples, schedule.factor(step), with_depth_flow)?;
+            let mut record = self.train_step(&samples, schedule.factor(step), maps)?;
             record["scenes"] = json!(samples.iter().map(|s| s.scene.name.clone()).collect::<Vec<_>>());
             record["bad_samples"] = json!(self.state.bad_samples);
             let pose_warmup = step < self.config.optim.pose_warmup_steps;
@@ -372,11 +376,11 @@ impl Trainer {
         &mut self,
         samples: &[LoadedSample],
         factor: f64,
-        with_depth_flow: bool,
+        maps: DepthFlowMaps,
     ) -> Result<serde_json::Value, TrainError> {
         let step = self.state.step;
         let started = Instant::now();
-        let outcome = self.accumulate(samples, with_depth_flow)?;
+        let outcome = self.accumulate(samples, maps)?;
         let mut record = json!({ "kind": "train", "step": step, "lr_factor": factor });
         let failure = match outcome {
             Some(outcome) => {
@@ -423,18 +427,18 @@ impl Trainer {
     /// Loss and gradients of the samples of one step: every device takes its own consecutive
     /// `optim.accumulation` samples (on its own thread) and sums their gradients; `None` when a loss is not
     /// finite. The gradients come back per device, in device order, for [`Replicas::all_reduce`].
-    fn accumulate(&self, samples: &[LoadedSample], with_depth_flow: bool) -> Result<Option<StepOutcome>, TrainError> {
+    fn accumulate(&self, samples: &[LoadedSample], maps: DepthFlowMaps) -> Result<Option<StepOutcome>, TrainError> {
         let scale = 1.0 / samples.len() as f64;
         let shares: Vec<&[LoadedSample]> = samples.chunks(samples.len().div_ceil(self.replicas.len())).collect();
         let results: Vec<Result<DeviceShare, TrainError>> = if shares.len() == 1 {
-            vec![self.run_share(self.replicas.master(), shares[0], scale, with_depth_flow)]
+            vec![self.run_share(self.replicas.master(), shares[0], scale, maps)]
         } else {
             std::thread::scope(|scope| {
                 let handles: Vec<_> = self
                     .replicas
                     .iter()
                     .zip(&shares)
-                    .map(|(replica, share)| scope.spawn(move || self.run_share(replica, share, scale, with_depth_flow)))
+                    .map(|(replica, share)| scope.spawn(move || self.run_share(replica, share, scale, maps)))
                     .collect();
                 handles.into_iter().map(|h| h.join().expect("a training thread panicked")).collect()
             })
@@ -457,13 +461,13 @@ impl Trainer {
         replica: &Replica,
         share: &[LoadedSample],
         scale: f64,
-        with_depth_flow: bool,
+        maps: DepthFlowMaps,
     ) -> Result<DeviceShare, TrainError> {
         let mut sum = GradientsAccumulator::<Dggt>::new();
         let mut samples = Vec::with_capacity(share.len());
         let mut finite = true;
         for sample in share {
-            let (result, grads) = self.run_sample(&replica.model, sample, &replica.device, scale, with_depth_flow)?;
+            let (result, grads) = self.run_sample(&replica.model, sample, &replica.device, scale, maps)?;
             match grads {
                 Some(grads) => sum.accumulate(&replica.model, grads),
                 None => finite = false,
@@ -480,11 +484,11 @@ impl Trainer {
         sample: &LoadedSample,
         device: &Device,
         scale: f64,
-        with_depth_flow: bool,
+        maps: DepthFlowMaps,
     ) -> Result<(SampleResult, Option<GradientsParams>), TrainError> {
         let started = Instant::now();
         let preprocess = &self.config.data.preprocess;
-        let batch = StepBatch::new(sample, &sample.scene, preprocess, with_depth_flow, device)?;
+        let batch = StepBatch::new(sample, &sample.scene, preprocess, maps, device)?;
         let prepared = Instant::now();
         let pose_warmup = sample.step < self.config.optim.pose_warmup_steps;
         let loss =

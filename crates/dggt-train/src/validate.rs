@@ -15,7 +15,7 @@ use dggt_data::{IndexedScene, LoadedSample, Preprocess, Scene, TrainingSample, l
 use dggt_losses::Lpips;
 use dggt_metrics::{MetricError, aligned_depth_rmse, image_metrics};
 use dggt_model::Dggt;
-use dggt_objective::{Objective, RenderedView, StepBatch, ViewsToRender, depth_flow_samples};
+use dggt_objective::{DepthFlowMaps, Objective, RenderedView, StepBatch, ViewsToRender, depth_flow_samples};
 use serde::Serialize;
 
 use crate::config::ValidationSection;
@@ -145,7 +145,7 @@ impl Validator<'_> {
         save_to: Option<&Path>,
     ) -> Result<Validation, TrainError> {
         let loaded = load_sample(scene, self.preprocess, 0, sample.clone())?;
-        let batch = StepBatch::new(&loaded, scene, self.preprocess, false, self.device)?;
+        let batch = StepBatch::new(&loaded, scene, self.preprocess, DepthFlowMaps::Skip, self.device)?;
         let model = self.model.valid();
         let (_, views) = self.objective.render(&model, &batch, ViewsToRender::Targets)?;
         let rendered = Tensor::stack::<4>(views.iter().map(|v| v.rgb.clone()).collect(), 0);

@@ -16,7 +16,7 @@ use dggt_model::Dggt;
 use dggt_train::checkpoint::{self, MANIFEST_FILE, MODEL_FILE, Purpose, RunState, STATE_FILE};
 use dggt_train::config::OptimSection;
 use dggt_train::optimizer::Optimizer;
-use dggt_train::{RunOptions, Start, TrainConfig, Trainer};
+use dggt_train::{DepthFlowMaps, RunOptions, Start, TrainConfig, Trainer};
 
 /// The AdamW state of the master replica as its checkpoint file holds it.
 fn optimizer_bytes(trainer: &Trainer, dir: &Path) -> Vec<u8> {
@@ -75,16 +75,16 @@ fn a_learning_rate_of_one_stops_the_run_as_diverged_without_checkpointing_the_fa
 fn a_rolled_back_step_restores_the_weights_and_the_moments() {
     let out = tempfile::tempdir().unwrap();
     let mut trainer = Trainer::new(small_config(out.path(), 4), vec![Device::flex()], Start::Fresh).unwrap();
-    trainer.train_step(&[trainer.sample(0).unwrap()], 1.0, false).unwrap();
+    trainer.train_step(&[trainer.sample(0).unwrap()], 1.0, DepthFlowMaps::Skip).unwrap();
     let (before, moments_before) = (weights(&trainer), optimizer_bytes(&trainer, out.path()));
     // A rate past f32's range: every stepped weight becomes infinite or NaN.
-    let record = trainer.train_step(&[trainer.sample(1).unwrap()], 1e300, false).unwrap();
+    let record = trainer.train_step(&[trainer.sample(1).unwrap()], 1e300, DepthFlowMaps::Skip).unwrap();
     assert!(record["rolled_back"].as_str().is_some_and(|t| t.contains('`')), "{record}");
     assert!(record["grad_norm"].as_f64().is_some_and(f64::is_finite), "{record}");
     assert_eq!((trainer.state().rolled_back_steps, trainer.state().failed_in_a_row), (1, 1));
     assert!(before == weights(&trainer), "the weights changed");
     assert!(moments_before == optimizer_bytes(&trainer, out.path()), "the moments changed");
-    let record = trainer.train_step(&[trainer.sample(2).unwrap()], 1.0, false).unwrap();
+    let record = trainer.train_step(&[trainer.sample(2).unwrap()], 1.0, DepthFlowMaps::Skip).unwrap();
     assert!(record.get("rolled_back").is_none() && record.get("skipped").is_none(), "{record}");
     assert_eq!(trainer.state().failed_in_a_row, 0, "a step that trains ends the row");
     assert!(before != weights(&trainer));

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 
 use burn::tensor::Device;
 use dggt_data::{DatasetSpec, ExportVariant, HeldOut};
-use dggt_objective::StepBatch;
+use dggt_objective::{DepthFlowMaps, StepBatch};
 use dggt_train::{RunOptions, Start, TrainConfig, Trainer};
 
 /// `count` synthetic scenes `root/000, 001, ...` in `variant`, 10 frames of one camera.
@@ -247,7 +247,8 @@ fn exports_without_depth_maps_supervise_depth_with_their_projected_lidar() {
     .unwrap();
     let sample = trainer.sample(0).unwrap();
     let preprocess = &trainer.config().data.preprocess;
-    let batch = StepBatch::new(&sample, &sample.scene, preprocess, true, &Device::flex().autodiff()).unwrap();
+    let batch =
+        StepBatch::new(&sample, &sample.scene, preprocess, DepthFlowMaps::Read, &Device::flex().autodiff()).unwrap();
     for view in &batch.inputs {
         let depth = view.depth_flow.as_ref().expect("lidar depth for every input view");
         assert!(depth.pixels.len() > 20, "{} lidar cells", depth.pixels.len());

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::tensor::{Device, Tensor};
-use dggt_train::{Start, TrainConfig, Trainer};
+use dggt_train::{DepthFlowMaps, Start, TrainConfig, Trainer};
 
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
@@ -96,7 +96,7 @@ fn one_step_trains_only_the_unfrozen_parts(config: TrainConfig) {
     assert!(validation.psnr.is_finite() && validation.views.len() == 3, "{validation:?}");
     let before = parameters_by_module(&trainer);
     let sample = trainer.sample(0).unwrap();
-    let record = trainer.train_step(&[sample], 1.0, false).unwrap();
+    let record = trainer.train_step(&[sample], 1.0, DepthFlowMaps::Skip).unwrap();
     assert!(record["terms"]["lpips"].as_f64().is_some_and(f64::is_finite), "{record}");
     let after = parameters_by_module(&trainer);
     // The losses reach the Gaussian, dynamic and sky parts; the frozen parts and the heads no loss reads

@@ -12,7 +12,7 @@ use std::path::Path;
 use burn::tensor::Device;
 use dggt_data::ExportVariant;
 use dggt_synth::{Sweeps, SynthConfig};
-use dggt_train::{Start, TrainConfig, Trainer};
+use dggt_train::{DepthFlowMaps, Start, TrainConfig, Trainer};
 
 use super::{ComputeOptions, Record, Scale, ScaleSpec, timed};
 use crate::error::BenchError;
@@ -33,8 +33,9 @@ pub fn train_step_record(options: &ComputeOptions, spec: &ScaleSpec, device: &De
     let record = timed(key, options, device, || {
         let sample = trainer.sample(sample_index).map_err(|e| BenchError::invalid("training sample", e.to_string()))?;
         sample_index += 1;
-        let metrics =
-            trainer.train_step(&[sample], 1.0, false).map_err(|e| BenchError::invalid("step", e.to_string()))?;
+        let metrics = trainer
+            .train_step(&[sample], 1.0, DepthFlowMaps::Skip)
+            .map_err(|e| BenchError::invalid("step", e.to_string()))?;
         if let Some(skipped) = metrics.get("skipped") {
             return Err(BenchError::invalid("step", format!("skipped: {skipped}")));
         }
