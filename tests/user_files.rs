@@ -222,8 +222,10 @@ fn reconstruct_and_eval_default_to_the_width_the_run_trained_at() {
     succeeded(evaluate(&run, &evaluation, &[]));
     assert_eq!(json(&evaluation.join("eval.json"))["preprocess"]["target_width"].as_u64(), Some(56));
 
+    // An older version's checkpoint: neither the preprocessing nor the checksums that list it.
     let checkpoint = run.join("checkpoints/step-00000001");
     std::fs::remove_file(checkpoint.join("preprocess.json")).expect("the checkpoint records its preprocessing");
+    std::fs::remove_file(checkpoint.join("checksums.json")).expect("the checkpoint lists its files' checksums");
     let older = dir.path().join("older");
     let text = succeeded(reconstruct(&run, &older, &["--frames", "0..1"]));
     assert!(text.contains("does not record the input preprocessing"), "{text}");
