@@ -142,6 +142,9 @@ fn the_refiner_benchmark_times_frames_at_a_folders_sizes() {
     let folder = work.path().join("model");
     let text = succeeded(&dggt(&["bench", "refiner", "--model", path(&base), "--write-model", path(&folder)]));
     assert!(text.contains("wrote a made-up model folder") && folder.join("model_difix.safetensors").is_file());
+    let again = dggt(&["bench", "refiner", "--model", path(&base), "--write-model", path(&folder)]);
+    let stderr = String::from_utf8_lossy(&again.stderr);
+    assert!(!again.status.success() && stderr.contains("is not empty") && stderr.contains("--overwrite"), "{stderr}");
     let args = ["bench", "refiner", "--model", path(&folder), "--load", "--height", "20", "--width", "30"];
     let text = succeeded(&dggt(&[&args[..], &["--repeat", "1"]].concat()));
     assert!(text.contains("weights loaded from disk") && text.contains("load (files read"), "{text}");

@@ -15,6 +15,7 @@ use dggt_refine::{Latent, Prompt, ReferenceView, Refiner, RefinerPrecision, Refi
 use dggt_refine_train::fresh::fresh_checkpoint;
 
 use crate::backend::DeviceList;
+use crate::commands::output::{self, OutputKind, OverwriteArg};
 use crate::commands::refine::load_refiner;
 
 /// Time the diffusion refiner on one frame (made-up weights and frames: the cost, not the quality) and report
@@ -32,6 +33,9 @@ pub struct Args {
     /// and a fresh Difix checkpoint (`model_difix.safetensors`) to this folder, for `--model DIR --load`.
     #[arg(long, conflicts_with = "load")]
     write_model: Option<PathBuf>,
+    /// With `--write-model`: replace a made-up model folder written earlier there.
+    #[command(flatten)]
+    overwrite: OverwriteArg,
     #[arg(long, default_value_t = 512)]
     height: usize,
     #[arg(long, default_value_t = 512)]
@@ -66,7 +70,7 @@ pub fn run(args: Args) -> Result<()> {
         None => (RefinerConfigs::sd_turbo(), PathBuf::from("sd-turbo (built in)")),
     };
     if let Some(dir) = &args.write_model {
-        return write_model(&configs, dir, &device);
+        return write_model(&configs, dir, args.overwrite.existing(), &device);
     }
     let started = Instant::now();
     let refiner = build_refiner(&args, &configs, &origin, &device)?;
@@ -108,8 +112,13 @@ fn build_refiner(args: &Args, configs: &RefinerConfigs, origin: &Path, device: &
     load_refiner(&spec, device)
 }
 
+/// A made-up model folder; its Difix checkpoint is written last.
+const MADE_UP_MODEL: OutputKind =
+    OutputKind { command: "bench refiner --write-model", signature: "model_difix.safetensors" };
+
 /// Writes the made-up model folder of `configs` and a fresh Difix checkpoint over it into `dir`.
-fn write_model(configs: &RefinerConfigs, dir: &Path, device: &Device) -> Result<()> {
+fn write_model(configs: &RefinerConfigs, dir: &Path, existing: output::Existing, device: &Device) -> Result<()> {
+    output::prepare(dir, MADE_UP_MODEL, existing)?;
     let started = Instant::now();
     write_random_model(configs, dir, device)?;
     let checkpoint = dir.join("model_difix.safetensors");
