@@ -76,13 +76,19 @@ fn wgpu_tile_cubes_sum_gradients_per_unit_and_with_compare_and_swap() {
     // device runs the tests: the long-list case again, in a child process of this test binary with the
     // variables that select them set.
     let test = "tile_cubes::wgpu_tile_cubes_walk_lists_longer_than_one_stage";
-    let status = std::process::Command::new(std::env::current_exe().expect("the test binary"))
+    let child = std::process::Command::new(std::env::current_exe().expect("the test binary"))
         .args(["--exact", test, "--test-threads=1"])
         .env("DGGT_SPLAT_UNIT_SUMS", "1")
         .env("DGGT_SPLAT_CAS_ATOMICS", "1")
-        .status()
+        .output()
         .expect("the test binary runs");
-    assert!(status.success(), "{test} failed with per-unit sums and compare-and-swap adds: {status}");
+    let output = format!("{}\n{}", String::from_utf8_lossy(&child.stdout), String::from_utf8_lossy(&child.stderr));
+    // A renamed test would run nothing and still exit 0: the child must have run exactly that one test.
+    assert!(
+        child.status.success() && output.contains("test result: ok. 1 passed"),
+        "{test} failed (or did not run) with per-unit sums and compare-and-swap adds ({}):\n{output}",
+        child.status
+    );
 }
 
 #[test]
