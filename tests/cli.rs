@@ -7,7 +7,7 @@ fn dggt(args: &[&str]) -> Output {
 }
 
 fn fixture() -> String {
-    format!("{}/data-fixtures/synth-s0", env!("CARGO_MANIFEST_DIR"))
+    dggt_test_data::fixture("synth-s0").display().to_string()
 }
 
 #[test]

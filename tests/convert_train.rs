@@ -13,11 +13,7 @@ mod common;
 mod nuscenes_scene;
 
 fn real_data() -> PathBuf {
-    let dir = std::env::var_os("DGGT_REAL_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| common::repo().join("../shared/real-data"));
-    assert!(dir.is_dir(), "real driving data not found at {} (set DGGT_REAL_DATA)", dir.display());
-    dir
+    dggt_test_data::real_data()
 }
 
 fn dggt(args: &[&str]) -> Output {

@@ -11,7 +11,7 @@ use dggt_geom::glam::{DVec2, DVec3};
 use dggt_geom::{PinholeIntrinsics, Rigid, World};
 
 fn fixture() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data-fixtures/synth-s0")
+    dggt_test_data::fixture("synth-s0")
 }
 
 /// Every file under `root`, by path relative to it.

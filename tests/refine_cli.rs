@@ -18,10 +18,7 @@ fn dggt(args: &[&str]) -> Output {
 }
 
 fn vectors() -> PathBuf {
-    let root = std::env::var_os("DGGT_PARITY_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/parity"));
-    let dir = root.join("difix_tiny_s1");
+    let dir = dggt_test_data::parity("difix_tiny_s1");
     assert!(
         dir.join("model_difix.pkl").is_file(),
         "refiner parity vectors not found at {} (set DGGT_PARITY_DIR to the shared parity folder)",
@@ -166,7 +163,7 @@ fn reconstruct_writes_refined_renders_beside_the_unrefined() {
     let text = succeeded(&dggt(&[
         "reconstruct",
         "--images",
-        path(&repo.join("data-fixtures/synth-s0")),
+        path(&dggt_test_data::fixture("synth-s0")),
         "--checkpoint",
         path(&run),
         "--cameras",

@@ -12,8 +12,7 @@ fn dggt(args: &[&str]) -> Output {
 
 fn config() -> PathBuf {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs/refine-tiny.toml");
-    let parity = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/parity/difix_tiny_s1");
-    assert!(parity.is_dir(), "the configuration's refiner is missing: {}", parity.display());
+    dggt_test_data::parity("difix_tiny_s1");
     path
 }
 
@@ -85,7 +84,7 @@ fn refine_pairs_writes_shards_that_a_rerun_keeps_and_training_reads() {
     std::fs::write(&record, recorded).unwrap();
 
     // The refiner trains on the folder (the tiny configuration with absolute paths and rendered pairs).
-    let shared = repo.join("../shared");
+    let shared = dggt_test_data::Shared::Parity.dir().join("..");
     let text = std::fs::read_to_string(config()).unwrap().replace("\"../../shared", &format!("\"{}", shared.display()));
     let images = text.lines().find(|l| l.starts_with("images = ")).unwrap().to_string();
     let text = text.replace(&images, &format!("rendered = \"{}\"", shards.display()));

@@ -11,7 +11,7 @@ use dggt_train::TrainConfig;
 mod common;
 
 fn fixture() -> PathBuf {
-    common::repo().join("data-fixtures/synth-s0")
+    dggt_test_data::fixture("synth-s0")
 }
 
 fn dggt(args: &[&str]) -> Output {

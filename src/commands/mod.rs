@@ -21,7 +21,7 @@ pub mod train;
 use std::ops::Range;
 
 /// Parses `START..END` (end exclusive, not empty), the form every `--frames` takes.
-pub fn parse_range(text: &str) -> Result<Range<usize>, String> {
+pub(crate) fn parse_range(text: &str) -> Result<Range<usize>, String> {
     let (start, end) = text.split_once("..").ok_or_else(|| format!("expected START..END, got {text:?}"))?;
     let start: usize = start.trim().parse().map_err(|_| format!("bad range start in {text:?}"))?;
     let end: usize = end.trim().parse().map_err(|_| format!("bad range end in {text:?}"))?;

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use dggt_train::TrainConfig;
 
 pub fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+    dggt_test_data::repo_root()
 }
 
 /// `configs/tiny-overfit.toml` made small and unattended: two inputs at width 56 drawn from a window of 8

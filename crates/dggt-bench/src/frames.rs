@@ -28,13 +28,13 @@ pub fn plan_frames(frames: usize, targets: Option<&[usize]>) -> Result<FramePlan
     targets.sort_unstable();
     targets.dedup();
     if targets.is_empty() {
-        return Err(BenchError::invalid(
+        return Err(BenchError::setting(
             "target frames",
             format!("none: a scene of {frames} frames needs at least 5 frames for the default targets"),
         ));
     }
     if let Some(&bad) = targets.iter().find(|&&t| t == 0 || t + 1 >= frames) {
-        return Err(BenchError::invalid(
+        return Err(BenchError::setting(
             "target frames",
             format!("{bad} is not strictly inside the scene's frames 0..{frames} (inputs must bracket targets)"),
         ));

@@ -41,8 +41,8 @@ impl Precision {
 
     /// Parses `f32`, `f16` or `bf16`.
     pub fn parse(text: &str) -> Result<Self, BenchError> {
-        Self::ALL.into_iter().find(|p| p.name().eq_ignore_ascii_case(text.trim())).ok_or_else(|| BenchError::Invalid {
-            what: "precision".into(),
+        Self::ALL.into_iter().find(|p| p.name().eq_ignore_ascii_case(text.trim())).ok_or_else(|| BenchError::Setting {
+            setting: "precision",
             detail: format!("`{text}`: expected f32, f16 or bf16"),
         })
     }
@@ -82,8 +82,8 @@ pub fn format_opacity(value: f32) -> String {
 /// Parses an opacity: a decimal or `N/D` (e.g. `1/255`).
 pub fn parse_opacity(text: &str) -> Result<f32, BenchError> {
     let text = text.trim();
-    let invalid = || BenchError::Invalid {
-        what: "minimum opacity".into(),
+    let invalid = || BenchError::Setting {
+        setting: "minimum opacity",
         detail: format!("`{text}`: expected a number in [0, 1] such as 0.01 or 1/255"),
     };
     let value = match text.split_once('/') {
@@ -127,8 +127,8 @@ impl Skips {
 
     /// Parses `none`, `motion`, `sky` or `all`.
     pub fn parse(text: &str) -> Result<Self, BenchError> {
-        Self::ALL.into_iter().find(|s| s.name().eq_ignore_ascii_case(text.trim())).ok_or_else(|| BenchError::Invalid {
-            what: "skips".into(),
+        Self::ALL.into_iter().find(|s| s.name().eq_ignore_ascii_case(text.trim())).ok_or_else(|| BenchError::Setting {
+            setting: "skips",
             detail: format!("`{text}`: expected none, motion, sky or all"),
         })
     }
@@ -269,7 +269,7 @@ fn or_base<T: Copy>(values: &[T], base: T) -> Vec<T> {
 impl SweepSpec {
     /// Checks the values that need no scene or network.
     pub fn validate(&self) -> Result<(), BenchError> {
-        let invalid = |what: &str, detail: String| Err(BenchError::Invalid { what: what.into(), detail });
+        let invalid = |setting: &'static str, detail: String| Err(BenchError::Setting { setting, detail });
         if let Culling::MinOpacity(value) = self.baseline.culling
             && !(0.0..=1.0).contains(&value)
         {

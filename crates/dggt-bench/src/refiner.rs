@@ -5,6 +5,7 @@
 use std::time::Instant;
 
 use burn::tensor::{Device, Distribution, Tensor};
+use dggt_model::host::host_f32;
 use dggt_refine::{Latent, Refiner, Trace};
 
 use crate::error::BenchError;
@@ -36,12 +37,8 @@ pub fn time_refiner_frames(
         let started = Instant::now();
         let refined = refiner
             .refine(frame.clone(), reference.clone(), Latent::PosteriorMean, &mut Trace::Off)
-            .map_err(|e| BenchError::invalid("refiner", e.to_string()))?;
-        refined
-            .into_data()
-            .convert::<f32>()
-            .try_into_vec::<f32>()
-            .map_err(|e| BenchError::invalid("refiner", format!("reading the frame back: {e:?}")))?;
+            .map_err(|source| BenchError::Refine { doing: "refining a frame", source: Box::new(source) })?;
+        host_f32(refined, "refined frame")?;
         if run >= warmup {
             times.push(started.elapsed().as_secs_f64() * 1e3);
         }

@@ -22,6 +22,7 @@ use dggt_infer::{
 };
 use dggt_losses::{Lpips, LpipsKind};
 use dggt_metrics::ImageShape;
+use dggt_model::host::host_f32;
 use dggt_model::{Dggt, ModelConfig};
 use dggt_refine::{Latent, ReferenceView, Refiner, RefinerSpec, frame_from_interleaved, frame_to_interleaved};
 use dggt_scene::{AssemblyCounts, AssemblySettings, TargetView, Timeline, nearest_in_time};
@@ -316,10 +317,10 @@ struct Runner<'a> {
 pub fn run_bench(options: &BenchOptions, device: &Device) -> Result<BenchReport, BenchError> {
     options.sweep.validate()?;
     if options.repeat == 0 {
-        return Err(BenchError::invalid("--repeat", "must be at least 1"));
+        return Err(BenchError::setting("--repeat", "must be at least 1"));
     }
     if options.cameras.is_empty() {
-        return Err(BenchError::invalid("--cameras", "no camera given"));
+        return Err(BenchError::setting("--cameras", "no camera given"));
     }
     let scene = dggt_data::open_scene(&options.scene, None, Some(options.cameras.clone()))?;
     let plan = plan_frames(scene.frames.len(), options.targets.as_deref())?;
@@ -327,14 +328,18 @@ pub fn run_bench(options: &BenchOptions, device: &Device) -> Result<BenchReport,
     let configurations = options.sweep.configurations();
     let patch = network.patch_size;
     if let Some(bad) = configurations.iter().map(|c| c.knobs.width).find(|w| !w.is_multiple_of(patch)) {
-        return Err(BenchError::invalid("width", format!("{bad} px is not a multiple of the {patch}-pixel patch")));
+        return Err(BenchError::setting("width", format!("{bad} px is not a multiple of the {patch}-pixel patch")));
     }
     let lpips = match &options.lpips {
         Some(files) => Some(Lpips::load(LpipsKind::Alex, &files.backbone, &files.linear, device)?),
         None => None,
     };
     let refiner = match &options.refine {
-        Some(spec) => Some(spec.load(device).map_err(|e| BenchError::invalid("refiner", e.to_string()))?.0),
+        Some(spec) => Some(
+            spec.load(device)
+                .map_err(|source| BenchError::Refine { doing: "loading the refiner", source: Box::new(source) })?
+                .0,
+        ),
         None => None,
     };
     let cache =
@@ -384,7 +389,7 @@ pub fn run_bench(options: &BenchOptions, device: &Device) -> Result<BenchReport,
         if configuration.varied == Varied::Reference {
             reference = Some(at_reference.clone());
         }
-        let exact = reference.as_ref().ok_or_else(|| BenchError::invalid("sweep", "the exact reference runs first"))?;
+        let exact = reference.as_ref().ok_or_else(|| BenchError::Missing("sweep: the exact reference runs first"))?;
         let vs_exact = compare(&at_reference, exact, reference_size, lpips.as_ref(), device)?;
         let truth: Vec<Vec<f32>> = targets.iter().map(|t| t.truth.clone()).collect();
         let vs_truth = compare(&at_reference, &truth, reference_size, lpips.as_ref(), device)?;
@@ -455,11 +460,10 @@ fn measure(
         })),
         Err(panic) => {
             let message = panic_message(&*panic).split_whitespace().collect::<Vec<_>>().join(" ");
-            let reason = format!("failed: {message}");
             if is_reference {
-                return Err(BenchError::invalid("the exact reference render", reason));
+                return Err(BenchError::Panicked { doing: "the exact reference render", message });
             }
-            Ok(Err(reason))
+            Ok(Err(format!("failed: {message}")))
         }
     }
 }
@@ -551,7 +555,7 @@ impl Runner<'_> {
             }
             last = Some(outputs);
         }
-        let last = last.ok_or_else(|| BenchError::invalid("--repeat", "no run"))?;
+        let last = last.ok_or_else(|| BenchError::setting("--repeat", "no run"))?;
         let median_of = |k: usize| median(samples.iter().map(|s| s[k]).collect());
         let times = StageTimes {
             backbone_ms: median_of(0),
@@ -612,9 +616,8 @@ impl Runner<'_> {
                 .iter()
                 .map(|(slot, _)| {
                     let candidates = input_slots.iter().map(|s| (s.rig_camera, s.time));
-                    let position = nearest_in_time(candidates, slot.rig_camera, slot.time).ok_or_else(|| {
-                        BenchError::invalid("refiner reference", format!("no input view of camera {}", slot.rig_camera))
-                    })?;
+                    let position = nearest_in_time(candidates, slot.rig_camera, slot.time)
+                        .ok_or_else(|| BenchError::NoReferenceView { camera: slot.rig_camera })?;
                     Ok(interleaved(&input_views[position].image.data, size))
                 })
                 .collect::<Result<Vec<_>, BenchError>>()?,
@@ -669,7 +672,7 @@ impl Runner<'_> {
         };
         let views = input_views(&prediction, &setup.input_slots, cameras, setup.size)?;
         let scene = Scene4d::build(model, &prediction, images, views, &setup.timeline, &setup.scene_options)?
-            .ok_or_else(|| BenchError::invalid("network", "no Gaussian head: nothing to render"))?;
+            .ok_or_else(|| BenchError::Missing("network: no Gaussian head: nothing to render"))?;
         let mut targets = Vec::new();
         for &(slot, camera) in &setup.target_truth {
             let camera = match self.options.poses {
@@ -751,7 +754,7 @@ fn refine_renders(
     repeat: usize,
     device: &Device,
 ) -> Result<(f64, Vec<Vec<f32>>), BenchError> {
-    let refine_error = |e: dggt_refine::RefineError| BenchError::invalid("refining a render", e.to_string());
+    let refine_error = |source| BenchError::Refine { doing: "refining a render", source: Box::new(source) };
     let (h, w) = (run.size.height as usize, run.size.width as usize);
     let mut times = Vec::new();
     let mut refined = Vec::new();
@@ -822,11 +825,7 @@ fn compare(
                 Tensor::<4>::from_data(TensorData::new(data, [list.len(), shape.height, shape.width, 3]), device)
             };
             let values = net.eval(batch(images), batch(references))?;
-            let values: Vec<f32> = values
-                .into_data()
-                .convert::<f32>()
-                .try_into_vec::<f32>()
-                .map_err(|e| BenchError::invalid("LPIPS", format!("reading the values back: {e:?}")))?;
+            let values = host_f32(values, "LPIPS values")?;
             Some(values.iter().map(|&v| v as f64).sum::<f64>() / values.len().max(1) as f64)
         }
         None => None,

@@ -17,6 +17,7 @@ use burn::tensor::Tensor;
 use dggt_infer::{MotionPath, Prediction, Scene4d, heads_chunked};
 use dggt_model::Dggt;
 use dggt_model::aggregator::AggregatorOutput;
+use dggt_model::host::host_f32;
 use dggt_scene::{AssembledGaussians, TargetView};
 
 use crate::error::BenchError;
@@ -28,14 +29,8 @@ pub fn settle<const D: usize>(tensor: &Tensor<D>) -> Result<(), BenchError> {
     if tensor.shape().num_elements() == 0 {
         return Ok(());
     }
-    tensor
-        .clone()
-        .sum()
-        .into_data()
-        .convert::<f32>()
-        .try_into_vec::<f32>()
-        .map(|_| ())
-        .map_err(|e| BenchError::invalid("device", format!("reading a stage's output back: {e:?}")))
+    host_f32(tensor.clone().sum(), "a stage's output")?;
+    Ok(())
 }
 
 /// The aggregator on `images` (`[1, S, 3, H, W]`, RGB in `[0, 1]`, in the model's float type).
@@ -71,11 +66,6 @@ pub fn rasterise(
 ) -> Result<Rasterised, BenchError> {
     let view = scene.render_assembled(assembled, target)?;
     let sky_rendered = view.sky.is_some();
-    let rgb = view
-        .rgb
-        .into_data()
-        .convert::<f32>()
-        .try_into_vec::<f32>()
-        .map_err(|e| BenchError::invalid("render", format!("reading the image back: {e:?}")))?;
+    let rgb = host_f32(view.rgb, "render")?;
     Ok(Rasterised { rgb, sky_rendered })
 }

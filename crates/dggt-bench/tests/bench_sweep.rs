@@ -17,7 +17,7 @@ use dggt_refine::{Latent, Prompt, ReferenceView, RefinerSpec};
 use dggt_scene::{AssemblySettings, InputView, MeansGradient, PixelGaussians, TargetView, render_target};
 
 fn fixture() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../data-fixtures/synth-s0")
+    dggt_test_data::fixture("synth-s0")
 }
 
 fn values<const D: usize>(tensor: Tensor<D>) -> Vec<f32> {
@@ -50,9 +50,7 @@ fn bounded_sweep_writes_table_and_plot() {
     };
     // The tiny random refiner of the parity vectors (plumbing only: its images mean nothing), in the
     // reference-view mode (each render attends to its camera's nearest input view).
-    let refiner = std::env::var_os("DGGT_PARITY_DIR")
-        .map_or_else(|| fixture().join("../../../shared/parity"), PathBuf::from)
-        .join("difix_tiny_s1");
+    let refiner = dggt_test_data::parity("difix_tiny_s1");
     options.refine = Some(RefinerSpec {
         model_dir: refiner.join("base"),
         checkpoint: refiner.join("model_difix.pkl"),

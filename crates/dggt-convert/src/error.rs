@@ -22,6 +22,9 @@ pub enum ConvertError {
     Table { path: PathBuf, expected: String, found: String },
     #[error(transparent)]
     Data(#[from] dggt_data::DataError),
+    /// A nuScenes version given by name is not a plain folder name.
+    #[error("{name:?} is not a folder name (a nuScenes version such as v1.0-mini)")]
+    VersionName { name: String },
     #[error("cannot serialise {what}: {source}")]
     Json { what: &'static str, source: serde_json::Error },
 }

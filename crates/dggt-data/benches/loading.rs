@@ -11,9 +11,7 @@ use std::time::Instant;
 use dggt_data::{LoaderOptions, Preprocess, Sampler, SamplerConfig, Scene, open_scene, prepare_view, training_stream};
 
 fn real_data() -> PathBuf {
-    std::env::var_os("DGGT_REAL_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/real-data"))
+    dggt_test_data::Shared::RealData.locate()
 }
 
 fn time_views(label: &str, scene: &Scene, camera: usize, preprocess: &Preprocess, repeats: usize) {
@@ -45,7 +43,7 @@ fn main() {
     let kitti = open_scene(&real_data().join("kitti-odometry/sequence_1"), None, None).expect("KITTI sequence");
     time_views("KITTI 1226x370 png -> 518x154", &kitti, 0, &release, 50);
 
-    let fixture = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../data-fixtures/synth-s0");
+    let fixture = dggt_test_data::fixture("synth-s0");
     let synth = Arc::new(open_scene(&fixture, None, None).expect("fixture"));
     time_views("fixture 160x112 jpg+masks -> 518x364", &synth, 0, &release, 60);
     let kitti = Arc::new(kitti);

@@ -8,15 +8,7 @@ use dggt_data::{ExportOptions, Preprocess, prepare_view, read_export, read_kitti
 use dggt_geom::glam::DVec3;
 
 fn real_data() -> PathBuf {
-    let dir = std::env::var_os("DGGT_REAL_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/real-data"));
-    assert!(
-        dir.is_dir(),
-        "real driving data not found at {} (set DGGT_REAL_DATA to the shared real-data folder)",
-        dir.display()
-    );
-    dir
+    dggt_test_data::real_data()
 }
 
 #[test]

@@ -4,8 +4,20 @@ use std::path::{Path, PathBuf};
 
 #[derive(Debug, thiserror::Error)]
 pub enum EvalError {
-    #[error("{what}: {detail}")]
-    Invalid { what: String, detail: String },
+    /// A command-line option's value is out of its range or contradicts the protocol.
+    #[error("{option}: {detail}")]
+    Option { option: &'static str, detail: String },
+    /// The checkpoint's network has no Gaussian head: nothing can be rendered to score.
+    #[error("checkpoint {}: the network has no Gaussian head: there is nothing to render", checkpoint.display())]
+    NoGaussianHead { checkpoint: PathBuf },
+    /// The refiner's reference view was asked of a camera without input views.
+    #[error("refiner reference: no input view of camera {camera}")]
+    NoReferenceView { camera: usize },
+    /// The diffusion refiner failed while `doing` (loading it, refining a render).
+    #[error("{doing}")]
+    Refine { doing: String, source: dggt_refine::RefineError },
+    #[error(transparent)]
+    ReadBack(#[from] dggt_model::host::ReadBackError),
     #[error("scene {}: {detail}", path.display())]
     Scene { path: PathBuf, detail: String },
     #[error("{}: {detail}", path.display())]
@@ -25,8 +37,8 @@ pub enum EvalError {
 }
 
 impl EvalError {
-    pub(crate) fn invalid(what: impl Into<String>, detail: impl Into<String>) -> Self {
-        Self::Invalid { what: what.into(), detail: detail.into() }
+    pub(crate) fn option(option: &'static str, detail: impl Into<String>) -> Self {
+        Self::Option { option, detail: detail.into() }
     }
 
     pub(crate) fn scene(path: &Path, detail: impl Into<String>) -> Self {

@@ -15,6 +15,6 @@ pub mod report;
 pub mod runner;
 
 pub use error::EvalError;
-pub use protocol::{Protocol, ProtocolKind, Split};
+pub use protocol::{Protocol, ProtocolKind, TargetKind};
 pub use report::{EvalReport, MOTION_HELD, SceneReport, SplitSummary, ViewRecord};
 pub use runner::{EvalOptions, LpipsWeights, MotionSource, evaluate};

@@ -50,7 +50,7 @@ impl fmt::Display for ProtocolKind {
 /// How a scored view is reported.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
 #[serde(rename_all = "snake_case")]
-pub enum Split {
+pub enum TargetKind {
     /// An input view re-rendered.
     Reconstruction,
     /// A frame that is no input, paper protocol.
@@ -61,7 +61,7 @@ pub enum Split {
     Extrapolated,
 }
 
-impl Split {
+impl TargetKind {
     /// The heading of the split in reports.
     pub fn title(self) -> &'static str {
         match self {
@@ -73,7 +73,7 @@ impl Split {
     }
 }
 
-impl fmt::Display for Split {
+impl fmt::Display for TargetKind {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(match self {
             Self::Reconstruction => "reconstruction",
@@ -123,13 +123,13 @@ impl Protocol {
     /// Checks the settings themselves (not yet against a scene).
     pub fn validate(&self) -> Result<(), EvalError> {
         if self.length == 0 {
-            return Err(EvalError::invalid("--frames", "the window is empty"));
+            return Err(EvalError::option("--frames", "the window is empty"));
         }
         if self.every == 0 {
-            return Err(EvalError::invalid("--every", "must be at least 1"));
+            return Err(EvalError::option("--every", "must be at least 1"));
         }
         if self.kind == ProtocolKind::Paper && self.every != PAPER_EVERY {
-            return Err(EvalError::invalid(
+            return Err(EvalError::option(
                 "--every",
                 format!(
                     "the paper protocol takes every {PAPER_EVERY}th frame as input; use --protocol interpolation \
@@ -138,19 +138,19 @@ impl Protocol {
             ));
         }
         if self.kind == ProtocolKind::Reconstruction && self.every != 1 {
-            return Err(EvalError::invalid("--every", "the reconstruction protocol takes every frame as input"));
+            return Err(EvalError::option("--every", "the reconstruction protocol takes every frame as input"));
         }
         if self.kind == ProtocolKind::Interpolation {
             self.check_two_inputs()?;
         }
         if self.cameras.is_empty() {
-            return Err(EvalError::invalid("--cameras", "no camera chosen"));
+            return Err(EvalError::option("--cameras", "no camera chosen"));
         }
         let mut sorted = self.cameras.clone();
         sorted.sort_unstable();
         sorted.dedup();
         if sorted.len() != self.cameras.len() {
-            return Err(EvalError::invalid("--cameras", format!("{:?} names a camera twice", self.cameras)));
+            return Err(EvalError::option("--cameras", format!("{:?} names a camera twice", self.cameras)));
         }
         Ok(())
     }
@@ -158,7 +158,7 @@ impl Protocol {
     /// Interpolation needs two inputs or more: a window of two frames or more, and a stride shorter than it.
     fn check_two_inputs(&self) -> Result<(), EvalError> {
         if self.length < 2 {
-            return Err(EvalError::invalid(
+            return Err(EvalError::option(
                 "--frames",
                 "the interpolation protocol needs a window of two frames or more",
             ));
@@ -166,7 +166,7 @@ impl Protocol {
         if self.every < self.length {
             return Ok(());
         }
-        Err(EvalError::invalid(
+        Err(EvalError::option(
             "--every",
             format!(
                 "{} leaves one input in the window {:?} ({} frames); the interpolation protocol needs two or more: \
@@ -190,21 +190,23 @@ impl Protocol {
     }
 
     /// Every scored frame with its split, ascending.
-    pub fn targets(&self) -> Vec<(usize, Split)> {
+    pub fn targets(&self) -> Vec<(usize, TargetKind)> {
         let inputs = self.input_frames();
         let last_input = inputs.last().copied().unwrap_or(self.start);
         let split = |frame: usize| match self.kind {
-            _ if inputs.contains(&frame) => Split::Reconstruction,
-            ProtocolKind::Paper => Split::NovelView,
-            ProtocolKind::Reconstruction | ProtocolKind::Interpolation if frame > last_input => Split::Extrapolated,
-            ProtocolKind::Reconstruction | ProtocolKind::Interpolation => Split::Interpolated,
+            _ if inputs.contains(&frame) => TargetKind::Reconstruction,
+            ProtocolKind::Paper => TargetKind::NovelView,
+            ProtocolKind::Reconstruction | ProtocolKind::Interpolation if frame > last_input => {
+                TargetKind::Extrapolated
+            }
+            ProtocolKind::Reconstruction | ProtocolKind::Interpolation => TargetKind::Interpolated,
         };
         self.window().map(|f| (f, split(f))).collect()
     }
 
     /// The splits this protocol reports, in report order.
-    pub fn splits(&self) -> Vec<Split> {
-        let mut splits: Vec<Split> = self.targets().into_iter().map(|(_, s)| s).collect();
+    pub fn splits(&self) -> Vec<TargetKind> {
+        let mut splits: Vec<TargetKind> = self.targets().into_iter().map(|(_, s)| s).collect();
         splits.sort_unstable();
         splits.dedup();
         splits

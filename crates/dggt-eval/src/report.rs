@@ -16,7 +16,7 @@ use dggt_data::Preprocess;
 use dggt_infer::CheckpointInfo;
 use serde::Serialize;
 
-use crate::protocol::{Protocol, Split};
+use crate::protocol::{Protocol, TargetKind};
 use dggt_metrics::{FlowMetrics, mean_present};
 
 /// How the predicted 3D motion was obtained.
@@ -30,7 +30,7 @@ pub struct ViewRecord {
     /// Export camera id.
     pub camera: usize,
     pub camera_name: String,
-    pub split: Split,
+    pub split: TargetKind,
     /// Scene time the view was rendered at (the release's timeline).
     pub scene_time: f64,
     /// PSNR in dB against the preprocessed image.
@@ -70,7 +70,7 @@ pub struct ImageScores {
 /// Means of one split (of one scene, or over scenes).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SplitSummary {
-    pub split: Split,
+    pub split: TargetKind,
     /// Views of the split (per scene), or scenes (overall).
     pub count: usize,
     pub psnr: Option<f64>,
@@ -148,7 +148,7 @@ pub struct EvalReport {
 }
 
 /// Means of `views` of `split` (views of other splits are ignored).
-pub fn summarise_views(views: &[ViewRecord], split: Split) -> SplitSummary {
+pub fn summarise_views(views: &[ViewRecord], split: TargetKind) -> SplitSummary {
     let views: Vec<&ViewRecord> = views.iter().filter(|v| v.split == split).collect();
     let motion = |f: fn(&FlowMetrics) -> Option<f64>| mean_present(views.iter().map(|v| v.motion.as_ref().and_then(f)));
     let (d_rmse, d_rmse_count) = mean_present(views.iter().map(|v| v.d_rmse));
@@ -180,7 +180,7 @@ pub fn summarise_views(views: &[ViewRecord], split: Split) -> SplitSummary {
 }
 
 /// Per split, the mean over the scenes' split means.
-pub fn summarise_scenes(scenes: &[SceneReport], splits: &[Split]) -> Vec<SplitSummary> {
+pub fn summarise_scenes(scenes: &[SceneReport], splits: &[TargetKind]) -> Vec<SplitSummary> {
     splits
         .iter()
         .map(|&split| {

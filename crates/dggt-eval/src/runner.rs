@@ -29,6 +29,7 @@ use dggt_infer::{
     forward_chunked, input_views, load_network,
 };
 use dggt_losses::{Lpips, LpipsKind};
+use dggt_model::host::host_f32;
 use dggt_refine::{ReferenceView, Refiner, RefinerSpec, frame_from_interleaved, frame_to_interleaved};
 use dggt_scene::{TargetView, Timeline, nearest_in_time};
 
@@ -155,7 +156,7 @@ pub fn evaluate(options: &EvalOptions, device: &Device) -> Result<EvalReport, Ev
     let protocol = &options.protocol;
     protocol.validate()?;
     if options.scenes.is_empty() {
-        return Err(EvalError::invalid("--scene", "give at least one scene export"));
+        return Err(EvalError::option("--scene", "give at least one scene export"));
     }
     // Every scene is checked before the network is loaded, so that a bad one fails fast.
     let scenes: Vec<Scene> = options.scenes.iter().map(|root| open_window(root, protocol)).collect::<Result<_, _>>()?;
@@ -171,9 +172,10 @@ pub fn evaluate(options: &EvalOptions, device: &Device) -> Result<EvalReport, Ev
     };
     let refiner = match &options.refine {
         Some(spec) => {
-            let (refiner, _) = spec
-                .load(device)
-                .map_err(|e| EvalError::invalid(format!("refiner {}", spec.describe()), e.to_string()))?;
+            let (refiner, _) = spec.load(device).map_err(|source| EvalError::Refine {
+                doing: format!("loading refiner {}", spec.describe()),
+                source,
+            })?;
             Some(refiner)
         }
         None => None,
@@ -302,11 +304,7 @@ fn restrict_inputs(window: InputSet, keep: &[usize]) -> InputSet {
 }
 
 fn host<const D: usize>(tensor: Tensor<D>, what: &str) -> Result<Vec<f32>, EvalError> {
-    tensor
-        .into_data()
-        .convert::<f32>()
-        .try_into_vec::<f32>()
-        .map_err(|e| EvalError::invalid(what, format!("cannot be read back: {e:?}")))
+    Ok(host_f32(tensor, what)?)
 }
 
 /// Planar `[3, H, W]` to interleaved `[H, W, 3]`.
@@ -470,13 +468,8 @@ fn forward_scene(root: &Path, context: &SceneContext<'_>, watch: &mut Stopwatch)
 
     let started = Instant::now();
     let scene_options = SceneOptions { assembly: network.assembly, ..SceneOptions::default() };
-    let scene =
-        Scene4d::build(&network.model, &prediction, &batch, views, &timeline, &scene_options)?.ok_or_else(|| {
-            EvalError::invalid(
-                format!("checkpoint {}", context.options.checkpoint.display()),
-                "the network has no Gaussian head: there is nothing to render",
-            )
-        })?;
+    let scene = Scene4d::build(&network.model, &prediction, &batch, views, &timeline, &scene_options)?
+        .ok_or_else(|| EvalError::NoGaussianHead { checkpoint: context.options.checkpoint.clone() })?;
     drop(prediction);
     watch.add(ASSEMBLY, started);
     Ok(ForwardScene { inputs, input_images, size, mapping, timeline, scene })
@@ -499,7 +492,7 @@ struct ScoredView {
     frame: usize,
     frame_position: usize,
     camera_position: usize,
-    split: crate::protocol::Split,
+    split: crate::protocol::TargetKind,
     time: f64,
 }
 
@@ -542,9 +535,8 @@ fn reference_view(
         ReferenceView::None => Ok(None),
         ReferenceView::NearestInput => {
             let views = forward.inputs.views.iter().map(|v| (v.camera, forward.timeline.time(v.frame as f64)));
-            let position = nearest_in_time(views, target.rig_camera, target.time).ok_or_else(|| {
-                EvalError::invalid("refiner reference", format!("no input view of camera {}", target.rig_camera))
-            })?;
+            let position = nearest_in_time(views, target.rig_camera, target.time)
+                .ok_or(EvalError::NoReferenceView { camera: target.rig_camera })?;
             Ok(Some(interleaved(&forward.input_images[position])))
         }
     }
@@ -559,7 +551,7 @@ fn refine_render(
     size: ImageSize,
     context: &SceneContext<'_>,
 ) -> Result<Vec<f32>, EvalError> {
-    let refine_error = |e: dggt_refine::RefineError| EvalError::invalid("refining a render", e.to_string());
+    let refine_error = |source| EvalError::Refine { doing: "refining a render".into(), source };
     let spec = context.options.refine.as_ref().expect("a refiner comes from its spec");
     let (h, w) = (size.height as usize, size.width as usize);
     let frame = frame_from_interleaved(rgb, h, w, context.device).map_err(refine_error)?;

@@ -4,7 +4,7 @@
 use dggt_data::Preprocess;
 use dggt_eval::grid::{CellMapping, cell_has_sky};
 use dggt_eval::report::{ViewRecord, summarise_views};
-use dggt_eval::{Protocol, ProtocolKind, Split};
+use dggt_eval::{Protocol, ProtocolKind, TargetKind};
 use dggt_geom::ImageSize;
 
 fn close(a: f64, b: f64, tolerance: f64) -> bool {
@@ -48,19 +48,19 @@ fn protocols_plan_their_frames() {
     assert_eq!(paper.input_frames(), vec![0, 5, 10, 15]);
     let targets = paper.targets();
     assert_eq!(targets.len(), 20);
-    assert_eq!(targets.iter().filter(|(_, s)| *s == Split::Reconstruction).count(), 4);
-    assert_eq!(targets.iter().filter(|(_, s)| *s == Split::NovelView).count(), 16);
-    assert_eq!(paper.splits(), vec![Split::Reconstruction, Split::NovelView]);
+    assert_eq!(targets.iter().filter(|(_, s)| *s == TargetKind::Reconstruction).count(), 4);
+    assert_eq!(targets.iter().filter(|(_, s)| *s == TargetKind::NovelView).count(), 16);
+    assert_eq!(paper.splits(), vec![TargetKind::Reconstruction, TargetKind::NovelView]);
 
     let reconstruction = Protocol::reconstruction(3, 4, vec![0]);
     assert_eq!(reconstruction.input_frames(), vec![3, 4, 5, 6]);
-    assert_eq!(reconstruction.splits(), vec![Split::Reconstruction]);
+    assert_eq!(reconstruction.splits(), vec![TargetKind::Reconstruction]);
 
     let interpolation = Protocol::interpolation(2, 7, 3, vec![1, 0]);
     interpolation.validate().unwrap();
     assert_eq!(interpolation.input_frames(), vec![2, 5, 8]);
-    assert_eq!(interpolation.targets()[1], (3, Split::Interpolated));
-    assert_eq!(interpolation.splits(), vec![Split::Reconstruction, Split::Interpolated]);
+    assert_eq!(interpolation.targets()[1], (3, TargetKind::Interpolated));
+    assert_eq!(interpolation.splits(), vec![TargetKind::Reconstruction, TargetKind::Interpolated]);
 
     // A stride that does not end on the window's last frame: the frames after the last input are extrapolated,
     // not "between inputs"; a stride that leaves one input is refused.
@@ -69,10 +69,10 @@ fn protocols_plan_their_frames() {
     assert_eq!(beyond.input_frames(), vec![0, 6, 12, 18]);
     assert_eq!(
         &beyond.targets()[17..],
-        &[(17, Split::Interpolated), (18, Split::Reconstruction), (19, Split::Extrapolated)]
+        &[(17, TargetKind::Interpolated), (18, TargetKind::Reconstruction), (19, TargetKind::Extrapolated)]
     );
-    assert_eq!(beyond.splits(), vec![Split::Reconstruction, Split::Interpolated, Split::Extrapolated]);
-    assert!(Split::Extrapolated.title().contains("beyond the last input"));
+    assert_eq!(beyond.splits(), vec![TargetKind::Reconstruction, TargetKind::Interpolated, TargetKind::Extrapolated]);
+    assert!(TargetKind::Extrapolated.title().contains("beyond the last input"));
 
     let error = |p: Protocol| p.validate().unwrap_err().to_string();
     assert!(error(Protocol::interpolation(0, 20, 30, vec![0])).contains("give 1..=19"));
@@ -90,7 +90,7 @@ fn protocols_plan_their_frames() {
     assert_eq!(paper.kind, ProtocolKind::Paper);
 }
 
-fn record(split: Split, psnr: f64, d_rmse: Option<f64>) -> ViewRecord {
+fn record(split: TargetKind, psnr: f64, d_rmse: Option<f64>) -> ViewRecord {
     ViewRecord {
         frame: 0,
         camera: 0,
@@ -113,13 +113,13 @@ fn record(split: Split, psnr: f64, d_rmse: Option<f64>) -> ViewRecord {
 #[test]
 fn split_means_leave_out_missing_metrics() {
     let views = [
-        record(Split::Reconstruction, 20.0, Some(1.0)),
-        record(Split::Reconstruction, 30.0, None),
-        record(Split::NovelView, 10.0, Some(4.0)),
+        record(TargetKind::Reconstruction, 20.0, Some(1.0)),
+        record(TargetKind::Reconstruction, 30.0, None),
+        record(TargetKind::NovelView, 10.0, Some(4.0)),
     ];
-    let s = summarise_views(&views, Split::Reconstruction);
+    let s = summarise_views(&views, TargetKind::Reconstruction);
     assert_eq!((s.count, s.d_rmse_count, s.motion_count), (2, 1, 0));
     assert_eq!((s.psnr, s.d_rmse, s.lpips, s.epe3d), (Some(25.0), Some(1.0), None, None));
-    let s = summarise_views(&views, Split::NovelView);
+    let s = summarise_views(&views, TargetKind::NovelView);
     assert_eq!((s.count, s.psnr, s.d_rmse), (1, Some(10.0), Some(4.0)));
 }

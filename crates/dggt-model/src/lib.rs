@@ -14,7 +14,8 @@
 //!
 //! - [`sky`]: the sky model's Gaussians and their colours sampled from the input views;
 //! - [`lifespan`]: frame times, the static/dynamic opacity split and the lifespan decay;
-//! - [`seeded`]: fresh weights drawn from a seed, one caller at a time (the backend's generator is global).
+//! - [`seeded`]: fresh weights drawn from a seed, one caller at a time (the backend's generator is global);
+//! - [`host`]: device tensors copied to the host as `f32`, with an error naming the tensor.
 //!
 //! The network stops at its maps: placing and rendering Gaussians is `dggt-scene`'s, and running a folder of
 //! reference vectors against the release (`dggt parity`) is `dggt-infer`'s.
@@ -34,6 +35,7 @@ pub mod dino;
 pub mod dpt;
 mod error;
 pub mod gaussian_maps;
+pub mod host;
 pub mod leaf;
 pub mod lifespan;
 pub mod mlp;

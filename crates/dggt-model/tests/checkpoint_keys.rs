@@ -7,18 +7,13 @@
 //! `DGGT_CHECKPOINT_KEYS_DIR`.
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
 
 use burn::tensor::Device;
 use dggt_model::weights::{module_path, parameters};
 use dggt_model::{Dggt, ModelConfig};
 
 fn key_list(name: &str) -> Vec<(String, Vec<usize>)> {
-    let dir = match std::env::var_os("DGGT_CHECKPOINT_KEYS_DIR") {
-        Some(dir) => PathBuf::from(dir),
-        None => PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/reference/checkpoint-keys"),
-    };
-    let path = dir.join(name);
+    let path = dggt_test_data::Shared::CheckpointKeys.entry(name);
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| {
         panic!("reading {}: {e} (set DGGT_CHECKPOINT_KEYS_DIR to the checkpoint-keys folder)", path.display())
     });

@@ -78,15 +78,14 @@ impl StepBatch {
         maps: DepthFlowMaps,
         device: &Device,
     ) -> Result<Self, ObjectiveError> {
-        let first = sample.inputs.first().ok_or_else(|| ObjectiveError::Invalid {
-            what: format!("sample of step {}", sample.step),
-            detail: "no input views".into(),
-        })?;
+        let first = sample.inputs.first().ok_or(ObjectiveError::NoInputViews { step: sample.step })?;
         let size = first.image.size;
         if let Some(view) = sample.inputs.iter().chain(&sample.targets).find(|v| v.image.size != size) {
-            return Err(ObjectiveError::Invalid {
-                what: format!("view (frame {}, camera {})", view.frame, view.camera),
-                detail: format!("size {} differs from the first input's {size}", view.image.size),
+            return Err(ObjectiveError::ViewSize {
+                frame: view.frame,
+                camera: view.camera,
+                size: view.image.size,
+                first: size,
             });
         }
         let timeline = Timeline::new(&sample.sample.input_frames)?;

@@ -4,8 +4,17 @@ use dggt_scene::SceneError;
 
 #[derive(Debug, thiserror::Error)]
 pub enum ObjectiveError {
-    #[error("{what}: {detail}")]
-    Invalid { what: String, detail: String },
+    /// The network cannot compute this objective (no aggregator layer, no Gaussian head to render with).
+    #[error("model: {0}")]
+    Unsupported(&'static str),
+    /// A training sample has no input view.
+    #[error("sample of step {step}: no input views")]
+    NoInputViews { step: u64 },
+    /// A sample's views are not all of one size.
+    #[error("view (frame {frame}, camera {camera}): size {size} differs from the first input's {first}")]
+    ViewSize { frame: usize, camera: usize, size: dggt_geom::ImageSize, first: dggt_geom::ImageSize },
+    #[error(transparent)]
+    ReadBack(#[from] dggt_model::host::ReadBackError),
     #[error(transparent)]
     Infer(#[from] dggt_infer::InferError),
     #[error(transparent)]

@@ -24,6 +24,7 @@ use dggt_infer::{
 use dggt_losses::{GramLoss, Lpips, bce_with_logits, l2, lifespan_l1, opacity_loss};
 use dggt_metrics::psnr;
 use dggt_model::Dggt;
+use dggt_model::host::host_f32;
 use dggt_scene::{AssemblyCounts, PixelGaussians, TargetView};
 
 use crate::batch::{DepthFlowSamples, StepBatch, ViewTruth};
@@ -147,10 +148,7 @@ impl Objective {
     /// rendered): the loss of a pose warm-up step (`optim.pose_warmup_steps`).
     pub fn pose_loss(&self, model: &Dggt, batch: &StepBatch) -> Result<SampleLoss, ObjectiveError> {
         let aggregator = model.aggregator.forward(batch.images.clone())?;
-        let last = aggregator.output_list.last().ok_or_else(|| ObjectiveError::Invalid {
-            what: "model".into(),
-            detail: "the aggregator has no layer".into(),
-        })?;
+        let last = aggregator.output_list.last().ok_or(ObjectiveError::Unsupported("the aggregator has no layer"))?;
         let camera = model.camera_head.forward(last.clone());
         let encodings: Vec<Tensor<3>> = camera.encodings.iter().map(|e| e.clone().cast(FloatDType::F32)).collect();
         let loss = camera_loss(&encodings, batch)?;
@@ -222,7 +220,7 @@ impl Objective {
             let lifespan = forward.pixels().lifespan.clone();
             let statics = match &forward.pixels().dynamic_logit {
                 Some(logit) => {
-                    let values = host(logit.clone())?;
+                    let values = host_f32(logit.clone(), "dynamic logit")?;
                     let index: Vec<i64> = (0..values.len()).filter(|&i| values[i] < 0.0).map(|i| i as i64).collect();
                     let count = index.len();
                     lifespan.select(0, Tensor::<1, Int>::from_data(TensorData::new(index, [count]), &device))
@@ -257,7 +255,10 @@ impl Objective {
             counts.static_kept += view.counts.static_kept;
             counts.dynamic_kept += view.counts.dynamic_kept;
             if view.is_target {
-                psnrs.push(psnr(&host(view.rgb.clone())?, &host(truth(view).image.clone())?)?);
+                psnrs.push(psnr(
+                    &host_f32(view.rgb.clone(), "render")?,
+                    &host_f32(truth(view).image.clone(), "target image")?,
+                )?);
             }
         }
         let target_psnr = if psnrs.is_empty() { f64::NAN } else { psnrs.iter().sum::<f64>() / psnrs.len() as f64 };
@@ -298,13 +299,11 @@ impl Forward {
             sky: if render.sky { SkyChoice::Render } else { SkyChoice::Skip },
             assembly: render.assembly(),
         };
-        let scene =
-            Scene4d::build(model, &prediction, &batch.images, views, &batch.timeline, &options)?.ok_or_else(|| {
-                ObjectiveError::Invalid {
-                    what: "model".into(),
-                    detail: "the configuration has no Gaussian head (gs_head); it cannot be trained to render".into(),
-                }
-            })?;
+        let scene = Scene4d::build(model, &prediction, &batch.images, views, &batch.timeline, &options)?.ok_or(
+            ObjectiveError::Unsupported(
+                "the configuration has no Gaussian head (gs_head); it cannot be trained to render",
+            ),
+        )?;
         Ok(Self {
             scene,
             depth: prediction.depth,
@@ -392,18 +391,10 @@ fn flow_loss(velocity: &Tensor<5>, batch: &StepBatch) -> Result<Option<Tensor<1>
     Ok(Some(((picked - truth).abs() * shares).sum()))
 }
 
-/// The values of `tensor` on the host; a failure of the device (out of memory, a lost device) is an error
-/// here, where the computation is first waited for.
-fn host<const D: usize>(tensor: Tensor<D>) -> Result<Vec<f32>, ObjectiveError> {
-    let data = tensor.try_into_data().map_err(|error| ObjectiveError::Invalid {
-        what: "device".into(),
-        detail: format!("computing the loss failed: {error}"),
-    })?;
-    Ok(data.convert::<f32>().try_into_vec::<f32>().unwrap_or_default())
-}
-
+/// A loss value on the host; a failure of the device (out of memory, a lost device) is an error here, where the
+/// computation is first waited for.
 fn scalar(tensor: &Tensor<1>) -> Result<f64, ObjectiveError> {
-    Ok(host(tensor.clone())?.first().copied().map(f64::from).unwrap_or(f64::NAN))
+    Ok(host_f32(tensor.clone(), "loss")?.first().copied().map(f64::from).unwrap_or(f64::NAN))
 }
 
 #[cfg(test)]

@@ -6,8 +6,12 @@ use std::path::PathBuf;
 pub enum ReconstructError {
     #[error("{}: {detail}", path.display())]
     Input { path: PathBuf, detail: String },
-    #[error("{what}: {detail}")]
-    Invalid { what: String, detail: String },
+    /// A command-line option's value is out of its range.
+    #[error("{option}: {detail}")]
+    Option { option: &'static str, detail: String },
+    /// A render was asked of a camera that has no input view to place it.
+    #[error("camera {camera}: no input view")]
+    NoInputView { camera: usize },
     #[error("{0}")]
     OutputTooLarge(crate::volume::OutputTooLarge),
     #[error(transparent)]
@@ -17,6 +21,8 @@ pub enum ReconstructError {
     #[error(transparent)]
     Infer(#[from] dggt_infer::InferError),
     #[error(transparent)]
+    ReadBack(#[from] dggt_model::host::ReadBackError),
+    #[error(transparent)]
     Export(#[from] dggt_export::ExportError),
 }
 
@@ -25,7 +31,7 @@ impl ReconstructError {
         Self::Input { path: path.into(), detail: detail.into() }
     }
 
-    pub(crate) fn invalid(what: impl Into<String>, detail: impl Into<String>) -> Self {
-        Self::Invalid { what: what.into(), detail: detail.into() }
+    pub(crate) fn option(option: &'static str, detail: impl Into<String>) -> Self {
+        Self::Option { option, detail: detail.into() }
     }
 }

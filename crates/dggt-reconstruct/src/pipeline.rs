@@ -35,6 +35,7 @@ use dggt_geom::{ImageSize, PosedCamera, WorldFromCamera};
 use dggt_infer::{
     InputCameras, InputSet, MotionPath, Scene4d, SceneOptions, ViewSlot, forward_chunked, input_views, load_network,
 };
+use dggt_model::host::host_f32;
 use dggt_scene::{
     AssemblyCounts, InputView, MIN_OPACITY, PixelGaussians, TargetView, Timeline, nearest_in_time, nearest_view,
 };
@@ -170,8 +171,11 @@ pub fn reconstruct(options: &ReconstructOptions, device: &Device) -> Result<Summ
     std::fs::create_dir_all(&options.out).map_err(|e| ReconstructError::input(&options.out, e.to_string()))?;
     let mut written = Written { root: options.out.clone(), files: Vec::new() };
     write_cameras(&mut written, &inputs, &images, &cameras, size)?;
-    let depth = host(prediction.depth.clone());
-    let dynamic = prediction.dynamic_logit.clone().map(|l| host(burn::tensor::activation::sigmoid(l)));
+    let depth = host(prediction.depth.clone(), "depth")?;
+    let dynamic = match prediction.dynamic_logit.clone() {
+        Some(logit) => Some(host(burn::tensor::activation::sigmoid(logit), "dynamic probability")?),
+        None => None,
+    };
     write_maps(&mut written, &inputs, size, &depth, dynamic.as_deref())?;
     if dynamic.is_none() {
         warnings.push("the network has no instance head: no dynamic maps; everything is static".into());
@@ -255,13 +259,13 @@ fn write_gaussians(
     warnings: &mut Vec<String>,
 ) -> Result<GaussianCounts, ReconstructError> {
     let mut counts = GaussianCounts::default();
-    let host_pixels = HostPixels::new(&scene.pixels);
+    let host_pixels = HostPixels::new(&scene.pixels)?;
     counts.per_pixel = host_pixels.len();
     let statics = host_pixels.static_cloud();
     counts.static_kept = statics.len();
     write_ply(&written.path("gaussians/static.ply"), &statics)?;
     drop(statics);
-    let sky_cloud = scene.sky.as_ref().map(sky_cloud).unwrap_or_default();
+    let sky_cloud = scene.sky.as_ref().map(sky_cloud).transpose()?.unwrap_or_default();
     counts.sky_kept = sky_cloud.len();
     write_ply(&written.path("gaussians/sky.ply"), &sky_cloud)?;
     if scene.sky.is_none() {
@@ -293,8 +297,8 @@ fn render_views(
     for (i, view) in inputs.views.iter().enumerate() {
         let target = TargetView { rig_camera: view.camera, time: views[i].time, camera: views[i].camera };
         let render = scene.render(&target)?;
-        let rgb = host(render.rgb);
-        let alpha = host(render.alpha);
+        let rgb = host(render.rgb, "render")?;
+        let alpha = host(render.alpha, "render alpha")?;
         let sky_mask: Vec<bool> = alpha.iter().map(|&a| a < 0.5).collect();
         write_binary_png(&written.path(&format!("sky/{}.png", view.name)), size, &sky_mask)?;
         input_psnr_db.push(psnr(&rgb, &interleaved(&request.images[i])));
@@ -312,13 +316,13 @@ fn render_views(
                     let time = request.scene_time(time_s);
                     let target = TargetView { rig_camera: camera, time, camera: scene.camera_at(camera, time)? };
                     let render = scene.render(&target)?;
-                    (host(render.rgb), render.counts)
+                    (host(render.rgb, "render")?, render.counts)
                 }
             };
             write_rgb_png(&written.path(&file), size, &rgb)?;
             let nearest = nearest_in_time(inputs.views.iter().map(|v| (v.camera, v.time_s)), camera, time_s)
                 .map(|position| &inputs.views[position])
-                .ok_or_else(|| ReconstructError::invalid(format!("camera {camera}"), "no input view"))?;
+                .ok_or(ReconstructError::NoInputView { camera })?;
             renders.push(RenderRecord {
                 file,
                 camera,
@@ -370,8 +374,18 @@ fn images_tensor(images: &[PlanarImage], size: ImageSize, device: &Device) -> Te
     Tensor::from_data(TensorData::new(data, shape), device)
 }
 
-fn host<const D: usize>(tensor: Tensor<D>) -> Vec<f32> {
-    tensor.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default()
+fn host<const D: usize>(tensor: Tensor<D>, name: &str) -> Result<Vec<f32>, ReconstructError> {
+    Ok(host_f32(tensor, name)?)
+}
+
+/// `[x, y, z]` rows of an `[N, 3]` tensor.
+fn triples(tensor: &Tensor<2>, name: &str) -> Result<Vec<[f32; 3]>, ReconstructError> {
+    Ok(host(tensor.clone(), name)?.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
+}
+
+/// `[w, x, y, z]` rows of an `[N, 4]` tensor.
+fn quads(tensor: &Tensor<2>, name: &str) -> Result<Vec<[f32; 4]>, ReconstructError> {
+    Ok(host(tensor.clone(), name)?.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect())
 }
 
 /// Planar `[3, H, W]` to interleaved `[H, W, 3]`.
@@ -468,22 +482,24 @@ struct HostPixels {
 }
 
 impl HostPixels {
-    fn new(pixels: &PixelGaussians) -> Self {
-        let triples = |t: &Tensor<2>| host(t.clone()).chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
-        let opacity = host(pixels.opacity.clone());
+    fn new(pixels: &PixelGaussians) -> Result<Self, ReconstructError> {
+        let opacity = host(pixels.opacity.clone(), "opacity")?;
         let dynamic_probability = match &pixels.dynamic_logit {
-            Some(logit) => host(burn::tensor::activation::sigmoid(logit.clone())),
+            Some(logit) => host(burn::tensor::activation::sigmoid(logit.clone()), "dynamic probability")?,
             None => vec![0.0; opacity.len()],
         };
         let cloud = GaussianCloud {
-            means: triples(&pixels.means),
-            quats_wxyz: host(pixels.quats_wxyz.clone()).chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect(),
-            scales: triples(&pixels.scales),
+            means: triples(&pixels.means, "means")?,
+            quats_wxyz: quads(&pixels.quats_wxyz, "rotations")?,
+            scales: triples(&pixels.scales, "scales")?,
             opacities: Vec::new(),
-            colors: triples(&pixels.colors),
+            colors: triples(&pixels.colors, "colours")?,
         };
-        let velocity = pixels.velocity.as_ref().map(triples);
-        Self { cloud, opacity, dynamic_probability, velocity, per_view: pixels.per_view() }
+        let velocity = match &pixels.velocity {
+            Some(velocity) => Some(triples(velocity, "velocity")?),
+            None => None,
+        };
+        Ok(Self { cloud, opacity, dynamic_probability, velocity, per_view: pixels.per_view() })
     }
 
     fn len(&self) -> usize {
@@ -531,15 +547,14 @@ impl HostPixels {
     }
 }
 
-fn sky_cloud(sky: &dggt_model::sky::SkyGaussians) -> GaussianCloud {
-    let triples = |t: &Tensor<2>| host(t.clone()).chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
-    GaussianCloud {
-        means: triples(&sky.means),
-        quats_wxyz: host(sky.quats.clone()).chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect(),
-        scales: triples(&sky.scales),
-        opacities: host(sky.opacities.clone()),
-        colors: triples(&sky.colors),
-    }
+fn sky_cloud(sky: &dggt_model::sky::SkyGaussians) -> Result<GaussianCloud, ReconstructError> {
+    Ok(GaussianCloud {
+        means: triples(&sky.means, "sky means")?,
+        quats_wxyz: quads(&sky.quats, "sky rotations")?,
+        scales: triples(&sky.scales, "sky scales")?,
+        opacities: host(sky.opacities.clone(), "sky opacities")?,
+        colors: triples(&sky.colors, "sky colours")?,
+    })
 }
 
 fn progress_bar(show: bool, total: u64) -> ProgressBar {

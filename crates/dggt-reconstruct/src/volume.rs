@@ -100,12 +100,12 @@ pub fn gigabytes(bytes: u64) -> String {
 pub fn check_times(times: &[f64], inputs: &[f64]) -> Result<(), ReconstructError> {
     let (Some(&first), Some(&last)) = (inputs.first(), inputs.last()) else { return Ok(()) };
     if times.is_empty() {
-        return Err(ReconstructError::invalid("--times", "no times given"));
+        return Err(ReconstructError::option("--times", "no times given"));
     }
     let outside = times.iter().find(|t| !(t.is_finite() && (first..=last).contains(*t)));
     match outside {
         None => Ok(()),
-        Some(time) => Err(ReconstructError::invalid(
+        Some(time) => Err(ReconstructError::option(
             "--times",
             format!(
                 "{time} s lies outside the input frames' time window: give seconds in {first:.3}..={last:.3} (the \
@@ -120,7 +120,7 @@ pub fn check_every(every: usize) -> Result<(), ReconstructError> {
     if (1..=MAX_EVERY).contains(&every) {
         return Ok(());
     }
-    Err(ReconstructError::invalid(
+    Err(ReconstructError::option(
         "--every",
         format!("{every} is outside 1..={MAX_EVERY} (render times per interval between input frames)"),
     ))

@@ -38,11 +38,11 @@ const MAX_LEVELS: u8 = 3;
 const MEAN_LEVELS: f64 = 0.05;
 
 fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+    dggt_test_data::repo_root()
 }
 
 fn fixture() -> PathBuf {
-    repo().join("data-fixtures/synth-s0")
+    dggt_test_data::fixture("synth-s0")
 }
 
 /// The tiny overfit configuration at 56 pixels wide, front camera, four inputs and a few steps; its final

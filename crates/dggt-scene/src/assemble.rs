@@ -14,6 +14,7 @@
 //! culling off to measure that.
 
 use burn::tensor::{Int, Tensor, TensorData};
+use dggt_model::host::host_f32;
 use dggt_model::lifespan::{dynamic_opacity, opacity_at, static_opacity};
 use dggt_splat::constants::{
     ALPHA_THRESHOLD, DEFAULT_EPS2D, DEFAULT_FAR_PLANE, DEFAULT_NEAR_PLANE, GUARD_BAND, MAX_BOX_SIGMAS_F32,
@@ -22,7 +23,7 @@ use dggt_splat::{GaussianTensors, OpacityTensor};
 use rayon::prelude::*;
 
 use crate::error::SceneError;
-use crate::pixels::{PixelGaussians, host_values};
+use crate::pixels::PixelGaussians;
 use crate::timeline::{DynamicBlend, TargetView, dynamic_sources};
 
 /// The rasteriser's alpha threshold: Gaussians below it never contribute.
@@ -188,7 +189,7 @@ impl Candidates {
         target: &TargetView,
         settings: &AssemblySettings,
     ) -> Result<Verdicts, SceneError> {
-        let static_values = host_values(self.faded.clone(), "static opacity")?;
+        let static_values = host_f32(self.faded.clone(), "static opacity")?;
         let footprint = Footprint::new(target, pixels.size, settings);
         let keep = |index: usize, mean: [f32; 3], opacity: f32| -> Verdict {
             if !(opacity >= settings.min_opacity) {
@@ -204,7 +205,7 @@ impl Candidates {
         if let Some(opacity) = &self.dynamic {
             for source in &self.sources {
                 let values =
-                    host_values(opacity.clone().narrow(0, source.range.start, source.range.len()), "dynamic opacity")?;
+                    host_f32(opacity.clone().narrow(0, source.range.start, source.range.len()), "dynamic opacity")?;
                 let displaced = |index: usize| -> [f32; 3] {
                     let mean = pixels.host_means[index];
                     match &pixels.host_velocity {

@@ -11,6 +11,7 @@
 
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_geom::{CameraFromWorld, ImageSize, PinholeIntrinsics, PosedCamera};
+use dggt_model::host::host_f32;
 use dggt_model::sky::SkyGaussians;
 use dggt_splat::{
     CameraTensors, GaussianTensors, OpacityTensor, RasterSettings, RenderSettings, RenderTensors, render,
@@ -18,7 +19,7 @@ use dggt_splat::{
 
 use crate::assemble::{AssembledGaussians, AssemblyCounts, AssemblySettings, HiddenSky, assemble};
 use crate::error::SceneError;
-use crate::pixels::{PixelGaussians, host_values};
+use crate::pixels::PixelGaussians;
 use crate::timeline::TargetView;
 
 /// One rendered view.
@@ -93,7 +94,7 @@ pub fn render_assembled(
 
 /// Whether the foreground opacity `alpha` lets at least `tolerance` of the background through at any pixel.
 fn sky_shows_through(alpha: &Tensor<3>, tolerance: f32) -> Result<bool, SceneError> {
-    let least_alpha = host_values(alpha.clone().min().reshape([1]), "foreground alpha")?[0];
+    let least_alpha = host_f32(alpha.clone().min().reshape([1]), "foreground alpha")?[0];
     Ok(!(1.0 - least_alpha < tolerance))
 }
 
@@ -123,7 +124,7 @@ pub fn camera_tensors(cameras: &[PosedCamera], size: ImageSize, device: &Device)
     let viewmats: Vec<f32> = pairs.iter().flat_map(|(c, _)| c.to_rows()).flatten().map(|v| v as f32).collect();
     let intrinsics: Vec<f32> = pairs.iter().flat_map(|(_, k)| k.to_rows_f32()).flatten().collect();
     if viewmats.iter().chain(&intrinsics).any(|v| !v.is_finite()) {
-        return Err(SceneError::Invalid { what: "camera", detail: "non-finite pose or intrinsics".into() });
+        return Err(SceneError::NonFiniteCamera);
     }
     Ok(CameraTensors {
         world_to_camera: Tensor::from_data(TensorData::new(viewmats, [views, 4, 4]), device),

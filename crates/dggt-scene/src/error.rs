@@ -6,8 +6,17 @@ use thiserror::Error;
 pub enum SceneError {
     #[error("{tensor}: expected shape {expected}, got {actual:?}")]
     Shape { tensor: &'static str, expected: String, actual: Vec<usize> },
-    #[error("{what}: {detail}")]
-    Invalid { what: &'static str, detail: String },
+    /// A camera's pose or intrinsics hold NaN or infinity.
+    #[error("camera: non-finite pose or intrinsics")]
+    NonFiniteCamera,
+    /// A timeline needs at least one input frame.
+    #[error("timeline: no input frames")]
+    NoInputFrames,
+    /// A time (scene time, or frames per unit of it) is NaN or infinite.
+    #[error("{what}: {value} is not finite")]
+    NonFiniteTime { what: &'static str, value: f64 },
+    #[error(transparent)]
+    ReadBack(#[from] dggt_model::host::ReadBackError),
     /// A network output holds NaN or infinity: the sample cannot be assembled (a trainer skips it).
     #[error("{tensor}: non-finite value {value} at view {view}, pixel {pixel}")]
     NonFinite { tensor: &'static str, value: f32, view: usize, pixel: usize },

@@ -10,6 +10,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use dggt_geom::glam::DVec3;
 use dggt_geom::{ImageSize, PixelConvention};
 use dggt_model::gaussian_maps::GaussianMaps;
+use dggt_model::host::host_f32;
 
 use crate::error::SceneError;
 use crate::timeline::InputView;
@@ -92,7 +93,7 @@ impl PixelGaussians {
         let device = maps.opacity.device();
         let count = frames * height * width;
 
-        let host_depth = host_values(depth.clone(), "depth")?;
+        let host_depth = host_f32(depth.clone(), "depth")?;
         if let Some(i) = host_depth.iter().position(|d| !d.is_finite()) {
             return Err(SceneError::NonFinite {
                 tensor: "depth",
@@ -118,7 +119,7 @@ impl PixelGaussians {
         let flat = |tensor: Tensor<5>, channels: usize| tensor.reshape([count, channels]);
         let scales = flat(maps.scale.clone(), 3);
         let host_max_scale =
-            host_values(scales.clone(), "scales")?.chunks_exact(3).map(|s| s[0].max(s[1]).max(s[2])).collect();
+            host_f32(scales.clone(), "scales")?.chunks_exact(3).map(|s| s[0].max(s[1]).max(s[2])).collect();
         let times: Vec<f32> = views.iter().flat_map(|v| std::iter::repeat_n(v.time as f32, height * width)).collect();
         Ok(Self {
             size,
@@ -153,9 +154,9 @@ impl PixelGaussians {
             });
         }
         if !frames_per_time.is_finite() {
-            return Err(SceneError::Invalid {
-                what: "motion",
-                detail: format!("frames per unit of scene time must be finite, got {frames_per_time}"),
+            return Err(SceneError::NonFiniteTime {
+                what: "motion: frames per unit of scene time",
+                value: frames_per_time,
             });
         }
         let device = velocity.device();
@@ -172,7 +173,7 @@ impl PixelGaussians {
         let rotations = Tensor::<3>::from_data(TensorData::new(rotations, [frames, 3, 3]), &device);
         let world = velocity.reshape([frames, per_view, channels]).matmul(rotations).mul_scalar(frames_per_time as f32);
         let world = world.reshape([frames * per_view, 3]);
-        let host = host_values(world.clone(), "velocity")?;
+        let host = host_f32(world.clone(), "velocity")?;
         if let Some(i) = host.iter().position(|v| !v.is_finite()) {
             return Err(SceneError::NonFinite {
                 tensor: "velocity",
@@ -244,13 +245,4 @@ impl Rays {
         let values: Vec<f32> = self.directions.iter().flat_map(|d| d.to_array().map(|v| v as f32)).collect();
         Tensor::from_data(TensorData::new(values, [count, 3]), device)
     }
-}
-
-/// Reads an `f32` tensor to the host.
-pub(crate) fn host_values<const D: usize>(tensor: Tensor<D>, name: &'static str) -> Result<Vec<f32>, SceneError> {
-    tensor
-        .into_data()
-        .convert::<f32>()
-        .try_into_vec::<f32>()
-        .map_err(|e| SceneError::Invalid { what: name, detail: format!("cannot read as f32: {e:?}") })
 }

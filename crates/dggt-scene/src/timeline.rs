@@ -43,7 +43,7 @@ impl Timeline {
         frames.sort_unstable();
         frames.dedup();
         let (Some(&first), Some(&last)) = (frames.first(), frames.last()) else {
-            return Err(SceneError::Invalid { what: "timeline", detail: "no input frames".into() });
+            return Err(SceneError::NoInputFrames);
         };
         let span = (last - first) as f64;
         let rate = if span > 0.0 { frames.len() as f64 / 4.0 / span } else { 0.0 };
@@ -65,7 +65,7 @@ impl Timeline {
 /// (extrapolated from the nearest pair outside their span; the only view when there is one).
 pub fn interpolate_camera(views: &[InputView], rig_camera: usize, time: f64) -> Result<PosedCamera, SceneError> {
     if !time.is_finite() {
-        return Err(SceneError::Invalid { what: "target time", detail: format!("{time} is not finite") });
+        return Err(SceneError::NonFiniteTime { what: "target time", value: time });
     }
     let mut own: Vec<&InputView> = views.iter().filter(|v| v.rig_camera == rig_camera).collect();
     own.sort_by(|a, b| a.time.total_cmp(&b.time));

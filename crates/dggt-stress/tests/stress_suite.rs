@@ -9,10 +9,7 @@ use dggt_stress::{Expect, Probe, Stage, StressOptions, StressScope, run_suite};
 /// The shared metrics vectors (LPIPS-Alex and VGG-16 weights): the LPIPS and Gram terms are part of the suite,
 /// so a missing folder fails the test, naming where it looked.
 fn loss_weights() -> PathBuf {
-    let root = std::env::var_os("DGGT_PARITY_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/parity"));
-    let dir = root.join("metrics");
+    let dir = dggt_test_data::parity("metrics");
     for file in ["lpips_alex.safetensors", "vgg16_features.safetensors"] {
         assert!(
             dir.join(file).is_file(),

@@ -47,7 +47,7 @@ pub fn aggregator_records(
     per_size("aggregator", "", options, spec, device, keep, |model, images| {
         let output = model.aggregator.forward(images)?;
         let last = output.output_list.last().cloned();
-        settle(&last.ok_or_else(|| BenchError::invalid("model", "no aggregator layer"))?.sum())
+        settle(&last.ok_or_else(|| BenchError::Missing("model: no aggregator layer"))?.sum())
     })
 }
 

@@ -36,6 +36,6 @@ impl DeviceMemory {
 pub fn guarded<T>(work: impl FnOnce() -> Result<T, BenchError>) -> Result<T, BenchError> {
     match catch_unwind(AssertUnwindSafe(work)) {
         Ok(result) => result,
-        Err(panic) => Err(BenchError::invalid("device", format!("panicked: {}", panic_message(&*panic)))),
+        Err(panic) => Err(BenchError::Panicked { doing: "the device", message: panic_message(&*panic) }),
     }
 }

@@ -112,7 +112,7 @@ impl Workload {
 
     pub fn parse(text: &str) -> Result<Self, BenchError> {
         Self::ALL.into_iter().find(|w| w.name() == text.trim()).ok_or_else(|| {
-            BenchError::invalid(
+            BenchError::setting(
                 "workload",
                 format!("`{text}`: expected forward, aggregator, train-step, raster or longest"),
             )

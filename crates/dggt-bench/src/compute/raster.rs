@@ -58,13 +58,13 @@ fn render_once(gaussians: &GaussianTensors, cameras: &CameraTensors, passes: Pas
         Passes::ForwardBackward => {
             let grads = loss.backward();
             let grad = |t: &Tensor<2>| {
-                t.grad(&grads).map(|g| g.sum()).ok_or_else(|| BenchError::invalid("raster", "a gradient is missing"))
+                t.grad(&grads).map(|g| g.sum()).ok_or_else(|| BenchError::Missing("raster: a gradient is missing"))
             };
             let opacity = match &gaussians.opacities {
                 OpacityTensor::Shared(values) => values.grad(&grads).map(|g| g.sum()),
                 OpacityTensor::PerView(values) => values.grad(&grads).map(|g| g.sum()),
             }
-            .ok_or_else(|| BenchError::invalid("raster", "the opacity gradient is missing"))?;
+            .ok_or_else(|| BenchError::Missing("raster: the opacity gradient is missing"))?;
             let total = grad(&gaussians.means)?
                 + grad(&gaussians.quats_wxyz)?
                 + grad(&gaussians.scales)?

@@ -40,13 +40,10 @@ impl RecordFile {
                 merged.implementation = file.implementation.clone();
                 merged.build = file.build.clone();
             } else if (&file.implementation, &file.build) != (&merged.implementation, &merged.build) {
-                return Err(BenchError::invalid(
-                    "record files",
-                    format!(
-                        "cannot merge `{}` records ({}) into `{}` ones ({})",
-                        file.implementation, file.build, merged.implementation, merged.build
-                    ),
-                ));
+                return Err(BenchError::MixedRecords {
+                    first: format!("{} ({})", merged.implementation, merged.build),
+                    other: format!("{} ({})", file.implementation, file.build),
+                });
             }
             if !merged.device.split("; ").any(|device| device == file.device) {
                 if !merged.device.is_empty() {

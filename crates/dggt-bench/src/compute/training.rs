@@ -31,13 +31,15 @@ pub fn train_step_record(options: &ComputeOptions, spec: &ScaleSpec, device: &De
     let mut sample_index = 0;
     let mut last_stages = serde_json::Value::Null;
     let record = timed(key, options, device, || {
-        let sample = trainer.sample(sample_index).map_err(|e| BenchError::invalid("training sample", e.to_string()))?;
+        let sample = trainer
+            .sample(sample_index)
+            .map_err(|source| BenchError::Train { doing: "loading a training sample", source: Box::new(source) })?;
         sample_index += 1;
         let metrics = trainer
             .train_step(&[sample], 1.0, DepthFlowMaps::Skip)
-            .map_err(|e| BenchError::invalid("step", e.to_string()))?;
+            .map_err(|source| BenchError::Train { doing: "a training step", source: Box::new(source) })?;
         if let Some(skipped) = metrics.get("skipped") {
-            return Err(BenchError::invalid("step", format!("skipped: {skipped}")));
+            return Err(BenchError::StepSkipped(skipped.to_string()));
         }
         last_stages = metrics["stage_s"].clone();
         Ok(())
@@ -76,9 +78,7 @@ impl Scratch {
                 std::fs::create_dir_all(path).map_err(|e| BenchError::file(path, format!("cannot create: {e}")))?;
                 Ok(Self::Given(path.clone()))
             }
-            None => tempfile::tempdir()
-                .map(Self::Temporary)
-                .map_err(|e| BenchError::invalid("scratch folder", format!("cannot create a temporary folder: {e}"))),
+            None => tempfile::tempdir().map(Self::Temporary).map_err(BenchError::ScratchFolder),
         }
     }
 
@@ -109,7 +109,8 @@ fn build_trainer(scale: Scale, spec: &ScaleSpec, scratch: &Path, device: &Device
     let text = config_text(scale, spec, &scene, &scratch.join("run"));
     std::fs::write(&config_path, text).map_err(|e| BenchError::file(&config_path, e))?;
     let config = TrainConfig::load(&config_path).map_err(|e| BenchError::file(&config_path, e))?;
-    Trainer::new(config, vec![device.clone()], Start::Fresh).map_err(|e| BenchError::invalid("trainer", e.to_string()))
+    Trainer::new(config, vec![device.clone()], Start::Fresh)
+        .map_err(|source| BenchError::Train { doing: "building the trainer", source: Box::new(source) })
 }
 
 /// The training configuration of the step (the recipe of `configs/dggt-waymo.toml` without its files).

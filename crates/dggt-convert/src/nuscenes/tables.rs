@@ -60,17 +60,17 @@ impl NuScenesVersion {
 }
 
 impl std::str::FromStr for NuScenesVersion {
-    type Err = String;
+    type Err = ConvertError;
 
     /// An official release by name, or any other plain folder name.
-    fn from_str(name: &str) -> std::result::Result<Self, String> {
+    fn from_str(name: &str) -> std::result::Result<Self, ConvertError> {
         if let Some(known) = Self::KNOWN.into_iter().find(|v| v.folder() == name) {
             return Ok(known);
         }
         let mut components = Path::new(name).components();
         match (components.next(), components.next()) {
             (Some(std::path::Component::Normal(_)), None) => Ok(Self::Other(name.to_owned())),
-            _ => Err(format!("{name:?} is not a folder name (a nuScenes version such as v1.0-mini)")),
+            _ => Err(ConvertError::VersionName { name: name.to_owned() }),
         }
     }
 }

@@ -5,13 +5,5 @@
 use std::path::PathBuf;
 
 pub fn real_data() -> PathBuf {
-    let dir = std::env::var_os("DGGT_REAL_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/real-data"));
-    assert!(
-        dir.is_dir(),
-        "real driving data not found at {} (set DGGT_REAL_DATA to the shared real-data folder)",
-        dir.display()
-    );
-    dir
+    dggt_test_data::real_data()
 }

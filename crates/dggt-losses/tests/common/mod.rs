@@ -12,9 +12,7 @@ use safetensors::{Dtype, SafeTensors};
 /// `$DGGT_PARITY_DIR/metrics`, or `shared/parity/metrics` next to the repository. Panics (failing the
 /// test) when the folder is missing.
 pub fn metrics_dir() -> PathBuf {
-    let root = std::env::var("DGGT_PARITY_DIR")
-        .unwrap_or_else(|_| concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/parity").to_string());
-    let dir = Path::new(&root).join("metrics");
+    let dir = dggt_test_data::parity("metrics");
     assert!(
         dir.join("outputs.safetensors").is_file(),
         "metrics parity vectors not found at {} (set DGGT_PARITY_DIR to the shared parity folder)",

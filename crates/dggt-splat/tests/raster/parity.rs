@@ -13,16 +13,7 @@ use dggt_splat::{
 };
 
 pub fn parity_dir() -> PathBuf {
-    let root = std::env::var_os("DGGT_PARITY_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/parity"));
-    let dir = root.join("raster");
-    assert!(
-        dir.is_dir(),
-        "rasteriser parity vectors not found at {} (set DGGT_PARITY_DIR to the shared parity folder)",
-        dir.display()
-    );
-    dir
+    dggt_test_data::parity("raster")
 }
 
 pub struct Tensors(HashMap<String, (Vec<usize>, Vec<f32>)>);

@@ -102,7 +102,7 @@ fn tiles_larger_than_a_cube_are_refused_on_every_backend() {
     };
     for device in [wgpu_device(), burn::tensor::Device::flex()] {
         let gaussians = gaussian_tensors(&scene, views.len(), &device, false);
-        let error = render(&gaussians, &camera_tensors(&views, &device), &settings).err().expect("refused");
+        let error = render(&gaussians, &camera_tensors(&views, &device), &settings).expect_err("refused");
         assert!(error.to_string().contains("tile_size must be in 1..=16, got 17"), "{error}");
     }
 }

@@ -1,0 +1,147 @@
+//! Where tests and benchmarks find their data. Two kinds exist:
+//!
+//! - the **bundled fixtures** (`data-fixtures/` in the repository), which the project generates itself;
+//! - the **shared data** kept beside the repository, never copied into it: the reference implementations'
+//!   parity vectors (`shared/parity`), the released checkpoints' key lists (`shared/reference/checkpoint-keys`)
+//!   and real driving logs under non-commercial licences (`shared/real-data`).
+//!
+//! Shared data is looked up as `../shared/...` from the repository or from the nearest folder above it that has
+//! one (a worktree or a clone may sit deeper), or where an environment variable says. A test that needs data
+//! that is not there fails with a message naming where it looked and the variable to set: it never passes
+//! quietly.
+
+use std::path::{Path, PathBuf};
+
+/// The repository's root folder (the workspace that holds this crate).
+pub fn repo_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// The bundled fixture `name` (e.g. `synth-s0`) under `data-fixtures/`.
+///
+/// # Panics
+/// When the folder is missing: the fixtures are part of the repository.
+pub fn fixture(name: &str) -> PathBuf {
+    let dir = repo_root().join("data-fixtures").join(name);
+    assert!(dir.is_dir(), "bundled fixture not found at {}", dir.display());
+    dir
+}
+
+/// One kind of shared data: its folder under `shared/` and the variable that points elsewhere.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Shared {
+    /// The reference implementations' parity vectors (`$DGGT_PARITY_DIR`).
+    Parity,
+    /// The released checkpoints' key lists (`$DGGT_CHECKPOINT_KEYS_DIR`).
+    CheckpointKeys,
+    /// Real driving logs and their exports (`$DGGT_REAL_DATA`).
+    RealData,
+}
+
+impl Shared {
+    /// The folder's path below `shared/`.
+    fn relative(self) -> &'static str {
+        match self {
+            Self::Parity => "parity",
+            Self::CheckpointKeys => "reference/checkpoint-keys",
+            Self::RealData => "real-data",
+        }
+    }
+
+    /// The environment variable that overrides where the folder is.
+    pub fn variable(self) -> &'static str {
+        match self {
+            Self::Parity => "DGGT_PARITY_DIR",
+            Self::CheckpointKeys => "DGGT_CHECKPOINT_KEYS_DIR",
+            Self::RealData => "DGGT_REAL_DATA",
+        }
+    }
+
+    /// Where the folder is: the variable's value when set, else `../shared/<relative>` from the nearest folder
+    /// at or above the repository's root that has one (the repository's own `../shared` when none has).
+    /// Nothing is checked: [`Shared::dir`] checks.
+    pub fn locate(self) -> PathBuf {
+        if let Some(dir) = std::env::var_os(self.variable()) {
+            return PathBuf::from(dir);
+        }
+        let below = |dir: &Path| dir.join("../shared").join(self.relative());
+        let root = repo_root();
+        root.ancestors().map(below).find(|dir| dir.is_dir()).unwrap_or_else(|| below(&root))
+    }
+
+    /// The folder, which must exist.
+    ///
+    /// # Panics
+    /// When it does not, naming where it looked and the variable to set.
+    pub fn dir(self) -> PathBuf {
+        let dir = self.locate();
+        assert!(
+            dir.is_dir(),
+            "shared {} not found at {} (set {} to the folder)",
+            self.relative(),
+            dir.display(),
+            self.variable()
+        );
+        dir
+    }
+
+    /// The entry `name` of the folder (a file or a subfolder), which must exist.
+    ///
+    /// # Panics
+    /// When it does not, naming where it looked and the variable to set.
+    pub fn entry(self, name: &str) -> PathBuf {
+        let path = self.dir().join(name);
+        assert!(
+            path.exists(),
+            "{name} not found in the shared {} folder {} (set {} to the folder that holds it)",
+            self.relative(),
+            path.parent().unwrap_or(&path).display(),
+            self.variable()
+        );
+        path
+    }
+}
+
+/// The parity vectors' folder `name` (e.g. `dggt_tiny_s3_56x70`, `metrics`, `difix_tiny_s1`).
+///
+/// # Panics
+/// When it is missing.
+pub fn parity(name: &str) -> PathBuf {
+    Shared::Parity.entry(name)
+}
+
+/// The real driving data's folder.
+///
+/// # Panics
+/// When it is missing.
+pub fn real_data() -> PathBuf {
+    Shared::RealData.dir()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_repository_root_holds_the_workspace_manifest_and_the_fixtures() {
+        assert!(repo_root().join("Cargo.toml").is_file());
+        assert!(fixture("synth-s0").join("images").is_dir());
+    }
+
+    #[test]
+    fn each_kind_has_its_own_folder_and_variable() {
+        let kinds = [Shared::Parity, Shared::CheckpointKeys, Shared::RealData];
+        for (i, a) in kinds.iter().enumerate() {
+            for b in &kinds[i + 1..] {
+                assert_ne!(a.relative(), b.relative());
+                assert_ne!(a.variable(), b.variable());
+            }
+        }
+    }
+
+    #[test]
+    #[should_panic(expected = "not found")]
+    fn a_missing_entry_fails_naming_it() {
+        Shared::Parity.entry("no-such-parity-folder");
+    }
+}
