@@ -10,7 +10,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use dggt_export::images::{read_rgb_png, write_rgb_png};
+use dggt_formats::images::{read_rgb_png, write_rgb_png};
 use dggt_geom::ImageSize;
 
 fn dggt(args: &[&str]) -> Output {

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use burn::tensor::Device;
 use clap::Subcommand;
-use dggt_export::images::{read_rgb_png, write_rgb_png};
+use dggt_formats::images::{read_rgb_png, write_rgb_png};
 use dggt_refine::checkpoint::DifixCheckpoint;
 use dggt_refine::{
     Latent, Prompt, ReferenceView, Refiner, RefinerPrecision, RefinerSpec, frame_from_interleaved, frame_to_interleaved,

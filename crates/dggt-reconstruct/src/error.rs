@@ -23,7 +23,7 @@ pub enum ReconstructError {
     #[error(transparent)]
     ReadBack(#[from] dggt_model::host::ReadBackError),
     #[error(transparent)]
-    Export(#[from] dggt_export::ExportError),
+    Format(#[from] dggt_formats::FormatError),
 }
 
 impl ReconstructError {

@@ -1,7 +1,7 @@
 //! `dggt reconstruct`: unposed images in; per-frame cameras, depth, dynamic and sky maps, 4D Gaussians and
 //! renders at any time out, from one forward pass of the network (run through `dggt-infer`).
 //!
-//! - [`pipeline`]: cameras, maps, Gaussians and renders written in the formats of `dggt-export`;
+//! - [`pipeline`]: cameras, maps, Gaussians and renders written in the formats of `dggt-formats`;
 //! - [`align`]: similarity alignment of predicted to reference camera centres (the pose report);
 //! - [`summary`]: counts, times and peak memory, printed and saved as `summary.json`;
 //! - [`volume`]: the requested times and the largest output they could give, checked before any work.

@@ -24,13 +24,13 @@ use std::time::Instant;
 
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_data::PlanarImage;
-use dggt_export::cameras_json::{CameraRecord, Convention, write_cameras_json};
-use dggt_export::colmap::{ColmapCamera, ColmapImage, write_colmap};
-use dggt_export::depth::{scale_for, write_depth_npy, write_depth_png16};
-use dggt_export::images::write_rgb_png;
-use dggt_export::masks::{write_binary_png, write_probability_png};
-use dggt_export::nerfstudio::{NerfstudioFrame, write_transforms};
-use dggt_export::ply::{GaussianCloud, write_ply};
+use dggt_formats::cameras_json::{CameraRecord, Convention, write_cameras_json};
+use dggt_formats::colmap::{ColmapCamera, ColmapImage, write_colmap};
+use dggt_formats::depth::{scale_for, write_depth_npy, write_depth_png16};
+use dggt_formats::images::write_rgb_png;
+use dggt_formats::masks::{write_binary_png, write_probability_png};
+use dggt_formats::nerfstudio::{NerfstudioFrame, write_transforms};
+use dggt_formats::ply::{GaussianCloud, write_ply};
 use dggt_geom::{ImageSize, PosedCamera, WorldFromCamera};
 use dggt_infer::{
     InputCameras, InputSet, MotionPath, Scene4d, SceneOptions, ViewSlot, forward_chunked, input_views, load_network,

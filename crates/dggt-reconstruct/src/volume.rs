@@ -5,7 +5,7 @@
 
 use std::fmt;
 
-use dggt_export::ply::INRIA_PROPERTIES;
+use dggt_formats::ply::INRIA_PROPERTIES;
 use dggt_geom::ImageSize;
 
 use crate::error::ReconstructError;

@@ -13,7 +13,7 @@
 
 use std::path::Path;
 
-use crate::ExportError;
+use crate::FormatError;
 
 /// The degree-0 spherical-harmonic constant `1 / (2 sqrt(pi))`.
 pub const SH_C0: f32 = 0.282_094_8;
@@ -114,8 +114,8 @@ pub fn encode_ply(cloud: &GaussianCloud) -> Result<Vec<u8>, PlyError> {
 }
 
 /// Writes `cloud` to `path` as an INRIA-layout binary PLY.
-pub fn write_ply(path: &Path, cloud: &GaussianCloud) -> Result<(), ExportError> {
-    let bytes = encode_ply(cloud).map_err(|source| ExportError::Ply { path: path.to_owned(), source })?;
+pub fn write_ply(path: &Path, cloud: &GaussianCloud) -> Result<(), FormatError> {
+    let bytes = encode_ply(cloud).map_err(|source| FormatError::Ply { path: path.to_owned(), source })?;
     crate::write_file(path, &bytes)
 }
 
@@ -232,9 +232,9 @@ pub fn parse_ply(bytes: &[u8]) -> Result<PlyVertices, PlyError> {
 }
 
 /// Reads a PLY written by [`write_ply`] (or any binary float32 vertex PLY).
-pub fn read_ply(path: &Path) -> Result<PlyVertices, ExportError> {
+pub fn read_ply(path: &Path) -> Result<PlyVertices, FormatError> {
     let bytes = crate::read_file(path)?;
-    parse_ply(&bytes).map_err(|source| ExportError::Ply { path: path.to_owned(), source })
+    parse_ply(&bytes).map_err(|source| FormatError::Ply { path: path.to_owned(), source })
 }
 
 #[cfg(test)]

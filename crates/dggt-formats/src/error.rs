@@ -1,9 +1,9 @@
-//! Errors of writing and reading export files; each names the file.
+//! Errors of writing and reading the output files; each names the file.
 
 use std::path::{Path, PathBuf};
 
 #[derive(Debug, thiserror::Error)]
-pub enum ExportError {
+pub enum FormatError {
     #[error("{}: {source}", path.display())]
     Io { path: PathBuf, source: std::io::Error },
     #[error("{}: expected {expected}, found {found}", path.display())]
@@ -18,7 +18,7 @@ pub enum ExportError {
     Write(#[from] dggt_data::DataError),
 }
 
-impl ExportError {
+impl FormatError {
     pub(crate) fn io(path: &Path, source: std::io::Error) -> Self {
         Self::Io { path: path.to_owned(), source }
     }

@@ -9,7 +9,7 @@
 //! - [`depth`]: float32 `.npy` depth maps and 16-bit PNGs with their scale in a JSON beside them;
 //! - [`masks`]: 8-bit PNG probability maps and binary masks; [`images`]: RGB PNG frames.
 //!
-//! Every reader treats its file as untrusted and returns an [`ExportError`] naming it.
+//! Every reader treats its file as untrusted and returns an [`FormatError`] naming it.
 
 pub mod cameras_json;
 pub mod colmap;
@@ -20,13 +20,13 @@ pub mod masks;
 pub mod nerfstudio;
 pub mod ply;
 
-pub use error::ExportError;
+pub use error::FormatError;
 
 /// Writes `bytes` to `path` atomically, creating the folder ([`dggt_data::io::write_atomically`]).
-pub(crate) fn write_file(path: &std::path::Path, bytes: &[u8]) -> Result<(), ExportError> {
+pub(crate) fn write_file(path: &std::path::Path, bytes: &[u8]) -> Result<(), FormatError> {
     Ok(dggt_data::io::write_atomically(path, bytes)?)
 }
 
-pub(crate) fn read_file(path: &std::path::Path) -> Result<Vec<u8>, ExportError> {
-    std::fs::read(path).map_err(|e| ExportError::io(path, e))
+pub(crate) fn read_file(path: &std::path::Path) -> Result<Vec<u8>, FormatError> {
+    std::fs::read(path).map_err(|e| FormatError::io(path, e))
 }

@@ -11,7 +11,7 @@ use std::path::Path;
 use dggt_geom::{ImageSize, PinholeIntrinsics, WorldFromCamera};
 use serde::{Deserialize, Serialize};
 
-use crate::ExportError;
+use crate::FormatError;
 
 /// One view's camera.
 #[derive(Debug, Clone, PartialEq)]
@@ -77,7 +77,7 @@ struct FileJson {
 }
 
 /// Writes `records` with `convention` to `path`.
-pub fn write_cameras_json(path: &Path, convention: &Convention, records: &[CameraRecord]) -> Result<(), ExportError> {
+pub fn write_cameras_json(path: &Path, convention: &Convention, records: &[CameraRecord]) -> Result<(), FormatError> {
     let json = FileJson {
         convention: convention.clone(),
         views: records
@@ -98,25 +98,25 @@ pub fn write_cameras_json(path: &Path, convention: &Convention, records: &[Camer
             })
             .collect(),
     };
-    let text = serde_json::to_string_pretty(&json).map_err(|e| ExportError::invalid(path, e.to_string()))?;
+    let text = serde_json::to_string_pretty(&json).map_err(|e| FormatError::invalid(path, e.to_string()))?;
     crate::write_file(path, text.as_bytes())
 }
 
 /// Reads a `cameras.json`; checks that the two pose matrices of each view are inverses.
-pub fn read_cameras_json(path: &Path) -> Result<(Convention, Vec<CameraRecord>), ExportError> {
+pub fn read_cameras_json(path: &Path) -> Result<(Convention, Vec<CameraRecord>), FormatError> {
     let bytes = crate::read_file(path)?;
     let json: FileJson = serde_json::from_slice(&bytes)
-        .map_err(|e| ExportError::malformed(path, "a cameras.json with a convention block", e.to_string()))?;
+        .map_err(|e| FormatError::malformed(path, "a cameras.json with a convention block", e.to_string()))?;
     let records = json
         .views
         .into_iter()
         .map(|v| {
-            let bad = |e: dggt_geom::GeomError| ExportError::invalid(path, format!("view {}: {e}", v.name));
+            let bad = |e: dggt_geom::GeomError| FormatError::invalid(path, format!("view {}: {e}", v.name));
             let world_from_camera = WorldFromCamera::from_rows(v.world_from_camera).map_err(bad)?;
             let camera_from_world = dggt_geom::CameraFromWorld::from_rows(v.camera_from_world).map_err(bad)?;
             let error = camera_from_world.max_abs_difference(&world_from_camera.inverse());
             if error > 1e-6 {
-                return Err(ExportError::invalid(
+                return Err(FormatError::invalid(
                     path,
                     format!("view {}: camera_from_world is not the inverse of world_from_camera ({error:.2e})", v.name),
                 ));

@@ -1,12 +1,12 @@
 //! Every writer read back by its reader: PLY header, vertex count and values; COLMAP cameras and poses;
 //! nerfstudio camera-to-world; camera JSON; depth as `.npy` and 16-bit PNG; masks.
 
-use dggt_export::cameras_json::{CameraRecord, Convention, read_cameras_json, write_cameras_json};
-use dggt_export::colmap::{ColmapCamera, ColmapImage, read_cameras_txt, read_images_txt, write_colmap};
-use dggt_export::depth::{read_depth_npy, read_depth_png16, scale_for, write_depth_npy, write_depth_png16};
-use dggt_export::masks::{read_mask_png, write_binary_png, write_probability_png};
-use dggt_export::nerfstudio::{NerfstudioFrame, read_transforms, write_transforms};
-use dggt_export::ply::{GaussianCloud, INRIA_PROPERTIES, read_ply, write_ply};
+use dggt_formats::cameras_json::{CameraRecord, Convention, read_cameras_json, write_cameras_json};
+use dggt_formats::colmap::{ColmapCamera, ColmapImage, read_cameras_txt, read_images_txt, write_colmap};
+use dggt_formats::depth::{read_depth_npy, read_depth_png16, scale_for, write_depth_npy, write_depth_png16};
+use dggt_formats::masks::{read_mask_png, write_binary_png, write_probability_png};
+use dggt_formats::nerfstudio::{NerfstudioFrame, read_transforms, write_transforms};
+use dggt_formats::ply::{GaussianCloud, INRIA_PROPERTIES, read_ply, write_ply};
 use dggt_geom::glam::{DQuat, DVec3};
 use dggt_geom::{ImageSize, PinholeIntrinsics, WorldFromCamera};
 

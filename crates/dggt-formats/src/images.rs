@@ -6,29 +6,29 @@ use std::path::Path;
 use dggt_geom::ImageSize;
 use image::RgbImage;
 
-use crate::ExportError;
+use crate::FormatError;
 
 /// Writes interleaved RGB in `[0, 1]` (non-finite values as 0).
-pub fn write_rgb_png(path: &Path, size: ImageSize, rgb: &[f32]) -> Result<(), ExportError> {
+pub fn write_rgb_png(path: &Path, size: ImageSize, rgb: &[f32]) -> Result<(), FormatError> {
     if rgb.len() != 3 * size.area() {
-        return Err(ExportError::invalid(path, format!("{} RGB values for a {size} image", rgb.len())));
+        return Err(FormatError::invalid(path, format!("{} RGB values for a {size} image", rgb.len())));
     }
     let bytes: Vec<u8> =
         rgb.iter().map(|&v| if v.is_finite() { (v.clamp(0.0, 1.0) * 255.0).round() as u8 } else { 0 }).collect();
     let image = RgbImage::from_raw(size.width, size.height, bytes)
-        .ok_or_else(|| ExportError::invalid(path, "RGB buffer does not fill the image"))?;
+        .ok_or_else(|| FormatError::invalid(path, "RGB buffer does not fill the image"))?;
     let mut encoded = std::io::Cursor::new(Vec::new());
     image
         .write_to(&mut encoded, image::ImageFormat::Png)
-        .map_err(|e| ExportError::invalid(path, format!("encoding PNG: {e}")))?;
+        .map_err(|e| FormatError::invalid(path, format!("encoding PNG: {e}")))?;
     crate::write_file(path, &encoded.into_inner())
 }
 
 /// Reads an image as interleaved RGB in `[0, 1]`.
-pub fn read_rgb_png(path: &Path) -> Result<(ImageSize, Vec<f32>), ExportError> {
+pub fn read_rgb_png(path: &Path) -> Result<(ImageSize, Vec<f32>), FormatError> {
     let bytes = crate::read_file(path)?;
     let image =
-        image::load_from_memory(&bytes).map_err(|e| ExportError::malformed(path, "an image", e.to_string()))?.to_rgb8();
-    let size = ImageSize::new(image.width(), image.height()).map_err(|e| ExportError::invalid(path, e.to_string()))?;
+        image::load_from_memory(&bytes).map_err(|e| FormatError::malformed(path, "an image", e.to_string()))?.to_rgb8();
+    let size = ImageSize::new(image.width(), image.height()).map_err(|e| FormatError::invalid(path, e.to_string()))?;
     Ok((size, image.as_raw().iter().map(|&v| v as f32 / 255.0).collect()))
 }

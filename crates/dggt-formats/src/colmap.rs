@@ -11,7 +11,7 @@ use std::path::Path;
 use dggt_geom::glam::{DQuat, DVec3};
 use dggt_geom::{CameraFromWorld, ImageSize, PinholeIntrinsics};
 
-use crate::ExportError;
+use crate::FormatError;
 
 /// One `PINHOLE` camera.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -32,9 +32,9 @@ pub struct ColmapImage {
 }
 
 /// Writes `cameras.txt`, `images.txt` and an empty `points3D.txt` into `dir`.
-pub fn write_colmap(dir: &Path, cameras: &[ColmapCamera], images: &[ColmapImage]) -> Result<(), ExportError> {
+pub fn write_colmap(dir: &Path, cameras: &[ColmapCamera], images: &[ColmapImage]) -> Result<(), FormatError> {
     if let Some(image) = images.iter().find(|i| i.name.is_empty() || i.name.contains(char::is_whitespace)) {
-        return Err(ExportError::invalid(dir, format!("image name {:?} is empty or has white space", image.name)));
+        return Err(FormatError::invalid(dir, format!("image name {:?} is empty or has white space", image.name)));
     }
     let mut text = String::from("# Camera list with one line of data per camera:\n");
     text.push_str("#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[] (PINHOLE: fx, fy, cx, cy in pixels)\n");
@@ -70,17 +70,17 @@ pub fn write_colmap(dir: &Path, cameras: &[ColmapCamera], images: &[ColmapImage]
     crate::write_file(&dir.join("points3D.txt"), text.as_bytes())
 }
 
-fn numbers<T: std::str::FromStr>(path: &Path, line: usize, words: &[&str]) -> Result<Vec<T>, ExportError> {
+fn numbers<T: std::str::FromStr>(path: &Path, line: usize, words: &[&str]) -> Result<Vec<T>, FormatError> {
     words
         .iter()
-        .map(|w| w.parse::<T>().map_err(|_| ExportError::malformed(path, format!("a number on line {line}"), *w)))
+        .map(|w| w.parse::<T>().map_err(|_| FormatError::malformed(path, format!("a number on line {line}"), *w)))
         .collect()
 }
 
 /// Reads `cameras.txt` (`PINHOLE` cameras only).
-pub fn read_cameras_txt(path: &Path) -> Result<Vec<ColmapCamera>, ExportError> {
+pub fn read_cameras_txt(path: &Path) -> Result<Vec<ColmapCamera>, FormatError> {
     let text = String::from_utf8(crate::read_file(path)?)
-        .map_err(|_| ExportError::malformed(path, "UTF-8 text", "other bytes"))?;
+        .map_err(|_| FormatError::malformed(path, "UTF-8 text", "other bytes"))?;
     let mut cameras = Vec::new();
     for (n, line) in text.lines().enumerate().map(|(i, l)| (i + 1, l.trim())) {
         if line.is_empty() || line.starts_with('#') {
@@ -88,25 +88,25 @@ pub fn read_cameras_txt(path: &Path) -> Result<Vec<ColmapCamera>, ExportError> {
         }
         let words: Vec<&str> = line.split_whitespace().collect();
         if words.len() != 8 || words[1] != "PINHOLE" {
-            return Err(ExportError::malformed(path, format!("`ID PINHOLE W H fx fy cx cy` on line {n}"), line));
+            return Err(FormatError::malformed(path, format!("`ID PINHOLE W H fx fy cx cy` on line {n}"), line));
         }
         let id = numbers::<u32>(path, n, &words[..1])?[0];
         let size = numbers::<u32>(path, n, &words[2..4])?;
         let k = numbers::<f64>(path, n, &words[4..8])?;
         cameras.push(ColmapCamera {
             id,
-            size: ImageSize::new(size[0], size[1]).map_err(|e| ExportError::invalid(path, format!("line {n}: {e}")))?,
+            size: ImageSize::new(size[0], size[1]).map_err(|e| FormatError::invalid(path, format!("line {n}: {e}")))?,
             intrinsics: PinholeIntrinsics::new(k[0], k[1], k[2], k[3])
-                .map_err(|e| ExportError::invalid(path, format!("line {n}: {e}")))?,
+                .map_err(|e| FormatError::invalid(path, format!("line {n}: {e}")))?,
         });
     }
     Ok(cameras)
 }
 
 /// Reads `images.txt`; the 2D-point lines are skipped.
-pub fn read_images_txt(path: &Path) -> Result<Vec<ColmapImage>, ExportError> {
+pub fn read_images_txt(path: &Path) -> Result<Vec<ColmapImage>, FormatError> {
     let text = String::from_utf8(crate::read_file(path)?)
-        .map_err(|_| ExportError::malformed(path, "UTF-8 text", "other bytes"))?;
+        .map_err(|_| FormatError::malformed(path, "UTF-8 text", "other bytes"))?;
     let lines: Vec<(usize, &str)> =
         text.lines().enumerate().map(|(i, l)| (i + 1, l.trim())).filter(|(_, l)| !l.starts_with('#')).collect();
     let mut images = Vec::new();
@@ -118,7 +118,7 @@ pub fn read_images_txt(path: &Path) -> Result<Vec<ColmapImage>, ExportError> {
         }
         let words: Vec<&str> = line.split_whitespace().collect();
         if words.len() != 10 {
-            return Err(ExportError::malformed(
+            return Err(FormatError::malformed(
                 path,
                 format!("`IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME` on line {n}"),
                 line,
@@ -128,7 +128,7 @@ pub fn read_images_txt(path: &Path) -> Result<Vec<ColmapImage>, ExportError> {
         let v = numbers::<f64>(path, n, &words[1..8])?;
         let rotation = DQuat::from_xyzw(v[1], v[2], v[3], v[0]);
         let camera_from_world = CameraFromWorld::from_rotation_translation(rotation, DVec3::new(v[4], v[5], v[6]))
-            .map_err(|e| ExportError::invalid(path, format!("line {n}: {e}")))?;
+            .map_err(|e| FormatError::invalid(path, format!("line {n}: {e}")))?;
         images.push(ColmapImage { id: ids[0], camera_id: ids[1], name: words[9].to_string(), camera_from_world });
         i += 2;
     }

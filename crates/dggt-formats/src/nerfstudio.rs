@@ -10,7 +10,7 @@ use std::path::Path;
 use dggt_geom::{ImageSize, PinholeIntrinsics, WorldFromCamera};
 use serde::{Deserialize, Serialize};
 
-use crate::ExportError;
+use crate::FormatError;
 
 /// One frame as this module takes and returns it: an OpenCV-axes pose, converted at the file boundary.
 #[derive(Debug, Clone, PartialEq)]
@@ -65,7 +65,7 @@ pub fn from_opengl_matrix(mut rows: [[f64; 4]; 4]) -> Result<WorldFromCamera, dg
 }
 
 /// Writes `transforms.json`.
-pub fn write_transforms(path: &Path, frames: &[NerfstudioFrame]) -> Result<(), ExportError> {
+pub fn write_transforms(path: &Path, frames: &[NerfstudioFrame]) -> Result<(), FormatError> {
     let json = TransformsJson {
         camera_model: "PINHOLE".into(),
         convention: Some(CONVENTION.into()),
@@ -83,20 +83,20 @@ pub fn write_transforms(path: &Path, frames: &[NerfstudioFrame]) -> Result<(), E
             })
             .collect(),
     };
-    let text = serde_json::to_string_pretty(&json).map_err(|e| ExportError::invalid(path, e.to_string()))?;
+    let text = serde_json::to_string_pretty(&json).map_err(|e| FormatError::invalid(path, e.to_string()))?;
     crate::write_file(path, text.as_bytes())
 }
 
 /// Reads a `transforms.json` written by [`write_transforms`] (per-frame intrinsics).
-pub fn read_transforms(path: &Path) -> Result<Vec<NerfstudioFrame>, ExportError> {
+pub fn read_transforms(path: &Path) -> Result<Vec<NerfstudioFrame>, FormatError> {
     let bytes = crate::read_file(path)?;
     let json: TransformsJson = serde_json::from_slice(&bytes)
-        .map_err(|e| ExportError::malformed(path, "a transforms.json with per-frame intrinsics", e.to_string()))?;
+        .map_err(|e| FormatError::malformed(path, "a transforms.json with per-frame intrinsics", e.to_string()))?;
     json.frames
         .into_iter()
         .enumerate()
         .map(|(i, f)| {
-            let bad = |e: dggt_geom::GeomError| ExportError::invalid(path, format!("frame {i}: {e}"));
+            let bad = |e: dggt_geom::GeomError| FormatError::invalid(path, format!("frame {i}: {e}"));
             Ok(NerfstudioFrame {
                 world_from_camera: from_opengl_matrix(f.transform_matrix).map_err(bad)?,
                 intrinsics: PinholeIntrinsics::new(f.fl_x, f.fl_y, f.cx, f.cy).map_err(bad)?,
