@@ -1,0 +1,25 @@
+//! Errors of the process group; each says what was expected.
+
+/// What went wrong in a collective operation or in setting the group up.
+#[derive(Debug, thiserror::Error)]
+pub enum CollectiveError {
+    /// The program was started under an MPI launcher but this build has no MPI support.
+    #[error(
+        "started as rank {rank} of {size} by an MPI launcher, but this build has no MPI support (build with the `mpi` feature)"
+    )]
+    NoMpiSupport { rank: String, size: String },
+    /// MPI could not be initialised (it already was, or the launcher's environment is broken).
+    #[error("MPI could not be initialised: {0}")]
+    Init(&'static str),
+    /// The ranks disagree on the size of a buffer they sum: they would exchange garbage.
+    #[error(
+        "rank {rank} sums {local} values, and the ranks' lengths range from {smallest} to {largest}: the ranks hold \
+         different models"
+    )]
+    SizeMismatch { rank: Rank, local: usize, smallest: usize, largest: usize },
+    /// A bucket size of zero elements cannot make progress.
+    #[error("bucket size must be at least one element")]
+    EmptyBucket,
+}
+
+use crate::group::Rank;

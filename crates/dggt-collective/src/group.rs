@@ -1,0 +1,158 @@
+//! The process group a training run belongs to: this process alone, or one rank of an MPI job.
+//!
+//! Which one is decided at start-up from the environment: a process started by `mpirun` (Open MPI, MPICH) or
+//! `srun` (Slurm) sees its launcher's rank variables and joins the MPI world; one started plainly is a group of
+//! one. A build without the `mpi` feature refuses to run as one rank of several (each would train alone and
+//! write the same files) rather than silently ignoring its siblings.
+
+use crate::error::CollectiveError;
+
+/// A rank's number in its group, from 0.
+pub type Rank = usize;
+
+/// The environment variables by which launchers tell a process its rank and the job's size.
+const LAUNCHER_VARIABLES: [(&str, &str); 3] =
+    [("OMPI_COMM_WORLD_RANK", "OMPI_COMM_WORLD_SIZE"), ("PMI_RANK", "PMI_SIZE"), ("SLURM_PROCID", "SLURM_NTASKS")];
+
+/// The group of processes that train together.
+pub enum ProcessGroup {
+    /// This process alone: sums are the identity.
+    Single,
+    /// One rank of an MPI job.
+    #[cfg(feature = "mpi")]
+    Mpi(crate::group::mpi_group::MpiGroup),
+}
+
+impl std::fmt::Debug for ProcessGroup {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "ProcessGroup(rank {} of {})", self.rank(), self.size())
+    }
+}
+
+impl ProcessGroup {
+    /// The group this process was started in: the MPI world when a launcher started it as one of several
+    /// ranks, else this process alone.
+    pub fn from_environment() -> Result<Self, CollectiveError> {
+        match launched_rank() {
+            Some((rank, size)) if size != "1" => Self::join_mpi(rank, size),
+            _ => Ok(Self::Single),
+        }
+    }
+
+    #[cfg(feature = "mpi")]
+    fn join_mpi(_rank: String, _size: String) -> Result<Self, CollectiveError> {
+        Ok(Self::Mpi(mpi_group::MpiGroup::initialise()?))
+    }
+
+    #[cfg(not(feature = "mpi"))]
+    fn join_mpi(rank: String, size: String) -> Result<Self, CollectiveError> {
+        Err(CollectiveError::NoMpiSupport { rank, size })
+    }
+
+    /// This process's rank.
+    pub fn rank(&self) -> Rank {
+        match self {
+            Self::Single => 0,
+            #[cfg(feature = "mpi")]
+            Self::Mpi(group) => group.rank(),
+        }
+    }
+
+    /// How many ranks train together.
+    pub fn size(&self) -> usize {
+        match self {
+            Self::Single => 1,
+            #[cfg(feature = "mpi")]
+            Self::Mpi(group) => group.size(),
+        }
+    }
+
+    /// Whether this rank writes the run's files (checkpoints, metrics, validation): rank 0 alone.
+    pub fn is_writer(&self) -> bool {
+        self.rank() == 0
+    }
+
+    /// Replaces `values` on every rank by their element-wise sum over all ranks. Every rank must call it with
+    /// a buffer of the same length, in the same order of calls.
+    pub fn all_reduce_sum(&self, values: &mut [f32]) -> Result<(), CollectiveError> {
+        match self {
+            Self::Single => Ok(()),
+            #[cfg(feature = "mpi")]
+            Self::Mpi(group) => group.all_reduce_sum(values),
+        }
+    }
+
+    /// Rank 0's `value` on every rank (a seed, a step to resume from).
+    pub fn broadcast_u64(&self, value: u64) -> u64 {
+        match self {
+            Self::Single => value,
+            #[cfg(feature = "mpi")]
+            Self::Mpi(group) => group.broadcast_u64(value),
+        }
+    }
+}
+
+/// The rank and size a launcher gave this process, as their text.
+fn launched_rank() -> Option<(String, String)> {
+    LAUNCHER_VARIABLES.iter().find_map(|(rank, size)| Some((std::env::var(rank).ok()?, std::env::var(size).ok()?)))
+}
+
+#[cfg(feature = "mpi")]
+pub(crate) mod mpi_group {
+    //! One rank of an MPI job, over rsmpi.
+
+    use mpi::collective::SystemOperation;
+    use mpi::environment::Universe;
+    use mpi::topology::SimpleCommunicator;
+    use mpi::traits::{Communicator, CommunicatorCollectives, Root};
+
+    use super::Rank;
+    use crate::error::CollectiveError;
+
+    /// The MPI world of this job; MPI is finalised when it is dropped.
+    pub struct MpiGroup {
+        world: SimpleCommunicator,
+        _universe: Universe,
+    }
+
+    impl MpiGroup {
+        pub(crate) fn initialise() -> Result<Self, CollectiveError> {
+            let universe = mpi::initialize().ok_or(CollectiveError::Init("it was initialised before"))?;
+            Ok(Self { world: universe.world(), _universe: universe })
+        }
+
+        pub(crate) fn rank(&self) -> Rank {
+            self.world.rank() as Rank
+        }
+
+        pub(crate) fn size(&self) -> usize {
+            self.world.size() as usize
+        }
+
+        /// Every rank first learns the smallest and largest length summed (one small all-reduce), so that a
+        /// mismatch fails on every rank instead of leaving some waiting on the others.
+        pub(crate) fn all_reduce_sum(&self, values: &mut [f32]) -> Result<(), CollectiveError> {
+            let local = values.len() as i64;
+            let mut extremes = [0i64; 2];
+            self.world.all_reduce_into(&[local, -local][..], &mut extremes[..], SystemOperation::max());
+            let (largest, smallest) = (extremes[0], -extremes[1]);
+            if largest != smallest {
+                return Err(CollectiveError::SizeMismatch {
+                    rank: self.rank(),
+                    local: values.len(),
+                    smallest: smallest as usize,
+                    largest: largest as usize,
+                });
+            }
+            let send = values.to_vec();
+            self.world.all_reduce_into(&send[..], values, SystemOperation::sum());
+            Ok(())
+        }
+
+        pub(crate) fn broadcast_u64(&self, value: u64) -> u64 {
+            let mut value = value;
+            self.world.process_at_rank(0).broadcast_into(&mut value);
+            value
+        }
+    }
+}
