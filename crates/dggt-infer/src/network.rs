@@ -129,6 +129,7 @@ pub fn load_network(
     }
     let report = load_checkpoint_with(&mut model, path, Coverage::Partial).map_err(|e| match e {
         dggt_model::ModelError::WeightsFile { message, .. } => fail(format!("cannot be read: {message}")),
+        dggt_model::ModelError::Safetensors(error) => fail(format!("cannot be read: {error}")),
         other => fail(format!("does not fit the architecture of {arch_name}: {other}")),
     })?;
     let fresh = check_release_coverage(&report, &arch_name, &mut warnings).map_err(fail)?;

@@ -24,6 +24,8 @@ pub enum ModelError {
     WeightApply { name: String, message: String },
     #[error("the checkpoint lacks {} tensor(s) the network needs: {}", .0.len(), .0.join(", "))]
     MissingWeights(Vec<String>),
+    #[error(transparent)]
+    Safetensors(#[from] crate::safetensors_file::SafetensorsError),
     #[error("parity vectors at {path}: {message}")]
     Vectors { path: String, message: String },
     #[error("input image size {height}x{width} is not a multiple of the patch size {patch}")]

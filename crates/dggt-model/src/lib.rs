@@ -14,6 +14,7 @@
 //!
 //! - [`sky`]: the sky model's Gaussians and their colours sampled from the input views;
 //! - [`lifespan`]: frame times, the static/dynamic opacity split and the lifespan decay;
+//! - [`safetensors_file`]: the workspace's one safetensors reader (header, shapes, types, tensors as `f32`);
 //! - [`seeded`]: fresh weights drawn from a seed, one caller at a time (the backend's generator is global);
 //! - [`host`]: device tensors copied to the host as `f32`, with an error naming the tensor.
 //!
@@ -42,6 +43,7 @@ pub mod mlp;
 pub mod model;
 pub mod resample;
 pub mod rope;
+pub mod safetensors_file;
 pub mod seeded;
 pub mod sky;
 pub mod uv_embed;

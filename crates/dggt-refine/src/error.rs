@@ -20,6 +20,8 @@ pub enum RefineError {
     Lora { path: String, module: String, message: String },
     #[error("unsupported configuration in {path}: {message}")]
     Config { path: String, message: String },
+    #[error(transparent)]
+    Safetensors(#[from] dggt_model::safetensors_file::SafetensorsError),
     #[error("invalid input: {0}")]
     Input(String),
 }
