@@ -10,7 +10,7 @@
 use std::path::{Path, PathBuf};
 
 use burn::tensor::{DType, Device, FloatDType, Tensor};
-use dggt_infer::parity::{ParityVectors, parity_folder};
+use dggt_parity::{ParityVectors, parity_folder};
 use dggt_model::{Dggt, DggtOutput};
 
 fn parity_dir() -> PathBuf {

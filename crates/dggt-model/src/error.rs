@@ -1,4 +1,4 @@
-//! Errors of model construction, weight loading and reading parity vectors.
+//! Errors of model construction and weight loading.
 
 use thiserror::Error;
 
@@ -26,8 +26,6 @@ pub enum ModelError {
     MissingWeights(Vec<String>),
     #[error(transparent)]
     Safetensors(#[from] crate::safetensors_file::SafetensorsError),
-    #[error("parity vectors at {path}: {message}")]
-    Vectors { path: String, message: String },
     #[error("input image size {height}x{width} is not a multiple of the patch size {patch}")]
     ImageSize { height: usize, width: usize, patch: usize },
 }

@@ -19,7 +19,7 @@
 //! - [`host`]: device tensors copied to the host as `f32`, with an error naming the tensor.
 //!
 //! The network stops at its maps: placing and rendering Gaussians is `dggt-scene`'s, and running a folder of
-//! reference vectors against the release (`dggt parity`) is `dggt-infer`'s.
+//! reference vectors against the release (`dggt parity`) is `dggt-parity`'s.
 //!
 //! Not built: the tracker head (never run by DGGT).
 //!

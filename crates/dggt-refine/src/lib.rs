@@ -21,7 +21,6 @@ pub mod config;
 mod error;
 pub mod layers;
 pub mod lora;
-pub mod parity;
 pub mod precision;
 pub mod random;
 pub mod reference;

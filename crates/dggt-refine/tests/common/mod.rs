@@ -3,15 +3,13 @@
 
 use std::path::PathBuf;
 
-use dggt_refine::parity::is_refiner_folder;
-
 pub fn vectors_dir() -> PathBuf {
     let root = std::env::var_os("DGGT_PARITY_DIR")
         .map(PathBuf::from)
         .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/parity"));
     let dir = root.join("difix_tiny_s1");
     assert!(
-        is_refiner_folder(&dir),
+        dir.join("base").is_dir() && dir.join("model_difix.pkl").is_file(),
         "refiner parity vectors not found at {} (set DGGT_PARITY_DIR to the shared parity folder)",
         dir.display()
     );
