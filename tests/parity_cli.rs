@@ -104,7 +104,8 @@ fn write_perturbed(source: &Path, target: &Path, name: &str, delta: f32, extra: 
         })
         .collect();
     let copy = tensors.iter().find(|(key, ..)| key == name).cloned().expect("the tensor is in the file");
-    let tensors: Vec<_> = tensors.into_iter().chain(extra.map(|extra| (extra.to_string(), copy.1, copy.2, copy.3))).collect();
+    let tensors: Vec<_> =
+        tensors.into_iter().chain(extra.map(|extra| (extra.to_string(), copy.1, copy.2, copy.3))).collect();
     let views = tensors
         .iter()
         .map(|(key, dtype, shape, data)| (key.as_str(), TensorView::new(*dtype, shape.clone(), data).unwrap()));
@@ -137,12 +138,16 @@ fn a_perturbed_output_fails_by_name() {
 /// A reference output the port has no rule for is never compared, and that fails the command.
 #[test]
 fn an_output_never_compared_fails() {
-    let copy = copied_vectors(|source, target| write_perturbed(source, target, "depth", 0.0, Some("track_head.coords")));
+    let copy =
+        copied_vectors(|source, target| write_perturbed(source, target, "depth", 0.0, Some("track_head.coords")));
     let out = dggt(&["parity", "--vectors", copy.path().to_str().unwrap()]);
     let (stdout, stderr) = text(&out);
     assert!(!out.status.success(), "an output never compared must fail:\n{stdout}");
     assert!(has_status(&stdout, "depth", "pass"), "{stdout}");
-    assert!(row(&stdout, "track_head.coords").contains("FAIL (not compared: not an output this port knows)"), "{stdout}");
+    assert!(
+        row(&stdout, "track_head.coords").contains("FAIL (not compared: not an output this port knows)"),
+        "{stdout}"
+    );
     assert!(stdout.contains(" 1 fail, 1 of them not compared"), "{stdout}");
     assert!(stderr.contains("1 output(s) failed parity: track_head.coords"), "{stderr}");
 }

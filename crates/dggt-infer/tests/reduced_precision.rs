@@ -10,8 +10,8 @@
 use std::path::{Path, PathBuf};
 
 use burn::tensor::{DType, Device, FloatDType, Tensor};
-use dggt_parity::{ParityVectors, parity_folder};
 use dggt_model::{Dggt, DggtOutput};
+use dggt_parity::{ParityVectors, parity_folder};
 
 fn parity_dir() -> PathBuf {
     parity_folder(Path::new(env!("CARGO_MANIFEST_DIR")), "dggt_tiny_s3_56x70")

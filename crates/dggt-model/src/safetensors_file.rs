@@ -43,6 +43,8 @@ pub enum SafetensorsError {
     /// The header is unreadable, or its sizes do not fit the file.
     #[error("{}: not a safetensors file: {detail}", path.display())]
     Malformed { path: PathBuf, detail: String },
+    #[error(transparent)]
+    BadSpan(Box<BadSpan>),
     #[error("{}: no tensor '{name}'", path.display())]
     MissingTensor { path: PathBuf, name: String },
     /// A tensor whose stored type the caller cannot take (or burn cannot hold).
@@ -58,6 +60,27 @@ pub enum SafetensorsError {
     /// A read of bytes outside a tensor's range.
     #[error("{}: tensor '{name}': {len} bytes at {offset} lie outside it", path.display())]
     OutsideTensor { path: PathBuf, name: String, offset: u64, len: usize },
+}
+
+/// A tensor whose byte range lies outside the data section or does not span its shape.
+#[derive(Debug, thiserror::Error)]
+#[error(
+    "{}: not a safetensors file: tensor '{name}': bytes {}..{} of {data_len}, expected {} bytes for {} {:?}",
+    path.display(),
+    entry.data_offsets[0],
+    entry.data_offsets[1],
+    expected.map_or("too many".to_string(), |bytes| bytes.to_string()),
+    entry.dtype,
+    entry.shape
+)]
+pub struct BadSpan {
+    pub path: PathBuf,
+    pub name: String,
+    pub entry: TensorEntry,
+    /// The length of the data section.
+    pub data_len: u64,
+    /// The bytes the shape needs (`None` when that overflows).
+    pub expected: Option<usize>,
 }
 
 /// One tensor of the header: its type name as stored (`F32`, `BF16`, `I64`, ...), shape and byte range in the
@@ -147,7 +170,7 @@ impl SafetensorsFile {
         for (name, value) in entries {
             let entry: TensorEntry =
                 serde_json::from_value(value).map_err(|e| malformed(format!("tensor '{name}': {e}")))?;
-            check_span(&name, &entry, data_len).map_err(malformed)?;
+            check_span(path, &name, &entry, data_len)?;
             tensors.insert(name, entry);
         }
         Ok(Self { path: path.to_path_buf(), file, tensors, metadata, data_start })
@@ -236,17 +259,15 @@ fn read_at(file: &mut File, position: u64, out: &mut [u8]) -> std::io::Result<()
 
 /// Checks that `entry`'s byte range lies inside a data section of `data_len` bytes and, for a type of known
 /// size, spans exactly its shape's bytes.
-fn check_span(name: &str, entry: &TensorEntry, data_len: u64) -> Result<(), String> {
+fn check_span(path: &Path, name: &str, entry: &TensorEntry, data_len: u64) -> Result<(), SafetensorsError> {
     let [begin, end] = entry.data_offsets;
     let element = entry.burn_dtype().map(|dtype| dtype.size());
     let expected = element.and_then(|bytes| entry.shape.iter().try_fold(bytes, |bytes, &side| bytes.checked_mul(side)));
-    let size_wrong = element.is_some() && expected.and_then(|bytes| u64::try_from(bytes).ok()) != end.checked_sub(begin);
-    if end < begin || end > data_len || size_wrong {
-        let expected = expected.map_or("too many".to_string(), |bytes| bytes.to_string());
-        return Err(format!(
-            "tensor '{name}': bytes {begin}..{end} of {data_len}, expected {expected} bytes for {} {:?}",
-            entry.dtype, entry.shape
-        ));
+    let spans_shape =
+        element.is_none() || expected.and_then(|bytes| u64::try_from(bytes).ok()) == end.checked_sub(begin);
+    if end < begin || end > data_len || !spans_shape {
+        let (path, name, entry) = (path.to_path_buf(), name.to_string(), entry.clone());
+        return Err(SafetensorsError::BadSpan(Box::new(BadSpan { path, name, entry, data_len, expected })));
     }
     Ok(())
 }

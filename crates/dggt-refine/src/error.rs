@@ -35,3 +35,14 @@ impl RefineError {
         Self::File { path: path.display().to_string(), message: message.into() }
     }
 }
+
+/// A name on a command line or in a configuration that is none of the accepted ones.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[error("unknown {what} {text:?}: expected {expected}")]
+pub struct UnknownName {
+    /// What was named (`reference view`, `refiner precision`).
+    pub what: &'static str,
+    pub text: String,
+    /// The accepted names, as a sentence.
+    pub expected: &'static str,
+}

@@ -36,7 +36,7 @@ pub mod unet;
 pub mod vae;
 pub mod weights;
 
-pub use error::RefineError;
+pub use error::{RefineError, UnknownName};
 pub use precision::RefinerPrecision;
 pub use reference::ReferenceView;
 pub use refiner::{

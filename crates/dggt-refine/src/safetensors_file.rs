@@ -24,7 +24,10 @@ impl SafetensorsFile {
         let length = entry.shape.iter().try_fold(element_bytes, |bytes, &side| bytes.checked_mul(side));
         if length.and_then(|bytes| u64::try_from(bytes).ok()) != Some(entry.byte_len()) {
             let ([begin, end], shape) = (entry.data_offsets, &entry.shape);
-            return Err(RefineError::file(self.0.path(), format!("tensor '{name}': offsets {begin}..{end} for shape {shape:?}")));
+            return Err(RefineError::file(
+                self.0.path(),
+                format!("tensor '{name}': offsets {begin}..{end} for shape {shape:?}"),
+            ));
         }
         Ok(entry)
     }

@@ -57,10 +57,7 @@ const OUTPUTS: &[(&str, Reproduce)] = &[
         }),
     ),
     ("agg.dino_token_list.{i}", (|p, k| Ok(dense(layer(&p.out.aggregator.dino_token_list, k.index)?)))),
-    (
-        "agg.patch_start_idx",
-        (|p, _| Ok(host(HostTensor::new(vec![1], vec![p.out.aggregator.patch_start_idx as f32])))),
-    ),
+    ("agg.patch_start_idx", (|p, _| Ok(host(HostTensor::new(vec![1], vec![p.out.aggregator.patch_start_idx as f32]))))),
     // Camera head.
     (
         "camera.token_norm_out",
@@ -249,10 +246,7 @@ const OUTPUTS: &[(&str, Reproduce)] = &[
         }),
     ),
     ("render.static_opacity", (|p, _| Ok(dense(p.scene()?.static_opacity.clone())))),
-    (
-        "render.static_opacity_at_frame.{i}",
-        (|p, k| Ok(dense(layer(&p.scene()?.static_opacity_at_frame, k.index)?))),
-    ),
+    ("render.static_opacity_at_frame.{i}", (|p, k| Ok(dense(layer(&p.scene()?.static_opacity_at_frame, k.index)?)))),
     ("render.fg_rgb", (|p, _| Ok(image(p.scene()?.foreground.colors.clone(), 3)))),
     ("render.fg_alpha", (|p, _| Ok(image(p.scene()?.foreground.alpha.clone().unsqueeze_dim::<4>(3), 1)))),
     ("render.fg_expected_depth", (|p, _| Ok(image(p.scene()?.foreground.depth.clone(), 1)))),

@@ -161,10 +161,10 @@ impl<'a> Prediction<'a> {
 
     /// Per pixel of every frame, row-major: not sky in the vectors' `sky_mask` (any channel 0).
     pub fn non_sky(&self) -> Result<Vec<bool>, ReproduceError> {
-        let mask = self.sky_mask.as_ref().ok_or_else(|| ReproduceError::Input {
-            input: "sky_mask",
-            problem: "not in inputs.safetensors".into(),
-        })?;
+        let mask = self
+            .sky_mask
+            .as_ref()
+            .ok_or_else(|| ReproduceError::Input { input: "sky_mask", problem: "not in inputs.safetensors".into() })?;
         let pixels = self.size.area();
         if mask.values.len() != self.images.dims()[..2].iter().product::<usize>() * 3 * pixels {
             let problem = format!("{:?}, not [B, S, 3, H, W]", mask.shape);
