@@ -7,7 +7,6 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use dggt_parity::parity_folder;
 use safetensors::{Dtype, SafeTensors, tensor::TensorView};
 
 fn dggt(args: &[&str]) -> Output {
@@ -15,7 +14,7 @@ fn dggt(args: &[&str]) -> Output {
 }
 
 fn vectors() -> PathBuf {
-    parity_folder(Path::new(env!("CARGO_MANIFEST_DIR")), "dggt_tiny_s3_56x70")
+    dggt_test_data::parity("dggt_tiny_s3_56x70")
 }
 
 fn text(out: &Output) -> (String, String) {

@@ -2,7 +2,7 @@
 //! inputs, and every reference output is compared with the port's value into one [`ParityReport`].
 //!
 //! - [`vectors`]: the network's vector folders (`config.json`, weights, `inputs.safetensors`,
-//!   `outputs.safetensors`), and where the shared ones are found;
+//!   `outputs.safetensors`);
 //! - [`network`]: the DGGT network run on them, each reference output reproduced by name (with
 //!   [`network::release_render`], the release's own inference render of the scene);
 //! - [`refiner`]: the refiner's vector folders, run in both modes and compared tensor by tensor;
@@ -19,4 +19,4 @@ pub mod vectors;
 
 pub use error::ParityError;
 pub use report::{ParityReport, ParityRow, Status};
-pub use vectors::{HostTensor, ParityVectors, parity_folder};
+pub use vectors::{HostTensor, ParityVectors};

@@ -1,6 +1,6 @@
 //! The network's reference vector folders: `config.json`, `weights.safetensors` or `weights.pt`,
 //! `inputs.safetensors` and `outputs.safetensors`, read into memory (weights excepted: they are loaded into the
-//! network), and where the shared folders are found.
+//! network).
 
 use std::path::{Path, PathBuf};
 
@@ -121,25 +121,4 @@ impl ParityVectors {
             found: format!("{:?}", images.shape),
         })
     }
-}
-
-/// The shared parity vectors' folder `name` (e.g. `dggt_tiny_s3_56x70`): under `$DGGT_PARITY_DIR` when set,
-/// else under `../shared/parity` of the nearest ancestor of `start` (a crate's manifest folder) that has one.
-/// Panics, naming where it looked, when the folder does not exist: for tests, which need the vectors.
-pub fn parity_folder(start: &Path, name: &str) -> PathBuf {
-    let root = match std::env::var_os("DGGT_PARITY_DIR") {
-        Some(dir) => PathBuf::from(dir),
-        None => start
-            .ancestors()
-            .map(|dir| dir.join("../shared/parity"))
-            .find(|dir| dir.is_dir())
-            .unwrap_or_else(|| start.join("../shared/parity")),
-    };
-    let dir = root.join(name);
-    assert!(
-        dir.is_dir(),
-        "parity vectors not found at {} (set DGGT_PARITY_DIR to the shared parity folder)",
-        dir.display()
-    );
-    dir
 }

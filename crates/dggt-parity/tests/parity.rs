@@ -13,10 +13,10 @@ use burn::tensor::Device;
 use dggt_model::{Dggt, ModelConfig, ModelError};
 use dggt_parity::network::{NetworkRun, run_parity};
 use dggt_parity::vectors::read_tensors;
-use dggt_parity::{ParityReport, ParityVectors, Status, parity_folder};
+use dggt_parity::{ParityReport, ParityVectors, Status};
 
 fn parity_dir() -> PathBuf {
-    parity_folder(Path::new(env!("CARGO_MANIFEST_DIR")), "dggt_tiny_s3_56x70")
+    dggt_test_data::parity("dggt_tiny_s3_56x70")
 }
 
 fn vectors() -> &'static ParityVectors {

@@ -11,13 +11,12 @@ use std::path::{Path, PathBuf};
 
 use burn::tensor::Device;
 use dggt_parity::Status;
-use dggt_parity::parity_folder;
 use dggt_parity::refiner::{compare, is_refiner_folder, read_vectors, run_parity};
 use dggt_refine::checkpoint::DifixCheckpoint;
 use dggt_refine::weights::HostTensor;
 
 fn vectors_dir() -> PathBuf {
-    let dir = parity_folder(Path::new(env!("CARGO_MANIFEST_DIR")), "difix_tiny_s1");
+    let dir = dggt_test_data::parity("difix_tiny_s1");
     assert!(is_refiner_folder(&dir), "{} is not a refiner vector folder", dir.display());
     dir
 }
