@@ -239,6 +239,12 @@ impl SafetensorsFile {
         Ok(TensorData::from_bytes_vec(bytes, shape, dtype))
     }
 
+    /// Every tensor as stored, by name.
+    pub fn read_all_data(&mut self) -> Result<BTreeMap<String, TensorData>, SafetensorsError> {
+        let names: Vec<String> = self.tensors.keys().cloned().collect();
+        names.into_iter().map(|name| Ok((name.clone(), self.read_data(&name)?))).collect()
+    }
+
     /// Tensor `name` widened (or narrowed) to `f32`, whatever its stored float, integer or boolean type.
     pub fn read_f32(&mut self, name: &str) -> Result<F32Tensor, SafetensorsError> {
         let data = self.read_data(name)?;

@@ -34,9 +34,7 @@ pub fn is_refiner_folder(dir: &Path) -> bool {
 
 /// The tensors of a safetensors file as stored, by name.
 pub fn read_vectors(path: &Path) -> Result<BTreeMap<String, TensorData>, SafetensorsError> {
-    let mut file = SafetensorsFile::open(path)?;
-    let names: Vec<String> = file.entries().keys().cloned().collect();
-    names.into_iter().map(|name| Ok((name.clone(), file.read_data(&name)?))).collect()
+    SafetensorsFile::open(path)?.read_all_data()
 }
 
 /// One run of the refiner's vectors: what loading took from where, and the comparison.

@@ -17,9 +17,7 @@ use common::vectors_dir;
 
 /// The tensors of a vector file as stored, by name.
 fn read_vectors(path: &Path) -> BTreeMap<String, TensorData> {
-    let mut file = SafetensorsFile::open(path).unwrap();
-    let names: Vec<String> = file.entries().keys().cloned().collect();
-    names.into_iter().map(|name| (name.clone(), file.read_data(&name).unwrap())).collect()
+    SafetensorsFile::open(path).and_then(|mut file| file.read_all_data()).unwrap()
 }
 
 /// The largest absolute difference between two tensors of the same size, in `f64` (infinite where one is NaN).
