@@ -7,7 +7,6 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use dggt_infer::parity::parity_folder;
 use safetensors::{Dtype, SafeTensors, tensor::TensorView};
 
 fn dggt(args: &[&str]) -> Output {
@@ -15,7 +14,7 @@ fn dggt(args: &[&str]) -> Output {
 }
 
 fn vectors() -> PathBuf {
-    parity_folder(Path::new(env!("CARGO_MANIFEST_DIR")), "dggt_tiny_s3_56x70")
+    dggt_test_data::parity("dggt_tiny_s3_56x70")
 }
 
 fn text(out: &Output) -> (String, String) {
@@ -83,8 +82,9 @@ fn passes_from_the_pytorch_checkpoints() {
     }
 }
 
-/// Writes `source` to `target` with `delta` added to every value of the tensor `name`.
-fn write_perturbed(source: &Path, target: &Path, name: &str, delta: f32) {
+/// Writes `source` to `target` with `delta` added to every value of the tensor `name`, and with a copy of that
+/// tensor under `extra` when given.
+fn write_perturbed(source: &Path, target: &Path, name: &str, delta: f32, extra: Option<&str>) {
     let bytes = std::fs::read(source).unwrap();
     let file = SafeTensors::deserialize(&bytes).unwrap();
     let tensors: Vec<(String, Dtype, Vec<usize>, Vec<u8>)> = file
@@ -102,20 +102,29 @@ fn write_perturbed(source: &Path, target: &Path, name: &str, delta: f32) {
             (key, view.dtype(), view.shape().to_vec(), data)
         })
         .collect();
+    let copy = tensors.iter().find(|(key, ..)| key == name).cloned().expect("the tensor is in the file");
+    let tensors: Vec<_> =
+        tensors.into_iter().chain(extra.map(|extra| (extra.to_string(), copy.1, copy.2, copy.3))).collect();
     let views = tensors
         .iter()
         .map(|(key, dtype, shape, data)| (key.as_str(), TensorView::new(*dtype, shape.clone(), data).unwrap()));
     safetensors::serialize_to_file(views, None, target).unwrap();
 }
 
-#[test]
-fn a_perturbed_output_fails_by_name() {
+/// A copy of the vectors whose outputs file is written by `write` (from the source file to the copy's).
+fn copied_vectors(write: impl FnOnce(&Path, &Path)) -> tempfile::TempDir {
     let source = vectors();
     let copy = tempfile::tempdir().unwrap();
     for file in ["config.json", "inputs.safetensors", "weights.safetensors"] {
         std::fs::copy(source.join(file), copy.path().join(file)).unwrap();
     }
-    write_perturbed(&source.join("outputs.safetensors"), &copy.path().join("outputs.safetensors"), "depth", 1e-2);
+    write(&source.join("outputs.safetensors"), &copy.path().join("outputs.safetensors"));
+    copy
+}
+
+#[test]
+fn a_perturbed_output_fails_by_name() {
+    let copy = copied_vectors(|source, target| write_perturbed(source, target, "depth", 1e-2, None));
     let out = dggt(&["parity", "--vectors", copy.path().to_str().unwrap()]);
     let (stdout, stderr) = text(&out);
     assert!(!out.status.success(), "a perturbed reference must fail:\n{stdout}");
@@ -123,6 +132,23 @@ fn a_perturbed_output_fails_by_name() {
     assert!(has_status(&stdout, "depth_conf", "pass"), "{stdout}");
     assert!(stdout.contains(" 1 fail,"), "{stdout}");
     assert!(stderr.contains("1 output(s) failed parity: depth"), "{stderr}");
+}
+
+/// A reference output the port has no rule for is never compared, and that fails the command.
+#[test]
+fn an_output_never_compared_fails() {
+    let copy =
+        copied_vectors(|source, target| write_perturbed(source, target, "depth", 0.0, Some("track_head.coords")));
+    let out = dggt(&["parity", "--vectors", copy.path().to_str().unwrap()]);
+    let (stdout, stderr) = text(&out);
+    assert!(!out.status.success(), "an output never compared must fail:\n{stdout}");
+    assert!(has_status(&stdout, "depth", "pass"), "{stdout}");
+    assert!(
+        row(&stdout, "track_head.coords").contains("FAIL (not compared: not an output this port knows)"),
+        "{stdout}"
+    );
+    assert!(stdout.contains(" 1 fail, 1 of them not compared"), "{stdout}");
+    assert!(stderr.contains("1 output(s) failed parity: track_head.coords"), "{stderr}");
 }
 
 #[test]

@@ -43,10 +43,7 @@ pub fn input_views(
         InputCameras::Given(cameras) => cameras,
     };
     if cameras.len() != slots.len() {
-        return Err(InferError::invalid(
-            "input cameras",
-            format!("{} cameras for {} input views", cameras.len(), slots.len()),
-        ));
+        return Err(InferError::CameraCount { cameras: cameras.len(), views: slots.len() });
     }
     Ok(slots
         .iter()

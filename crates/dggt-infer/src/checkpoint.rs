@@ -55,18 +55,29 @@ pub fn latest(root: &Path, purpose: Purpose) -> Result<Option<PathBuf>, InferErr
                 }
                 return Ok(Some(dir));
             }
-            Err(reason) => passed_over.push(reason),
+            Err(reason) => passed_over.push(reason.to_string()),
         }
     }
     Err(InferError::checkpoint(root, format!("no usable checkpoint: {}", passed_over.join("; "))))
 }
 
-/// Why the checkpoint folder `dir` cannot be used for `purpose`: incomplete or damaged.
-fn usable(dir: &Path, purpose: Purpose) -> Result<(), String> {
+/// Why a checkpoint folder cannot be used.
+#[derive(Debug, thiserror::Error)]
+enum Unusable {
+    /// A folder without its run state (a run killed while writing it).
+    #[error("{} is incomplete (no {STATE_FILE})", .0.display())]
+    Incomplete(PathBuf),
+    /// Files that do not match their checksums.
+    #[error(transparent)]
+    Damaged(InferError),
+}
+
+/// Whether the checkpoint folder `dir` can be used for `purpose`: an error when incomplete or damaged.
+fn usable(dir: &Path, purpose: Purpose) -> Result<(), Unusable> {
     if !dir.join(STATE_FILE).is_file() {
-        return Err(format!("{} is incomplete (no {STATE_FILE})", dir.display()));
+        return Err(Unusable::Incomplete(dir.to_path_buf()));
     }
-    verified(dir, purpose).map_err(|e| e.to_string())
+    verified(dir, purpose).map_err(Unusable::Damaged)
 }
 
 /// Checks the files of the checkpoint folder `dir` that `purpose` reads against their checksums: an error

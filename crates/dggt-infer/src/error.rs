@@ -17,8 +17,25 @@ pub enum InferError {
     DamagedCheckpoint { dir: PathBuf, damage: crate::checksums::Damage },
     #[error("configuration {}: {detail}", path.display())]
     Config { path: PathBuf, detail: String },
-    #[error("{what}: {detail}")]
-    Invalid { what: String, detail: String },
+    /// A checkpoint in the release's format that does not cover the network it is loaded into.
+    #[error("checkpoint {}: {coverage}", path.display())]
+    ReleaseCoverage { path: PathBuf, coverage: crate::network::CoverageError },
+    /// The forward pass takes one scene at a time.
+    #[error("images: batch of {found}, expected 1")]
+    BatchSize { found: usize },
+    #[error("input cameras: {cameras} cameras for {views} input views")]
+    CameraCount { cameras: usize, views: usize },
+    /// A network whose aggregator has no layers, so the heads have no tokens to read.
+    #[error("model: no aggregator layer")]
+    NoAggregatorLayer,
+    /// A glob pattern of a setting (such as `model.init_may_lack`) that does not parse.
+    #[error("{setting}: {pattern:?}: {source}")]
+    BadPattern {
+        setting: &'static str,
+        pattern: String,
+        #[source]
+        source: glob::PatternError,
+    },
     #[error(transparent)]
     Data(#[from] dggt_data::DataError),
     #[error(transparent)]
@@ -32,10 +49,6 @@ pub enum InferError {
 impl InferError {
     pub fn input(path: impl Into<PathBuf>, detail: impl Into<String>) -> Self {
         Self::Input { path: path.into(), detail: detail.into() }
-    }
-
-    pub fn invalid(what: impl Into<String>, detail: impl Into<String>) -> Self {
-        Self::Invalid { what: what.into(), detail: detail.into() }
     }
 
     pub fn checkpoint(path: impl Into<PathBuf>, detail: impl ToString) -> Self {

@@ -74,7 +74,7 @@ pub fn forward_chunked(
 ) -> Result<Prediction, InferError> {
     let [batch, ..] = images.dims();
     if batch != 1 {
-        return Err(InferError::invalid("images", format!("batch of {batch}, expected 1")));
+        return Err(InferError::BatchSize { found: batch });
     }
     let aggregator = model.aggregator.forward(images.clone())?;
     heads_chunked(model, aggregator, images, chunk, motion)
@@ -93,7 +93,7 @@ pub fn heads_chunked(
     let frames = images.dims()[1];
     let chunk = chunk.max(1);
     let f32 = |t: Tensor<4>| t.cast(FloatDType::F32);
-    let last = aggregator.output_list.last().ok_or_else(|| InferError::invalid("model", "no aggregator layer"))?;
+    let last = aggregator.output_list.last().ok_or(InferError::NoAggregatorLayer)?;
     let camera = model.camera_head.forward(last.clone());
     let encodings = camera.encodings.iter().map(|e| e.clone().cast(FloatDType::F32)).collect();
     let (start, grid) = (aggregator.patch_start_idx, aggregator.grid);

@@ -1,5 +1,5 @@
 //! The inference path, once: every tool that runs the network (training, reconstruction, evaluation,
-//! benchmarks, the stress suite, parity) goes through it.
+//! benchmarks, the stress suite) goes through it.
 //!
 //! In data-flow order:
 //!
@@ -10,9 +10,9 @@
 //! 2. [`inputs`]: the views of an image folder, glob or scene export, preprocessed to the network's size;
 //! 3. [`forward`]: the forward pass, dense heads a few frames at a time;
 //! 4. [`cameras`]: the input views' cameras, predicted or given;
-//! 5. [`scene`]: the 4D scene (pixel and sky Gaussians) and its renders at any time;
-//! 6. [`release`] and [`parity`]: the release's own inference render, and a folder of its reference vectors
-//!    run and compared output by output (`dggt parity`).
+//! 5. [`scene`]: the 4D scene (pixel and sky Gaussians) and its renders at any time.
+//!
+//! Parity with the release's reference vectors (`dggt parity`) is `dggt-parity`'s.
 //!
 //! Conventions: poses world-from-camera, OpenCV axes, the world the first input view's camera frame when
 //! cameras are predicted; images RGB in `[0, 1]`; scene time as [`dggt_scene::Timeline`] maps frames.
@@ -24,8 +24,6 @@ mod error;
 pub mod forward;
 pub mod inputs;
 pub mod network;
-pub mod parity;
-pub mod release;
 pub mod scene;
 pub mod settings;
 

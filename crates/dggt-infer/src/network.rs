@@ -129,9 +129,11 @@ pub fn load_network(
     }
     let report = load_checkpoint_with(&mut model, path, Coverage::Partial).map_err(|e| match e {
         dggt_model::ModelError::WeightsFile { message, .. } => fail(format!("cannot be read: {message}")),
+        dggt_model::ModelError::Safetensors(error) => fail(format!("cannot be read: {error}")),
         other => fail(format!("does not fit the architecture of {arch_name}: {other}")),
     })?;
-    let fresh = check_release_coverage(&report, &arch_name, &mut warnings).map_err(fail)?;
+    let fresh = check_release_coverage(&report, &arch_name, &mut warnings)
+        .map_err(|coverage| InferError::ReleaseCoverage { path: path.to_path_buf(), coverage })?;
     let info = CheckpointInfo {
         path: path.to_path_buf(),
         format: "release".into(),
@@ -167,27 +169,40 @@ fn trained_preprocess(
     Ok(recorded.or(configured))
 }
 
+/// Why a checkpoint in the release's format cannot start the network.
+#[derive(Debug, thiserror::Error)]
+pub enum CoverageError {
+    #[error("no tensor in it matches the network of {architecture} (not a DGGT or VGGT checkpoint?)")]
+    NothingMatches { architecture: String },
+    /// Modules the network cannot do without (aggregator, camera and depth heads) left without weights.
+    #[error(
+        "lacks weights of {modules:?} that the architecture of {architecture} needs ({missing} tensors missing, e.g. \
+         {examples:?})"
+    )]
+    CoreMissing { modules: Vec<String>, architecture: String, missing: usize, examples: Vec<String> },
+}
+
 /// The top-level modules a release-format load left fresh; an error when it matched nothing or left the core
 /// without weights, a warning when the scene modules are untrained.
 fn check_release_coverage(
     report: &LoadReport,
     arch_name: &str,
     warnings: &mut Vec<String>,
-) -> Result<Vec<String>, String> {
+) -> Result<Vec<String>, CoverageError> {
     if report.applied.is_empty() {
-        return Err(format!("no tensor in it matches the network of {arch_name} (not a DGGT or VGGT checkpoint?)"));
+        return Err(CoverageError::NothingMatches { architecture: arch_name.to_string() });
     }
     let mut fresh: Vec<String> = report.missing.iter().map(|p| p.split('.').next().unwrap_or(p).to_string()).collect();
     fresh.sort();
     fresh.dedup();
     let missing_core: Vec<&String> = fresh.iter().filter(|m| CORE_MODULES.contains(&m.as_str())).collect();
     if !missing_core.is_empty() {
-        let examples: Vec<&String> = report.missing.iter().take(3).collect();
-        return Err(format!(
-            "lacks weights of {missing_core:?} that the architecture of {arch_name} needs ({} tensors missing, e.g. \
-             {examples:?})",
-            report.missing.len()
-        ));
+        return Err(CoverageError::CoreMissing {
+            modules: missing_core.into_iter().cloned().collect(),
+            architecture: arch_name.to_string(),
+            missing: report.missing.len(),
+            examples: report.missing.iter().take(3).cloned().collect(),
+        });
     }
     let untrained: Vec<&String> = fresh.iter().filter(|m| SCENE_MODULES.contains(&m.as_str())).collect();
     if !untrained.is_empty() {
@@ -275,7 +290,13 @@ fn check_coverage(init: StartingWeights<'_>, report: &dggt_model::weights::LoadR
     let patterns = init
         .may_lack
         .iter()
-        .map(|p| glob::Pattern::new(p).map_err(|e| InferError::invalid("model.init_may_lack", format!("{p:?}: {e}"))))
+        .map(|p| {
+            glob::Pattern::new(p).map_err(|source| InferError::BadPattern {
+                setting: "model.init_may_lack",
+                pattern: p.clone(),
+                source,
+            })
+        })
         .collect::<Result<Vec<_>, _>>()?;
     let lacking: Vec<&String> =
         report.missing.iter().filter(|name| !patterns.iter().any(|p| p.matches(name))).collect();

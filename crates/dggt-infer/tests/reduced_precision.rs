@@ -7,14 +7,14 @@
 //! from computing in the type grows with the depth of the network but stays a small multiple of `e`; a constant
 //! left in f32, an overflow or a lost normalisation would either fail to run or miss by far more.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use burn::tensor::{DType, Device, FloatDType, Tensor};
-use dggt_infer::parity::{ParityVectors, parity_folder};
 use dggt_model::{Dggt, DggtOutput};
+use dggt_parity::ParityVectors;
 
 fn parity_dir() -> PathBuf {
-    parity_folder(Path::new(env!("CARGO_MANIFEST_DIR")), "dggt_tiny_s3_56x70")
+    dggt_test_data::parity("dggt_tiny_s3_56x70")
 }
 
 fn host<const D: usize>(tensor: Tensor<D>) -> Vec<f32> {

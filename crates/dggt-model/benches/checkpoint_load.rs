@@ -57,9 +57,18 @@ impl ReleaseTensor {
     }
 }
 
+/// A module parameter whose release key, found by inverting the renames, does not map back to it.
+#[derive(Debug, thiserror::Error)]
+#[error("{parameter}: inverted key {key} maps to {mapped}, not back")]
+struct KeyNotInvertible {
+    parameter: String,
+    key: String,
+    mapped: String,
+}
+
 /// The release key and PyTorch shape a module parameter is loaded from: the inverse of the loader's renames and
 /// of burn-store's PyTorch adapter (norm `gamma`/`beta` are `weight`/`bias`; Linear weights are transposed).
-fn release_tensor(parameter: &ParameterInfo) -> Result<ReleaseTensor, String> {
+fn release_tensor(parameter: &ParameterInfo) -> Result<ReleaseTensor, KeyNotInvertible> {
     let is_norm = NORMALIZATION_CONTAINERS.contains(&parameter.container.as_str());
     let pytorch_path = match (is_norm, parameter.path.rsplit_once('.')) {
         (true, Some((stem, "gamma"))) => format!("{stem}.weight"),
@@ -68,8 +77,9 @@ fn release_tensor(parameter: &ParameterInfo) -> Result<ReleaseTensor, String> {
     };
     let key =
         MODULE_TO_RELEASE.iter().fold(pytorch_path.clone(), |key, (module, release)| key.replace(module, release));
-    if module_path(&key) != pytorch_path {
-        return Err(format!("{}: inverted key {key} maps to {}, not back", parameter.path, module_path(&key)));
+    let mapped = module_path(&key);
+    if mapped != pytorch_path {
+        return Err(KeyNotInvertible { parameter: parameter.path.clone(), key, mapped });
     }
     let mut shape = parameter.shape.clone();
     if parameter.container == "Struct:Linear" && key.ends_with(".weight") {

@@ -1,4 +1,4 @@
-//! Errors of model construction, weight loading and reading parity vectors.
+//! Errors of model construction and weight loading.
 
 use thiserror::Error;
 
@@ -24,8 +24,8 @@ pub enum ModelError {
     WeightApply { name: String, message: String },
     #[error("the checkpoint lacks {} tensor(s) the network needs: {}", .0.len(), .0.join(", "))]
     MissingWeights(Vec<String>),
-    #[error("parity vectors at {path}: {message}")]
-    Vectors { path: String, message: String },
+    #[error(transparent)]
+    Safetensors(#[from] crate::safetensors_file::SafetensorsError),
     #[error("input image size {height}x{width} is not a multiple of the patch size {patch}")]
     ImageSize { height: usize, width: usize, patch: usize },
 }

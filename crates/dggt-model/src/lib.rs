@@ -14,11 +14,12 @@
 //!
 //! - [`sky`]: the sky model's Gaussians and their colours sampled from the input views;
 //! - [`lifespan`]: frame times, the static/dynamic opacity split and the lifespan decay;
+//! - [`safetensors_file`]: the workspace's one safetensors reader (header, shapes, types, tensors as `f32`);
 //! - [`seeded`]: fresh weights drawn from a seed, one caller at a time (the backend's generator is global);
 //! - [`host`]: device tensors copied to the host as `f32`, with an error naming the tensor.
 //!
 //! The network stops at its maps: placing and rendering Gaussians is `dggt-scene`'s, and running a folder of
-//! reference vectors against the release (`dggt parity`) is `dggt-infer`'s.
+//! reference vectors against the release (`dggt parity`) is `dggt-parity`'s.
 //!
 //! Not built: the tracker head (never run by DGGT).
 //!
@@ -42,6 +43,7 @@ pub mod mlp;
 pub mod model;
 pub mod resample;
 pub mod rope;
+pub mod safetensors_file;
 pub mod seeded;
 pub mod sky;
 pub mod uv_embed;

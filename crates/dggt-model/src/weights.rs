@@ -12,18 +12,15 @@
 //! safetensors reader memory-maps the file instead, and the mapped pages it touches stay in the process's resident
 //! set until the load ends, which put the peak at about twice the file size.
 
-use std::fs::File;
-use std::io::{Read, Seek, SeekFrom};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::store::burn_pack::{Error as PackError, Tensor as PackTensor};
 use burn::store::{ApplyError, KeyRemapper, ModuleSnapshot, PyTorchToBurnAdapter, PytorchStore, bridge};
-use burn::tensor::{Bytes, DType, Shape, Tensor, TensorData};
-use safetensors::Dtype;
-use safetensors::tensor::Metadata;
+use burn::tensor::{Bytes, Shape, Tensor, TensorData};
 
 use crate::error::ModelError;
+use crate::safetensors_file::{SafetensorsError, SafetensorsFile, read_file_range};
 
 /// Source-key renames from the release's names to the module tree: `(regex, replacement)`.
 pub const KEY_RENAMES: &[(&str, &str)] = &[
@@ -127,7 +124,7 @@ pub fn load_checkpoint_with<M: Module>(
     let result = match path.extension().and_then(|e| e.to_str()) {
         Some("safetensors") => {
             let renames = KeyRemapper::from_patterns(KEY_RENAMES.to_vec()).expect("KEY_RENAMES are valid regexes");
-            let (tensors, _) = renames.remap(safetensors_tensors(path).map_err(file_error)?);
+            let (tensors, _) = renames.remap(safetensors_tensors(path)?);
             module.apply(tensors, None, Some(Box::new(PyTorchToBurnAdapter)), false)
         }
         Some("pt" | "pth") => {
@@ -175,84 +172,27 @@ pub fn load_checkpoint_with<M: Module>(
     Ok(LoadReport { applied: result.applied, unused: result.unused, missing })
 }
 
-/// Header sizes beyond this are refused rather than allocated (the release's header is about 150 kB).
-const MAX_SAFETENSORS_HEADER_BYTES: u64 = 100 << 20;
-
-/// The tensors of a safetensors file (8-byte little-endian header length, JSON header, then the data; offsets
-/// relative to the data's start), each read from disk only when the loader takes it. The header is checked
-/// here: every tensor's byte range must lie inside the file and match its shape and dtype.
-fn safetensors_tensors(path: &Path) -> Result<Vec<PackTensor>, String> {
-    let mut file = File::open(path).map_err(|e| format!("cannot open: {e}"))?;
-    let file_len = file.metadata().map_err(|e| format!("cannot read its size: {e}"))?.len();
-    let mut header_len = [0u8; 8];
-    file.read_exact(&mut header_len).map_err(|e| format!("cannot read the header length: {e}"))?;
-    let header_len = u64::from_le_bytes(header_len);
-    if header_len > MAX_SAFETENSORS_HEADER_BYTES || header_len > file_len - 8 {
-        return Err(format!("header length {header_len} does not fit a {file_len}-byte safetensors file"));
-    }
-    let mut header = vec![0u8; header_len as usize];
-    file.read_exact(&mut header).map_err(|e| format!("cannot read the header: {e}"))?;
-    let metadata: Metadata = serde_json::from_slice(&header).map_err(|e| format!("invalid safetensors header: {e}"))?;
-    let data_start = 8 + header_len;
-    let data_len = file_len - data_start;
+/// The tensors of a safetensors file ([`SafetensorsFile`] checks its header: every tensor's byte range lies
+/// inside the file and matches its shape and dtype), each read from disk only when the loader takes it.
+fn safetensors_tensors(path: &Path) -> Result<Vec<PackTensor>, SafetensorsError> {
+    let file = SafetensorsFile::open(path)?;
     let mut tensors = Vec::new();
-    for (name, info) in metadata.tensors() {
-        let dtype =
-            burn_dtype(info.dtype).ok_or_else(|| format!("tensor {name}: unsupported dtype {:?}", info.dtype))?;
-        let (begin, end) = info.data_offsets;
-        let expected_bytes = info.shape.iter().try_fold(dtype.size(), |bytes, &dim| bytes.checked_mul(dim));
-        if end < begin || end as u64 > data_len || Some(end - begin) != expected_bytes {
-            return Err(format!(
-                "tensor {name}: bytes {begin}..{end} of {data_len}, expected {} bytes for {:?} {:?}",
-                expected_bytes.map_or("too many".to_string(), |bytes| bytes.to_string()),
-                info.dtype,
-                info.shape
-            ));
-        }
-        let shape = Shape::from(info.shape.clone());
-        let source = TensorSource { path: path.to_path_buf(), offset: data_start + begin as u64, len: end - begin };
-        tensors.push(bridge::deferred(name, dtype, shape.clone(), None, move || {
-            let bytes = source.read().map_err(|e| PackError::IoError(e.to_string()))?;
+    for (name, entry) in file.entries() {
+        let dtype = entry.burn_dtype().ok_or_else(|| SafetensorsError::UnsupportedDtype {
+            path: path.to_path_buf(),
+            name: name.clone(),
+            dtype: entry.dtype.clone(),
+            expected: "a type burn holds",
+        })?;
+        let shape = Shape::from(entry.shape.clone());
+        let (source, range) = (path.to_path_buf(), file.byte_range(name)?);
+        tensors.push(bridge::deferred(name.clone(), dtype, shape.clone(), None, move || {
+            let bytes = read_file_range(&source, range.clone()).map_err(|e| PackError::IoError(e.to_string()))?;
             TensorData::try_from_bytes(Bytes::from_bytes_vec(bytes), shape.clone(), dtype)
                 .map_err(|e| PackError::TensorBytesSizeMismatch(e.to_string()))
         }));
     }
     Ok(tensors)
-}
-
-/// Where one tensor's bytes lie in a file.
-struct TensorSource {
-    path: PathBuf,
-    offset: u64,
-    len: usize,
-}
-
-impl TensorSource {
-    fn read(&self) -> std::io::Result<Vec<u8>> {
-        let mut file = File::open(&self.path)?;
-        file.seek(SeekFrom::Start(self.offset))?;
-        let mut bytes = vec![0u8; self.len];
-        file.read_exact(&mut bytes)?;
-        Ok(bytes)
-    }
-}
-
-/// The burn element type of a safetensors dtype; `None` for types burn cannot hold (sub-byte floats, ...).
-fn burn_dtype(dtype: Dtype) -> Option<DType> {
-    Some(match dtype {
-        Dtype::F64 => DType::F64,
-        Dtype::F32 => DType::F32,
-        Dtype::F16 => DType::F16,
-        Dtype::BF16 => DType::BF16,
-        Dtype::I64 => DType::I64,
-        Dtype::I32 => DType::I32,
-        Dtype::I16 => DType::I16,
-        Dtype::I8 => DType::I8,
-        Dtype::U64 => DType::U64,
-        Dtype::U32 => DType::U32,
-        Dtype::U8 => DType::U8,
-        _ => return None,
-    })
 }
 
 #[cfg(test)]

@@ -20,6 +20,8 @@ pub enum RefineError {
     Lora { path: String, module: String, message: String },
     #[error("unsupported configuration in {path}: {message}")]
     Config { path: String, message: String },
+    #[error(transparent)]
+    Safetensors(#[from] dggt_model::safetensors_file::SafetensorsError),
     #[error("invalid input: {0}")]
     Input(String),
 }
@@ -32,4 +34,15 @@ impl RefineError {
     pub(crate) fn file(path: &std::path::Path, message: impl Into<String>) -> Self {
         Self::File { path: path.display().to_string(), message: message.into() }
     }
+}
+
+/// A name on a command line or in a configuration that is none of the accepted ones.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[error("unknown {what} {text:?}: expected {expected}")]
+pub struct UnknownName {
+    /// What was named (`reference view`, `refiner precision`).
+    pub what: &'static str,
+    pub text: String,
+    /// The accepted names, as a sentence.
+    pub expected: &'static str,
 }

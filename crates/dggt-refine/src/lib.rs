@@ -9,7 +9,8 @@
 //! - [`text_encoder`]: the CLIP text encoder for the fixed prompt, run once; [`tokenizer`]: its tokenizer;
 //! - [`scheduler`]: the noise schedule and the step to the clean latent;
 //! - [`refiner`]: the whole computation, and loading a diffusers model folder ([`config`], [`weights`], its
-//!   files read piece by piece by [`safetensors_file`]) with
+//!   files read piece by piece by the workspace's reader, `dggt_model::safetensors_file`; [`safetensors_file`]
+//!   gives that reader this crate's error type) with
 //!   a Difix checkpoint ([`checkpoint`]) over it; [`random`]: made-up weights at full size, for timing;
 //! - [`precision`]: the float types of the UNet and the VAE;
 //! - [`reference`]: which input view a rendered frame attends to in the reference-view mode.
@@ -21,7 +22,6 @@ pub mod config;
 mod error;
 pub mod layers;
 pub mod lora;
-pub mod parity;
 pub mod precision;
 pub mod random;
 pub mod reference;
@@ -37,7 +37,7 @@ pub mod unet;
 pub mod vae;
 pub mod weights;
 
-pub use error::RefineError;
+pub use error::{RefineError, UnknownName};
 pub use precision::RefinerPrecision;
 pub use reference::ReferenceView;
 pub use refiner::{

@@ -100,7 +100,7 @@ pub fn apply_vae_overlay_scaled(
             path: path.display().to_string(),
             name: weight_name.clone(),
         })?;
-        merge(weight, &down, &up, rank, scale).map_err(|message| lora_error(target, message))?;
+        merge(weight, &down, &up, rank, scale).map_err(|mismatch| lora_error(target, mismatch.to_string()))?;
         overlay.merged.push(target.clone());
     }
     if let Some(stray) = pairs.keys().next() {
@@ -109,17 +109,31 @@ pub fn apply_vae_overlay_scaled(
     Ok(overlay)
 }
 
+/// A LoRA pair whose shapes do not fit the weight it is merged into.
+#[derive(Debug, thiserror::Error)]
+#[error("lora_A {down:?} and lora_B {up:?} do not fit the weight {weight:?} at rank {rank}")]
+struct PairMismatch {
+    down: Vec<usize>,
+    up: Vec<usize>,
+    weight: Vec<usize>,
+    rank: usize,
+}
+
 /// `weight += scale * up @ down`, `weight`: `[out, rest...]`, `down`: `[rank, rest...]`,
 /// `up`: `[out, rank, (1, 1)]`.
-fn merge(weight: &mut HostTensor, down: &HostTensor, up: &HostTensor, rank: usize, scale: f32) -> Result<(), String> {
+fn merge(
+    weight: &mut HostTensor,
+    down: &HostTensor,
+    up: &HostTensor,
+    rank: usize,
+    scale: f32,
+) -> Result<(), PairMismatch> {
     let out = weight.shape[0];
     let rest = &weight.shape[1..];
     let up_ok = up.shape.len() >= 2 && up.shape[..2] == [out, rank] && up.shape[2..].iter().all(|&d| d == 1);
     if down.shape[0] != rank || &down.shape[1..] != rest || !up_ok {
-        return Err(format!(
-            "lora_A {:?} and lora_B {:?} do not fit the weight {:?} at rank {rank}",
-            down.shape, up.shape, weight.shape
-        ));
+        let (down, up, weight) = (down.shape.clone(), up.shape.clone(), weight.shape.clone());
+        return Err(PairMismatch { down, up, weight, rank });
     }
     let inner: usize = rest.iter().product();
     for o in 0..out {

@@ -8,6 +8,8 @@
 
 use burn::tensor::FloatDType;
 
+use crate::error::UnknownName;
+
 /// The UNet's and the VAE's float types.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct RefinerPrecision {
@@ -50,9 +52,9 @@ impl RefinerPrecision {
 }
 
 impl std::str::FromStr for RefinerPrecision {
-    type Err = String;
+    type Err = UnknownName;
 
-    fn from_str(text: &str) -> Result<Self, String> {
+    fn from_str(text: &str) -> Result<Self, UnknownName> {
         let dtype = |name: &str| match name {
             "f32" => Some(FloatDType::F32),
             "f16" => Some(FloatDType::F16),
@@ -63,8 +65,10 @@ impl std::str::FromStr for RefinerPrecision {
             Some(unet) => dtype(unet).map(Self::unet_only),
             None => dtype(text).map(Self::all),
         };
-        parsed.ok_or_else(|| {
-            format!("unknown refiner precision {text:?}: expected f32, f16, bf16, f16-unet or bf16-unet")
+        parsed.ok_or_else(|| UnknownName {
+            what: "refiner precision",
+            text: text.to_string(),
+            expected: "f32, f16, bf16, f16-unet or bf16-unet",
         })
     }
 }
@@ -79,6 +83,6 @@ mod tests {
             assert_eq!(name.parse::<RefinerPrecision>().unwrap().name(), name);
         }
         assert_eq!("bf16-unet".parse(), Ok(RefinerPrecision { unet: FloatDType::BF16, vae: FloatDType::F32 }));
-        assert!("f64".parse::<RefinerPrecision>().unwrap_err().contains("bf16-unet"));
+        assert!("f64".parse::<RefinerPrecision>().unwrap_err().to_string().contains("bf16-unet"));
     }
 }

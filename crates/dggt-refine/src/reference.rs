@@ -6,6 +6,8 @@
 //! refiner's training pairs use (`dggt refine-pairs`) and what `dggt reconstruct`, `dggt eval` and
 //! `dggt bench` take with `--refine-reference nearest-input`.
 
+use crate::error::UnknownName;
+
 /// The view each refined frame attends to.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -28,13 +30,14 @@ impl ReferenceView {
 }
 
 impl std::str::FromStr for ReferenceView {
-    type Err = String;
+    type Err = UnknownName;
 
-    fn from_str(text: &str) -> Result<Self, String> {
-        [Self::None, Self::NearestInput]
-            .into_iter()
-            .find(|view| view.name() == text)
-            .ok_or_else(|| format!("unknown reference view {text:?}: expected none or nearest-input"))
+    fn from_str(text: &str) -> Result<Self, UnknownName> {
+        [Self::None, Self::NearestInput].into_iter().find(|view| view.name() == text).ok_or_else(|| UnknownName {
+            what: "reference view",
+            text: text.to_string(),
+            expected: "none or nearest-input",
+        })
     }
 }
 
@@ -47,6 +50,7 @@ mod tests {
         for view in [ReferenceView::None, ReferenceView::NearestInput] {
             assert_eq!(view.name().parse::<ReferenceView>(), Ok(view));
         }
-        assert!("nearest".parse::<ReferenceView>().unwrap_err().contains("nearest-input"));
+        let error = "nearest".parse::<ReferenceView>().unwrap_err().to_string();
+        assert!(error.contains("\"nearest\"") && error.contains("nearest-input"), "{error}");
     }
 }

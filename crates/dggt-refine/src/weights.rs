@@ -13,8 +13,9 @@ use burn::module::ParamId;
 use burn::tensor::{DType, Device, Distribution, Tensor, TensorData};
 use safetensors::Dtype;
 
+use dggt_model::safetensors_file::{SafetensorsError, SafetensorsFile};
+
 use crate::error::RefineError;
-use crate::safetensors_file::SafetensorsFile;
 
 /// One tensor's shape, values (row-major) and the file it was read from.
 #[derive(Debug, Clone)]
@@ -63,27 +64,20 @@ pub fn read_safetensors(path: &Path) -> Result<NamedTensors, RefineError> {
 }
 
 /// Every tensor of a safetensors file, and the file's text metadata (empty when it has none). The file is
-/// read tensor by tensor (its header first, then each tensor's bytes), so reading holds one tensor's bytes
-/// beside the widened values rather than a copy of the whole file.
+/// read tensor by tensor ([`SafetensorsFile`]: its header first, then each tensor's bytes), so reading holds one
+/// tensor's bytes beside the widened values rather than a copy of the whole file. Every tensor must be a float.
 pub fn read_safetensors_with_metadata(path: &Path) -> Result<(NamedTensors, HashMap<String, String>), RefineError> {
     let mut file = SafetensorsFile::open(path)?;
     let mut tensors = NamedTensors::new();
-    let mut bytes = Vec::new();
-    let names: Vec<String> = file.tensors.keys().cloned().collect();
+    let names: Vec<String> = file.entries().keys().cloned().collect();
     for name in names {
-        let dtype = match file.tensors[&name].dtype.as_str() {
-            "F64" => DType::F64,
-            "F32" => DType::F32,
-            "F16" => DType::F16,
-            "BF16" => DType::BF16,
-            other => {
-                return Err(RefineError::file(path, format!("tensor '{name}' has type {other}, expected a float")));
-            }
-        };
-        let shape = file.entry(&name, dtype.size())?.shape.clone();
-        bytes.resize(shape.iter().product::<usize>() * dtype.size(), 0);
-        file.read_bytes(&name, 0, &mut bytes)?;
-        let data = TensorData::from_bytes_vec(std::mem::take(&mut bytes), shape, dtype);
+        let entry = file.entry(&name)?;
+        if !entry.is_float() {
+            let dtype = entry.dtype.clone();
+            let path = path.to_path_buf();
+            return Err(SafetensorsError::UnsupportedDtype { path, name, dtype, expected: "a float" }.into());
+        }
+        let data = file.read_data(&name)?;
         tensors.insert(name.clone(), HostTensor::from_data(data, path, &name)?);
     }
     Ok((tensors, std::mem::take(&mut file.metadata)))

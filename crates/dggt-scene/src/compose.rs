@@ -6,7 +6,7 @@
 //! composite by `(1 - alpha) · sky`, below the tolerance times the sky's colour.
 //!
 //! The release's inference additionally min-max normalises the sky over all views before [`composite`]
-//! (`dggt_infer::release`); a trained model of this project composites the sky as rendered, in training and
+//! (`dggt_parity::network::release_render`); a trained model of this project composites the sky as rendered, in training and
 //! inference alike.
 
 use burn::tensor::{Device, Tensor, TensorData};

@@ -1,19 +1,8 @@
-//! The refiner's reference vectors for the tests: `$DGGT_PARITY_DIR/difix_tiny_s1` when that variable names the
-//! shared parity folder, else `shared/parity/difix_tiny_s1` beside the repository. Missing vectors fail the test.
+//! The refiner's reference vectors for the tests: the shared parity folder's `difix_tiny_s1`
+//! ([`dggt_test_data::parity`]). Missing vectors fail the test.
 
 use std::path::PathBuf;
 
-use dggt_refine::parity::is_refiner_folder;
-
 pub fn vectors_dir() -> PathBuf {
-    let root = std::env::var_os("DGGT_PARITY_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/parity"));
-    let dir = root.join("difix_tiny_s1");
-    assert!(
-        is_refiner_folder(&dir),
-        "refiner parity vectors not found at {} (set DGGT_PARITY_DIR to the shared parity folder)",
-        dir.display()
-    );
-    dir
+    dggt_test_data::parity("difix_tiny_s1")
 }

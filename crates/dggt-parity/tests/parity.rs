@@ -1,6 +1,7 @@
 //! Parity with the release: the tiny model of `shared/parity/dggt_tiny_s3_56x70`, built from its
 //! `config.json`, loaded from its weights and run on its inputs, reproduces every reference output, renders
-//! included ([`dggt_infer::parity`] does the comparing).
+//! included ([`dggt_parity::network`] does the comparing), and a report fails on any output it did not
+//! compare.
 //!
 //! The folder is read in place (`../../../shared/parity/dggt_tiny_s3_56x70` from this crate), or from
 //! `$DGGT_PARITY_DIR/dggt_tiny_s3_56x70` when that variable names the shared parity folder.
@@ -9,11 +10,13 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use burn::tensor::Device;
-use dggt_infer::parity::{ParityReport, ParityVectors, Status, parity_folder, read_safetensors, run_parity};
 use dggt_model::{Dggt, ModelConfig, ModelError};
+use dggt_parity::network::{NetworkRun, run_parity};
+use dggt_parity::vectors::read_tensors;
+use dggt_parity::{ParityReport, ParityVectors, Status};
 
 fn parity_dir() -> PathBuf {
-    parity_folder(Path::new(env!("CARGO_MANIFEST_DIR")), "dggt_tiny_s3_56x70")
+    dggt_test_data::parity("dggt_tiny_s3_56x70")
 }
 
 fn vectors() -> &'static ParityVectors {
@@ -22,12 +25,16 @@ fn vectors() -> &'static ParityVectors {
 }
 
 /// The run from `weights.safetensors`, shared by the tests.
-fn report() -> &'static ParityReport {
-    static REPORT: OnceLock<ParityReport> = OnceLock::new();
-    REPORT.get_or_init(|| {
+fn run() -> &'static NetworkRun {
+    static RUN: OnceLock<NetworkRun> = OnceLock::new();
+    RUN.get_or_init(|| {
         let weights = parity_dir().join("weights.safetensors");
         run_parity(vectors(), &weights, &Device::flex()).expect("running the parity vectors")
     })
+}
+
+fn report() -> &'static ParityReport {
+    &run().report
 }
 
 /// Asserts that every row whose name starts with one of `prefixes` (and at least one) passes.
@@ -95,7 +102,7 @@ fn sky_model_matches_release() {
     );
 }
 
-/// A perturbed reference is caught, and a name the port does not know is listed as not compared.
+/// A perturbed reference is caught, and a name the port does not know is listed as not compared: a failure.
 #[test]
 fn perturbed_and_unknown_outputs_are_reported() {
     let mut vectors = vectors().clone();
@@ -104,14 +111,45 @@ fn perturbed_and_unknown_outputs_are_reported() {
     let unknown = vectors.outputs[0].1.clone();
     vectors.outputs.push(("track.coords".into(), unknown));
     let weights = vectors.default_weights().unwrap();
-    let report = run_parity(&vectors, &weights, &Device::flex()).unwrap();
+    let report = run_parity(&vectors, &weights, &Device::flex()).unwrap().report;
     assert!(!report.passed());
     let failed: Vec<&str> = report.failed().map(|row| row.name.as_str()).collect();
-    assert_eq!(failed, ["depth"]);
+    assert_eq!(failed, ["depth", "track.coords"]);
     let depth = report.row("depth").unwrap();
+    assert_eq!(depth.status, Status::OutOfTolerance);
     assert!(depth.max_abs.unwrap() > 9e-3 && depth.max_abs.unwrap() < 1.1e-2, "{depth:?}");
-    let unknown = report.row("track.coords").unwrap();
-    assert!(matches!(&unknown.status, Status::Skipped(reason) if reason.contains("not an output")), "{unknown:?}");
+    assert_eq!(report.row("track.coords").unwrap().status, Status::Unknown);
+}
+
+/// An outputs file holding a tensor the port cannot reproduce fails the run, though every other output passes.
+#[test]
+fn an_output_the_port_cannot_reproduce_fails_the_report() {
+    let copy = tempfile::tempdir().unwrap();
+    for file in ["config.json", "inputs.safetensors", "weights.safetensors"] {
+        std::fs::copy(parity_dir().join(file), copy.path().join(file)).unwrap();
+    }
+    let mut outputs = read_tensors(parity_dir().join("outputs.safetensors")).unwrap();
+    outputs.truncate(3);
+    outputs.push(("track_head.coords".into(), outputs[0].1.clone()));
+    write_f32_tensors(&copy.path().join("outputs.safetensors"), &outputs);
+    let vectors = ParityVectors::open(copy.path()).unwrap();
+    let report = run_parity(&vectors, &copy.path().join("weights.safetensors"), &Device::flex()).unwrap().report;
+    assert_eq!(report.rows.len(), 4);
+    assert!(report.rows[..3].iter().all(|row| row.status == Status::Pass), "{report}");
+    assert_eq!(report.rows[3].status, Status::Unknown);
+    assert!(!report.passed(), "{report}");
+    assert!(report.summary().contains(" 1 fail, 1 of them not compared"), "{}", report.summary());
+}
+
+/// Writes `tensors` as an `f32` safetensors file, in their order.
+fn write_f32_tensors(path: &Path, tensors: &[(String, dggt_parity::HostTensor)]) {
+    let bytes: Vec<Vec<u8>> =
+        tensors.iter().map(|(_, t)| t.values.iter().flat_map(|v| v.to_le_bytes()).collect()).collect();
+    let views = tensors.iter().zip(&bytes).map(|((name, tensor), data)| {
+        let view = safetensors::tensor::TensorView::new(safetensors::Dtype::F32, tensor.shape.clone(), data);
+        (name.as_str(), view.unwrap())
+    });
+    safetensors::serialize_to_file(views, None, path).unwrap();
 }
 
 #[test]
@@ -119,7 +157,7 @@ fn every_built_weight_is_consumed() {
     let device = Device::flex();
     let path = parity_dir().join("weights.safetensors");
     let (model, report) = Dggt::from_checkpoint(&vectors().config, &path, &device).expect("loading");
-    let weights = read_safetensors(&path).expect("reading the weights");
+    let weights = read_tensors(&path).expect("reading the weights");
     let prefixes = model.built_prefixes();
     let built = |name: &str| prefixes.iter().any(|p| name.starts_with(p));
     let expected = weights.iter().filter(|(k, _)| built(k)).count();
@@ -157,8 +195,8 @@ fn pytorch_checkpoints_load_the_same_network() {
     for file in ["weights.pt", "weights_cuda_storage.pt"] {
         let pt = run_parity(vectors(), &parity_dir().join(file), &Device::flex())
             .unwrap_or_else(|e| panic!("running from {file}: {e}"));
-        assert_eq!(pt.load.applied.len(), report().load.applied.len(), "{file}: applied tensors");
-        assert!(pt.passed(), "{file}:\n{pt}");
+        assert_eq!(pt.load.applied.len(), run().load.applied.len(), "{file}: applied tensors");
+        assert!(pt.report.passed(), "{file}:\n{}", pt.report);
     }
 }
 
@@ -181,7 +219,7 @@ fn fresh_sky_buffers_match_the_release() {
     use dggt_model::sky::SkyModel;
     let config = vectors().config.sky_model.clone().expect("the tiny model has a sky");
     let sky = SkyModel::initialised(&config, &Device::flex());
-    let stored = read_safetensors(parity_dir().join("weights.safetensors")).unwrap();
+    let stored = read_tensors(parity_dir().join("weights.safetensors")).unwrap();
     let compare = |name: &str, buffer: &Param<burn::tensor::Tensor<2>>, tolerance: f32| {
         let (_, reference) = stored.iter().find(|(key, _)| key == name).unwrap_or_else(|| panic!("{name} stored"));
         let ours: Vec<f32> = buffer.val().into_data().try_into_vec().unwrap();

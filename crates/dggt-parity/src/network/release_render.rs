@@ -1,12 +1,13 @@
-//! The release's inference render of one scene: the static Gaussians of every frame (non-sky pixels whose
-//! dynamic logit is below 0.5), faded to each frame's time, plus that frame's dynamic Gaussians (all its
-//! non-sky pixels), rasterised at
-//! the frame's camera; the sky Gaussians rasterised in every view and min-max normalised; and the foreground
-//! composited over the sky.
+//! The release's inference render of one scene, as the parity vectors' `render.*` outputs hold it: the static
+//! Gaussians of every frame (non-sky pixels whose dynamic logit is below 0.5), faded to each frame's time, plus
+//! that frame's dynamic Gaussians (all its non-sky pixels), rasterised at the frame's camera; the sky Gaussians
+//! rasterised in every view and min-max normalised; and the foreground composited over the sky.
 //!
 //! Gaussians are one per pixel: means from the unprojected depth, rotations as `w x y z`, linear scales,
 //! post-sigmoid colours. Everything after the masks is a tensor expression, so gradients reach the maps. The
 //! compositing is `dggt-scene`'s ([`composite`]); only the sky's normalisation is the release's own.
+
+use std::fmt;
 
 use burn::tensor::{Int, Tensor, TensorData};
 use dggt_geom::{CameraFromWorld, ImageSize, PinholeIntrinsics, PosedCamera};
@@ -14,10 +15,44 @@ use dggt_model::gaussian_maps::GaussianMaps;
 use dggt_model::lifespan::{dynamic_opacity, frame_times, opacity_at, static_opacity};
 use dggt_model::sky::SkyGaussians;
 use dggt_scene::{camera_tensors, composite, sky_splats};
-use dggt_splat::{CameraTensors, GaussianTensors, OpacityTensor, RenderSettings, RenderTensors, render};
+use dggt_splat::{CameraTensors, GaussianTensors, OpacityTensor, RenderSettings, RenderTensors, SplatError, render};
 
 /// Added to the sky's range in the min-max normalisation.
 const MINMAX_EPS: f32 = 1e-8;
+
+/// Why the scene could not be rendered.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RenderError {
+    #[error("a scene is one batch element; the maps hold {0}")]
+    NotOneScene(usize),
+    #[error("{frames} frames need as many cameras and sky flags; there are {cameras} cameras and {flags} sky flags")]
+    FrameCount { frames: usize, cameras: usize, flags: usize },
+    #[error("reading the dynamic logits back: {0}")]
+    Readback(String),
+    /// The cameras as the rasteriser takes them could not be made.
+    #[error("the rasteriser's cameras: {0}")]
+    Cameras(String),
+    #[error("rendering {target}: {source}")]
+    Rasterising { target: RenderTarget, source: SplatError },
+}
+
+/// What a render was of.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RenderTarget {
+    /// The foreground Gaussians at this frame's camera.
+    Frame(usize),
+    /// The sky Gaussians in every view.
+    Sky,
+}
+
+impl fmt::Display for RenderTarget {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            RenderTarget::Frame(frame) => write!(f, "frame {frame}"),
+            RenderTarget::Sky => f.write_str("the sky"),
+        }
+    }
+}
 
 /// One scene's per-pixel Gaussians and what it is rendered with (batch of one).
 pub struct SceneInputs<'a> {
@@ -58,14 +93,15 @@ pub fn static_mask(non_sky: &[bool], dynamic_logit: &[f32]) -> Vec<bool> {
 }
 
 /// Renders the scene at every frame's camera.
-pub fn render_scene(inputs: &SceneInputs<'_>, size: ImageSize) -> Result<SceneRender, String> {
+pub fn render_scene(inputs: &SceneInputs<'_>, size: ImageSize) -> Result<SceneRender, RenderError> {
     let maps = inputs.maps;
     let [batch, frames, height, width] = maps.opacity.dims();
     if batch != 1 {
-        return Err(format!("a scene is one batch element; the maps hold {batch}"));
+        return Err(RenderError::NotOneScene(batch));
     }
     if inputs.cameras.len() != frames || inputs.non_sky.len() != frames * height * width {
-        return Err(format!("{frames} frames need as many cameras and sky flags"));
+        let (cameras, flags) = (inputs.cameras.len(), inputs.non_sky.len());
+        return Err(RenderError::FrameCount { frames, cameras, flags });
     }
     let device = maps.opacity.device();
     let pixels = height * width;
@@ -76,7 +112,7 @@ pub fn render_scene(inputs: &SceneInputs<'_>, size: ImageSize) -> Result<SceneRe
         .into_data()
         .convert::<f32>()
         .try_into_vec::<f32>()
-        .map_err(|e| format!("{e:?}"))?;
+        .map_err(|e| RenderError::Readback(format!("{e:?}")))?;
     let mask = static_mask(inputs.non_sky, &logits);
     let index: Vec<i64> = (0..count).filter(|&i| mask[i]).map(|i| i as i64).collect();
     let statics = Tensor::<1, Int>::from_data(TensorData::new(index.clone(), [index.len()]), &device);
@@ -119,7 +155,8 @@ pub fn render_scene(inputs: &SceneInputs<'_>, size: ImageSize) -> Result<SceneRe
             colors: pick(&colors),
         };
         let cameras = cameras_of(&inputs.cameras[frame..=frame], size, &device)?;
-        renders.push(render(&gaussians, &cameras, &settings).map_err(|e| format!("rendering frame {frame}: {e}"))?);
+        let rasterising = |source| RenderError::Rasterising { target: RenderTarget::Frame(frame), source };
+        renders.push(render(&gaussians, &cameras, &settings).map_err(rasterising)?);
     }
     let foreground = RenderTensors {
         colors: Tensor::cat(renders.iter().map(|r| r.colors.clone()).collect(), 0),
@@ -129,7 +166,8 @@ pub fn render_scene(inputs: &SceneInputs<'_>, size: ImageSize) -> Result<SceneRe
 
     let sky_gaussians = sky_splats(inputs.sky);
     let cameras = cameras_of(inputs.cameras, size, &device)?;
-    let sky_raw = render(&sky_gaussians, &cameras, &settings).map_err(|e| format!("rendering the sky: {e}"))?.colors;
+    let rasterising = |source| RenderError::Rasterising { target: RenderTarget::Sky, source };
+    let sky_raw = render(&sky_gaussians, &cameras, &settings).map_err(rasterising)?.colors;
     // Inference only: one min and max over every frame and channel.
     let low = sky_raw.clone().min().reshape([1, 1, 1, 1]);
     let high = sky_raw.clone().max().reshape([1, 1, 1, 1]);
@@ -152,7 +190,7 @@ fn cameras_of(
     cameras: &[(CameraFromWorld, PinholeIntrinsics)],
     size: ImageSize,
     device: &burn::tensor::Device,
-) -> Result<CameraTensors, String> {
+) -> Result<CameraTensors, RenderError> {
     let posed: Vec<PosedCamera> = cameras
         .iter()
         .map(|(camera_from_world, intrinsics)| PosedCamera {
@@ -160,5 +198,5 @@ fn cameras_of(
             intrinsics: *intrinsics,
         })
         .collect();
-    camera_tensors(&posed, size, device).map_err(|e| e.to_string())
+    camera_tensors(&posed, size, device).map_err(|e| RenderError::Cameras(e.to_string()))
 }
