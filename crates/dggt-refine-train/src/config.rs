@@ -34,8 +34,9 @@ pub struct RefineTrainConfig {
 #[serde(deny_unknown_fields)]
 pub struct ModelSection {
     pub base_dir: PathBuf,
-    /// `model_difix.pkl` (torch) or a file this crate exported ([`crate::export`], `.safetensors`); without
-    /// one, training starts from the base model with fresh skip convolutions and LoRA ([`crate::fresh`]).
+    /// `model_difix.pkl` (torch) or a trained refiner this crate wrote ([`crate::difix_checkpoint`],
+    /// `.safetensors`); without one, training starts from the base model with fresh skip convolutions and LoRA
+    /// ([`crate::fresh`]).
     #[serde(default)]
     pub checkpoint: Option<PathBuf>,
     /// The LoRA rank of a fresh start (Difix's is 4).

@@ -44,7 +44,7 @@ pub struct RunState {
     /// Steps whose update made a weight or moment non-finite and was undone.
     #[serde(default)]
     pub rolled_back_steps: u64,
-    /// Steps skipped or rolled back since the last step that trained ([`crate::divergence`]).
+    /// Steps skipped or rolled back since the last step that trained (the divergence check counts them).
     #[serde(default)]
     pub failed_in_a_row: u64,
     /// Training seconds before this checkpoint (summed over resumed segments).

@@ -20,7 +20,7 @@ use burn::optim::{AdamW, AdamWConfig, AdamWState, AdaptiveMomentumState, Gradien
 use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::error::RunError;
-use crate::finite::{NonFinite, first_non_finite};
+use crate::finite::{Moments, NonFinite, first_non_finite};
 use crate::optim_config::OptimSection;
 
 /// AdamW with groups and clipping.
@@ -131,11 +131,6 @@ impl Optimizer {
         }
     }
 
-    /// The two moments kept for parameter `id`, once it has been stepped.
-    pub(crate) fn moments(&self, id: &ParamId) -> Option<[&Tensor<1>; 2]> {
-        self.states.get(id).map(|state| [&state.momentum.moment_1, &state.momentum.moment_2])
-    }
-
     /// A copy of this optimiser, its state moved to `device` (for the replica there).
     pub fn fork(&self, device: &Device) -> Self {
         Self {
@@ -221,6 +216,12 @@ impl Optimizer {
             }
         }
         model.visit(&mut Zero(&mut self.states));
+    }
+}
+
+impl Moments for Optimizer {
+    fn moments(&self, id: &ParamId) -> Option<[&Tensor<1>; 2]> {
+        self.states.get(id).map(|state| [&state.momentum.moment_1, &state.momentum.moment_2])
     }
 }
 

@@ -129,3 +129,59 @@ pub struct ValidationRecord<'a> {
     pub validation: &'a Validation,
     pub time_s: f64,
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn keys(value: &serde_json::Value) -> Vec<&str> {
+        value.as_object().unwrap().keys().map(String::as_str).collect()
+    }
+
+    #[test]
+    fn a_logged_step_has_the_keys_of_what_it_measured() {
+        let measures = StepMeasures { loss: f64::NAN, target_psnr: 20.0, ..StepMeasures::default() };
+        let trained = StepRecord {
+            step: 3,
+            lr_factor: 0.5,
+            update: Some(UpdateRecord { grad_norm: 2.0, clipped: true }),
+            measures: Some(measures),
+            failure: None,
+            step_s: 0.25,
+        };
+        let logged = LoggedStep { record: &trained, scenes: vec!["s0".into()], bad_samples: 1, time_s: 9.0 };
+        let value = serde_json::to_value(&logged).unwrap();
+        let mut expected = vec![
+            "bad_samples",
+            "clipped",
+            "gaussians_kept",
+            "grad_norm",
+            "loss",
+            "lr_factor",
+            "scenes",
+            "stage_s",
+            "step",
+            "step_s",
+            "target_psnr",
+            "terms",
+            "time_s",
+        ];
+        assert_eq!(keys(&value), expected, "{value}");
+        assert!(value["loss"].is_null(), "a loss that is not finite is written as null: {value}");
+
+        let skipped = StepRecord {
+            update: None,
+            measures: None,
+            failure: Some(FailureRecord::Skipped(SkipReason::NonFiniteLoss)),
+            ..trained.clone()
+        };
+        let value = serde_json::to_value(&skipped).unwrap();
+        expected = vec!["lr_factor", "skipped", "step", "step_s"];
+        assert_eq!(keys(&value), expected, "{value}");
+        assert_eq!(value["skipped"], "non-finite loss");
+        let rolled_back = StepRecord { failure: Some(FailureRecord::RolledBack("weight `w`".into())), ..trained };
+        let value = serde_json::to_value(&rolled_back).unwrap();
+        assert_eq!(value["rolled_back"], "weight `w`", "{value}");
+        assert!(value.get("skipped").is_none() && value["grad_norm"] == 2.0, "{value}");
+    }
+}
