@@ -24,7 +24,7 @@ pub enum RunError {
     /// A fresh run asked to write where another run's files are.
     #[error("{} already holds a training run ({}); a new run would overwrite it", dir.display(), found.join(", "))]
     RunExists { dir: PathBuf, found: Vec<&'static str> },
-    /// Too many steps in a row made no update ([`crate::divergence`]).
+    /// Too many steps in a row made no update (the divergence check).
     #[error(
         "training diverged: the {} steps {first_step}..={last_step} in a row made no update (the last: \
          {last_failure}); the weights are those from before step {first_step}. Lower the learning rate (optim.lr \
