@@ -83,8 +83,7 @@ pub fn run(args: Args) -> Result<()> {
         let source = shard_source(run.config().run.out_dir.as_path(), run.state().step);
         prepare_shards(&args.out, &source, existing)?;
     }
-    let shown = Visibility::shown_if(std::io::IsTerminal::is_terminal(&std::io::stderr()));
-    let bar = progress_bar(shown, 0, args.samples.len() as u64);
+    let bar = progress_bar(Visibility::on_terminal(), 0, args.samples.len() as u64);
     let reconstruction = Reconstruction {
         model: run.model(),
         objective: run.objective(),

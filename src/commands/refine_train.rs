@@ -7,6 +7,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 use dggt_refine_train::{RefineTrainConfig, RefineTrainError, RefineTrainer};
 use dggt_run::Start;
+use dggt_run::progress::Visibility;
 
 use crate::backend::DeviceSpec;
 use crate::commands::output::{self, OverwriteFileArg};
@@ -58,7 +59,7 @@ pub fn run(args: Args) -> Result<()> {
     })?;
     let first_step = trainer.state().step;
     let before = trainer.validate()?;
-    let after = trainer.run(std::io::IsTerminal::is_terminal(&std::io::stderr()))?;
+    let after = trainer.run(Visibility::on_terminal())?;
     let out = trainer.config().run.out_dir.clone();
     let export = args.export.unwrap_or_else(|| out.join("refiner.safetensors"));
     trainer.write_difix_checkpoint(&export)?;

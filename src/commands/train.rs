@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use dggt_run::RunError;
+use dggt_run::progress::Visibility;
 use dggt_train::{RunOptions, Start, TrainConfig, TrainError, Trainer};
 
 use crate::backend::DeviceList;
@@ -65,8 +66,7 @@ pub fn run(args: Args) -> Result<()> {
         );
         return Ok(());
     }
-    let summary =
-        trainer.run(RunOptions { progress: std::io::IsTerminal::is_terminal(&std::io::stderr()), stop_after: None })?;
+    let summary = trainer.run(RunOptions { progress: Visibility::on_terminal(), stop_after: None })?;
     let out = &trainer.config().run.out_dir;
     print!(
         "trained steps {}..{} in {:.1} s ({} skipped)",

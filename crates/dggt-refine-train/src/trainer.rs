@@ -188,11 +188,11 @@ impl RefineTrainer {
         Ok(divergence::check(&self.state, self.last_failure.as_ref(), limit)?)
     }
 
-    /// Trains to `run.steps` with a progress bar (when `progress`), validating and checkpointing on the
+    /// Trains to `run.steps` with a progress bar (drawn as `progress` says), validating and checkpointing on the
     /// configured cadence and at the end. Returns the last validation.
-    pub fn run(&mut self, progress: bool) -> Result<Validation, RefineTrainError> {
+    pub fn run(&mut self, progress: Visibility) -> Result<Validation, RefineTrainError> {
         let run = self.config.run.clone();
-        let bar = progress_bar(Visibility::shown_if(progress), self.state.step, run.steps);
+        let bar = progress_bar(progress, self.state.step, run.steps);
         let started = Instant::now();
         let elapsed_before = self.state.elapsed_s;
         let mut last = None;

@@ -17,6 +17,7 @@ use dggt_refine_train::pair::RenderedPair;
 use dggt_refine_train::pair_files::write_pairs;
 use dggt_refine_train::pairs::{Image, Pair, batch, step_indices};
 use dggt_run::Start;
+use dggt_run::progress::Visibility;
 
 mod common;
 
@@ -278,7 +279,7 @@ fn an_unreadable_pair_is_replaced_and_counted_and_past_the_limit_the_run_stops_w
     config.pairs.max_bad_pairs = 0;
     config.run.out_dir = dir.path().join("strict");
     let mut strict = RefineTrainer::new(config, device(), Start::Fresh).unwrap();
-    let error = strict.run(false).expect_err("no pair may fail").to_string();
+    let error = strict.run(Visibility::Hidden).expect_err("no pair may fail").to_string();
     let named = format!("pair {bad}");
     assert!(
         error.contains("pairs.safetensors") && error.contains("max_bad_pairs") && error.contains(&named),

@@ -4,18 +4,19 @@
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 /// Whether a bar is drawn.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Visibility {
     /// Drawn on stderr.
     Shown,
     /// Counted but never drawn.
+    #[default]
     Hidden,
 }
 
 impl Visibility {
-    /// [`Visibility::Shown`] when `shown`.
-    pub fn shown_if(shown: bool) -> Self {
-        if shown { Self::Shown } else { Self::Hidden }
+    /// [`Visibility::Shown`] when stderr is a terminal (where a bar can be drawn), else hidden.
+    pub fn on_terminal() -> Self {
+        if std::io::IsTerminal::is_terminal(&std::io::stderr()) { Self::Shown } else { Self::Hidden }
     }
 }
 

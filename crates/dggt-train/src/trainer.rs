@@ -70,8 +70,8 @@ pub struct RunSummary {
 /// Options of [`Trainer::run`] beyond the configuration.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct RunOptions {
-    /// Show a progress bar on stderr.
-    pub progress: bool,
+    /// Whether the progress bar is drawn on stderr.
+    pub progress: Visibility,
     /// Stop after this step even if the configuration runs longer (for interrupting runs on purpose).
     pub stop_after: Option<u64>,
 }
@@ -253,7 +253,7 @@ impl Trainer {
             dataset_stream(self.sampling.clone(), self.config.data.preprocess, first_sample, options_loader)?;
 
         let last_step = options.stop_after.map_or(run.steps, |s| s.min(run.steps));
-        let bar = progress_bar(Visibility::shown_if(options.progress), self.state.step, run.steps);
+        let bar = progress_bar(options.progress, self.state.step, run.steps);
         let started = Instant::now();
         let elapsed_before = self.state.elapsed_s;
         let schedule = self.schedule();

@@ -40,7 +40,7 @@ fn an_interrupted_run_resumes_exactly() {
 
     let split = tempfile::tempdir().unwrap();
     let mut first = Trainer::new(small_config(split.path(), 4), vec![Device::flex()], Start::Fresh).unwrap();
-    let summary = first.run(RunOptions { progress: false, stop_after: Some(2) }).unwrap();
+    let summary = first.run(RunOptions { stop_after: Some(2), ..RunOptions::default() }).unwrap();
     assert_eq!(summary.final_step, 2);
     drop(first);
     let mut resumed = Trainer::new(small_config(split.path(), 4), vec![Device::flex()], Start::Resume).unwrap();
