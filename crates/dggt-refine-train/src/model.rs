@@ -154,7 +154,8 @@ impl TrainableRefiner {
         Ok(refiner.refine(image, reference, latent, &mut Trace::default())?)
     }
 
-    /// The refiner on the device without autodiff (for validation and export: no graph is built).
+    /// The refiner on the device without autodiff (for validation and for writing its Difix checkpoint: no
+    /// graph is built).
     pub fn valid(&self) -> Self {
         Self { weights: self.weights.valid(), prompt_embeds: self.prompt_embeds.clone().inner(), ..self.clone() }
     }
