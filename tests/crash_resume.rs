@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use dggt_train::failpoint::{FAILPOINT_VARIABLE, INSIDE_CHECKPOINT};
+use dggt_run::failpoint::{FAILPOINT_VARIABLE, INSIDE_CHECKPOINT};
 
 mod common;
 
@@ -74,7 +74,7 @@ fn finish(child: Child) -> u64 {
 
 /// Every tensor of the final checkpoint's weights, by name.
 fn final_weights(out: &Path) -> Vec<(String, Vec<u8>)> {
-    let dir = dggt_train::checkpoint::latest(&out.join("checkpoints"), dggt_train::checkpoint::Purpose::Resume)
+    let dir = dggt_run::checkpoint::latest(&out.join("checkpoints"), dggt_run::checkpoint::Purpose::Resume)
         .unwrap()
         .expect("a checkpoint");
     assert!(dir.ends_with(format!("step-{STEPS:08}")), "{}", dir.display());

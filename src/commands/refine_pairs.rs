@@ -14,9 +14,12 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
-use dggt_refine_train::render_pairs::{RenderedPair, render_pairs, shard_path, write_pairs};
-use dggt_train::trainer::progress_bar;
-use dggt_train::{Start, TrainConfig, Trainer};
+use dggt_refine_train::pair::RenderedPair;
+use dggt_refine_train::pair_files::{shard_path, write_pairs};
+use dggt_refine_train::render_pairs::{Reconstruction, render_pairs};
+use dggt_run::Start;
+use dggt_run::progress::{Visibility, progress_bar};
+use dggt_train::{TrainConfig, Trainer};
 
 use crate::backend::DeviceSpec;
 use crate::commands::output::{self, Existing, OutputKind, OverwriteArg};
@@ -80,7 +83,13 @@ pub fn run(args: Args) -> Result<()> {
         let source = shard_source(run.config().run.out_dir.as_path(), run.state().step);
         prepare_shards(&args.out, &source, existing)?;
     }
-    let bar = progress_bar(std::io::IsTerminal::is_terminal(&std::io::stderr()), 0, args.samples.len() as u64);
+    let bar = progress_bar(Visibility::on_terminal(), 0, args.samples.len() as u64);
+    let reconstruction = Reconstruction {
+        model: run.model(),
+        objective: run.objective(),
+        sampling: run.sampling(),
+        preprocess: &run.config().data.preprocess,
+    };
     let mut tally = Tally::default();
     let mut collected = Vec::new();
     for sample in args.samples.clone().map(|s| s as u64) {
@@ -88,7 +97,7 @@ pub fn run(args: Args) -> Result<()> {
         if shard.as_ref().is_some_and(|path| path.is_file()) {
             tally.kept += 1;
         } else {
-            match render_pairs(&run, [sample], &device) {
+            match render_pairs(reconstruction, [sample], &device) {
                 Ok(pairs) => {
                     tally.rendered += 1;
                     tally.pairs += pairs.len();

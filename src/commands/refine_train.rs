@@ -1,12 +1,13 @@
 //! `dggt refine-train`: trains the diffusion refiner as a TOML configuration describes
 //! (`configs/refine-tiny.toml`), with progress, checkpoints and resume, and writes the trained refiner where
-//! the refiner's loader reads it (`dggt_refine_train::export::load_refiner`).
+//! the refiner's loader reads it (`dggt_refine_train::difix_checkpoint::load_trained_refiner`).
 
 use std::path::PathBuf;
 
 use anyhow::Result;
 use dggt_refine_train::{RefineTrainConfig, RefineTrainError, RefineTrainer};
-use dggt_train::Start;
+use dggt_run::Start;
+use dggt_run::progress::Visibility;
 
 use crate::backend::DeviceSpec;
 use crate::commands::output::{self, OverwriteFileArg};
@@ -53,15 +54,15 @@ pub fn run(args: Args) -> Result<()> {
     config.validate().map_err(|e| anyhow::anyhow!("{}: {e}", args.config.display()))?;
     let start = if args.resume { Start::Resume } else { Start::Fresh };
     let mut trainer = RefineTrainer::new(config, args.device.device()?, start).map_err(|error| match error {
-        RefineTrainError::Train(error) => train::with_flags(error),
+        RefineTrainError::Run(error) => train::run_with_flags(error),
         other => other.into(),
     })?;
     let first_step = trainer.state().step;
     let before = trainer.validate()?;
-    let after = trainer.run(std::io::IsTerminal::is_terminal(&std::io::stderr()))?;
+    let after = trainer.run(Visibility::on_terminal())?;
     let out = trainer.config().run.out_dir.clone();
     let export = args.export.unwrap_or_else(|| out.join("refiner.safetensors"));
-    trainer.export(&export)?;
+    trainer.write_difix_checkpoint(&export)?;
     println!(
         "trained steps {first_step}..{} ({} skipped); held-out PSNR {:.2} -> {:.2} dB (renders as they are: {:.2} dB)",
         trainer.state().step,

@@ -3,6 +3,8 @@
 use std::path::PathBuf;
 
 use anyhow::Result;
+use dggt_run::RunError;
+use dggt_run::progress::Visibility;
 use dggt_train::{RunOptions, Start, TrainConfig, TrainError, Trainer};
 
 use crate::backend::DeviceList;
@@ -64,8 +66,7 @@ pub fn run(args: Args) -> Result<()> {
         );
         return Ok(());
     }
-    let summary =
-        trainer.run(RunOptions { progress: std::io::IsTerminal::is_terminal(&std::io::stderr()), stop_after: None })?;
+    let summary = trainer.run(RunOptions { progress: Visibility::on_terminal(), stop_after: None })?;
     let out = &trainer.config().run.out_dir;
     print!(
         "trained steps {}..{} in {:.1} s ({} skipped)",
@@ -106,14 +107,22 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
-/// A refusal to start a run (of `train` or `refine-train`), with the flags that resolve it; other errors as
-/// they are.
+/// A refusal to start a run, with the flags that resolve it; other errors as they are.
 pub fn with_flags(error: TrainError) -> anyhow::Error {
     match error {
-        TrainError::RunExists { .. } => {
+        TrainError::Run(error) => run_with_flags(error),
+        TrainError::ArchitectureChanged { .. } => anyhow::anyhow!("{error} (--out DIR)"),
+        other => other.into(),
+    }
+}
+
+/// A refusal of the run's machinery to start a run (of `train` or `refine-train`) over another run's files,
+/// with the flags that resolve it; other errors as they are.
+pub fn run_with_flags(error: RunError) -> anyhow::Error {
+    match error {
+        RunError::RunExists { .. } => {
             anyhow::anyhow!("{error}: continue it with --resume, or train into another folder with --out DIR")
         }
-        TrainError::ArchitectureChanged { .. } => anyhow::anyhow!("{error} (--out DIR)"),
         other => other.into(),
     }
 }

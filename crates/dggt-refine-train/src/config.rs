@@ -7,9 +7,10 @@
 
 use std::path::{Path, PathBuf};
 
-use dggt_losses::LpipsKind;
-use dggt_train::config::OptimSection;
-use dggt_train::divergence::{self, DEFAULT_MAX_FAILED_STEPS_IN_A_ROW};
+/// The LPIPS network of `loss.lpips_kind`.
+pub use dggt_losses::LpipsKind;
+use dggt_run::OptimSection;
+use dggt_run::divergence::{self, DEFAULT_MAX_FAILED_STEPS_IN_A_ROW};
 use serde::{Deserialize, Serialize};
 
 use crate::error::RefineTrainError;
@@ -33,8 +34,9 @@ pub struct RefineTrainConfig {
 #[serde(deny_unknown_fields)]
 pub struct ModelSection {
     pub base_dir: PathBuf,
-    /// `model_difix.pkl` (torch) or a file this crate exported ([`crate::export`], `.safetensors`); without
-    /// one, training starts from the base model with fresh skip convolutions and LoRA ([`crate::fresh`]).
+    /// `model_difix.pkl` (torch) or a trained refiner this crate wrote ([`crate::difix_checkpoint`],
+    /// `.safetensors`); without one, training starts from the base model with fresh skip convolutions and LoRA
+    /// ([`crate::fresh`]).
     #[serde(default)]
     pub checkpoint: Option<PathBuf>,
     /// The LoRA rank of a fresh start (Difix's is 4).
@@ -241,8 +243,8 @@ impl RefineTrainConfig {
 
     /// Settings out of range or contradicting each other.
     pub fn validate(&self) -> Result<(), RefineTrainError> {
-        let check = |ok: bool, what: &str, detail: &str| {
-            if ok { Ok(()) } else { Err(RefineTrainError::invalid(what, detail)) }
+        let check = |ok: bool, setting: &'static str, detail: &str| {
+            if ok { Ok(()) } else { Err(RefineTrainError::Setting { setting, detail: detail.into() }) }
         };
         let prompts = [
             self.model.prompt.is_some(),

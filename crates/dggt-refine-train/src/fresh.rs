@@ -26,7 +26,7 @@ const TARGET_ENDINGS: [&str; 10] =
 /// The checkpoint described in the module's doc; target `k`'s `lora_A` is drawn from seed `seed + k`.
 pub fn fresh_checkpoint(base_dir: &Path, rank: usize, seed: u64) -> Result<DifixCheckpoint, RefineTrainError> {
     if rank == 0 {
-        return Err(RefineTrainError::invalid("model.lora_rank", "must be at least 1"));
+        return Err(RefineTrainError::Setting { setting: "model.lora_rank", detail: "must be at least 1".into() });
     }
     let vae_dir = base_dir.join("vae");
     let config: VaeConfig = read_json(&vae_dir.join("config.json"))?;

@@ -7,7 +7,8 @@
 //! own trainable parameters. Convolution `[out, in, k, k]`: `a` is peft's `lora_B` `[out, r]` and `b` its
 //! `lora_A` flattened `[r, in·k·k]` (the convolution is linear in its kernel, so this equals peft's branch
 //! `base(x) + scale · lora_B(lora_A(x))`); linear (burn's `[in, out]`): `a = lora_Aᵀ`, `b = lora_Bᵀ`. They are
-//! merged into the weights only by the refiner's loader, from an exported checkpoint ([`crate::export`]).
+//! merged into the weights only by the refiner's loader, from a Difix checkpoint written of the trained
+//! weights.
 
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::path::Path;
@@ -67,8 +68,8 @@ fn vae_trains(name: &str) -> bool {
 }
 
 impl TrainableRefiner {
-    /// Loads the diffusers folder with a Difix checkpoint over it (`model_difix.pkl`, or a file of
-    /// [`crate::export`]), its LoRA factors the starting point, on `device` (an autodiff device to train).
+    /// Loads the diffusers folder with a Difix checkpoint over it (`model_difix.pkl`, or its safetensors form
+    /// as a trained refiner is written), its LoRA factors the starting point, on `device` (an autodiff device to train).
     pub fn load(
         base_dir: &Path,
         checkpoint_path: &Path,
@@ -92,8 +93,10 @@ impl TrainableRefiner {
         let rank = checkpoint.lora_rank;
         let base = DifixCheckpoint { vae: plain, ..checkpoint };
         let (refiner, report) = Refiner::from_checkpoint(base_dir, base, checkpoint_path, prompt_tokens, device)?;
-        let lora_error = |module: &str, detail: &str| {
-            RefineTrainError::invalid(format!("{}: LoRA '{module}'", checkpoint_path.display()), detail)
+        let lora_error = |module: &str, detail: &str| RefineTrainError::Lora {
+            checkpoint: checkpoint_path.to_path_buf(),
+            module: module.to_string(),
+            detail: detail.to_string(),
         };
         let mut factors = HashMap::new();
         for target in &targets {
@@ -102,7 +105,8 @@ impl TrainableRefiner {
                 .vae_params
                 .get(&format!("{target}.weight"))
                 .ok_or_else(|| lora_error(target, "not a weight of the VAE"))?;
-            let (a, b) = burn_factors(pair, layout, rank, device).map_err(|detail| lora_error(target, &detail))?;
+            let (a, b) =
+                burn_factors(pair, layout, rank, device).map_err(|fault| lora_error(target, &fault.to_string()))?;
             factors.insert(id, (target.clone(), a, b, layout));
         }
         if let Some(stray) = pairs.keys().next() {
@@ -150,7 +154,8 @@ impl TrainableRefiner {
         Ok(refiner.refine(image, reference, latent, &mut Trace::default())?)
     }
 
-    /// The refiner on the device without autodiff (for validation and export: no graph is built).
+    /// The refiner on the device without autodiff (for validation and for writing its Difix checkpoint: no
+    /// graph is built).
     pub fn valid(&self) -> Self {
         Self { weights: self.weights.valid(), prompt_embeds: self.prompt_embeds.clone().inner(), ..self.clone() }
     }
@@ -172,20 +177,38 @@ impl TrainableRefiner {
     }
 }
 
+/// Why a LoRA pair cannot become burn's factors.
+#[derive(Debug, Clone, PartialEq, Eq)]
+enum FactorFault {
+    /// One of the two factors is not in the checkpoint.
+    Missing,
+    /// The factors' shapes do not have the checkpoint's rank.
+    Rank { down: Vec<usize>, up: Vec<usize>, rank: usize },
+}
+
+impl std::fmt::Display for FactorFault {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Missing => f.write_str("lora_A or lora_B is missing"),
+            Self::Rank { down, up, rank } => write!(f, "lora_A {down:?} and lora_B {up:?} do not have rank {rank}"),
+        }
+    }
+}
+
 /// peft's factors in burn's layout (see the module's doc), checked against the rank.
 fn burn_factors(
     pair: LoraPair,
     layout: StoredLayout,
     rank: usize,
     device: &Device,
-) -> Result<(Tensor<2>, Tensor<2>), String> {
+) -> Result<(Tensor<2>, Tensor<2>), FactorFault> {
     let (Some(down), Some(up)) = (pair.down, pair.up) else {
-        return Err("lora_A or lora_B is missing".into());
+        return Err(FactorFault::Missing);
     };
     let (out, rest) = (up.shape[0], down.shape[1..].iter().product::<usize>());
     let up_ok = up.shape.len() >= 2 && up.shape[1] == rank && up.shape[2..].iter().all(|&d| d == 1);
     if down.shape.first() != Some(&rank) || !up_ok {
-        return Err(format!("lora_A {:?} and lora_B {:?} do not have rank {rank}", down.shape, up.shape));
+        return Err(FactorFault::Rank { down: down.shape.clone(), up: up.shape.clone(), rank });
     }
     let tensor =
         |t: &HostTensor, shape: [usize; 2]| Tensor::<2>::from_data(TensorData::new(t.values.clone(), shape), device);

@@ -1,5 +1,6 @@
 //! One training pair of the refiner: a frame with artifacts, its ground truth and the reference view, as host
-//! images; and the check every image read from a file passes (float32 values in [0, 1]).
+//! images, with the view a rendered one shows; and the check every image read from a file passes (float32
+//! values in [0, 1]).
 
 use crate::error::RefineTrainError;
 
@@ -20,12 +21,24 @@ pub struct Pair {
     pub reference: Option<Image>,
 }
 
-/// Little-endian float32 `bytes` as values, each checked to lie in [0, 1] (not a number fails too); `what`
-/// names them in the error.
-pub(crate) fn unit_values(bytes: &[u8], what: impl FnOnce() -> String) -> Result<Vec<f32>, RefineTrainError> {
+/// A rendered pair and the view it shows.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RenderedPair {
+    pub pair: Pair,
+    /// Position in the scene's frames.
+    pub frame: usize,
+    pub camera: usize,
+}
+
+/// Little-endian float32 `bytes` as values, each checked to lie in [0, 1] (not a number fails too); `error`
+/// makes the error naming them from what is wrong.
+pub(crate) fn unit_values(
+    bytes: &[u8],
+    error: impl FnOnce(String) -> RefineTrainError,
+) -> Result<Vec<f32>, RefineTrainError> {
     let values: Vec<f32> = bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
     match values.iter().find(|v| !(0.0..=1.0).contains(*v)) {
-        Some(bad) => Err(RefineTrainError::invalid(what(), format!("value {bad} outside [0, 1]"))),
+        Some(bad) => Err(error(format!("value {bad} outside [0, 1]"))),
         None => Ok(values),
     }
 }

@@ -1,21 +1,31 @@
-//! Rendered pairs read from disk as training needs them: a pairs file or a folder of shards
-//! ([`crate::render_pairs`]) is indexed by its headers alone, and each pair is read when a step or the
-//! validation draws it, so training on the pairs of hundreds of scenes holds one batch of them in memory.
+//! Pairs files: rendered pairs written to disk, and read back as training needs them.
 //!
-//! Every file is checked when indexed: its `views` metadata, and `render`, `target` and `reference` as float32
+//! A pairs file ([`write_pairs`]) is safetensors: `render`, `target` and `reference`, each `[N, 3, H, W]`
+//! float32 RGB in [0, 1], and metadata `views`: a JSON list of `[frame, camera]` per pair (positions in the
+//! scene). Many samples' pairs may instead go to a folder of such files, one per sample ([`shard_path`]),
+//! written as each sample is rendered so that memory stays bounded and a stopped run resumes.
+//!
+//! [`PairFiles`] reads a pairs file or a folder of shards: it is indexed by its headers alone, and each pair is
+//! read when a step or the validation draws it, so training on the pairs of hundreds of scenes holds one batch
+//! of them in memory. Every file is checked when indexed: its `views` metadata, and `render`, `target` and `reference` as float32
 //! `[N, 3, H, W]` with one `N` per file (one per view) and one `H x W` for the whole source (a batch takes
 //! pairs of one size). A pair's values are checked when read: a value outside [0, 1] or not a number is an
 //! error naming the file, the tensor and the pair.
 
+use std::collections::HashMap;
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 
 use dggt_refine::safetensors_file::SafetensorsFile;
 
-use crate::error::RefineTrainError;
-use crate::pair::{Image, Pair, unit_values};
-use crate::render_pairs::{RenderedPair, TENSORS, VIEWS_KEY};
+use crate::error::{PairKind, RefineTrainError};
+use crate::pair::{Image, Pair, RenderedPair, unit_values};
+
+/// The tensors of a pairs file, in this order.
+const TENSORS: [&str; 3] = ["render", "target", "reference"];
+/// The metadata entry naming each pair's view.
+const VIEWS_KEY: &str = "views";
 
 /// The pairs of a pairs file or of a folder of shards, in file-name order, read one at a time.
 #[derive(Debug, Clone)]
@@ -46,10 +56,8 @@ impl PairFiles {
             let (file, file_size) = index_file(&path)?;
             match size {
                 Some((height, width)) if (height, width) != file_size => {
-                    return Err(RefineTrainError::invalid(
-                        path.display().to_string(),
-                        format!("pairs of {}x{} among pairs of {height}x{width}", file_size.0, file_size.1),
-                    ));
+                    let detail = format!("pairs of {}x{} among pairs of {height}x{width}", file_size.0, file_size.1);
+                    return Err(RefineTrainError::PairFile { path, detail });
                 }
                 _ => size = Some(file_size),
             }
@@ -74,7 +82,7 @@ impl PairFiles {
     /// indexing checked.
     pub fn read(&self, index: usize) -> Result<RenderedPair, RefineTrainError> {
         if index >= self.count {
-            return Err(RefineTrainError::invalid("pairs", format!("pair {index} of {}", self.count)));
+            return Err(RefineTrainError::NoSuchPair { kind: PairKind::Any, index, count: self.count });
         }
         let position = self.starts.partition_point(|&start| start <= index) - 1;
         let file = &self.files[position];
@@ -102,11 +110,14 @@ impl PairFiles {
     ) -> Result<Image, RefineTrainError> {
         let (height, width) = (self.height, self.width);
         let mut bytes = vec![0u8; 3 * height * width * 4];
-        let what = || format!("{}: tensor '{}', pair {at}", file.path.display(), TENSORS[tensor]);
+        let invalid = |detail: String| RefineTrainError::PairFile {
+            path: file.path.clone(),
+            detail: format!("tensor '{}', pair {at}: {detail}", TENSORS[tensor]),
+        };
         open.seek(SeekFrom::Start(file.starts[tensor] + (at * bytes.len()) as u64))
             .and_then(|_| open.read_exact(&mut bytes))
-            .map_err(|e| RefineTrainError::invalid(what(), format!("not readable: {e}")))?;
-        Ok(Image { height, width, values: unit_values(&bytes, what)? })
+            .map_err(|e| invalid(format!("not readable: {e}")))?;
+        Ok(Image { height, width, values: unit_values(&bytes, invalid)? })
     }
 }
 
@@ -121,7 +132,8 @@ fn shard_files(dir: &Path) -> Result<Vec<PathBuf>, RefineTrainError> {
         }
     }
     if files.is_empty() {
-        return Err(RefineTrainError::invalid(dir.display().to_string(), "a folder without pair files (.safetensors)"));
+        let detail = "a folder without pair files (.safetensors)".into();
+        return Err(RefineTrainError::PairFile { path: dir.into(), detail });
     }
     files.sort();
     Ok(files)
@@ -129,7 +141,7 @@ fn shard_files(dir: &Path) -> Result<Vec<PathBuf>, RefineTrainError> {
 
 /// One pairs file's views and its pairs' size, from its header (see the module's doc for the checks).
 fn index_file(path: &Path) -> Result<(PairFile, (usize, usize)), RefineTrainError> {
-    let invalid = |detail: String| RefineTrainError::invalid(path.display().to_string(), detail);
+    let invalid = |detail: String| RefineTrainError::PairFile { path: path.into(), detail };
     let file = SafetensorsFile::open(path)?;
     let views: Vec<[usize; 2]> = file
         .metadata
@@ -158,4 +170,41 @@ fn index_file(path: &Path) -> Result<(PairFile, (usize, usize)), RefineTrainErro
         starts[k] = file.byte_range(name)?.start;
     }
     Ok((PairFile { path: path.to_path_buf(), views, starts }, size.expect("three tensors checked")))
+}
+
+/// Writes `pairs` (all of one size, each with a reference) to `path` (see the module's doc), atomically.
+pub fn write_pairs(pairs: &[RenderedPair], path: &Path) -> Result<(), RefineTrainError> {
+    let invalid = |detail: String| RefineTrainError::PairFile { path: path.into(), detail };
+    let first = pairs.first().ok_or_else(|| invalid("no pairs to write".into()))?;
+    let (height, width) = (first.pair.render.height, first.pair.render.width);
+    let mut columns: [Vec<u8>; 3] = Default::default();
+    for rendered in pairs {
+        let Pair { render, target, reference } = &rendered.pair;
+        let reference =
+            reference.as_ref().ok_or_else(|| invalid(format!("frame {} has no reference", rendered.frame)))?;
+        for (column, image) in columns.iter_mut().zip([render, target, reference]) {
+            if (image.height, image.width) != (height, width) {
+                return Err(invalid(format!(
+                    "frame {}: {}x{} among {height}x{width} images",
+                    rendered.frame, image.height, image.width
+                )));
+            }
+            column.extend(image.values.iter().flat_map(|v| v.to_le_bytes()));
+        }
+    }
+    let shape = vec![pairs.len(), 3, height, width];
+    let views = TENSORS.iter().zip(&columns).map(|(name, bytes)| {
+        let view =
+            safetensors::tensor::TensorView::new(safetensors::Dtype::F32, shape.clone(), bytes).expect("sizes agree");
+        (name.to_string(), view)
+    });
+    let frames: Vec<[usize; 2]> = pairs.iter().map(|p| [p.frame, p.camera]).collect();
+    let metadata = HashMap::from([(VIEWS_KEY.to_string(), serde_json::to_string(&frames).expect("numbers serialise"))]);
+    let file = safetensors::serialize(views, Some(metadata)).map_err(|e| invalid(e.to_string()))?;
+    dggt_data::io::write_atomically(path, &file).map_err(|e| invalid(e.to_string()))
+}
+
+/// The file of sample `sample`'s pairs in a folder of pair shards.
+pub fn shard_path(dir: &Path, sample: u64) -> PathBuf {
+    dir.join(format!("sample-{sample:06}.safetensors"))
 }

@@ -13,7 +13,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use rand::rngs::Xoshiro256PlusPlus;
 use rand::{RngExt, SeedableRng};
 
-use crate::error::RefineTrainError;
+use crate::error::{PairKind, RefineTrainError};
 use crate::pair::unit_values;
 pub use crate::pair::{Image, Pair};
 use crate::pair_files::PairFiles;
@@ -35,10 +35,11 @@ impl PairSource {
 
     fn get(&self, index: usize) -> Result<Cow<'_, Pair>, RefineTrainError> {
         match self {
-            Self::InMemory(pairs) => pairs
-                .get(index)
-                .map(Cow::Borrowed)
-                .ok_or_else(|| RefineTrainError::invalid("pairs", format!("pair {index} of {}", pairs.len()))),
+            Self::InMemory(pairs) => pairs.get(index).map(Cow::Borrowed).ok_or(RefineTrainError::NoSuchPair {
+                kind: PairKind::Any,
+                index,
+                count: pairs.len(),
+            }),
             Self::Files(files) => Ok(Cow::Owned(files.read(index)?.pair)),
         }
     }
@@ -55,10 +56,10 @@ impl PairSet {
     /// `source` with its last `held_out` pairs held out; at least one must be left to train on.
     pub fn new(source: PairSource, held_out: usize) -> Result<Self, RefineTrainError> {
         if held_out >= source.len() {
-            return Err(RefineTrainError::invalid(
-                "pairs.held_out",
-                format!("{held_out} held out of {} pairs leaves none to train on", source.len()),
-            ));
+            return Err(RefineTrainError::Setting {
+                setting: "pairs.held_out",
+                detail: format!("{held_out} held out of {} pairs leaves none to train on", source.len()),
+            });
         }
         Ok(Self { source, held_out })
     }
@@ -74,7 +75,8 @@ impl PairSet {
     /// Training pair `index` (of [`Self::train_len`]).
     pub fn train(&self, index: usize) -> Result<Cow<'_, Pair>, RefineTrainError> {
         if index >= self.train_len() {
-            return Err(RefineTrainError::invalid("pairs", format!("training pair {index} of {}", self.train_len())));
+            let count = self.train_len();
+            return Err(RefineTrainError::NoSuchPair { kind: PairKind::Training, index, count });
         }
         self.source.get(index)
     }
@@ -82,7 +84,7 @@ impl PairSet {
     /// Held-out pair `index` (of [`Self::held_out_len`]).
     pub fn held_out(&self, index: usize) -> Result<Cow<'_, Pair>, RefineTrainError> {
         if index >= self.held_out {
-            return Err(RefineTrainError::invalid("pairs", format!("held-out pair {index} of {}", self.held_out)));
+            return Err(RefineTrainError::NoSuchPair { kind: PairKind::HeldOut, index, count: self.held_out });
         }
         self.source.get(self.train_len() + index)
     }
@@ -92,32 +94,28 @@ impl PairSet {
 /// images, in that order.
 pub fn read_images(path: &Path, names: &[String]) -> Result<Vec<Image>, RefineTrainError> {
     let bytes = std::fs::read(path).map_err(|source| RefineTrainError::Io { path: path.into(), source })?;
-    let file = safetensors::SafeTensors::deserialize(&bytes)
-        .map_err(|e| RefineTrainError::invalid(path.display().to_string(), format!("not a safetensors file: {e}")))?;
+    let invalid = |detail: String| RefineTrainError::ImageFile { path: path.into(), detail };
+    let file =
+        safetensors::SafeTensors::deserialize(&bytes).map_err(|e| invalid(format!("not a safetensors file: {e}")))?;
     let mut images = Vec::new();
     for name in names {
-        let what = || format!("{}: tensor '{name}'", path.display());
-        let view = file.tensor(name).map_err(|_| RefineTrainError::invalid(what(), "missing"))?;
+        let tensor = |detail: String| invalid(format!("tensor '{name}': {detail}"));
+        let view = file.tensor(name).map_err(|_| tensor("missing".into()))?;
         if view.dtype() != safetensors::Dtype::F32 {
-            return Err(RefineTrainError::invalid(what(), format!("{:?}, expected float32", view.dtype())));
+            return Err(tensor(format!("{:?}, expected float32", view.dtype())));
         }
         let shape = view.shape().to_vec();
         let (height, width) = match shape.as_slice() {
             [3, h, w] => (*h, *w),
             [_, 3, h, w] => (*h, *w),
-            _ => {
-                return Err(RefineTrainError::invalid(
-                    what(),
-                    format!("shape {shape:?}, expected [3, H, W] or [N, 3, H, W]"),
-                ));
-            }
+            _ => return Err(tensor(format!("shape {shape:?}, expected [3, H, W] or [N, 3, H, W]"))),
         };
-        let values = unit_values(view.data(), what)?;
+        let values = unit_values(view.data(), tensor)?;
         let size = 3 * height * width;
         images.extend(values.chunks_exact(size).map(|v| Image { height, width, values: v.to_vec() }));
     }
     if images.is_empty() {
-        return Err(RefineTrainError::invalid(path.display().to_string(), "no image tensor named"));
+        return Err(invalid("no image tensor named".into()));
     }
     Ok(images)
 }
@@ -184,13 +182,11 @@ pub fn batch_pairs(
 
 /// Images of one size as a `[N, 3, H, W]` tensor on `device`.
 pub fn batch(images: &[&Image], device: &Device) -> Result<Tensor<4>, RefineTrainError> {
-    let first = images.first().ok_or_else(|| RefineTrainError::invalid("batch", "no image"))?;
+    let first = images.first().ok_or_else(|| RefineTrainError::Batch("no image".into()))?;
     let (height, width) = (first.height, first.width);
     if let Some(other) = images.iter().find(|i| (i.height, i.width) != (height, width)) {
-        return Err(RefineTrainError::invalid(
-            "batch",
-            format!("images of {height}x{width} and {}x{} in one batch", other.height, other.width),
-        ));
+        let sizes = format!("images of {height}x{width} and {}x{} in one batch", other.height, other.width);
+        return Err(RefineTrainError::Batch(sizes));
     }
     let values: Vec<f32> = images.iter().flat_map(|i| i.values.iter().copied()).collect();
     Ok(Tensor::from_data(TensorData::new(values, [images.len(), 3, height, width]), device))

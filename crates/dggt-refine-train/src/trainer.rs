@@ -1,4 +1,4 @@
-//! The refiner's training loop on `dggt-train`'s machinery: its AdamW ([`Optimizer`]) with clipping, its
+//! The refiner's training loop on a training run's machinery (`dggt-run`): its AdamW ([`Optimizer`]) with clipping, its
 //! schedule ([`WarmupCosine`]), its checkpoint folders (`checkpoints/step-NNNNNNNN/` with `model.bpk`,
 //! `optimizer.bpk` and `state.json`, the `latest` pointer written last) and its run state.
 //!
@@ -8,30 +8,29 @@
 //! pairs from the posterior mean and reports their PSNR against the targets (and that of the unrefined
 //! renders). A step that fails (a non-finite loss or gradient, or an update rolled back) is counted, and too
 //! many in a row stop the run; a checkpoint falling due meanwhile waits for a step that trains
-//! ([`dggt_train::divergence`]). Records go to `out_dir/metrics.jsonl`, one JSON
-//! object a line with its `kind` and `step`, as the project's trainer writes them (a resumed run first drops
-//! the records it is about to write again).
+//! ([`dggt_run::divergence`]). Records go to `out_dir/metrics.jsonl` ([`dggt_run::metrics`]), one JSON object a
+//! line with its `kind` and `step`, as the DGGT trainer writes them (a resumed run first drops the records it
+//! is about to write again).
 
 use std::borrow::Cow;
 use std::fs;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use burn::optim::GradientsParams;
 use burn::tensor::Device;
-use dggt_infer::checkpoint::{STATE_FILE, latest, load_model};
 use dggt_metrics::psnr;
 use dggt_refine::{Latent, Prompt};
-use dggt_train::Start;
-use dggt_train::checkpoint::{Purpose, RunState, optimizer_file, save_folder};
-use dggt_train::divergence::{self, CheckpointDue, CheckpointGate, DivergenceLimit, StepFailure};
-use dggt_train::optimizer::Optimizer;
-use dggt_train::schedule::WarmupCosine;
-use dggt_train::trainer::{progress_bar, truncate_metrics};
+use dggt_run::checkpoint::{Purpose, RunState, latest, load_model, optimizer_file, read_state, save_folder};
+use dggt_run::divergence::{self, CheckpointDue, CheckpointGate, DivergenceLimit, StepFailure};
+use dggt_run::metrics::{MetricsLog, RecordKind};
+use dggt_run::progress::{Visibility, progress_bar};
+use dggt_run::schedule::WarmupCosine;
+use dggt_run::{Optimizer, Start, run_folder};
 use serde::Serialize;
 
 use crate::config::{PairsSection, RefineTrainConfig};
+use crate::difix_checkpoint::{to_difix_checkpoint, write_difix_checkpoint};
 use crate::error::RefineTrainError;
 use crate::fresh::fresh_checkpoint;
 use crate::loss::RefineLoss;
@@ -87,7 +86,7 @@ impl RefineTrainer {
     pub fn new(config: RefineTrainConfig, plain_device: Device, start: Start) -> Result<Self, RefineTrainError> {
         config.validate()?;
         if start == Start::Fresh {
-            dggt_train::run_folder::ensure_no_run(&config.run.out_dir)?;
+            run_folder::ensure_no_run(&config.run.out_dir)?;
         }
         let device = plain_device.clone().autodiff();
         let tokens = prompt_tokens(&config)?;
@@ -109,7 +108,7 @@ impl RefineTrainer {
             checkpoint_gate: CheckpointGate::default(),
         };
         if start == Start::Resume
-            && let Some(dir) = latest(&trainer.checkpoints(), Purpose::Resume).map_err(dggt_train::TrainError::from)?
+            && let Some(dir) = latest(&trainer.checkpoints(), Purpose::Resume)?
         {
             trainer.resume_from(&dir)?;
         }
@@ -129,7 +128,7 @@ impl RefineTrainer {
     }
 
     fn checkpoints(&self) -> PathBuf {
-        self.config.run.out_dir.join("checkpoints")
+        self.config.run.out_dir.join(run_folder::CHECKPOINTS)
     }
 
     fn schedule(&self) -> WarmupCosine {
@@ -182,22 +181,22 @@ impl RefineTrainer {
         Ok(record)
     }
 
-    /// [`dggt_train::TrainError::Diverged`] once `optim.max_failed_steps_in_a_row` steps in a row have failed.
+    /// [`dggt_run::RunError::Diverged`] once `optim.max_failed_steps_in_a_row` steps in a row have failed.
     fn check_divergence(&self) -> Result<(), RefineTrainError> {
         let optim = &self.config.optim;
         let limit = DivergenceLimit { max_failed_in_a_row: optim.max_failed_steps_in_a_row, lr: optim.lr };
         Ok(divergence::check(&self.state, self.last_failure.as_ref(), limit)?)
     }
 
-    /// Trains to `run.steps` with a progress bar (when `progress`), validating and checkpointing on the
+    /// Trains to `run.steps` with a progress bar (drawn as `progress` says), validating and checkpointing on the
     /// configured cadence and at the end. Returns the last validation.
-    pub fn run(&mut self, progress: bool) -> Result<Validation, RefineTrainError> {
+    pub fn run(&mut self, progress: Visibility) -> Result<Validation, RefineTrainError> {
         let run = self.config.run.clone();
         let bar = progress_bar(progress, self.state.step, run.steps);
         let started = Instant::now();
         let elapsed_before = self.state.elapsed_s;
         let mut last = None;
-        truncate_metrics(&self.metrics_path(), self.state.step)?;
+        let mut metrics = MetricsLog::continuing_at(&run.out_dir.join(run_folder::METRICS), self.state.step)?;
         while self.state.step < run.steps {
             let record = match self.step() {
                 Ok(record) => record,
@@ -211,13 +210,13 @@ impl RefineTrainer {
             };
             bar.set_message(format!("loss {:.4}", record.loss));
             bar.inc(1);
-            self.append_metrics("train", &record)?;
+            metrics.append(RecordKind::Train, &record)?;
             // No checkpoint then: the weights are those the last one holds, and a new one could prune it.
             self.check_divergence()?;
             let step = self.state.step;
             self.state.elapsed_s = elapsed_before + started.elapsed().as_secs_f64();
             if run.validate_every > 0 && step.is_multiple_of(run.validate_every) && step < run.steps {
-                last = Some(self.validate_and_record()?);
+                last = Some(self.validate_and_record(&mut metrics)?);
             }
             let due =
                 if step.is_multiple_of(run.checkpoint_every) { CheckpointDue::Periodic } else { CheckpointDue::No };
@@ -227,13 +226,13 @@ impl RefineTrainer {
         }
         bar.finish_and_clear();
         if last.is_none_or(|v: Validation| v.step != self.state.step) {
-            last = Some(self.validate_and_record()?);
+            last = Some(self.validate_and_record(&mut metrics)?);
         }
         self.save_checkpoint()?;
         Ok(last.expect("validated above"))
     }
 
-    fn validate_and_record(&self) -> Result<Validation, RefineTrainError> {
+    fn validate_and_record(&self, metrics: &mut MetricsLog) -> Result<Validation, RefineTrainError> {
         let validation = self
             .validate()
             .map_err(|source| RefineTrainError::Validation { step: self.state.step, source: Box::new(source) })?;
@@ -243,7 +242,7 @@ impl RefineTrainer {
             render_psnr = validation.render_psnr,
             "held-out pairs"
         );
-        self.append_metrics("validation", &validation)?;
+        metrics.append(RecordKind::Validation, &validation)?;
         Ok(validation)
     }
 
@@ -263,23 +262,25 @@ impl RefineTrainer {
             scored += 1;
             let (render, _, reference) = batch_pairs(&[&pair], &self.plain_device)?;
             let refined = model.refine(render, reference, Latent::PosteriorMean)?;
-            let refined: Vec<f32> = refined
-                .into_data()
-                .try_into_vec()
-                .map_err(|e| RefineTrainError::invalid("validation", format!("refined image not readable: {e:?}")))?;
+            let refined: Vec<f32> = refined.into_data().try_into_vec().map_err(|e| RefineTrainError::Readback {
+                stage: "validation",
+                image: "refined image",
+                detail: format!("{e:?}"),
+            })?;
             refined_sum += psnr(&refined, &pair.target.values)?;
             render_sum += psnr(&pair.render.values, &pair.target.values)?;
         }
         if scored == 0 && self.pairs.held_out_len() > 0 {
-            return Err(RefineTrainError::invalid("pairs.held_out", "no held-out pair can be read"));
+            return Err(RefineTrainError::NoHeldOutPairReadable);
         }
         let count = scored.max(1) as f64;
         Ok(Validation { step: self.state.step, refined_psnr: refined_sum / count, render_psnr: render_sum / count })
     }
 
-    /// Writes the trained refiner to `path` for the refiner's loader ([`crate::export`]).
-    pub fn export(&self, path: &Path) -> Result<(), RefineTrainError> {
-        crate::export::write(&crate::export::to_checkpoint(&self.model)?, path)
+    /// Writes the trained refiner to `path` as a Difix checkpoint for the refiner's loader
+    /// ([`crate::difix_checkpoint`]).
+    pub fn write_difix_checkpoint(&self, path: &Path) -> Result<(), RefineTrainError> {
+        write_difix_checkpoint(&to_difix_checkpoint(&self.model)?, path)
     }
 
     /// The run's configuration.
@@ -292,26 +293,11 @@ impl RefineTrainer {
         let reference = reference.map(|r| batch(&[r], &self.plain_device)).transpose()?;
         let image = batch(&[image], &self.plain_device)?;
         let refined = self.model.valid().refine(image, reference, Latent::PosteriorMean)?;
-        refined
-            .into_data()
-            .try_into_vec()
-            .map_err(|e| RefineTrainError::invalid("refine", format!("refined image not readable: {e:?}")))
-    }
-
-    fn metrics_path(&self) -> PathBuf {
-        self.config.run.out_dir.join("metrics.jsonl")
-    }
-
-    /// Appends `record` with its `kind` as one JSON line to `out_dir/metrics.jsonl`.
-    fn append_metrics(&self, kind: &str, record: &impl Serialize) -> Result<(), RefineTrainError> {
-        let mut line = serde_json::to_value(record).expect("records serialise");
-        line["kind"] = kind.into();
-        let record = line;
-        let path = self.metrics_path();
-        let io = |source| RefineTrainError::Io { path: path.clone(), source };
-        fs::create_dir_all(&self.config.run.out_dir).map_err(io)?;
-        let mut file = fs::OpenOptions::new().create(true).append(true).open(&path).map_err(io)?;
-        writeln!(file, "{record}").map_err(io)
+        refined.into_data().try_into_vec().map_err(|e| RefineTrainError::Readback {
+            stage: "refine",
+            image: "refined image",
+            detail: format!("{e:?}"),
+        })
     }
 
     /// Writes `checkpoints/step-NNNNNNNN/` and points `latest` at it; keeps the newest `run.keep_checkpoints`.
@@ -322,13 +308,10 @@ impl RefineTrainer {
 
     /// Continues from the checkpoint folder `dir`: weights, AdamW moments and run state.
     fn resume_from(&mut self, dir: &Path) -> Result<(), RefineTrainError> {
-        let loaded = load_model(dir, self.model.weights.clone()).map_err(dggt_train::TrainError::from)?;
+        let loaded = load_model(dir, self.model.weights.clone())?;
         self.model = self.model.clone().with_loaded_weights(loaded);
         self.optimizer.load(&optimizer_file(dir), &self.device)?;
-        let path = dir.join(STATE_FILE);
-        let text = fs::read(&path).map_err(|source| RefineTrainError::Io { path: path.clone(), source })?;
-        self.state = serde_json::from_slice(&text)
-            .map_err(|e| RefineTrainError::invalid(path.display().to_string(), e.to_string()))?;
+        self.state = read_state(dir)?;
         tracing::info!(checkpoint = %dir.display(), step = self.state.step, "resumed");
         Ok(())
     }
@@ -352,13 +335,14 @@ fn readable_pair<'a>(
         state.bad_samples += 1;
         tracing::warn!("training pair {position} replaced by the next one: {error}");
         if state.bad_samples > limit {
-            return Err(RefineTrainError::invalid(
-                "pairs.max_bad_pairs",
-                format!("{} pairs could not be read (at most {limit} may fail); the last: {error}", state.bad_samples),
-            ));
+            return Err(RefineTrainError::TooManyBadPairs {
+                failed: state.bad_samples,
+                limit,
+                last: error.to_string(),
+            });
         }
     }
-    Err(RefineTrainError::invalid("pairs", format!("none of the {count} training pairs can be read")))
+    Err(RefineTrainError::NoTrainingPairReadable { count })
 }
 
 /// The refiner to train: the configured checkpoint over the base, or a fresh start from the base.
@@ -384,7 +368,9 @@ fn load_pairs(section: &PairsSection) -> Result<PairSet, RefineTrainError> {
         (None, Some(images)) => {
             synthetic_pairs(&read_images(images, &section.tensors)?, section.variants, section.held_out)
         }
-        (None, None) => Err(RefineTrainError::invalid("pairs", "neither `rendered` nor `images` given")),
+        (None, None) => {
+            Err(RefineTrainError::Setting { setting: "pairs", detail: "neither `rendered` nor `images` given".into() })
+        }
     }
 }
 
@@ -400,7 +386,7 @@ fn prompt_tokens(config: &RefineTrainConfig) -> Result<Vec<i64>, RefineTrainErro
         };
         return Ok(prompt.token_ids(&model.base_dir)?);
     };
-    let invalid = |detail: String| RefineTrainError::invalid(path.display().to_string(), detail);
+    let invalid = |detail: String| RefineTrainError::PromptTokens { path: path.clone(), detail };
     let bytes = fs::read(path).map_err(|source| RefineTrainError::Io { path: path.clone(), source })?;
     let file = safetensors::SafeTensors::deserialize(&bytes).map_err(|e| invalid(e.to_string()))?;
     let ids = file.tensor("input_ids").map_err(|_| invalid("no tensor 'input_ids'".into()))?;

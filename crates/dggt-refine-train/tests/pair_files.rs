@@ -5,9 +5,10 @@
 
 use std::path::Path;
 
+use dggt_refine_train::pair::RenderedPair;
 use dggt_refine_train::pair_files::PairFiles;
+use dggt_refine_train::pair_files::{shard_path, write_pairs};
 use dggt_refine_train::pairs::{Image, Pair};
-use dggt_refine_train::render_pairs::{RenderedPair, shard_path, write_pairs};
 
 fn image(height: usize, width: usize, seed: usize) -> Image {
     let values = (0..3 * height * width).map(|i| ((i * 31 + seed * 17) % 97) as f32 / 96.0).collect();

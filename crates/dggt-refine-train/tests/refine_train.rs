@@ -10,12 +10,14 @@ use burn::module::ParamId;
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_refine::Latent;
 use dggt_refine_train::RefineTrainer;
-use dggt_refine_train::export::{load_refiner, to_checkpoint, write};
+use dggt_refine_train::difix_checkpoint::{load_trained_refiner, to_difix_checkpoint, write_difix_checkpoint};
 use dggt_refine_train::loss::{LossValue, RefineLoss};
 use dggt_refine_train::model::param_values;
+use dggt_refine_train::pair::RenderedPair;
+use dggt_refine_train::pair_files::write_pairs;
 use dggt_refine_train::pairs::{Image, Pair, batch, step_indices};
-use dggt_refine_train::render_pairs::{RenderedPair, write_pairs};
-use dggt_train::Start;
+use dggt_run::Start;
+use dggt_run::progress::Visibility;
 
 mod common;
 
@@ -142,7 +144,7 @@ fn the_exported_merged_refiner_equals_the_trained_unmerged_one() {
     let unmerged = trainer.refine_host(image, None).unwrap();
 
     let path = out.path().join("refiner.safetensors");
-    write(&to_checkpoint(trainer.model()).unwrap(), &path).unwrap();
+    write_difix_checkpoint(&to_difix_checkpoint(trainer.model()).unwrap(), &path).unwrap();
     let cpu = Device::flex();
     let tokens = {
         let bytes = std::fs::read(config.model.prompt_tokens_file.as_ref().unwrap()).unwrap();
@@ -150,7 +152,7 @@ fn the_exported_merged_refiner_equals_the_trained_unmerged_one() {
         let ids = file.tensor("input_ids").unwrap();
         ids.data().chunks_exact(8).map(|b| i64::from_le_bytes(b.try_into().unwrap())).collect::<Vec<_>>()
     };
-    let (refiner, report) = load_refiner(&config.model.base_dir, &path, &tokens, &cpu).unwrap();
+    let (refiner, report) = load_trained_refiner(&config.model.base_dir, &path, &tokens, &cpu).unwrap();
     assert_eq!(report.vae.merged.len(), 35);
     assert!(report.unused.is_empty(), "{:?}", report.unused);
     assert_eq!(report.unet_from_base, 0, "the export carries the whole UNet");
@@ -199,11 +201,11 @@ fn bad_checkpoints_and_pair_files_are_errors_naming_the_file_and_the_part() {
     let out = tempfile::tempdir().unwrap();
     let config = tiny_config(out.path(), 1);
     let trainer = RefineTrainer::new(config.clone(), device(), Start::Fresh).unwrap();
-    let mut checkpoint = to_checkpoint(trainer.model()).unwrap();
+    let mut checkpoint = to_difix_checkpoint(trainer.model()).unwrap();
     let target = "decoder.conv_in";
     checkpoint.vae.remove(&format!("{target}.lora_B.vae_skip.weight")).expect("the export names peft's factors");
     let path = out.path().join("broken.safetensors");
-    write(&checkpoint, &path).unwrap();
+    write_difix_checkpoint(&checkpoint, &path).unwrap();
     let mut broken = config.clone();
     broken.model.checkpoint = Some(path.clone());
     let error = RefineTrainer::new(broken, device(), Start::Fresh).err().expect("a missing factor").to_string();
@@ -277,7 +279,7 @@ fn an_unreadable_pair_is_replaced_and_counted_and_past_the_limit_the_run_stops_w
     config.pairs.max_bad_pairs = 0;
     config.run.out_dir = dir.path().join("strict");
     let mut strict = RefineTrainer::new(config, device(), Start::Fresh).unwrap();
-    let error = strict.run(false).expect_err("no pair may fail").to_string();
+    let error = strict.run(Visibility::Hidden).expect_err("no pair may fail").to_string();
     let named = format!("pair {bad}");
     assert!(
         error.contains("pairs.safetensors") && error.contains("max_bad_pairs") && error.contains(&named),

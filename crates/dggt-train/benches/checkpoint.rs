@@ -11,9 +11,10 @@ use std::time::Instant;
 use burn::module::Module;
 use burn::tensor::Device;
 use dggt_model::{Dggt, ModelConfig};
-use dggt_train::checkpoint::{self, RunState};
-use dggt_train::config::OptimSection;
-use dggt_train::optimizer::Optimizer;
+use dggt_run::OptimSection;
+use dggt_run::checkpoint::RunState;
+use dggt_train::checkpoint;
+use dggt_train::modules::grouped_optimizer;
 
 const GIB: f64 = (1u64 << 30) as f64;
 
@@ -40,7 +41,7 @@ fn main() {
     let device = Device::flex().autodiff();
     let started = Instant::now();
     let model = Dggt::new(&config, &device).expect("the preset builds");
-    let mut optimizer = Optimizer::new(&OptimSection::default(), &model);
+    let mut optimizer = grouped_optimizer(&OptimSection::default(), &model);
     optimizer.zero_moments(&model);
     let parameters = model.num_params() as f64;
     let state_gib = 3.0 * parameters * 4.0 / GIB;

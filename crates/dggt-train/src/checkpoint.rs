@@ -1,91 +1,22 @@
-//! Checkpoints: everything a run needs to continue exactly as if it had not stopped.
+//! The DGGT trainer's checkpoints: a run's checkpoint folder ([`dggt_run::checkpoint`]) with the files that
+//! say how its network was made: the network's configuration (`model.json`), the input preprocessing it was
+//! trained with (`preprocess.json`, inference's default) and the `[model]` and `[optim]` sections as
+//! configured (`training.json`, which a resume compares with its own: [`resume`](crate::resume)).
 //!
 //! The network's half (its weights, its configuration and the `latest` pointer) is read by
-//! [`dggt_infer::checkpoint`], which inference shares; this module adds the optimiser and run state and writes
-//! all of it.
-//!
-//! A checkpoint is a folder `checkpoints/step-NNNNNNNN/` holding the network (`model.bpk`, burnpack, parameter
-//! ids included so the optimiser state stays attached), the AdamW state (`optimizer.bpk`), the network's
-//! configuration (`model.json`), the input preprocessing it was trained with (`preprocess.json`, inference's
-//! default), the `[model]` and `[optim]` sections as configured (`training.json`, which a resume compares with
-//! its own: [`resume`](crate::resume)) and the run state (`state.json`: the next step, seed and counters). The
-//! learning-rate schedule is a function of the step and the sampler draws sample `k` from `(seed, k)`, so no
-//! random-generator state needs saving. The weights and moments are written tensor by tensor (peak host memory
-//! is one tensor, not the 16 GB of a full-size model and its AdamW state). Every file is written through a
-//! temporary file and a rename; `checksums.json` records every file's size and CRC-32C
-//! ([`dggt_infer::checksums`]), `state.json` then marks the folder complete and the `checkpoints/latest`
-//! pointer is replaced last: a run killed at any moment, in the middle of a checkpoint included, resumes from
-//! the last complete one, and one whose newest checkpoint was damaged afterwards from the newest intact one.
-//! No checkpoint is written with a non-finite weight or moment.
+//! [`dggt_infer::checkpoint`], which inference shares.
 
-use std::fs;
 use std::path::{Path, PathBuf};
 
-use burn::module::{Module, ModuleVisitor, Param};
-use burn::tensor::Tensor;
 use dggt_data::Preprocess;
-use dggt_data::io::write_atomically;
-pub use dggt_infer::checkpoint::{
-    LATEST, MODEL_CONFIG_FILE, MODEL_FILE, PREPROCESS_FILE, STATE_FILE, latest, load_model, read_model_config,
-    read_preprocess, verified,
-};
-use dggt_infer::checksums;
-pub use dggt_infer::checksums::{MANIFEST_FILE, Purpose};
+pub use dggt_infer::checkpoint::{MODEL_CONFIG_FILE, PREPROCESS_FILE, read_model_config, read_preprocess};
 use dggt_model::{Dggt, ModelConfig};
-use serde::{Deserialize, Serialize};
+use dggt_run::Optimizer;
+use dggt_run::checkpoint::{RunState, load_model, read_state, save_folder};
+use serde::Serialize;
 
 use crate::error::TrainError;
-use crate::failpoint;
-use crate::finite::first_non_finite;
-use crate::optimizer::{Optimizer, deferred_tensor};
 use crate::resume::{ConfiguredSections, TRAINING_FILE};
-
-/// The counters of a run.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct RunState {
-    /// The next optimiser step to run.
-    pub step: u64,
-    pub seed: u64,
-    /// Steps skipped for a non-finite loss or gradient.
-    pub skipped_steps: u64,
-    /// Steps whose update made a weight or moment non-finite and was undone.
-    #[serde(default)]
-    pub rolled_back_steps: u64,
-    /// Steps skipped or rolled back since the last step that trained ([`crate::divergence`]).
-    #[serde(default)]
-    pub failed_in_a_row: u64,
-    /// Training seconds before this checkpoint (summed over resumed segments).
-    pub elapsed_s: f64,
-    /// Samples that failed to load and were replaced.
-    #[serde(default)]
-    pub bad_samples: u64,
-    /// Samples drawn per step (`optim.accumulation` x devices) when the checkpoint was written; 0 when unknown.
-    #[serde(default)]
-    pub samples_per_step: u64,
-}
-
-impl RunState {
-    /// The counters of a run that has not taken a step yet.
-    pub fn starting(seed: u64, samples_per_step: u64) -> Self {
-        Self {
-            step: 0,
-            seed,
-            skipped_steps: 0,
-            rolled_back_steps: 0,
-            failed_in_a_row: 0,
-            elapsed_s: 0.0,
-            bad_samples: 0,
-            samples_per_step,
-        }
-    }
-}
-
-/// The optimiser's state in a checkpoint folder.
-const OPTIMIZER_FILE: &str = "optimizer.bpk";
-
-fn checkpoint_error(path: &Path, detail: impl ToString) -> TrainError {
-    TrainError::Checkpoint { path: path.to_path_buf(), detail: detail.to_string() }
-}
 
 /// What a checkpoint records beside the weights about how its network was made.
 #[derive(Debug, Clone, PartialEq)]
@@ -116,92 +47,7 @@ pub fn save(
         (TRAINING_FILE, json(&settings.configured)),
     ];
     let extra: Vec<(&str, &[u8])> = files.iter().map(|(name, text)| (*name, text.as_bytes())).collect();
-    save_folder(root, model, optimizer, state, keep, &extra)
-}
-
-/// [`save`] for any trained module: its parameters, the optimiser, `extra` files (name, bytes) and the run
-/// state, written last, in `root/step-NNNNNNNN/`; then `latest` and pruning to the newest `keep`. Nothing is
-/// written when a weight or moment is not finite.
-pub fn save_folder<M: Module>(
-    root: &Path,
-    model: &M,
-    optimizer: &Optimizer,
-    state: &RunState,
-    keep: usize,
-    extra: &[(&str, &[u8])],
-) -> Result<PathBuf, TrainError> {
-    let name = format!("step-{:08}", state.step);
-    let dir = root.join(&name);
-    if let Some(non_finite) = first_non_finite(model, Some(optimizer)) {
-        return Err(TrainError::NonFiniteCheckpoint { dir, non_finite });
-    }
-    fs::create_dir_all(&dir).map_err(|e| checkpoint_error(&dir, e))?;
-    let write = |file: &str, bytes: &[u8]| -> Result<(), TrainError> {
-        write_atomically(&dir.join(file), bytes).map_err(|e| checkpoint_error(&dir.join(file), e))
-    };
-    // The run state goes last: a folder without it is incomplete and never resumed from.
-    let _ = fs::remove_file(dir.join(STATE_FILE));
-    save_model(&dir.join(MODEL_FILE), model)?;
-    failpoint::reached(failpoint::INSIDE_CHECKPOINT);
-    optimizer.save(&dir.join(OPTIMIZER_FILE))?;
-    for (file, bytes) in extra {
-        write(file, bytes)?;
-    }
-    let state_bytes = serde_json::to_string_pretty(state).expect("states serialise").into_bytes();
-    let written: Vec<&str> =
-        [MODEL_FILE, OPTIMIZER_FILE].into_iter().chain(extra.iter().map(|(name, _)| *name)).collect();
-    checksums::write_manifest(&dir, &written, &[(STATE_FILE, &state_bytes)])?;
-    write(STATE_FILE, &state_bytes)?;
-    write_atomically(&root.join(LATEST), name.as_bytes()).map_err(|e| checkpoint_error(&root.join(LATEST), e))?;
-    prune(root, keep.max(1))?;
-    Ok(dir)
-}
-
-/// Writes a module's (the network's) parameters as a burnpack file readable by [`load_model`], one tensor at a time: each
-/// is read back from its device only when the writer reaches it, so saving never holds a host copy of the
-/// whole network.
-pub fn save_model<M: Module>(path: &Path, model: &M) -> Result<(), TrainError> {
-    let mut collect = DeferredParameters::default();
-    model.visit(&mut collect);
-    burn_pack::Writer::new(collect.tensors).write_to_file(path).map_err(|e| checkpoint_error(path, e))
-}
-
-/// Every parameter of a module as a deferred burnpack entry named by its module path, as burn's module records
-/// name them.
-#[derive(Default)]
-struct DeferredParameters {
-    path: Vec<String>,
-    tensors: Vec<burn_pack::Tensor>,
-}
-
-impl ModuleVisitor for DeferredParameters {
-    fn enter_module(&mut self, name: &str, _container_type: &str) {
-        self.path.push(name.to_string());
-    }
-
-    fn exit_module(&mut self, _name: &str, _container_type: &str) {
-        self.path.pop();
-    }
-
-    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-        let saved = param.transform_for_save().val();
-        self.tensors.push(deferred_tensor(self.path.join("."), &saved, &param.id));
-    }
-}
-
-/// Removes all but the newest `keep` `step-*` folders under `root`.
-pub fn prune(root: &Path, keep: usize) -> Result<(), TrainError> {
-    let mut steps: Vec<PathBuf> = fs::read_dir(root)
-        .map_err(|e| checkpoint_error(root, e))?
-        .filter_map(|entry| entry.ok().map(|e| e.path()))
-        .filter(|p| p.is_dir() && p.file_name().is_some_and(|n| n.to_string_lossy().starts_with("step-")))
-        .collect();
-    steps.sort();
-    let excess = steps.len().saturating_sub(keep);
-    for old in &steps[..excess] {
-        fs::remove_dir_all(old).map_err(|e| checkpoint_error(old, e))?;
-    }
-    Ok(())
+    Ok(save_folder(root, model, optimizer, state, keep, &extra)?)
 }
 
 /// A loaded checkpoint.
@@ -211,21 +57,11 @@ pub struct Loaded {
     pub state: RunState,
 }
 
-fn read(path: &Path) -> Result<Vec<u8>, TrainError> {
-    fs::read(path).map_err(|e| checkpoint_error(path, e))
-}
-
 /// Loads the network into `model` (built from the stored configuration) and the run state; the optimiser
-/// loads its own file ([`optimizer_file`]).
+/// loads its own file ([`dggt_run::checkpoint::optimizer_file`]).
 pub fn load(dir: &Path, model: Dggt) -> Result<Loaded, TrainError> {
     let config = read_model_config(dir)?;
     let model = load_model(dir, model)?;
-    let path = dir.join(STATE_FILE);
-    let state: RunState = serde_json::from_slice(&read(&path)?).map_err(|e| checkpoint_error(&path, e))?;
+    let state = read_state(dir)?;
     Ok(Loaded { model, config, state })
-}
-
-/// The AdamW state's file in a checkpoint folder (see [`Optimizer::load`]).
-pub fn optimizer_file(dir: &Path) -> PathBuf {
-    dir.join(OPTIMIZER_FILE)
 }

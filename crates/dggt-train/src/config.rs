@@ -7,10 +7,12 @@ use dggt_data::{DatasetSpec, Preprocess, SamplerConfig};
 pub use dggt_infer::{CameraSource, ModelSection, RenderSection};
 use dggt_objective::LossTerm;
 pub use dggt_objective::LossWeights;
+pub use dggt_run::OptimSection;
+use dggt_run::divergence;
 use serde::{Deserialize, Serialize};
 
-use crate::divergence::{self, DEFAULT_MAX_FAILED_STEPS_IN_A_ROW};
 use crate::error::TrainError;
+use crate::modules::MODULES;
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 #[serde(default, deny_unknown_fields)]
@@ -91,57 +93,6 @@ pub struct ValidationSection {
 impl Default for ValidationSection {
     fn default() -> Self {
         Self { inputs: vec![0, 5, 10, 15], targets: vec![2, 7, 12], lpips_weights: None, lpips_backbone: None }
-    }
-}
-
-/// AdamW, learning-rate schedule, clipping, accumulation, parameter groups and frozen modules.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct OptimSection {
-    /// Peak learning rate of every trainable parameter outside `groups`.
-    pub lr: f64,
-    /// Top-level modules (`sky_model`, `gs_head`, ...) with their own peak learning rate.
-    pub groups: std::collections::BTreeMap<String, f64>,
-    /// Top-level modules that are not trained (the release freezes `aggregator`, `camera_head`, `depth_head`).
-    pub frozen: Vec<String>,
-    pub weight_decay: f64,
-    pub beta1: f64,
-    pub beta2: f64,
-    pub epsilon: f64,
-    /// Linear warm-up from 0 over this many steps, then cosine decay to `min_lr_ratio · lr`.
-    pub warmup_steps: u64,
-    pub min_lr_ratio: f64,
-    /// Clip the global gradient norm to this value; `None` disables clipping.
-    pub clip_grad_norm: Option<f64>,
-    /// Samples whose gradients are summed (averaged) per optimiser step.
-    pub accumulation: usize,
-    /// The first steps train the camera loss alone (`loss.camera`, against the export's poses): the aggregator
-    /// and camera head run, no dense head and no render, so each costs a fraction of a full step. For training
-    /// from scratch, where the camera head otherwise learns per-frame positions last. Counted in `run.steps`
-    /// and the schedule.
-    pub pose_warmup_steps: u64,
-    /// Steps in a row that may fail (skipped for a non-finite loss or gradient, or rolled back for an update
-    /// that made a weight non-finite) before the run stops as diverged ([`crate::divergence`]).
-    pub max_failed_steps_in_a_row: u64,
-}
-
-impl Default for OptimSection {
-    fn default() -> Self {
-        Self {
-            lr: 4e-5,
-            groups: [("sky_model".to_string(), 1e-4)].into_iter().collect(),
-            frozen: Vec::new(),
-            weight_decay: 1e-4,
-            beta1: 0.9,
-            beta2: 0.999,
-            epsilon: 1e-8,
-            warmup_steps: 1000,
-            min_lr_ratio: 0.0,
-            clip_grad_norm: Some(1.0),
-            accumulation: 1,
-            pose_warmup_steps: 0,
-            max_failed_steps_in_a_row: DEFAULT_MAX_FAILED_STEPS_IN_A_ROW,
-        }
     }
 }
 
@@ -354,19 +305,6 @@ impl TrainConfig {
         Ok(())
     }
 }
-
-/// The network's top-level modules, which `optim.frozen` and `optim.groups` name.
-const MODULES: [&str; 9] = [
-    "aggregator",
-    "camera_head",
-    "depth_head",
-    "point_head",
-    "gs_head",
-    "instance_head",
-    "semantic_head",
-    "sky_model",
-    "motion_head",
-];
 
 fn setting(setting: &'static str, detail: impl Into<String>) -> TrainError {
     TrainError::Setting { setting, detail: detail.into() }

@@ -13,6 +13,8 @@ pub enum TrainError {
     #[error("checkpoint {path}: {detail}")]
     Checkpoint { path: PathBuf, detail: String },
     #[error(transparent)]
+    Run(#[from] dggt_run::RunError),
+    #[error(transparent)]
     Data(#[from] dggt_data::DataError),
     #[error(transparent)]
     Model(#[from] dggt_model::ModelError),
@@ -20,8 +22,6 @@ pub enum TrainError {
     Loss(#[from] dggt_losses::LossError),
     #[error(transparent)]
     Metric(#[from] dggt_metrics::MetricError),
-    #[error("{what}: {detail}")]
-    Invalid { what: String, detail: String },
     /// A configuration value out of its range, or settings that contradict each other.
     #[error("{setting}: {detail}")]
     Setting { setting: &'static str, detail: String },
@@ -29,9 +29,12 @@ pub enum TrainError {
     Infer(#[from] dggt_infer::InferError),
     #[error(transparent)]
     Objective(#[from] dggt_objective::ObjectiveError),
-    /// A fresh run asked to write where another run's files are.
-    #[error("{} already holds a training run ({}); a new run would overwrite it", dir.display(), found.join(", "))]
-    RunExists { dir: PathBuf, found: Vec<&'static str> },
+    /// A run given no device to train on.
+    #[error("devices: training needs at least one device")]
+    NoDevice,
+    /// A resume whose `run.seed` is not the checkpoint's.
+    #[error("resume: the checkpoint's seed {checkpoint} differs from run.seed {configured}")]
+    SeedChanged { checkpoint: u64, configured: u64 },
     /// A resume whose configuration describes another network than the checkpoint's.
     #[error(
         "cannot resume from {}: the configuration describes another network ({}); the weights fix the network, so \
@@ -40,22 +43,27 @@ pub enum TrainError {
         changes.iter().map(ToString::to_string).collect::<Vec<_>>().join("; ")
     )]
     ArchitectureChanged { checkpoint: PathBuf, changes: Vec<crate::resume::Change> },
-    /// Too many steps in a row made no update ([`crate::divergence`]).
+    /// The single scene of a run (`data.scene`) that cannot be indexed.
+    #[error("data.scene {}: {reason}", scene.display())]
+    SceneExcluded { scene: PathBuf, reason: String },
+    /// A validation frame beyond the frames of a validation scene.
     #[error(
-        "training diverged: the {} steps {first_step}..={last_step} in a row made no update (the last: \
-         {last_failure}); the weights are those from before step {first_step}. Lower the learning rate (optim.lr \
-         is {lr}, and any optim.groups rate), set or lower optim.clip_grad_norm, or lengthen optim.warmup_steps, \
-         then continue from the last checkpoint with --resume (optim.max_failed_steps_in_a_row = {limit} failed \
-         steps in a row stop a run)",
-        last_step + 1 - first_step
+        "data.validation: frame {frame} is outside the {frame_count} frames of {} (positions 0..{frame_count})",
+        scene.display()
     )]
-    Diverged { first_step: u64, last_step: u64, last_failure: String, lr: f64, limit: u64 },
-    /// A checkpoint that would hold non-finite values is not written.
-    #[error(
-        "checkpoint {}: not written, the {non_finite} holds non-finite values (the earlier checkpoints are kept)",
-        dir.display()
-    )]
-    NonFiniteCheckpoint { dir: PathBuf, non_finite: crate::finite::NonFinite },
+    ValidationFrame { frame: usize, frame_count: usize, scene: PathBuf },
+    /// More samples failed to load than `data.max_bad_samples` allows.
+    #[error("data: {failed} samples failed to load, more than data.max_bad_samples = {limit}; the last: {last}")]
+    TooManyBadSamples { failed: u64, limit: u64, last: String },
+    /// The sample stream stopped before the run had its samples.
+    #[error("data stream: ended early")]
+    StreamEnded,
+    /// A validation render's comparison image that cannot be written.
+    #[error("{}: {detail}", path.display())]
+    Comparison { path: PathBuf, detail: String },
+    /// A validation depth score that cannot be computed.
+    #[error("validation D-RMSE: {0}")]
+    DepthScore(dggt_metrics::MetricError),
     /// An error of a validation pass, with the step it validated.
     #[error("validation at step {step}: {source}")]
     Validation { step: u64, source: Box<TrainError> },

@@ -1,7 +1,7 @@
-//! Training DGGT: the configuration, the optimiser (AdamW with groups, frozen modules, clipping, accumulation,
-//! warm-up and cosine schedule), atomic checkpoints with exact resume, and validation. A sample's objective
-//! (network, 4D scene, weighted losses) is `dggt-objective`'s; the network, its checkpoints and its scenes are
-//! reached through `dggt-infer`.
+//! Training DGGT: the configuration, the network's modules (frozen ones, optimiser groups), its checkpoints with
+//! exact resume, and validation. The run's machinery (AdamW, the schedule, checkpoint folders, divergence,
+//! metric records) is `dggt-run`'s; a sample's objective (network, 4D scene, weighted losses) is
+//! `dggt-objective`'s; the network, its checkpoints and its scenes are reached through `dggt-infer`.
 //!
 //! The loop is this crate's own rather than burn-train's learner: a step renders views assembled from a
 //! forward pass with a host-side culling stage, skips or rolls back non-finite steps (stopping a diverged run),
@@ -10,20 +10,19 @@
 
 pub mod checkpoint;
 pub mod config;
-pub mod divergence;
 mod error;
-pub mod failpoint;
-pub mod finite;
-pub mod optimizer;
+pub mod modules;
+pub mod records;
 pub mod replicas;
 pub mod resume;
-pub mod run_folder;
-pub mod schedule;
 pub mod trainer;
 pub mod validate;
 
 pub use config::TrainConfig;
 /// Whether a training step reads the depth-and-flow maps ([`Trainer::train_step`] takes it).
 pub use dggt_objective::DepthFlowMaps;
+/// How a run starts: fresh, or resuming the newest checkpoint of its folder.
+pub use dggt_run::Start;
 pub use error::TrainError;
-pub use trainer::{RunOptions, RunSummary, Start, Trainer};
+pub use records::StepRecord;
+pub use trainer::{RunOptions, RunSummary, Trainer};

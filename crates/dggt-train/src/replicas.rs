@@ -12,7 +12,7 @@ use burn::optim::{GradientsAccumulator, GradientsParams};
 use burn::tensor::{Device, Tensor};
 use dggt_model::Dggt;
 
-use crate::optimizer::{Optimizer, StepOutcome};
+use dggt_run::optimizer::{Optimizer, StepOutcome};
 
 /// The network and its optimiser on one device.
 pub struct Replica {

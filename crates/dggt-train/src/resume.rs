@@ -14,10 +14,11 @@ use std::fmt;
 use std::path::Path;
 
 use dggt_model::ModelConfig;
+use dggt_run::OptimSection;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
-use crate::config::{ModelSection, OptimSection, TrainConfig};
+use crate::config::{ModelSection, TrainConfig};
 use crate::error::TrainError;
 
 /// The sections a checkpoint records, in its folder.

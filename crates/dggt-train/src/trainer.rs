@@ -8,13 +8,12 @@
 //! norm, is skipped with a warning and leaves the weights untouched; an update that makes a weight or moment
 //! non-finite is rolled back; a checkpoint falling due meanwhile waits for a step that trains, and too many
 //! such steps in a row stop the run ([`divergence`]). Metrics go to
-//! `metrics.jsonl`, checkpoints to `checkpoints/` (see [`checkpoint`]); an error of a validation pass names
-//! the step it validated.
+//! `metrics.jsonl` ([`records`](crate::records)), checkpoints to `checkpoints/` (see [`checkpoint`]); an error
+//! of a validation pass names the step it validated.
 //!
 //! [`checkpoint`]: crate::checkpoint
 
 use std::fs;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
@@ -29,21 +28,27 @@ use dggt_data::{
 use dggt_infer::{StartingWeights, fresh_model};
 use dggt_losses::{Lpips, LpipsKind};
 use dggt_model::{Dggt, ModelConfig};
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use serde_json::json;
-
 use dggt_objective::{DepthFlowMaps, LossTerm, Objective, StepBatch};
+use dggt_run::checkpoint::{Purpose, RunState, optimizer_file};
+use dggt_run::divergence::{self, CheckpointDue, CheckpointGate, DivergenceLimit, StepFailure};
+use dggt_run::metrics::{MetricsLog, RecordKind};
+use dggt_run::progress::{Visibility, progress_bar, styled_bar};
+use dggt_run::schedule::WarmupCosine;
+use dggt_run::{Start, run_folder};
 
-use crate::checkpoint::{self, Purpose, RunState};
+use crate::checkpoint;
 use crate::config::TrainConfig;
-use crate::divergence::{self, CheckpointDue, CheckpointGate, DivergenceLimit, StepFailure};
 use crate::error::TrainError;
-use crate::optimizer::{Optimizer, freeze};
+use crate::modules::{freeze, grouped_optimizer};
+use crate::records::{FailureRecord, LoggedStep, StepMeasures, StepRecord, ValidationRecord};
 use crate::replicas::{Replica, Replicas};
 use crate::resume::{self, ConfiguredSections};
-use crate::run_folder;
-use crate::schedule::WarmupCosine;
 use crate::validate::{Validation, Validator};
+
+/// The cached scene index in a run's output folder. It is not among the run's own files
+/// ([`run_folder::RUN_ENTRIES`]): it is checked against the scenes on every use and rebuilt when stale, and a
+/// dry run writes it before any step.
+pub const SCENE_INDEX: &str = "scene-index.json";
 
 /// How a run ended.
 #[derive(Debug, Clone, PartialEq)]
@@ -65,21 +70,10 @@ pub struct RunSummary {
 /// Options of [`Trainer::run`] beyond the configuration.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct RunOptions {
-    /// Show a progress bar on stderr.
-    pub progress: bool,
+    /// Whether the progress bar is drawn on stderr.
+    pub progress: Visibility,
     /// Stop after this step even if the configuration runs longer (for interrupting runs on purpose).
     pub stop_after: Option<u64>,
-}
-
-/// How a run starts.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Start {
-    /// From the configured starting weights (or random ones), at step 0, in an output folder that holds no
-    /// other run's files ([`run_folder`](crate::run_folder)).
-    Fresh,
-    /// From the newest checkpoint in the output folder when there is one, exactly where it stopped, with the
-    /// checkpoint's network ([`resume`](crate::resume)); fresh otherwise.
-    Resume,
 }
 
 pub struct Trainer {
@@ -107,10 +101,7 @@ impl Trainer {
     /// Builds a run of `config` (validated here) on `devices` (at least one), started as `start` says.
     pub fn new(config: TrainConfig, devices: Vec<Device>, start: Start) -> Result<Self, TrainError> {
         config.validate()?;
-        let plain_device = devices.first().cloned().ok_or_else(|| TrainError::Invalid {
-            what: "devices".into(),
-            detail: "training needs at least one device".into(),
-        })?;
+        let plain_device = devices.first().cloned().ok_or(TrainError::NoDevice)?;
         let autodiff: Vec<Device> = devices.iter().map(|d| d.clone().autodiff()).collect();
         let device = autodiff[0].clone();
         // Checked before anything is written into the output folder.
@@ -124,8 +115,8 @@ impl Trainer {
                 let blank = Dggt::new(&model_config, &device)?;
                 let loaded = checkpoint::load(&dir, blank)?;
                 let model = freeze(loaded.model, &config.optim.frozen)?;
-                let mut optimizer = Optimizer::new(&config.optim, &model);
-                optimizer.load(&checkpoint::optimizer_file(&dir), &device)?;
+                let mut optimizer = grouped_optimizer(&config.optim, &model);
+                optimizer.load(&optimizer_file(&dir), &device)?;
                 tracing::info!(checkpoint = %dir.display(), step = loaded.state.step, "resuming");
                 (model, loaded.config, optimizer, loaded.state)
             }
@@ -138,16 +129,13 @@ impl Trainer {
                     .map(|path| StartingWeights { path, may_lack: &config.model.init_may_lack });
                 let model = fresh_model(&model_config, init, config.run.seed, &device)?;
                 let model = freeze(model, &config.optim.frozen)?;
-                let optimizer = Optimizer::new(&config.optim, &model);
+                let optimizer = grouped_optimizer(&config.optim, &model);
                 let state = RunState::starting(config.run.seed, 0);
                 (model, model_config, optimizer, state)
             }
         };
         if state.seed != config.run.seed {
-            return Err(TrainError::Invalid {
-                what: "resume".into(),
-                detail: format!("the checkpoint's seed {} differs from run.seed {}", state.seed, config.run.seed),
-            });
+            return Err(TrainError::SeedChanged { checkpoint: state.seed, configured: config.run.seed });
         }
         let mut state = state;
         let samples_per_step = config.optim.accumulation as u64 * autodiff.len() as u64;
@@ -219,6 +207,11 @@ impl Trainer {
         &self.sampling.index
     }
 
+    /// The indexed scenes and how each sample draws from them ([`Trainer::sample`] loads from them).
+    pub fn sampling(&self) -> &DatasetSampling {
+        &self.sampling
+    }
+
     /// Scores the current weights on the validation frames.
     pub fn validate(&self) -> Result<Option<Validation>, TrainError> {
         self.validate_into(None)
@@ -250,16 +243,7 @@ impl Trainer {
     pub fn run(&mut self, options: RunOptions) -> Result<RunSummary, TrainError> {
         let run = self.config.run.clone();
         fs::create_dir_all(&run.out_dir).map_err(|source| TrainError::Io { path: run.out_dir.clone(), source })?;
-        let metrics_path = run.out_dir.join(run_folder::METRICS);
-        truncate_metrics(&metrics_path, self.state.step)?;
-        let mut metrics = fs::OpenOptions::new()
-            .create(true)
-            .append(true)
-            .open(&metrics_path)
-            .map_err(|source| TrainError::Io { path: metrics_path.clone(), source })?;
-        let mut log = |value: serde_json::Value| -> Result<(), TrainError> {
-            writeln!(metrics, "{value}").map_err(|source| TrainError::Io { path: metrics_path.clone(), source })
-        };
+        let mut metrics = MetricsLog::continuing_at(&run.out_dir.join(run_folder::METRICS), self.state.step)?;
 
         let samples_per_step = self.samples_per_step();
         let first_sample = self.state.step * samples_per_step;
@@ -296,17 +280,12 @@ impl Trainer {
             let step = self.state.step;
             let samples = (0..samples_per_step).map(|_| next_sample(&mut stream)).collect::<Result<Vec<_>, _>>()?;
             self.count_bad_samples(&samples)?;
-            let mut record = self.train_step(&samples, schedule.factor(step), maps)?;
-            record["scenes"] = json!(samples.iter().map(|s| s.scene.name.clone()).collect::<Vec<_>>());
-            record["bad_samples"] = json!(self.state.bad_samples);
+            let record = self.train_step(&samples, schedule.factor(step), maps)?;
             let pose_warmup = step < self.config.optim.pose_warmup_steps;
             if pose_warmup {
-                bar.set_message(format!(
-                    "pose warm-up: camera loss {:.4}",
-                    record["loss"].as_f64().unwrap_or(f64::NAN)
-                ));
-            } else if let Some(loss) = record["loss"].as_f64() {
-                let psnr = record["target_psnr"].as_f64().unwrap_or(f64::NAN);
+                bar.set_message(format!("pose warm-up: camera loss {:.4}", record.finite_loss().unwrap_or(f64::NAN)));
+            } else if let Some(loss) = record.finite_loss() {
+                let psnr = record.finite_target_psnr().unwrap_or(f64::NAN);
                 summary.first_loss.get_or_insert(loss);
                 summary.first_target_psnr.get_or_insert(psnr);
                 summary.last_loss = Some(loss);
@@ -316,8 +295,13 @@ impl Trainer {
             summary.steps_run += 1;
             let elapsed = elapsed_before + started.elapsed().as_secs_f64();
             self.state.elapsed_s = elapsed;
-            record["time_s"] = json!(elapsed);
-            log(record)?;
+            let logged = LoggedStep {
+                record: &record,
+                scenes: samples.iter().map(|s| s.scene.name.clone()).collect(),
+                bad_samples: self.state.bad_samples,
+                time_s: elapsed,
+            };
+            metrics.append(RecordKind::Train, &logged)?;
             bar.inc(1);
             // No checkpoint then: the weights are those the last one holds, and a new one could prune it.
             self.check_divergence()?;
@@ -345,9 +329,8 @@ impl Trainer {
                         ssim = validation.ssim,
                         "validation"
                     );
-                    log(json!({ "kind": "validation", "step": self.state.step, "psnr": validation.psnr,
-                        "ssim": validation.ssim, "lpips": validation.lpips, "d_rmse": validation.d_rmse,
-                        "views": validation.views, "scenes": validation.scenes, "time_s": elapsed }))?;
+                    let record = ValidationRecord { step: self.state.step, validation: &validation, time_s: elapsed };
+                    metrics.append(RecordKind::Validation, &record)?;
                     bar.println(format!(
                         "validation at step {} on {} scene(s): {}",
                         self.state.step,
@@ -369,59 +352,48 @@ impl Trainer {
         Ok(summary)
     }
 
-    /// One optimiser step on `samples` at schedule factor `factor`: returns the step's metrics record. A
-    /// non-finite loss or gradient norm skips the step, an update that makes a weight non-finite is rolled
-    /// back; either leaves the weights as they were and is counted ([`divergence`]).
+    /// One optimiser step on `samples` at schedule factor `factor`: returns the step's record. A non-finite
+    /// loss or gradient norm skips the step, an update that makes a weight non-finite is rolled back; either
+    /// leaves the weights as they were and is counted ([`divergence`]).
     pub fn train_step(
         &mut self,
         samples: &[LoadedSample],
         factor: f64,
         maps: DepthFlowMaps,
-    ) -> Result<serde_json::Value, TrainError> {
+    ) -> Result<StepRecord, TrainError> {
         let step = self.state.step;
         let started = Instant::now();
         let outcome = self.accumulate(samples, maps)?;
-        let mut record = json!({ "kind": "train", "step": step, "lr_factor": factor });
+        let mut record =
+            StepRecord { step, lr_factor: factor, update: None, measures: None, failure: None, step_s: 0.0 };
         let failure = match outcome {
             Some(outcome) => {
                 let update = Instant::now();
                 let grads = self.replicas.all_reduce(outcome.grads);
                 let stepped = self.replicas.step(grads, factor);
-                if let Some(report) = stepped.report() {
-                    record["grad_norm"] = json!(report.grad_norm);
-                    record["clipped"] = json!(report.clipped);
-                }
-                record["loss"] = json!(outcome.loss);
-                record["terms"] = json!(outcome.terms);
-                record["target_psnr"] = json!(outcome.target_psnr);
-                record["gaussians_kept"] = json!(outcome.kept);
-                let mut stages = outcome.stages;
-                stages.insert("update".into(), update.elapsed().as_secs_f64());
-                record["stage_s"] = json!(stages);
+                record.update = stepped.report().map(Into::into);
+                let mut measures = outcome.measures;
+                measures.stage_seconds.insert("update".into(), update.elapsed().as_secs_f64());
+                record.measures = Some(measures);
                 StepFailure::of(&stepped)
             }
             None => Some(StepFailure::NonFiniteLoss),
         };
-        match &failure {
-            Some(StepFailure::RolledBack(tensor)) => record["rolled_back"] = json!(tensor.to_string()),
-            Some(StepFailure::NonFiniteGradient) => record["skipped"] = json!("non-finite gradient"),
-            Some(StepFailure::NonFiniteLoss) => record["skipped"] = json!("non-finite loss"),
-            None => {}
-        }
-        record["step_s"] = json!(started.elapsed().as_secs_f64());
+        record.failure = failure.as_ref().map(FailureRecord::from);
+        record.step_s = started.elapsed().as_secs_f64();
         divergence::count_step(&mut self.state, step, failure.as_ref());
         self.last_failure = failure;
         self.state.step += 1;
         Ok(record)
     }
 
-    /// [`TrainError::Diverged`] once `optim.max_failed_steps_in_a_row` steps in a row have failed.
+    /// [`dggt_run::RunError::Diverged`] once `optim.max_failed_steps_in_a_row` steps in a row have failed.
     fn check_divergence(&self) -> Result<(), TrainError> {
         let limit = DivergenceLimit {
             max_failed_in_a_row: self.config.optim.max_failed_steps_in_a_row,
             lr: self.config.optim.lr,
         };
-        divergence::check(&self.state, self.last_failure.as_ref(), limit)
+        Ok(divergence::check(&self.state, self.last_failure.as_ref(), limit)?)
     }
 
     /// Loss and gradients of the samples of one step: every device takes its own consecutive
@@ -555,13 +527,10 @@ impl Trainer {
             return Ok(());
         }
         self.save_checkpoint()?;
-        Err(TrainError::Invalid {
-            what: "data".into(),
-            detail: format!(
-                "{} samples failed to load, more than data.max_bad_samples = {limit}; the last: {}",
-                self.state.bad_samples,
-                failures.last().map_or("-", |f| f.as_str())
-            ),
+        Err(TrainError::TooManyBadSamples {
+            failed: self.state.bad_samples,
+            limit,
+            last: failures.last().map_or("-", |f| f.as_str()).to_string(),
         })
     }
 }
@@ -574,7 +543,9 @@ fn resume_point(config: &TrainConfig, start: Start) -> Result<Option<PathBuf>, T
             run_folder::ensure_no_run(&config.run.out_dir)?;
             return Ok(None);
         }
-        Start::Resume => checkpoint::latest(&config.run.out_dir.join(run_folder::CHECKPOINTS), Purpose::Resume)?,
+        Start::Resume => {
+            dggt_run::checkpoint::latest(&config.run.out_dir.join(run_folder::CHECKPOINTS), Purpose::Resume)?
+        }
     };
     if let Some(dir) = &dir {
         for change in resume::compare(dir, &checkpoint::read_model_config(dir)?, config)? {
@@ -599,10 +570,10 @@ fn index_datasets(config: &TrainConfig) -> Result<(DatasetSampling, Vec<IndexedS
     let specs = config.data.dataset_specs(&config.sampler.cameras);
     fs::create_dir_all(&config.run.out_dir)
         .map_err(|source| TrainError::Io { path: config.run.out_dir.clone(), source })?;
-    let cache = config.run.out_dir.join(run_folder::SCENE_INDEX);
+    let cache = config.run.out_dir.join(SCENE_INDEX);
     // Drawn only when stderr is a terminal.
     let template = "indexing scenes {elapsed_precise} [{bar:30}] {pos}/{len} ({per_sec}, {eta})";
-    let bar = styled_bar(template, ProgressDrawTarget::stderr(), None);
+    let bar = styled_bar(template, Visibility::Shown, None);
     let show = |done: usize, total: usize| {
         bar.set_length(total as u64);
         bar.set_position(done as u64);
@@ -621,15 +592,10 @@ fn index_datasets(config: &TrainConfig) -> Result<(DatasetSampling, Vec<IndexedS
     }
     let needed = config.data.validation.inputs.iter().chain(&config.data.validation.targets).max().map(|f| f + 1);
     if let Some(scene) = validation_scenes.iter().find(|s| needed.is_some_and(|n| s.frame_count() < n)) {
-        return Err(TrainError::Invalid {
-            what: "data.validation".into(),
-            detail: format!(
-                "frame {} is outside the {} frames of {} (positions 0..{})",
-                needed.unwrap_or(0) - 1,
-                scene.frame_count(),
-                scene.root.display(),
-                scene.frame_count()
-            ),
+        return Err(TrainError::ValidationFrame {
+            frame: needed.unwrap_or(0) - 1,
+            frame_count: scene.frame_count(),
+            scene: scene.root.clone(),
         });
     }
     tracing::info!(
@@ -651,10 +617,7 @@ fn check_single_scene(config: &TrainConfig, index: &DatasetIndex) -> Result<(), 
         return Ok(());
     }
     if let Some(excluded) = index.excluded.first() {
-        return Err(TrainError::Invalid {
-            what: format!("data.scene {}", excluded.root.display()),
-            detail: excluded.reason.clone(),
-        });
+        return Err(TrainError::SceneExcluded { scene: excluded.root.clone(), reason: excluded.reason.clone() });
     }
     let (Some([start, end]), Some(scene)) = (config.data.frames, index.scenes.first()) else { return Ok(()) };
     // The index clips the range to the scene's frames: each bound it moved lies outside them.
@@ -703,24 +666,21 @@ struct DeviceShare {
 #[derive(Default)]
 struct StepOutcome {
     grads: Vec<GradientsParams>,
-    loss: f64,
-    terms: std::collections::BTreeMap<String, f64>,
-    target_psnr: f64,
-    kept: usize,
-    stages: std::collections::BTreeMap<String, f64>,
+    measures: StepMeasures,
 }
 
 impl StepOutcome {
     /// Adds one sample's metrics, weighted by `scale` (one over the samples of the step).
     fn add(&mut self, result: &SampleResult, scale: f64) {
-        self.loss += result.loss * scale;
-        self.target_psnr += result.target_psnr * scale;
-        self.kept += result.kept;
+        let measures = &mut self.measures;
+        measures.loss += result.loss * scale;
+        measures.target_psnr += result.target_psnr * scale;
+        measures.gaussians_kept += result.kept;
         for (name, value) in &result.terms {
-            *self.terms.entry(name.name().to_string()).or_default() += value * scale;
+            *measures.terms.entry(name.name().to_string()).or_default() += value * scale;
         }
         for (name, value) in result.stages {
-            *self.stages.entry(name.to_string()).or_default() += value;
+            *measures.stage_seconds.entry(name.to_string()).or_default() += value;
         }
     }
 }
@@ -728,44 +688,6 @@ impl StepOutcome {
 fn next_sample(stream: &mut Prefetcher<LoadedSample>) -> Result<LoadedSample, TrainError> {
     match stream.next() {
         Some(sample) => Ok(sample?),
-        None => Err(TrainError::Invalid { what: "data stream".into(), detail: "ended early".into() }),
+        None => Err(TrainError::StreamEnded),
     }
-}
-
-/// Drops the records (JSON lines with a `step`) of steps at or after `step` from a metrics file: a resumed run
-/// writes them again.
-pub fn truncate_metrics(path: &Path, step: u64) -> Result<(), TrainError> {
-    if !path.exists() {
-        return Ok(());
-    }
-    let text = fs::read_to_string(path).map_err(|source| TrainError::Io { path: path.into(), source })?;
-    let kept: String = text
-        .lines()
-        .filter(|line| {
-            serde_json::from_str::<serde_json::Value>(line).ok().and_then(|v| v["step"].as_u64()).is_some_and(|s| {
-                match step {
-                    0 => false,
-                    _ => s < step || (s == step && line.contains("\"validation\"")),
-                }
-            })
-        })
-        .map(|line| format!("{line}\n"))
-        .collect();
-    dggt_data::io::write_atomically(path, kept.as_bytes())
-        .map_err(|e| TrainError::Invalid { what: path.display().to_string(), detail: e.to_string() })
-}
-
-/// The trainer's step bar at `position` of `total`, drawn on stderr when `visible`.
-pub fn progress_bar(visible: bool, position: u64, total: u64) -> ProgressBar {
-    let target = if visible { ProgressDrawTarget::stderr() } else { ProgressDrawTarget::hidden() };
-    let bar = styled_bar("{elapsed_precise} [{bar:30}] {pos}/{len} ({eta}) {msg}", target, Some(total));
-    bar.set_position(position);
-    bar
-}
-
-/// A bar of the trainer's style drawn with `template`.
-fn styled_bar(template: &str, target: ProgressDrawTarget, total: Option<u64>) -> ProgressBar {
-    let bar = ProgressBar::with_draw_target(total, target);
-    bar.set_style(ProgressStyle::with_template(template).expect("a valid template").progress_chars("=> "));
-    bar
 }

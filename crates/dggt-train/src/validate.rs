@@ -191,7 +191,7 @@ impl Validator<'_> {
         match aligned_depth_rmse(&predicted, &cells.depths) {
             Ok(alignment) => Ok(Some(alignment.rmse)),
             Err(MetricError::Empty { .. }) => Ok(None),
-            Err(error) => Err(TrainError::Invalid { what: "validation D-RMSE".into(), detail: error.to_string() }),
+            Err(error) => Err(TrainError::DepthScore(error)),
         }
     }
 }
@@ -230,7 +230,7 @@ fn save_comparisons(dir: &Path, views: &[RenderedView], batch: &StepBatch) -> Re
         let path = dir.join(format!("frame{:03}_camera{}.png", truth.frame, truth.rig_camera));
         comparison(view.rgb.clone(), truth.image.clone())
             .save(&path)
-            .map_err(|e| TrainError::Invalid { what: path.display().to_string(), detail: e.to_string() })?;
+            .map_err(|e| TrainError::Comparison { path: path.clone(), detail: e.to_string() })?;
     }
     Ok(())
 }

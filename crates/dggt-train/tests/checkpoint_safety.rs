@@ -13,9 +13,9 @@ use burn::tensor::{Device, Tensor};
 use common::{parameters, repo, small_config, weights};
 use dggt_infer::load_network;
 use dggt_model::Dggt;
-use dggt_train::checkpoint::{self, MANIFEST_FILE, MODEL_FILE, Purpose, RunState, STATE_FILE};
-use dggt_train::config::OptimSection;
-use dggt_train::optimizer::Optimizer;
+use dggt_run::checkpoint::{self, MANIFEST_FILE, MODEL_FILE, Purpose, RunState, STATE_FILE};
+use dggt_run::{OptimSection, Optimizer};
+use dggt_train::records::FailureRecord;
 use dggt_train::{DepthFlowMaps, RunOptions, Start, TrainConfig, Trainer};
 
 /// The AdamW state of the master replica as its checkpoint file holds it.
@@ -27,7 +27,7 @@ fn optimizer_bytes(trainer: &Trainer, dir: &Path) -> Vec<u8> {
 
 /// The weights of the checkpoint folder `dir`.
 fn checkpoint_weights(dir: &Path) -> Vec<f32> {
-    let config = checkpoint::read_model_config(dir).unwrap();
+    let config = dggt_train::checkpoint::read_model_config(dir).unwrap();
     let model = checkpoint::load_model(dir, Dggt::new(&config, &Device::flex()).unwrap()).unwrap();
     parameters(&model)
 }
@@ -79,13 +79,13 @@ fn a_rolled_back_step_restores_the_weights_and_the_moments() {
     let (before, moments_before) = (weights(&trainer), optimizer_bytes(&trainer, out.path()));
     // A rate past f32's range: every stepped weight becomes infinite or NaN.
     let record = trainer.train_step(&[trainer.sample(1).unwrap()], 1e300, DepthFlowMaps::Skip).unwrap();
-    assert!(record["rolled_back"].as_str().is_some_and(|t| t.contains('`')), "{record}");
-    assert!(record["grad_norm"].as_f64().is_some_and(f64::is_finite), "{record}");
+    assert!(matches!(&record.failure, Some(FailureRecord::RolledBack(t)) if t.contains('`')), "{record:?}");
+    assert!(record.update.is_some_and(|u| u.grad_norm.is_finite()), "{record:?}");
     assert_eq!((trainer.state().rolled_back_steps, trainer.state().failed_in_a_row), (1, 1));
     assert!(before == weights(&trainer), "the weights changed");
     assert!(moments_before == optimizer_bytes(&trainer, out.path()), "the moments changed");
     let record = trainer.train_step(&[trainer.sample(2).unwrap()], 1.0, DepthFlowMaps::Skip).unwrap();
-    assert!(record.get("rolled_back").is_none() && record.get("skipped").is_none(), "{record}");
+    assert!(record.failure.is_none(), "{record:?}");
     assert_eq!(trainer.state().failed_in_a_row, 0, "a step that trains ends the row");
     assert!(before != weights(&trainer));
 }

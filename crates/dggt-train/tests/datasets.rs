@@ -105,7 +105,7 @@ fn a_multiscene_run_trains_on_its_scenes_validates_on_held_out_ones_and_resumes_
     let split = tempfile::tempdir().unwrap();
     let mut first =
         Trainer::new(config(datasets.clone(), split.path(), 4), vec![Device::flex()], Start::Fresh).unwrap();
-    assert_eq!(first.run(RunOptions { progress: false, stop_after: Some(2) }).unwrap().final_step, 2);
+    assert_eq!(first.run(RunOptions { stop_after: Some(2), ..RunOptions::default() }).unwrap().final_step, 2);
     drop(first);
     let mut resumed = Trainer::new(config(datasets, split.path(), 4), vec![Device::flex()], Start::Resume).unwrap();
     resumed.run(RunOptions::default()).unwrap();

@@ -9,6 +9,7 @@ mod common;
 use common::{parameters, repo, small_config, weights};
 
 use burn::tensor::Device;
+use dggt_train::records::{FailureRecord, SkipReason};
 use dggt_train::{DepthFlowMaps, RunOptions, Start, TrainConfig, Trainer};
 
 #[test]
@@ -39,7 +40,7 @@ fn an_interrupted_run_resumes_exactly() {
 
     let split = tempfile::tempdir().unwrap();
     let mut first = Trainer::new(small_config(split.path(), 4), vec![Device::flex()], Start::Fresh).unwrap();
-    let summary = first.run(RunOptions { progress: false, stop_after: Some(2) }).unwrap();
+    let summary = first.run(RunOptions { stop_after: Some(2), ..RunOptions::default() }).unwrap();
     assert_eq!(summary.final_step, 2);
     drop(first);
     let mut resumed = Trainer::new(small_config(split.path(), 4), vec![Device::flex()], Start::Resume).unwrap();
@@ -59,20 +60,20 @@ fn a_non_finite_loss_skips_the_step_and_keeps_the_weights() {
     let mut sample = trainer.sample(0).unwrap();
     sample.targets[0].image.data[5] = f32::NAN;
     let record = trainer.train_step(&[sample], 1.0, DepthFlowMaps::Skip).unwrap();
-    assert_eq!(record["skipped"], "non-finite loss", "{record}");
+    assert_eq!(record.failure, Some(FailureRecord::Skipped(SkipReason::NonFiniteLoss)), "{record:?}");
     assert_eq!(trainer.state().skipped_steps, 1);
     assert_eq!(before, weights(&trainer));
     // A non-finite input makes every network output non-finite: also a skip, not an error that ends the run.
     let mut sample = trainer.sample(1).unwrap();
     sample.inputs[0].image.data[7] = f32::INFINITY;
     let record = trainer.train_step(&[sample], 1.0, DepthFlowMaps::Skip).unwrap();
-    assert_eq!(record["skipped"], "non-finite loss", "{record}");
+    assert_eq!(record.failure, Some(FailureRecord::Skipped(SkipReason::NonFiniteLoss)), "{record:?}");
     assert_eq!(trainer.state().skipped_steps, 2);
     assert_eq!(before, weights(&trainer));
     // The next, finite step trains.
     let sample = trainer.sample(1).unwrap();
     let record = trainer.train_step(&[sample], 1.0, DepthFlowMaps::Skip).unwrap();
-    assert!(record["loss"].as_f64().unwrap().is_finite(), "{record}");
+    assert!(record.finite_loss().is_some(), "{record:?}");
     assert_ne!(before, weights(&trainer));
 }
 

@@ -7,11 +7,13 @@
 //! input size, enlarged by the loader's preprocessing); every step draws its own
 //! sample through the trainer's loader, so the step is the trainer's own ([`Trainer::train_step`]).
 
+use std::collections::BTreeMap;
 use std::path::Path;
 
 use burn::tensor::Device;
 use dggt_data::ExportVariant;
 use dggt_synth::{Sweeps, SynthConfig};
+use dggt_train::records::FailureRecord;
 use dggt_train::{DepthFlowMaps, Start, TrainConfig, Trainer};
 
 use super::{ComputeOptions, Record, Scale, ScaleSpec, timed};
@@ -29,7 +31,7 @@ pub fn train_step_record(options: &ComputeOptions, spec: &ScaleSpec, device: &De
         Err(error) => return Record::failed(key, error),
     };
     let mut sample_index = 0;
-    let mut last_stages = serde_json::Value::Null;
+    let mut last_stages = None;
     let record = timed(key, options, device, || {
         let sample = trainer
             .sample(sample_index)
@@ -38,10 +40,10 @@ pub fn train_step_record(options: &ComputeOptions, spec: &ScaleSpec, device: &De
         let metrics = trainer
             .train_step(&[sample], 1.0, DepthFlowMaps::Skip)
             .map_err(|source| BenchError::Train { doing: "a training step", source: Box::new(source) })?;
-        if let Some(skipped) = metrics.get("skipped") {
-            return Err(BenchError::StepSkipped(skipped.to_string()));
+        if let Some(FailureRecord::Skipped(reason)) = &metrics.failure {
+            return Err(BenchError::StepSkipped(reason.to_string()));
         }
-        last_stages = metrics["stage_s"].clone();
+        last_stages = metrics.measures.map(|measures| measures.stage_seconds);
         Ok(())
     });
     let views = format!("{} inputs, {} targets", spec.train_inputs, 2 * spec.train_inputs);
@@ -49,18 +51,14 @@ pub fn train_step_record(options: &ComputeOptions, spec: &ScaleSpec, device: &De
         "{views} at {}x{}; frozen aggregator, camera and depth heads; LPIPS off; last step's stages (s): {}",
         spec.image.width,
         spec.image.height,
-        stage_summary(&last_stages)
+        stage_summary(last_stages.as_ref())
     ))
 }
 
 /// `stage_s` of a step's metrics as `name time` pairs.
-fn stage_summary(stages: &serde_json::Value) -> String {
-    match stages.as_object() {
-        Some(map) => map
-            .iter()
-            .map(|(name, seconds)| format!("{name} {:.3}", seconds.as_f64().unwrap_or(f64::NAN)))
-            .collect::<Vec<_>>()
-            .join(", "),
+fn stage_summary(stages: Option<&BTreeMap<String, f64>>) -> String {
+    match stages {
+        Some(map) => map.iter().map(|(name, seconds)| format!("{name} {seconds:.3}")).collect::<Vec<_>>().join(", "),
         None => "none".into(),
     }
 }

@@ -4,14 +4,17 @@
 use std::path::{Path, PathBuf};
 
 use burn::tensor::Device;
-use dggt_losses::LpipsKind;
 use dggt_refine_train::RefineTrainConfig;
-use dggt_refine_train::config::{LossSection, ModelSection, OptimSettings, PairsSection, RunSection};
+use dggt_refine_train::config::{LossSection, LpipsKind, ModelSection, OptimSettings, PairsSection, RunSection};
 
+/// `$DGGT_PARITY_DIR`, else the nearest `shared/parity` beside the tests' package or a folder above it (the
+/// workspace's sibling `shared/parity`, whether the tests are this crate's or the workspace root's).
 pub fn parity_dir() -> PathBuf {
-    let root = std::env::var_os("DGGT_PARITY_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/parity"));
+    let package = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let root = std::env::var_os("DGGT_PARITY_DIR").map(PathBuf::from).unwrap_or_else(|| {
+        let nearest = package.ancestors().map(|dir| dir.join("shared/parity")).find(|dir| dir.is_dir());
+        nearest.unwrap_or_else(|| package.join("../../../shared/parity"))
+    });
     let refiner = root.join("difix_tiny_s1");
     assert!(
         refiner.join("model_difix.pkl").is_file() && root.join("metrics/vgg16_features.safetensors").is_file(),

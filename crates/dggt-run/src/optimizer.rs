@@ -1,7 +1,8 @@
-//! The optimiser around burn's AdamW: frozen modules, parameter groups with their own learning rates, global
-//! gradient-norm clipping and gradient accumulation.
+//! The optimiser around burn's AdamW: parameter groups with their own learning rates, global gradient-norm
+//! clipping, and a step that never leaves a non-finite value behind.
 //!
-//! Groups are the network's top-level modules (`sky_model`, `gs_head`, ...). Every group shares one AdamW state
+//! Groups are sets of parameters the trainer names (the DGGT trainer: the network's top-level modules,
+//! `sky_model`, `gs_head`, ...), each with its own peak rate. Every group shares one AdamW state
 //! map (keyed by parameter id, so it survives checkpoints) and is stepped with its own rate; clipping scales all
 //! gradients together so that their joint L2 norm is at most the limit. The state is saved and loaded tensor by
 //! tensor, so a checkpoint of a 1.3B-parameter run never holds a second copy of its 10 GB of moments.
@@ -17,62 +18,10 @@ use std::path::Path;
 use burn::module::{Module, ModuleMapper, ModuleVisitor, Param, ParamId};
 use burn::optim::{AdamW, AdamWConfig, AdamWState, AdaptiveMomentumState, GradientsParams, Optimizer as _};
 use burn::tensor::{Device, Tensor, TensorData};
-use dggt_model::Dggt;
 
-use crate::config::OptimSection;
-use crate::error::TrainError;
-use crate::finite::{NonFinite, first_non_finite};
-
-/// Freezes the named top-level modules: their parameters get no gradient and are never updated.
-pub fn freeze(mut model: Dggt, names: &[String]) -> Result<Dggt, TrainError> {
-    for name in names {
-        match name.as_str() {
-            "aggregator" => model.aggregator = model.aggregator.no_grad(),
-            "camera_head" => model.camera_head = model.camera_head.no_grad(),
-            "depth_head" => model.depth_head = model.depth_head.no_grad(),
-            "point_head" => model.point_head = model.point_head.no_grad(),
-            "gs_head" => model.gs_head = model.gs_head.map(|m| m.no_grad()),
-            "instance_head" => model.instance_head = model.instance_head.map(|m| m.no_grad()),
-            "semantic_head" => model.semantic_head = model.semantic_head.map(|m| m.no_grad()),
-            "sky_model" => model.sky_model = model.sky_model.map(|m| m.no_grad()),
-            "motion_head" => model.motion_head = model.motion_head.map(|m| m.no_grad()),
-            other => {
-                return Err(TrainError::Invalid {
-                    what: "optim.frozen".into(),
-                    detail: format!("unknown module `{other}`"),
-                });
-            }
-        }
-    }
-    Ok(model)
-}
-
-/// The parameter ids of a named top-level module (empty when the network lacks it).
-fn module_ids(model: &Dggt, name: &str) -> Vec<ParamId> {
-    let mut ids = IdCollector::default();
-    match name {
-        "aggregator" => model.aggregator.visit(&mut ids),
-        "camera_head" => model.camera_head.visit(&mut ids),
-        "depth_head" => model.depth_head.visit(&mut ids),
-        "point_head" => model.point_head.visit(&mut ids),
-        "gs_head" => model.gs_head.visit(&mut ids),
-        "instance_head" => model.instance_head.visit(&mut ids),
-        "semantic_head" => model.semantic_head.visit(&mut ids),
-        "sky_model" => model.sky_model.visit(&mut ids),
-        "motion_head" => model.motion_head.visit(&mut ids),
-        _ => {}
-    }
-    ids.0
-}
-
-#[derive(Default)]
-struct IdCollector(Vec<ParamId>);
-
-impl ModuleVisitor for IdCollector {
-    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-        self.0.push(param.id);
-    }
-}
+use crate::error::RunError;
+use crate::finite::{Moments, NonFinite, first_non_finite};
+use crate::optim_config::OptimSection;
 
 /// AdamW with groups and clipping.
 ///
@@ -122,17 +71,14 @@ impl StepOutcome {
 }
 
 impl Optimizer {
-    pub fn new(config: &OptimSection, model: &Dggt) -> Self {
-        let group_rates = config
-            .groups
-            .iter()
-            .flat_map(|(name, &rate)| module_ids(model, name).into_iter().map(move |id| (id, rate)))
-            .collect();
+    /// The optimiser whose parameters in `group_rates` take their own peak rate, every other one
+    /// `config.lr`.
+    pub fn grouped(config: &OptimSection, group_rates: HashMap<ParamId, f64>) -> Self {
         Self { group_rates, ..Self::ungrouped(config) }
     }
 
     /// The optimiser of any module, every parameter at `config.lr` (`config.groups` and `config.frozen` name
-    /// the network's modules and are not consulted).
+    /// a network's modules and are not consulted).
     pub fn ungrouped(config: &OptimSection) -> Self {
         let adamw = AdamWConfig::new()
             .with_beta_1(config.beta1 as f32)
@@ -185,11 +131,6 @@ impl Optimizer {
         }
     }
 
-    /// The two moments kept for parameter `id`, once it has been stepped.
-    pub(crate) fn moments(&self, id: &ParamId) -> Option<[&Tensor<1>; 2]> {
-        self.states.get(id).map(|state| [&state.momentum.moment_1, &state.momentum.moment_2])
-    }
-
     /// A copy of this optimiser, its state moved to `device` (for the replica there).
     pub fn fork(&self, device: &Device) -> Self {
         Self {
@@ -208,7 +149,7 @@ impl Optimizer {
 
     /// Writes the moments to a burnpack file, one tensor at a time (each read back from its device only when
     /// the writer reaches it), atomically.
-    pub fn save(&self, path: &Path) -> Result<(), TrainError> {
+    pub fn save(&self, path: &Path) -> Result<(), RunError> {
         let mut tensors = Vec::with_capacity(2 * self.states.len());
         let mut steps = Vec::with_capacity(self.states.len());
         let mut ids: Vec<&ParamId> = self.states.keys().collect();
@@ -226,7 +167,7 @@ impl Optimizer {
     }
 
     /// Replaces the moments with those saved at `path`, on `device`.
-    pub fn load(&mut self, path: &Path, device: &Device) -> Result<(), TrainError> {
+    pub fn load(&mut self, path: &Path, device: &Device) -> Result<(), RunError> {
         let reader = burn_pack::Reader::from_file(path).map_err(|e| optimizer_file_error(path, e))?;
         let steps = reader.scalars().clone();
         let mut moments: HashMap<u64, [Option<Tensor<1>>; 2]> = HashMap::new();
@@ -261,7 +202,7 @@ impl Optimizer {
 
     /// Gives every parameter of `model` that takes gradients zero moments at step count 0, the state a first
     /// step starts from: a full-size state without running a step (the checkpoint benchmark).
-    pub fn zero_moments(&mut self, model: &Dggt) {
+    pub fn zero_moments<M: Module>(&mut self, model: &M) {
         struct Zero<'a>(&'a mut HashMap<ParamId, AdamWState<1>>);
         impl ModuleVisitor for Zero<'_> {
             fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
@@ -276,10 +217,11 @@ impl Optimizer {
         }
         model.visit(&mut Zero(&mut self.states));
     }
+}
 
-    /// The number of parameters with optimiser state.
-    pub fn state_count(&self) -> usize {
-        self.states.len()
+impl Moments for Optimizer {
+    fn moments(&self, id: &ParamId) -> Option<[&Tensor<1>; 2]> {
+        self.states.get(id).map(|state| [&state.momentum.moment_1, &state.momentum.moment_2])
     }
 }
 
@@ -288,8 +230,8 @@ const MOMENT_1: &str = "moment_1";
 const MOMENT_2: &str = "moment_2";
 const STEPS: &str = "steps";
 
-fn optimizer_file_error(path: &Path, detail: impl ToString) -> TrainError {
-    TrainError::Checkpoint { path: path.to_path_buf(), detail: detail.to_string() }
+fn optimizer_file_error(path: &Path, detail: impl ToString) -> RunError {
+    RunError::Checkpoint { path: path.to_path_buf(), detail: detail.to_string() }
 }
 
 /// A burnpack entry whose bytes are read from `tensor`'s device only when the writer reaches it.

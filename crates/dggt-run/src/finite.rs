@@ -1,16 +1,20 @@
 //! Finding non-finite values (NaN, ±inf) in a module's weights and in the AdamW moments of its parameters.
 //!
 //! An update that overflows leaves such values behind, and every later forward pass fails on them: the
-//! optimiser checks after every update and rolls the step back ([`Optimizer::step`]), and no checkpoint is
-//! written with them ([`save_folder`](crate::checkpoint::save_folder)). Every tensor is reduced to one flag on
-//! its device and all flags are read back together, so a check costs one transfer, not one per tensor.
+//! optimiser checks after every update and rolls the step back, and no checkpoint is written with them. Every
+//! tensor is reduced to one flag on its device and all flags are read back together, so a check costs one
+//! transfer, not one per tensor.
 
 use std::fmt;
 
-use burn::module::{Module, ModuleVisitor, Param};
+use burn::module::{Module, ModuleVisitor, Param, ParamId};
 use burn::tensor::{Int, Tensor};
 
-use crate::optimizer::Optimizer;
+/// What keeps the two AdamW moments of a parameter (the optimiser), to be checked beside its weight.
+pub trait Moments {
+    /// The first and second moments kept for parameter `id`, once it has been stepped.
+    fn moments(&self, id: &ParamId) -> Option<[&Tensor<1>; 2]>;
+}
 
 /// Which tensor of a parameter holds a non-finite value.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -41,7 +45,7 @@ impl fmt::Display for NonFinite {
 
 /// The first weight of `model`, or moment `optimizer` keeps for one of its parameters, that holds a NaN or an
 /// infinity; `None` when every value is finite.
-pub fn first_non_finite<M: Module>(model: &M, optimizer: Option<&Optimizer>) -> Option<NonFinite> {
+pub fn first_non_finite<M: Module>(model: &M, optimizer: Option<&dyn Moments>) -> Option<NonFinite> {
     let mut flags = FiniteFlags { optimizer, path: Vec::new(), checked: Vec::new(), flags: Vec::new() };
     model.visit(&mut flags);
     if flags.flags.is_empty() {
@@ -56,7 +60,7 @@ pub fn first_non_finite<M: Module>(model: &M, optimizer: Option<&Optimizer>) -> 
 /// One `[1]` flag per checked tensor, 1 when all its values are finite and 0 otherwise, with the tensor it
 /// belongs to.
 struct FiniteFlags<'a> {
-    optimizer: Option<&'a Optimizer>,
+    optimizer: Option<&'a dyn Moments>,
     path: Vec<String>,
     checked: Vec<(String, Holder)>,
     flags: Vec<Tensor<1, Int>>,

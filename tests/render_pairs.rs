@@ -1,25 +1,39 @@
 //! The pair generator on a tiny reconstruction run (`configs/tiny-overfit.toml` on the bundled fixture, its
 //! network as initialised): the targets of a sample rendered at frames that are not among its inputs, paired
 //! with the export's images and an input view as the reference; the pairs file and a folder of shards
-//! round-trip; the refiner
-//! trains on rendered pairs in its reference-view mode.
+//! round-trip; the refiner trains on rendered pairs in its reference-view mode.
+//!
+//! It joins the DGGT trainer (the reconstruction run) and the refiner's trainer, so it lives with the
+//! workspace's tests rather than with either crate's; the refiner's tiny run is the refiner-training tests'.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use burn::tensor::Device;
 use dggt_refine_train::RefineTrainer;
-use dggt_refine_train::pair_files::PairFiles;
-use dggt_refine_train::render_pairs::{render_pairs, shard_path, write_pairs};
-use dggt_train::{Start, TrainConfig, Trainer};
+use dggt_refine_train::pair_files::{PairFiles, shard_path, write_pairs};
+use dggt_refine_train::render_pairs::{Reconstruction, render_pairs};
+use dggt_run::Start;
+use dggt_train::{TrainConfig, Trainer};
 
-mod common;
+#[path = "../crates/dggt-refine-train/tests/common/mod.rs"]
+mod refine_common;
 
-use common::{device, tiny_config};
+use refine_common::{device, tiny_config};
 
-fn reconstruction_run(out: &std::path::Path) -> Trainer {
-    let repo = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
+fn reconstruction_run(out: &Path) -> Trainer {
+    let repo = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let config = TrainConfig::load(&repo.join("configs/tiny-overfit.toml")).expect("tiny-overfit.toml loads");
     Trainer::new(config.unattended(out), vec![Device::flex()], Start::Fresh).expect("the run builds")
+}
+
+/// What the run renders pairs from.
+fn reconstruction(run: &Trainer) -> Reconstruction<'_> {
+    Reconstruction {
+        model: run.model(),
+        objective: run.objective(),
+        sampling: run.sampling(),
+        preprocess: &run.config().data.preprocess,
+    }
 }
 
 #[test]
@@ -27,7 +41,7 @@ fn targets_between_the_inputs_are_rendered_and_paired_with_the_truth_and_an_inpu
     let run_dir = tempfile::tempdir().unwrap();
     let run = reconstruction_run(run_dir.path());
     let sample = run.sample(0).unwrap();
-    let pairs = render_pairs(&run, [0], &Device::flex()).unwrap();
+    let pairs = render_pairs(reconstruction(&run), [0], &Device::flex()).unwrap();
     assert_eq!(pairs.len(), sample.targets.len(), "one pair per target view");
     let inputs: Vec<Vec<f32>> = sample.inputs.iter().map(|v| v.image.data.clone()).collect();
     for (rendered, target) in pairs.iter().zip(&sample.targets) {
@@ -64,7 +78,7 @@ fn targets_between_the_inputs_are_rendered_and_paired_with_the_truth_and_an_inpu
 fn the_refiner_trains_on_rendered_pairs_with_their_reference_views() {
     let run_dir = tempfile::tempdir().unwrap();
     let run = reconstruction_run(run_dir.path());
-    let pairs = render_pairs(&run, [0, 1], &Device::flex()).unwrap();
+    let pairs = render_pairs(reconstruction(&run), [0, 1], &Device::flex()).unwrap();
     let file = run_dir.path().join("pairs.safetensors");
     write_pairs(&pairs, &file).unwrap();
 

@@ -1,11 +1,11 @@
 //! The trained refiner as a Difix checkpoint, and its file.
 //!
-//! [`to_checkpoint`] gives what `model_difix.pkl` holds: the full UNet state dict, the VAE's skip convolutions
+//! [`to_difix_checkpoint`] gives what `model_difix.pkl` holds: the full UNet state dict, the VAE's skip convolutions
 //! (`<module>.base_layer.weight`) and LoRA factors (`<module>.lora_A.vae_skip.weight`, `lora_B`) in peft's
 //! names and layouts, the targets and the rank. [`dggt_refine::Refiner::from_checkpoint`] merges the factors,
-//! so a trained refiner loads like a released one: [`load_refiner`].
+//! so a trained refiner loads like a released one: [`load_trained_refiner`].
 //!
-//! The file ([`write`], [`read_checkpoint`]) is the refiner's safetensors form of a Difix checkpoint
+//! The file ([`write_difix_checkpoint`], [`read_difix_checkpoint`]) is the refiner's safetensors form of a Difix checkpoint
 //! ([`DifixCheckpoint::write_safetensors`]).
 
 use std::path::Path;
@@ -21,11 +21,14 @@ use crate::error::RefineTrainError;
 use crate::model::{TrainableRefiner, param_values};
 
 /// The trained weights as a Difix checkpoint (see the module's doc).
-pub fn to_checkpoint(model: &TrainableRefiner) -> Result<DifixCheckpoint, RefineTrainError> {
+pub fn to_difix_checkpoint(model: &TrainableRefiner) -> Result<DifixCheckpoint, RefineTrainError> {
     let values = param_values(&model.weights);
     let index = &model.index;
-    let host = |id: &ParamId, layout: StoredLayout, what: &str| -> Result<HostTensor, RefineTrainError> {
-        let data = values.get(id).ok_or_else(|| RefineTrainError::invalid(what, "not a parameter of the refiner"))?;
+    let host = |id: &ParamId, layout: StoredLayout, name: &str| -> Result<HostTensor, RefineTrainError> {
+        let data = values.get(id).ok_or_else(|| RefineTrainError::MissingParameter {
+            name: name.to_string(),
+            detail: "not a parameter of the refiner",
+        })?;
         Ok(host_tensor(data, layout))
     };
     let unet = index
@@ -41,8 +44,9 @@ pub fn to_checkpoint(model: &TrainableRefiner) -> Result<DifixCheckpoint, Refine
     for (target, adapter) in &index.adapters {
         let (a, b) = (host(&adapter.a, StoredLayout::AsFile, target)?, host(&adapter.b, StoredLayout::AsFile, target)?);
         let weight = index.vae.get(&format!("{target}.weight")).and_then(|(id, _)| values.get(id));
-        let kernel = weight.map(|w| w.shape().to_vec()).ok_or_else(|| {
-            RefineTrainError::invalid(target.as_str(), "a LoRA target without its weight in the refiner")
+        let kernel = weight.map(|w| w.shape().to_vec()).ok_or_else(|| RefineTrainError::MissingParameter {
+            name: target.clone(),
+            detail: "a LoRA target without its weight in the refiner",
         })?;
         let (down, up) = peft_factors(a, b, adapter.layout, &kernel);
         let [down_name, up_name] = lora_names(target);
@@ -96,21 +100,21 @@ fn transposed(t: &HostTensor) -> HostTensor {
 }
 
 /// Writes `checkpoint` to `path` as safetensors ([`DifixCheckpoint::write_safetensors`]).
-pub fn write(checkpoint: &DifixCheckpoint, path: &Path) -> Result<(), RefineTrainError> {
+pub fn write_difix_checkpoint(checkpoint: &DifixCheckpoint, path: &Path) -> Result<(), RefineTrainError> {
     Ok(checkpoint.write_safetensors(path)?)
 }
 
 /// Reads a Difix checkpoint: `model_difix.pkl` or its safetensors form ([`DifixCheckpoint::read`]).
-pub fn read_checkpoint(path: &Path) -> Result<DifixCheckpoint, RefineTrainError> {
+pub fn read_difix_checkpoint(path: &Path) -> Result<DifixCheckpoint, RefineTrainError> {
     Ok(DifixCheckpoint::read(path)?)
 }
 
-/// The refiner of an exported file over its base folder, LoRA merged.
-pub fn load_refiner(
+/// The refiner of a written Difix checkpoint file over its base folder, LoRA merged.
+pub fn load_trained_refiner(
     base_dir: &Path,
-    exported: &Path,
+    checkpoint: &Path,
     prompt_tokens: &[i64],
     device: &Device,
 ) -> Result<(Refiner, LoadReport), RefineTrainError> {
-    Ok(Refiner::from_checkpoint(base_dir, read_checkpoint(exported)?, exported, prompt_tokens, device)?)
+    Ok(Refiner::from_checkpoint(base_dir, read_difix_checkpoint(checkpoint)?, checkpoint, prompt_tokens, device)?)
 }

@@ -5,7 +5,7 @@
 //! either way the weights keep their last finite values. A failed step now and then is survivable (one bad
 //! sample); several in a row mean the run has diverged, usually a learning rate too high for the network, and
 //! nothing will change by itself. Past `optim.max_failed_steps_in_a_row` such steps the run therefore stops
-//! with [`TrainError::Diverged`], which says what to change. The count is part of the run state, so a resumed
+//! with [`RunError::Diverged`], which says what to change. The count is part of the run state, so a resumed
 //! run continues it.
 //!
 //! Weights that are finite can still be what makes every step fail (their outputs overflow), so a checkpoint
@@ -15,7 +15,7 @@
 use std::ops::RangeInclusive;
 
 use crate::checkpoint::RunState;
-use crate::error::TrainError;
+use crate::error::RunError;
 use crate::finite::NonFinite;
 use crate::optimizer::StepOutcome;
 
@@ -81,13 +81,13 @@ pub fn count_step(state: &mut RunState, step: u64, failure: Option<&StepFailure>
     tracing::warn!(step, in_a_row = state.failed_in_a_row, "{}", failure.describe());
 }
 
-/// [`TrainError::Diverged`] once `limit` steps in a row have failed, the last of them with `last_failure`;
+/// [`RunError::Diverged`] once `limit` steps in a row have failed, the last of them with `last_failure`;
 /// called after [`count_step`] (`state.step` is the next step).
-pub fn check(state: &RunState, last_failure: Option<&StepFailure>, limit: DivergenceLimit) -> Result<(), TrainError> {
+pub fn check(state: &RunState, last_failure: Option<&StepFailure>, limit: DivergenceLimit) -> Result<(), RunError> {
     if state.failed_in_a_row < limit.max_failed_in_a_row {
         return Ok(());
     }
-    Err(TrainError::Diverged {
+    Err(RunError::Diverged {
         first_step: state.step.saturating_sub(state.failed_in_a_row),
         last_step: state.step.saturating_sub(1),
         last_failure: last_failure.map_or_else(|| "unknown".into(), StepFailure::describe),
@@ -127,12 +127,12 @@ impl CheckpointGate {
 }
 
 /// Refuses a `max_failed_steps_in_a_row` outside [`MAX_FAILED_STEPS_IN_A_ROW_RANGE`].
-pub fn validate_limit(setting: &'static str, value: u64) -> Result<(), TrainError> {
+pub fn validate_limit(setting: &'static str, value: u64) -> Result<(), RunError> {
     if MAX_FAILED_STEPS_IN_A_ROW_RANGE.contains(&value) {
         return Ok(());
     }
     let (low, high) = (MAX_FAILED_STEPS_IN_A_ROW_RANGE.start(), MAX_FAILED_STEPS_IN_A_ROW_RANGE.end());
-    Err(TrainError::Setting { setting, detail: format!("must lie in [{low}, {high}], got {value}") })
+    Err(RunError::Setting { setting, detail: format!("must lie in [{low}, {high}], got {value}") })
 }
 
 #[cfg(test)]

@@ -1,0 +1,178 @@
+//! Checkpoint folders: everything a run needs to continue exactly as if it had not stopped.
+//!
+//! The module's half (its weights and the `latest` pointer) is read by [`dggt_infer::checkpoint`], which
+//! inference shares; this module adds the optimiser and run state and writes all of it, for any trained
+//! module. A trainer adds its own files (the DGGT trainer: the network's configuration, preprocessing and
+//! configured sections).
+//!
+//! A checkpoint is a folder `checkpoints/step-NNNNNNNN/` holding the module (`model.bpk`, burnpack, parameter
+//! ids included so the optimiser state stays attached), the AdamW state (`optimizer.bpk`), the trainer's own
+//! files and the run state (`state.json`: the next step, seed and counters). The learning-rate schedule is a
+//! function of the step and the samplers draw from `(seed, step)`, so no random-generator state needs saving.
+//! The weights and moments are written tensor by tensor (peak host memory is one tensor, not the 16 GB of a
+//! full-size model and its AdamW state). Every file is written through a temporary file and a rename;
+//! `checksums.json` records every file's size and CRC-32C ([`dggt_infer::checksums`]), `state.json` then marks
+//! the folder complete and the `checkpoints/latest` pointer is replaced last: a run killed at any moment, in
+//! the middle of a checkpoint included, resumes from the last complete one, and one whose newest checkpoint
+//! was damaged afterwards from the newest intact one. No checkpoint is written with a non-finite weight or
+//! moment.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use burn::module::{Module, ModuleVisitor, Param};
+use burn::tensor::Tensor;
+use dggt_data::io::write_atomically;
+pub use dggt_infer::checkpoint::{LATEST, MODEL_FILE, STATE_FILE, latest, load_model, verified};
+use dggt_infer::checksums;
+pub use dggt_infer::checksums::{MANIFEST_FILE, Purpose};
+use serde::{Deserialize, Serialize};
+
+use crate::error::RunError;
+use crate::failpoint;
+use crate::finite::first_non_finite;
+use crate::optimizer::{Optimizer, deferred_tensor};
+
+/// The counters of a run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunState {
+    /// The next optimiser step to run.
+    pub step: u64,
+    pub seed: u64,
+    /// Steps skipped for a non-finite loss or gradient.
+    pub skipped_steps: u64,
+    /// Steps whose update made a weight or moment non-finite and was undone.
+    #[serde(default)]
+    pub rolled_back_steps: u64,
+    /// Steps skipped or rolled back since the last step that trained (the divergence check counts them).
+    #[serde(default)]
+    pub failed_in_a_row: u64,
+    /// Training seconds before this checkpoint (summed over resumed segments).
+    pub elapsed_s: f64,
+    /// Samples that failed to load and were replaced.
+    #[serde(default)]
+    pub bad_samples: u64,
+    /// Samples drawn per step (`optim.accumulation` x devices) when the checkpoint was written; 0 when unknown.
+    #[serde(default)]
+    pub samples_per_step: u64,
+}
+
+impl RunState {
+    /// The counters of a run that has not taken a step yet.
+    pub fn starting(seed: u64, samples_per_step: u64) -> Self {
+        Self {
+            step: 0,
+            seed,
+            skipped_steps: 0,
+            rolled_back_steps: 0,
+            failed_in_a_row: 0,
+            elapsed_s: 0.0,
+            bad_samples: 0,
+            samples_per_step,
+        }
+    }
+}
+
+/// The optimiser's state in a checkpoint folder.
+const OPTIMIZER_FILE: &str = "optimizer.bpk";
+
+fn checkpoint_error(path: &Path, detail: impl ToString) -> RunError {
+    RunError::Checkpoint { path: path.to_path_buf(), detail: detail.to_string() }
+}
+
+/// Writes a checkpoint of any trained module under `root` (`run/checkpoints`): its parameters, the optimiser,
+/// `extra` files (name, bytes) and the run state, written last, in `root/step-NNNNNNNN/`; then `latest` and
+/// pruning to the newest `keep`. Nothing is written when a weight or moment is not finite.
+pub fn save_folder<M: Module>(
+    root: &Path,
+    model: &M,
+    optimizer: &Optimizer,
+    state: &RunState,
+    keep: usize,
+    extra: &[(&str, &[u8])],
+) -> Result<PathBuf, RunError> {
+    let name = format!("step-{:08}", state.step);
+    let dir = root.join(&name);
+    if let Some(non_finite) = first_non_finite(model, Some(optimizer)) {
+        return Err(RunError::NonFiniteCheckpoint { dir, non_finite });
+    }
+    fs::create_dir_all(&dir).map_err(|e| checkpoint_error(&dir, e))?;
+    let write = |file: &str, bytes: &[u8]| -> Result<(), RunError> {
+        write_atomically(&dir.join(file), bytes).map_err(|e| checkpoint_error(&dir.join(file), e))
+    };
+    // The run state goes last: a folder without it is incomplete and never resumed from.
+    let _ = fs::remove_file(dir.join(STATE_FILE));
+    save_model(&dir.join(MODEL_FILE), model)?;
+    failpoint::reached(failpoint::INSIDE_CHECKPOINT);
+    optimizer.save(&dir.join(OPTIMIZER_FILE))?;
+    for (file, bytes) in extra {
+        write(file, bytes)?;
+    }
+    let state_bytes = serde_json::to_string_pretty(state).expect("states serialise").into_bytes();
+    let written: Vec<&str> =
+        [MODEL_FILE, OPTIMIZER_FILE].into_iter().chain(extra.iter().map(|(name, _)| *name)).collect();
+    checksums::write_manifest(&dir, &written, &[(STATE_FILE, &state_bytes)])?;
+    write(STATE_FILE, &state_bytes)?;
+    write_atomically(&root.join(LATEST), name.as_bytes()).map_err(|e| checkpoint_error(&root.join(LATEST), e))?;
+    prune(root, keep.max(1))?;
+    Ok(dir)
+}
+
+/// Writes a module's (the network's) parameters as a burnpack file readable by [`load_model`], one tensor at a time: each
+/// is read back from its device only when the writer reaches it, so saving never holds a host copy of the
+/// whole network.
+pub fn save_model<M: Module>(path: &Path, model: &M) -> Result<(), RunError> {
+    let mut collect = DeferredParameters::default();
+    model.visit(&mut collect);
+    burn_pack::Writer::new(collect.tensors).write_to_file(path).map_err(|e| checkpoint_error(path, e))
+}
+
+/// Every parameter of a module as a deferred burnpack entry named by its module path, as burn's module records
+/// name them.
+#[derive(Default)]
+struct DeferredParameters {
+    path: Vec<String>,
+    tensors: Vec<burn_pack::Tensor>,
+}
+
+impl ModuleVisitor for DeferredParameters {
+    fn enter_module(&mut self, name: &str, _container_type: &str) {
+        self.path.push(name.to_string());
+    }
+
+    fn exit_module(&mut self, _name: &str, _container_type: &str) {
+        self.path.pop();
+    }
+
+    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+        let saved = param.transform_for_save().val();
+        self.tensors.push(deferred_tensor(self.path.join("."), &saved, &param.id));
+    }
+}
+
+/// Removes all but the newest `keep` `step-*` folders under `root`.
+pub fn prune(root: &Path, keep: usize) -> Result<(), RunError> {
+    let mut steps: Vec<PathBuf> = fs::read_dir(root)
+        .map_err(|e| checkpoint_error(root, e))?
+        .filter_map(|entry| entry.ok().map(|e| e.path()))
+        .filter(|p| p.is_dir() && p.file_name().is_some_and(|n| n.to_string_lossy().starts_with("step-")))
+        .collect();
+    steps.sort();
+    let excess = steps.len().saturating_sub(keep);
+    for old in &steps[..excess] {
+        fs::remove_dir_all(old).map_err(|e| checkpoint_error(old, e))?;
+    }
+    Ok(())
+}
+
+/// The run state of the checkpoint folder `dir` (`state.json`).
+pub fn read_state(dir: &Path) -> Result<RunState, RunError> {
+    let path = dir.join(STATE_FILE);
+    let bytes = fs::read(&path).map_err(|e| checkpoint_error(&path, e))?;
+    serde_json::from_slice(&bytes).map_err(|e| checkpoint_error(&path, e))
+}
+
+/// The AdamW state's file in a checkpoint folder (see [`Optimizer::load`]).
+pub fn optimizer_file(dir: &Path) -> PathBuf {
+    dir.join(OPTIMIZER_FILE)
+}
