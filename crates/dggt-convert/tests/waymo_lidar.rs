@@ -177,7 +177,8 @@ fn lidar_sky_masks_are_written_per_view_and_mark_no_sky_without_returns_in_view(
     let input = dir.path().join("built.tfrecord");
     std::fs::write(&input, frame_record(&frame(None, None).encode_to_vec())).unwrap();
     let scene = dir.path().join("000");
-    let options = WaymoOptions { cameras: vec![0], sky_masks: dggt_convert::sky::SkyMasks::Lidar };
+    let options =
+        WaymoOptions { cameras: vec![0], sky_masks: dggt_convert::sky::SkyMasks::Lidar, ..Default::default() };
     convert_segment(&input, &scene, &options, &|_| {}).unwrap();
     // The four columns of returns lie at ±45° and ±135° azimuth, outside FRONT's ±43.8° field of view.
     let mask = image::open(ExportLayout::new(&scene).sky_mask(0, 0)).unwrap().to_luma8();
