@@ -239,10 +239,21 @@ fn depth_flows_move_exactly_the_points_inside_tracked_boxes() {
 
     let out = tempfile::tempdir().unwrap();
     let scene_dir = out.path().join("000");
+    let started = std::time::Instant::now();
+    convert_log(&log(), &out.path().join("plain"), &cameras(&[0, 1, 2, 3, 4, 5, 6]), &|_| {}).unwrap();
+    let plain_s = started.elapsed().as_secs_f64();
     let options = ConvertOptions { depth_flows: DepthFlows::FromBoxes, ..cameras(&[0, 1, 2, 3, 4, 5, 6]) };
     let started = std::time::Instant::now();
     convert_log(&log(), &scene_dir, &options, &|_| {}).unwrap();
-    println!("converted with depth flows in {:.2} s", started.elapsed().as_secs_f64());
+    let folder_bytes = |folder: &std::path::Path| -> u64 {
+        std::fs::read_dir(folder).unwrap().map(|e| e.unwrap().metadata().unwrap().len()).sum()
+    };
+    println!(
+        "converted in {plain_s:.2} s, with depth flows in {:.2} s; depth_flows_4/ holds {} bytes, images/ {}",
+        started.elapsed().as_secs_f64(),
+        folder_bytes(&scene_dir.join("depth_flows_4")),
+        folder_bytes(&scene_dir.join("images"))
+    );
     let scene = read_export(&scene_dir, &Default::default()).unwrap();
     assert_eq!(scene.depth_source(), Some(dggt_data::DepthSource::DepthFlows4));
     let objects = instance_boxes(&ExportLayout::new(&scene_dir));
@@ -281,15 +292,22 @@ fn depth_flows_move_exactly_the_points_inside_tracked_boxes() {
                         .filter(|o| o.get(&frame).is_some_and(|b| inside(b, p, reach)))
                         .filter_map(|o| velocity(o, p))
                         .collect::<Vec<_>>();
-                    assert!(!expected.is_empty(), "frame {frame} camera {c} cell {i}: flow {f} outside every tracked box");
+                    assert!(
+                        !expected.is_empty(),
+                        "frame {frame} camera {c} cell {i}: flow {f} outside every tracked box"
+                    );
                     let close = expected.iter().any(|e| (*e - f).length() < 0.2 + 0.05 * e.length());
                     assert!(close, "frame {frame} camera {c} cell {i}: flow {f}, the boxes' motion {expected:?}");
                 } else {
                     static_cells += 1;
                     let deep = objects.iter().filter(|o| o.get(&frame).is_some_and(|b| inside(b, p, -reach)));
                     let moving = deep.filter_map(|o| velocity(o, p)).find(|v| v.length() > 0.05);
-                    assert!(moving.is_none(), "frame {frame} camera {c} cell {i}: static inside a box moving {moving:?}");
-                    static_in_boxes += objects.iter().any(|o| o.get(&frame).is_some_and(|b| inside(b, p, 0.0))) as usize;
+                    assert!(
+                        moving.is_none(),
+                        "frame {frame} camera {c} cell {i}: static inside a box moving {moving:?}"
+                    );
+                    static_in_boxes +=
+                        objects.iter().any(|o| o.get(&frame).is_some_and(|b| inside(b, p, 0.0))) as usize;
                 }
             }
         }
@@ -301,4 +319,47 @@ fn depth_flows_move_exactly_the_points_inside_tracked_boxes() {
     // Parked cars' boxes jitter by centimetres between sweeps: their flow is small but not zero.
     assert!(fast_cells > 100, "the log's moving objects are seen: {fast_cells}");
     assert!(static_cells > 5 * moving_cells, "{static_cells} static, {moving_cells} with flow");
+}
+
+#[test]
+fn a_box_of_zero_length_is_an_error_naming_the_annotations_with_depth_flows() {
+    // (A NaN length is already refused by the table reader: `expected finite values in length_m`.)
+    use arrow_array::{Array, ArrayRef, Float32Array, Float64Array, RecordBatch};
+    use std::sync::Arc;
+
+    let dir = tempfile::tempdir().unwrap();
+    let copy = dir.path().join("log");
+    std::fs::create_dir_all(&copy).unwrap();
+    for name in ["sensors", "calibration", "city_SE3_egovehicle.feather"] {
+        std::os::unix::fs::symlink(log().join(name), copy.join(name)).unwrap();
+    }
+    let source = std::fs::File::open(log().join("annotations.feather")).unwrap();
+    let batches: Vec<RecordBatch> =
+        arrow_ipc::reader::FileReader::try_new(source, None).unwrap().map(|b| b.unwrap()).collect();
+    let target = std::fs::File::create(copy.join("annotations.feather")).unwrap();
+    let mut writer = arrow_ipc::writer::FileWriter::try_new(target, &batches[0].schema()).unwrap();
+    for batch in &batches {
+        let columns: Vec<ArrayRef> = batch
+            .schema()
+            .fields()
+            .iter()
+            .zip(batch.columns())
+            .map(|(field, column)| match field.name().as_str() {
+                "length_m" if column.as_any().is::<Float32Array>() => {
+                    Arc::new(Float32Array::from(vec![0f32; column.len()])) as ArrayRef
+                }
+                "length_m" => Arc::new(Float64Array::from(vec![0f64; column.len()])) as ArrayRef,
+                _ => column.clone(),
+            })
+            .collect();
+        writer.write(&RecordBatch::try_new(batch.schema(), columns).unwrap()).unwrap();
+    }
+    writer.finish().unwrap();
+
+    let options = ConvertOptions { depth_flows: DepthFlows::FromBoxes, ..cameras(&[0]) };
+    let message = convert_log(&copy, &dir.path().join("000"), &options, &|_| {}).unwrap_err().to_string();
+    assert!(
+        message.contains("annotations.feather") && message.contains("frame 0") && message.contains("box size"),
+        "{message}"
+    );
 }
