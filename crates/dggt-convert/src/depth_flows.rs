@@ -19,9 +19,10 @@ use dggt_data::depth_flow::DEPTH_FLOW_STRIDE;
 use dggt_data::{ExportLayout, npy};
 use dggt_geom::frames::Frame;
 use dggt_geom::glam::DVec3;
-use dggt_geom::{Camera, ImageSize, LogWorld, PinholeIntrinsics, Rigid};
+use dggt_geom::{Camera, Ego, ImageSize, LogWorld, PinholeIntrinsics, Rigid};
 
-use crate::box_flow::{FrameBoxes, FrameFlow};
+use crate::box_flow::{FrameBoxes, FrameFlow, WorldBox};
+use crate::boxes::AnnotatedBox;
 use crate::camera::EgoCamera;
 use crate::error::{ConvertError, Result};
 
@@ -62,7 +63,7 @@ pub struct MapView {
 
 impl MapView {
     /// A camera fixed on the ego, at the frame whose ego pose is `world_from_ego`.
-    pub fn on_ego(camera: usize, projection: &EgoCamera, world_from_ego: &Rigid<LogWorld, dggt_geom::Ego>) -> Self {
+    pub fn on_ego(camera: usize, projection: &EgoCamera, world_from_ego: &Rigid<LogWorld, Ego>) -> Self {
         Self {
             camera,
             camera_from_world: projection.camera_from_ego * world_from_ego.inverse(),
@@ -115,6 +116,26 @@ pub struct FrameSample {
     /// The frame's boxes in the log's world and its time.
     pub boxes: FrameBoxes,
     pub views: Vec<MapView>,
+}
+
+impl FrameSample {
+    /// A frame whose lidar returns and boxes are in its ego frame, posed in the log's world by `world_from_ego`
+    /// (Waymo, Argoverse 2); `points_in_ego` is `None` for a frame without lidar.
+    pub fn in_ego(
+        frame: usize,
+        time_s: f64,
+        world_from_ego: &Rigid<LogWorld, Ego>,
+        points_in_ego: Option<impl Iterator<Item = DVec3>>,
+        boxes: &[AnnotatedBox],
+        views: Vec<MapView>,
+    ) -> Self {
+        Self {
+            frame,
+            points_in_world: points_in_ego.map(|points| points.map(|p| world_from_ego.transform_point(p)).collect()),
+            boxes: FrameBoxes { time_s, boxes: boxes.iter().map(|b| WorldBox::of(b, world_from_ego)).collect() },
+            views,
+        }
+    }
 }
 
 /// Writes the maps of a log's frames as they come: a frame is written once its next frame is known (the flow

@@ -28,7 +28,6 @@ use dggt_geom::{ImageSize, PinholeIntrinsics};
 
 use super::tables::{self, CameraCalibration};
 use crate::batch::ConvertOptions;
-use crate::box_flow::{FrameBoxes, WorldBox};
 use crate::camera::{Distortion, EgoCamera};
 use crate::depth_flows::{DepthFlowWriter, DepthFlows, FrameSample, MapView};
 use crate::error::{ConvertError, Result};
@@ -177,20 +176,10 @@ pub fn convert_log(
         text::write_rows(&layout.ego_pose(t), &world_from_ego.to_rows())?;
         let boxes = annotations.remove(&sweep).unwrap_or_default();
         if let Some(writer) = &mut depth_flows {
-            let points_in_world = points.iter().map(|&p| world_from_ego.transform_point(p)).collect();
-            writer.push(FrameSample {
-                frame: t,
-                points_in_world: Some(points_in_world),
-                boxes: FrameBoxes {
-                    time_s: (sweep - sweeps[0]) as f64 * 1e-9,
-                    boxes: boxes.iter().map(|b| WorldBox::of(b, world_from_ego)).collect(),
-                },
-                views: cameras
-                    .iter()
-                    .zip(&projections)
-                    .map(|(c, p)| MapView::on_ego(c.id, p, world_from_ego))
-                    .collect(),
-            })?;
+            let time_s = (sweep - sweeps[0]) as f64 * 1e-9;
+            let views = cameras.iter().zip(&projections).map(|(c, p)| MapView::on_ego(c.id, p, world_from_ego));
+            let points = Some(points.iter().copied());
+            writer.push(FrameSample::in_ego(t, time_s, world_from_ego, points, &boxes, views.collect()))?;
         }
         instances.add_frame(t, world_from_ego, &boxes);
         kept.push(sweep);

@@ -24,8 +24,6 @@ use dggt_data::{ExportLayout, io, text};
 use super::frame::{self, CAMERA_COUNT, CameraCalibration, camera_id};
 use super::lidar::{self, LaserCalibration, LidarRow};
 use super::{ground, proto};
-use crate::box_flow::{FrameBoxes, WorldBox};
-use crate::boxes::AnnotatedBox;
 use crate::depth_flows::{DepthFlowWriter, DepthFlows, FrameSample, MapView};
 use crate::error::{ConvertError, RecordAt, Result};
 use crate::instances::InstanceLog;
@@ -33,7 +31,6 @@ use crate::marker::{DoneMarker, write_done};
 use crate::masks::{DynamicMasks, MaskRule};
 use crate::sky::{self, SkyMasks};
 use dggt_geom::glam::DVec3;
-use dggt_geom::{Ego, LogWorld, Rigid};
 
 /// Horizontal speed above which a Waymo box counts as moving (m/s).
 pub const MOVING_SPEED_M_S: f64 = 1.0;
@@ -120,7 +117,10 @@ pub fn convert_segment(
             let time_s = (times_us[record] - times_us[0]) as f64 * 1e-6;
             let in_view = calibration.cameras.iter().filter(|c| options.cameras.contains(&c.id));
             let views = in_view.map(|c| MapView::on_ego(c.id, &c.camera, &world_from_ego)).collect();
-            writer.push(depth_flow_sample(record, time_s, &world_from_ego, lidar_rows.as_deref(), &boxes, views))?;
+            // Points in columns 3..6, vehicle frame.
+            let points =
+                lidar_rows.as_ref().map(|rows| rows.iter().map(|r| DVec3::new(r[3].into(), r[4].into(), r[5].into())));
+            writer.push(FrameSample::in_ego(record, time_s, &world_from_ego, points, &boxes, views))?;
         }
         instances.add_frame(record, &world_from_ego, &boxes);
         progress(reader.bytes_read());
@@ -193,23 +193,4 @@ fn write_images(at: RecordAt, frame: &proto::Frame, options: &WaymoOptions, layo
 fn write_lidar_rows(path: &Path, rows: &[LidarRow]) -> Result<()> {
     let bytes: Vec<u8> = rows.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
     Ok(io::write_atomically(path, &bytes)?)
-}
-
-/// What the depth-flow maps need of one frame: its lidar points (vehicle frame, columns 3..6) and laser boxes
-/// moved into the log's world by the frame pose.
-fn depth_flow_sample(
-    frame: usize,
-    time_s: f64,
-    world_from_ego: &Rigid<LogWorld, Ego>,
-    rows: Option<&[LidarRow]>,
-    boxes: &[AnnotatedBox],
-    views: Vec<MapView>,
-) -> FrameSample {
-    let point = |r: &LidarRow| world_from_ego.transform_point(DVec3::new(r[3].into(), r[4].into(), r[5].into()));
-    FrameSample {
-        frame,
-        points_in_world: rows.map(|rows| rows.iter().map(point).collect()),
-        boxes: FrameBoxes { time_s, boxes: boxes.iter().map(|b| WorldBox::of(b, world_from_ego)).collect() },
-        views,
-    }
 }
