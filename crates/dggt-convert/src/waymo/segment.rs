@@ -104,12 +104,14 @@ pub fn convert_segment(
             lidar_frames += 1;
         }
         let boxes = frame::laser_boxes(at, &frame.laser_labels)?;
+        // A row's point: columns 3..6, vehicle frame.
+        let point = |r: &LidarRow| DVec3::new(r[3].into(), r[4].into(), r[5].into());
         for camera in calibration.cameras.iter().filter(|c| options.cameras.contains(&c.id)) {
             let masks = DynamicMasks::draw(&camera.camera, &boxes, MaskRule::SeenAndFasterThan(MOVING_SPEED_M_S));
             masks.write(&layout, record, camera.id)?;
             if options.sky_masks == SkyMasks::Lidar {
-                // Points in columns 3..6, vehicle frame; a frame without lidar gets a mask without sky.
-                let points = lidar_rows.iter().flatten().map(|r| DVec3::new(r[3].into(), r[4].into(), r[5].into()));
+                // A frame without lidar gets a mask without sky.
+                let points = lidar_rows.iter().flatten().map(point);
                 sky::write_lidar_sky_mask(&layout, record, camera.id, &sky::lidar_sky_mask(&camera.camera, points))?;
             }
         }
@@ -117,9 +119,7 @@ pub fn convert_segment(
             let time_s = (times_us[record] - times_us[0]) as f64 * 1e-6;
             let in_view = calibration.cameras.iter().filter(|c| options.cameras.contains(&c.id));
             let views = in_view.map(|c| MapView::on_ego(c.id, &c.camera, &world_from_ego)).collect();
-            // Points in columns 3..6, vehicle frame.
-            let points =
-                lidar_rows.as_ref().map(|rows| rows.iter().map(|r| DVec3::new(r[3].into(), r[4].into(), r[5].into())));
+            let points = lidar_rows.as_ref().map(|rows| rows.iter().map(point));
             writer.push(FrameSample::in_ego(record, time_s, &world_from_ego, points, &boxes, views))?;
         }
         instances.add_frame(record, &world_from_ego, &boxes);
