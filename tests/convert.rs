@@ -217,6 +217,29 @@ fn convert_nuscenes_reads_any_version_folder_that_holds_the_tables() {
 /// flag that converts it again, and leaves the scene as it was; a scene folder without a marker is refused in
 /// plain words, with no partial folder left behind.
 #[test]
+fn convert_argoverse2_with_depth_flows_writes_maps_the_loader_reads_and_records_the_option() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("scenes");
+    let log = real_data().join("av2/sensor/val/7fab2350-7eaf-3b7e-a39d-6937a4c1bede");
+    let convert = |extra: &[&str]| {
+        let args = ["convert", "argoverse2", "--input", log.to_str().unwrap(), "--out", out.to_str().unwrap()];
+        dggt(&[&args[..], &["--cameras", "1,2"], extra].concat())
+    };
+    let run = convert(&["--depth-flows", "boxes"]);
+    assert!(run.status.success(), "{}", text(&run));
+    let inspect = dggt(&["inspect", out.join("000").to_str().unwrap(), "--json"]);
+    assert!(inspect.status.success(), "{}", text(&inspect));
+    let summary: serde_json::Value = serde_json::from_slice(&inspect.stdout).unwrap();
+    assert_eq!(summary["depth_flows"], true, "{summary}");
+    let marker: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("000").join(dggt_convert::DONE_MARKER)).unwrap()).unwrap();
+    assert_eq!(marker["provenance"]["depth_flows"], "boxes");
+    let without = convert(&[]);
+    assert!(!without.status.success(), "{}", text(&without));
+    assert!(text(&without).contains("with depth flows boxes (this run: none)"), "{}", text(&without));
+}
+
+#[test]
 fn convert_skips_a_scene_only_when_its_marker_records_the_same_conversion() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("scenes");

@@ -61,6 +61,15 @@ pub enum SkyMasks {
     Lidar,
 }
 
+/// Depth-flow maps to write.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum DepthFlows {
+    /// None (depth then comes from the lidar sweeps, which carry no scene flow).
+    None,
+    /// `depth_flows_4/`: lidar depth and scene flow from the tracked boxes, for scoring motion.
+    Boxes,
+}
+
 impl Dataset {
     fn converter(self, version: NuScenesVersion, rate: NuscenesRate) -> batch::Dataset {
         match self {
@@ -107,6 +116,10 @@ pub struct Args {
     /// Sky masks (`lidar`: approximate, from the projected lidar returns; recorded in `sky_masks/SOURCE.txt`).
     #[arg(long, value_enum, default_value = "none")]
     sky_masks: SkyMasks,
+    /// Depth-flow maps (`boxes`: `depth_flows_4/` with the lidar's depth and the scene flow of points inside
+    /// tracked boxes, metres per second in the log's world; about 16 bytes per 16 pixels of every image).
+    #[arg(long, value_enum, default_value = "none")]
+    depth_flows: DepthFlows,
     /// Convert the chosen scenes again even when their folders exist, replacing each once its new version is
     /// complete. Without it, a scene finished from the same source with the same options is skipped and any
     /// other folder in its place is refused.
@@ -126,6 +139,7 @@ pub fn run(args: Args) -> Result<()> {
         version,
         nuscenes_rate,
         sky_masks,
+        depth_flows,
         overwrite,
     } = args;
     let dataset = dataset.converter(version, nuscenes_rate);
@@ -143,7 +157,11 @@ pub fn run(args: Args) -> Result<()> {
         SkyMasks::None => sky::SkyMasks::None,
         SkyMasks::Lidar => sky::SkyMasks::Lidar,
     };
-    let options = batch::ConvertOptions { cameras, sky_masks };
+    let depth_flows = match depth_flows {
+        DepthFlows::None => dggt_convert::depth_flows::DepthFlows::None,
+        DepthFlows::Boxes => dggt_convert::depth_flows::DepthFlows::FromBoxes,
+    };
+    let options = batch::ConvertOptions { cameras, sky_masks, depth_flows };
     let existing = if overwrite { ExistingScenes::Replace } else { ExistingScenes::Keep };
     let outcomes = batch::convert_segments(&dataset, &jobs, &options, workers, policy, existing, &bars)?;
     bars.overall.finish_and_clear();

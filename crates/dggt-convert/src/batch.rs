@@ -13,6 +13,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use rayon::prelude::*;
 
+use crate::depth_flows::DepthFlows;
 use crate::error::{ConvertError, Result};
 use crate::marker::{DoneMarker, Found, Provenance, Refusal, examine, read_done, write_done};
 use crate::nuscenes::{FrameRate, NuScenesOptions, NuScenesVersion, Tables};
@@ -44,6 +45,7 @@ pub struct ConvertOptions {
     /// Export camera ids.
     pub cameras: Vec<usize>,
     pub sky_masks: SkyMasks,
+    pub depth_flows: DepthFlows,
 }
 
 impl Dataset {
@@ -129,7 +131,11 @@ impl Prepared {
         let input = &job.input;
         let summary = match self {
             Self::Waymo => {
-                let waymo = WaymoOptions { cameras: options.cameras.clone(), sky_masks: options.sky_masks };
+                let waymo = WaymoOptions {
+                    cameras: options.cameras.clone(),
+                    sky_masks: options.sky_masks,
+                    depth_flows: options.depth_flows,
+                };
                 let summary = convert_segment(input, scene, &waymo, progress)?;
                 (summary.frames, summary.instances)
             }
@@ -138,8 +144,12 @@ impl Prepared {
                 (summary.frames, summary.instances)
             }
             Self::NuScenes(tables, rate) => {
-                let nuscenes =
-                    NuScenesOptions { cameras: options.cameras.clone(), sky_masks: options.sky_masks, rate: *rate };
+                let nuscenes = NuScenesOptions {
+                    cameras: options.cameras.clone(),
+                    sky_masks: options.sky_masks,
+                    depth_flows: options.depth_flows,
+                    rate: *rate,
+                };
                 let summary = crate::nuscenes::convert_scene(tables, job.index, scene, &nuscenes, progress)?;
                 (summary.frames, summary.instances)
             }
@@ -320,6 +330,7 @@ fn provenance(dataset: &Dataset, job: &SegmentJob, options: &ConvertOptions) -> 
         dataset: dataset.describe(),
         cameras: options.cameras.clone(),
         sky_masks: options.sky_masks.name().into(),
+        depth_flows: options.depth_flows.name().into(),
         converter: format!("dggt-convert {}", env!("CARGO_PKG_VERSION")),
     }
 }

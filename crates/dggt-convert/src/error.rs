@@ -20,6 +20,9 @@ pub enum ConvertError {
     /// A table (Feather file) lacks a column, has the wrong type or a bad value.
     #[error("{}: expected {expected}, found {found}", path.display())]
     Table { path: PathBuf, expected: String, found: String },
+    /// A frame's boxes give no scene flow (a box without a size, frames at one time).
+    #[error("{}: frame {frame}: {source}", path.display())]
+    BoxFlow { path: PathBuf, frame: usize, source: crate::box_flow::BoxFlowError },
     #[error(transparent)]
     Data(#[from] dggt_data::DataError),
     /// A nuScenes version given by name is not a plain folder name.

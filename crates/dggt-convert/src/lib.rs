@@ -10,14 +10,17 @@
 //!   marker records the same conversion.
 //! - Shared by the datasets: [`camera`] (projection with lens distortion), [`boxes`] (annotated 3D boxes),
 //!   [`masks`] (dynamic masks from projected boxes), [`sky`] (approximate sky masks from lidar), [`instances`]
-//!   (`instances/`), [`marker`] (the done marker a finished scene gets, recording what it was converted from).
+//!   (`instances/`), [`box_flow`] (scene flow of lidar points from tracked boxes) and [`depth_flows`]
+//!   (`depth_flows_4/`: lidar depth and that flow per quarter-resolution cell), [`marker`] (the done marker a finished scene gets, recording what it was converted from).
 //!
 //! Every error names the file and the record in it ([`ConvertError`]); bad input never panics.
 
 pub mod argoverse2;
 pub mod batch;
+pub mod box_flow;
 pub mod boxes;
 pub mod camera;
+pub mod depth_flows;
 mod error;
 pub mod feather;
 pub mod instances;

@@ -46,22 +46,30 @@ pub struct Provenance {
     pub cameras: Vec<usize>,
     /// `none` or `lidar`.
     pub sky_masks: String,
+    /// `none` or `boxes` ([`DepthFlows`](crate::depth_flows::DepthFlows)); `none` in markers of older versions.
+    #[serde(default = "no_depth_flows")]
+    pub depth_flows: String,
     /// `dggt-convert` and its version.
     pub converter: String,
 }
 
 impl Provenance {
     /// Every field as (name, value), in the order a difference is reported.
-    fn fields(&self) -> [(&'static str, String); 6] {
+    fn fields(&self) -> [(&'static str, String); 7] {
         [
             ("source", self.source.display().to_string()),
             ("segment", self.segment.clone()),
             ("dataset", self.dataset.clone()),
             ("cameras", format!("{:?}", self.cameras)),
             ("sky masks", self.sky_masks.clone()),
+            ("depth flows", self.depth_flows.clone()),
             ("converter version", self.converter.clone()),
         ]
     }
+}
+
+fn no_depth_flows() -> String {
+    crate::depth_flows::DepthFlows::None.name().into()
 }
 
 /// Why an existing scene folder is neither skipped nor converted over.

@@ -5,6 +5,7 @@
 
 use std::path::Path;
 
+use dggt_convert::depth_flows::DepthFlows;
 use dggt_convert::nuscenes::{FrameRate, NuScenesOptions, NuScenesVersion, Tables, convert_scene};
 use dggt_convert::sky::SkyMasks;
 use dggt_data::{DynamicMaskKind, ExportLayout, text};
@@ -20,7 +21,12 @@ fn convert(root: &Path, out: &Path, cameras: &[usize]) -> Result<usize, String> 
 
 fn convert_at(root: &Path, out: &Path, cameras: &[usize], rate: FrameRate) -> Result<usize, String> {
     let tables = Tables::read(root, &NuScenesVersion::Mini).map_err(|e| e.to_string())?;
-    let options = NuScenesOptions { cameras: cameras.to_vec(), sky_masks: SkyMasks::Lidar, rate };
+    let options = NuScenesOptions {
+        cameras: cameras.to_vec(),
+        sky_masks: SkyMasks::Lidar,
+        depth_flows: DepthFlows::FromBoxes,
+        rate,
+    };
     convert_scene(&tables, 0, out, &options, &|_| {}).map(|s| s.frames).map_err(|e| e.to_string())
 }
 
@@ -66,7 +72,7 @@ fn a_synthetic_scene_converts_to_the_hand_computed_poses_points_and_masks() {
     // target pixel.
     let bytes = std::fs::read(layout.lidar(0)).unwrap();
     let values: Vec<f32> = bytes.chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().unwrap())).collect();
-    assert_eq!(values.len(), 8);
+    assert_eq!(values.len(), 12);
     assert_eq!(values[3], 7.0);
     let point = DVec3::new(values[0].into(), values[1].into(), values[2].into());
     let world = read_matrix(&layout.lidar_pose(0)).transform_point3(point);
@@ -119,6 +125,33 @@ fn a_synthetic_scene_converts_to_the_hand_computed_poses_points_and_masks() {
     let scene = dggt_data::read_export(&out, &Default::default()).unwrap();
     assert_eq!((scene.frames.len(), scene.cameras.len(), scene.views.len()), (2, 6, 12));
     assert!(scene.views.iter().all(|v| v.files.sky_mask.is_some()));
+    assert_front_depth_flows(&out, 2);
+}
+
+/// CAM_FRONT's depth-flow maps, read by the loader: the point on the car moves with it, every other return is
+/// static.
+fn assert_front_depth_flows(out: &Path, frames: usize) {
+    let scene = dggt_data::read_export(out, &Default::default()).unwrap();
+    assert_eq!(scene.depth_source(), Some(dggt_data::DepthSource::DepthFlows4));
+    let front = scene.cameras.iter().position(|c| c.id == 0).unwrap();
+    for frame in 0..frames {
+        let map = scene.depth_map(frame, front).unwrap().unwrap();
+        assert_eq!((map.size.width, map.size.height), (20, 15));
+        let flow = map.flow.as_ref().unwrap();
+        // The car point is 10.5 m ahead of CAM_FRONT (the car 12 m ahead of the ego, the camera 1.5 m forward),
+        // 0.3 m to its right and 0.5 m below it: pixel (40 + 50 · 0.3 / 10.5, 30 + 50 · 0.5 / 10.5) =
+        // (41.43, 32.38), cell (row 8, column 10).
+        let car = 8 * 20 + 10;
+        assert!((map.depth[car] - 10.5).abs() < 1e-4, "frame {frame}: {}", map.depth[car]);
+        // The car moves 5 m along world +y per 0.5 s sample: 10 m/s, in the global frame's axes.
+        let expected = [0.0, CAR_SPEED as f32, 0.0];
+        assert!(flow[car].iter().zip(expected).all(|(a, b)| (a - b).abs() < 1e-3), "frame {frame}: {:?}", flow[car]);
+        let moving: Vec<usize> = (0..flow.len()).filter(|&i| flow[i] != [0.0; 3]).collect();
+        assert_eq!(moving, vec![car], "frame {frame}: only the car point moves");
+    }
+    let target = 6 * 20 + 5;
+    let first = scene.depth_map(0, front).unwrap().unwrap();
+    assert!((first.depth[target] - TARGET_PIXEL.2 as f32).abs() < 1e-4, "the static target point's depth");
 }
 
 #[test]
@@ -147,6 +180,8 @@ fn interpolated_frames_take_the_nearest_readings_and_interpolated_boxes() {
     assert_close(DMat4::from_cols_array_2d(&rows).transpose(), world_from((a.0, midpoint)), "car at frame 1");
     let scene = dggt_data::read_export(&out, &Default::default()).unwrap();
     assert_eq!((scene.frames.len(), scene.views.len()), (3, 6));
+    // The interpolated frame's box moves as the key frames' do: 10 m/s at every frame.
+    assert_front_depth_flows(&out, 3);
 }
 
 fn error_of(edit: impl FnOnce(&mut Vec<(&'static str, Value)>), cameras: &[usize]) -> String {

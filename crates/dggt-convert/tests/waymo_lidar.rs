@@ -177,7 +177,8 @@ fn lidar_sky_masks_are_written_per_view_and_mark_no_sky_without_returns_in_view(
     let input = dir.path().join("built.tfrecord");
     std::fs::write(&input, frame_record(&frame(None, None).encode_to_vec())).unwrap();
     let scene = dir.path().join("000");
-    let options = WaymoOptions { cameras: vec![0], sky_masks: dggt_convert::sky::SkyMasks::Lidar };
+    let options =
+        WaymoOptions { cameras: vec![0], sky_masks: dggt_convert::sky::SkyMasks::Lidar, ..Default::default() };
     convert_segment(&input, &scene, &options, &|_| {}).unwrap();
     // The four columns of returns lie at ±45° and ±135° azimuth, outside FRONT's ±43.8° field of view.
     let mask = image::open(ExportLayout::new(&scene).sky_mask(0, 0)).unwrap().to_luma8();
@@ -185,4 +186,87 @@ fn lidar_sky_masks_are_written_per_view_and_mark_no_sky_without_returns_in_view(
     assert!(mask.pixels().all(|p| p.0[0] == 0));
     let note = std::fs::read_to_string(scene.join("sky_masks/SOURCE.txt")).unwrap();
     assert!(note.contains("Approximate"), "{note}");
+}
+
+/// A car box around the return of (row 0, column 1), its centre `shift` m further along the vehicle's x.
+fn car_label(shift: f64) -> proto::Label {
+    let [x, y, z] = expected_point(0, 1, 11.0);
+    proto::Label {
+        r#box: Some(proto::LabelBox {
+            center_x: Some(x + shift),
+            center_y: Some(y),
+            center_z: Some(z),
+            width: Some(2.0),
+            length: Some(2.0),
+            height: Some(2.0),
+            heading: Some(0.0),
+        }),
+        metadata: None,
+        r#type: Some(1),
+        id: Some("car".into()),
+        num_lidar_points_in_box: Some(1),
+        num_top_lidar_points_in_box: None,
+    }
+}
+
+#[test]
+fn depth_flows_give_the_return_inside_a_moving_label_its_velocity() {
+    use dggt_convert::depth_flows::DepthFlows;
+    use dggt_data::DepthFlowMap;
+    use dggt_geom::ImageSize;
+
+    // Two records 0.1 s apart; the car's box moves 0.5 m along x between them: 5 m/s.
+    let records: Vec<proto::Frame> = [(0.0, 1_000_000), (0.5, 1_100_000)]
+        .into_iter()
+        .map(|(shift, time)| {
+            let mut record = frame(None, None);
+            // The camera at the lidar's position, turned 40° left: of the five returns only (0, 1), at 45° left
+            // of the vehicle's x, is in view.
+            let (s, c) = 40f64.to_radians().sin_cos();
+            let extrinsic = vec![c, -s, 0.0, 1.0, s, c, 0.0, 0.0, 0.0, 0.0, 1.0, 2.0, 0.0, 0.0, 0.0, 1.0];
+            let context = record.context.as_mut().unwrap();
+            context.camera_calibrations[0].extrinsic = Some(proto::Transform { transform: extrinsic });
+            record.timestamp_micros = Some(time);
+            record.laser_labels = vec![car_label(shift)];
+            record
+        })
+        .collect();
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("built.tfrecord");
+    let bytes: Vec<u8> = records.iter().flat_map(|r| frame_record(&r.encode_to_vec())).collect();
+    std::fs::write(&input, bytes).unwrap();
+    let scene = dir.path().join("000");
+    let options = WaymoOptions { cameras: vec![0], depth_flows: DepthFlows::FromBoxes, ..Default::default() };
+    convert_segment(&input, &scene, &options, &|_| {}).unwrap();
+    for frame in 0..2 {
+        let path = ExportLayout::new(&scene).depth_flow(frame, 0);
+        let map = DepthFlowMap::read(&path, ImageSize::new(1920, 1280).unwrap()).unwrap();
+        let filled: Vec<usize> = (0..map.depth.len()).filter(|&i| map.depth[i] > 0.0).collect();
+        assert_eq!(filled.len(), 1, "frame {frame}: one return in view");
+        let flow = map.flow.as_ref().unwrap();
+        // Frame 0 looks ahead, frame 1 (the last) back: both see +0.5 m in 0.1 s along x (the frame pose is the
+        // identity, so the log world's axes are the vehicle's).
+        let velocity = flow[filled[0]];
+        assert!(
+            (velocity[0] - 5.0).abs() < 1e-3 && velocity[1].abs() < 1e-4 && velocity[2].abs() < 1e-4,
+            "{velocity:?}"
+        );
+        assert!(flow.iter().enumerate().all(|(i, f)| i == filled[0] || *f == [0.0; 3]));
+    }
+}
+
+#[test]
+fn a_segment_without_lidar_gets_no_depth_flows() {
+    use dggt_convert::depth_flows::DepthFlows;
+
+    let mut record = frame(None, None);
+    record.lasers.clear();
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("built.tfrecord");
+    std::fs::write(&input, frame_record(&record.encode_to_vec())).unwrap();
+    let scene = dir.path().join("000");
+    let options = WaymoOptions { cameras: vec![0], depth_flows: DepthFlows::FromBoxes, ..Default::default() };
+    let summary = convert_segment(&input, &scene, &options, &|_| {}).unwrap();
+    assert_eq!(summary.lidar_frames, 0);
+    assert!(!scene.join("depth_flows_4").exists(), "no lidar, no maps (the reader wants one per view)");
 }

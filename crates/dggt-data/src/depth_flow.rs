@@ -7,6 +7,10 @@
 //! `(4 col + 2, 4 row + 2)`. A lidar map uses the same grid (a return lands in the cell of the pixel it projects
 //! into; the nearest return of a cell wins) and has no flow: the exports' lidar flow columns are not in the
 //! camera-relative units the motion supervision needs.
+//!
+//! Who writes the maps: STORM's Waymo export, the synthetic scenes (exact surface velocities), and the converters
+//! with `--depth-flows boxes` (`dggt_convert::depth_flows`: lidar returns binned as above, flow from the tracked
+//! box each return lies in, zero outside boxes).
 
 use std::path::Path;
 

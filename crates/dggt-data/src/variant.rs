@@ -8,6 +8,10 @@
 //! | [`NuScenes`](ExportVariant::NuScenes) | 6 | `extrinsics/{t}_{cam}.txt` camera -> world, OpenCV axes, per frame | `lidar_pose/` = world <- lidar | N x 4, lidar frame | `{all,human,vehicle}/` | 2 Hz keyframes, or the `processed_{N}Hz` folder's rate |
 //! | [`Argoverse2`](ExportVariant::Argoverse2) | 7 | `extrinsics/{cam}.txt` camera -> ego, OpenCV axes | `ego_pose/` | N x 4, ego frame | `{all,human,vehicle}/` | 10 Hz |
 //!
+//! `depth_flows_4/` is optional in every variant: STORM's export has it; `dggt convert --depth-flows boxes` writes
+//! it for the Waymo, nuScenes and Argoverse 2 variants, with the flow of returns inside tracked boxes in the log
+//! world's axes, metres per second, as [`crate::depth_flow`] reads it (`dggt_convert::depth_flows`).
+//!
 //! A nuScenes export has no ego poses; its frame's ego is the `LIDAR_TOP` sensor with its axes turned to
 //! forward-left-up (ego x = lidar y, ego y = -lidar x, ego z = lidar z), which anchors the scene's world.
 

@@ -16,6 +16,7 @@
 //! | `lidar/{t:03}.bin` | N x 4 float32: x y z (m, ego frame at the sweep's time), intensity (0-255) |
 //! | `dynamic_masks/{all,human,vehicle}/` | every box of the masked categories ([`MaskRule::EveryBox`]), pinhole cameras |
 //! | `sky_masks/` | with [`SkyMasks::Lidar`] only ([`crate::sky`]) |
+//! | `depth_flows_4/{t:03}_{cam}.npy` | with [`DepthFlows::FromBoxes`] only ([`crate::depth_flows`]): the sweep's points, flow from the annotations of the same `track_uuid` at the next kept sweep (or the previous), times from the sweeps' `timestamp_ns` |
 //! | `instances/` | those boxes; `obj_to_world` = ego -> city at the sweep · object -> ego |
 //! | [`DONE_MARKER`](crate::marker::DONE_MARKER) | written last |
 
@@ -28,6 +29,7 @@ use dggt_geom::{ImageSize, PinholeIntrinsics};
 use super::tables::{self, CameraCalibration};
 use crate::batch::ConvertOptions;
 use crate::camera::{Distortion, EgoCamera};
+use crate::depth_flows::{DepthFlowWriter, DepthFlows, FrameSample, MapView};
 use crate::error::{ConvertError, Result};
 use crate::feather::Table;
 use crate::instances::InstanceLog;
@@ -150,6 +152,9 @@ pub fn convert_log(
     let sweeps = timestamps_in(&log.join("sensors/lidar"), "feather")?;
     let projections = cameras.iter().map(|camera| camera.export_camera(log)).collect::<Result<Vec<_>>>()?;
     let mut instances = InstanceLog::default();
+    let annotations_file = log.join("annotations.feather");
+    let mut depth_flows =
+        (options.depth_flows == DepthFlows::FromBoxes).then(|| DepthFlowWriter::new(&layout, &annotations_file));
     let mut kept = Vec::new();
     for (index, &sweep) in sweeps.iter().enumerate() {
         progress(index as u64);
@@ -169,7 +174,14 @@ pub fn convert_log(
             }
         }
         text::write_rows(&layout.ego_pose(t), &world_from_ego.to_rows())?;
-        instances.add_frame(t, world_from_ego, &annotations.remove(&sweep).unwrap_or_default());
+        let boxes = annotations.remove(&sweep).unwrap_or_default();
+        if let Some(writer) = &mut depth_flows {
+            let time_s = (sweep - sweeps[0]) as f64 * 1e-9;
+            let views = cameras.iter().zip(&projections).map(|(c, p)| MapView::on_ego(c.id, p, world_from_ego));
+            let points = Some(points.iter().copied());
+            writer.push(FrameSample::in_ego(t, time_s, world_from_ego, points, &boxes, views.collect()))?;
+        }
+        instances.add_frame(t, world_from_ego, &boxes);
         kept.push(sweep);
     }
     let Some(&first) = kept.first() else {
@@ -189,6 +201,9 @@ pub fn convert_log(
     }
     let times: Vec<[f64; 2]> = kept.iter().enumerate().map(|(t, ns)| [t as f64, (ns - first) as f64 * 1e-9]).collect();
     text::write_rows(&layout.timestamps(), &times)?;
+    if let Some(writer) = depth_flows {
+        writer.finish()?;
+    }
     instances.write(&layout)?;
     let marker = DoneMarker {
         converter: format!("dggt-convert {} (argoverse2)", env!("CARGO_PKG_VERSION")),

@@ -13,6 +13,7 @@
 //! | `dynamic_masks/{all,human,vehicle}/{t:03}_{cam}.png` | every annotated box of the class ([`MaskRule::EveryBox`]), moved from global into the camera's ego frame |
 //! | `instances/` | the annotations' instances ([`crate::instances`]); `obj_to_world` in the global frame |
 //! | `sky_masks/` | with [`SkyMasks::Lidar`] only ([`crate::sky`]) |
+//! | `depth_flows_4/{t:03}_{cam}.npy` | with [`DepthFlows::FromBoxes`] only ([`crate::depth_flows`]): the frame's LIDAR_TOP points, flow from its boxes (annotated, or interpolated between key frames) of the same instance at `t + 1` (or `t - 1`), times the frames' target times; each camera projected with its own per-frame pose |
 //! | [`DONE_MARKER`](crate::marker::DONE_MARKER) | written last |
 //!
 //! Frames: global (the log's world, [`LogWorld`]), ego (vehicle, forward-left-up), [`Sweep`] (LIDAR_TOP),
@@ -27,8 +28,10 @@ use dggt_geom::{Camera, Ego, ImageSize, LogWorld, PinholeIntrinsics, Rigid, Swee
 
 use super::frames::{FrameRate, PlannedFrame, plan};
 use super::tables::{SampleDataRow, Tables};
+use crate::box_flow::{FrameBoxes, WorldBox};
 use crate::boxes::AnnotatedBox;
 use crate::camera::{Distortion, EgoCamera};
+use crate::depth_flows::{DepthFlowWriter, DepthFlows, FrameSample, MapView};
 use crate::error::{ConvertError, Result};
 use crate::instances::InstanceLog;
 use crate::marker::{DoneMarker, write_done};
@@ -118,14 +121,26 @@ fn sweep_points(tables: &Tables, reading: &Reading<Sweep>) -> Result<Vec<[f32; 5
         .collect())
 }
 
-/// Writes frame `t`; returns the boxes in the lidar's ego frame and that ego's global pose.
+/// What a written frame hands on to `instances/` and the depth-flow maps.
+struct WrittenFrame {
+    /// The boxes in the lidar's ego frame.
+    boxes_in_ego: Vec<AnnotatedBox>,
+    /// That ego's global pose.
+    global_from_ego: Rigid<LogWorld, Ego>,
+    /// The sweep's points in the global frame.
+    points_in_global: Vec<DVec3>,
+    /// The cameras with their own poses at this frame.
+    views: Vec<MapView>,
+}
+
+/// Writes frame `t`.
 fn write_frame<'a>(
     tables: &'a Tables,
     frame: &PlannedFrame<'a>,
     t: usize,
     options: &NuScenesOptions,
     layout: &ExportLayout,
-) -> Result<(Vec<AnnotatedBox>, Rigid<LogWorld, Ego>)> {
+) -> Result<WrittenFrame> {
     let lidar = Reading::<Sweep>::of(tables, frame, LIDAR)?;
     let points = sweep_points(tables, &lidar)?;
     let rows: Vec<u8> = points.iter().flat_map(|p| p[..4].iter().flat_map(|v| v.to_le_bytes())).collect();
@@ -134,6 +149,7 @@ fn write_frame<'a>(
     text::write_rows(&layout.lidar_pose(t), &global_from_lidar.to_rows())?;
     let boxes = &frame.boxes;
     let names = ExportVariant::NuScenes.camera_names();
+    let mut views = Vec::new();
     for &id in &options.cameras {
         let reading = Reading::<Camera>::of(tables, frame, names[id])?;
         let camera = camera_projection(tables, &reading)?;
@@ -152,9 +168,18 @@ fn write_frame<'a>(
             let k = camera.intrinsics;
             text::write_rows(&layout.intrinsics(id), &[k.fx, k.fy, k.cx, k.cy, 0.0, 0.0, 0.0, 0.0, 0.0].map(|v| [v]))?;
         }
+        let camera_from_world = reading.global_from_sensor().inverse();
+        views.push(MapView { camera: id, camera_from_world, intrinsics: camera.intrinsics, size: camera.size });
     }
-    let boxes_in_lidar_ego = boxes.iter().map(|b| b.in_ego(&lidar.global_from_ego)).collect();
-    Ok((boxes_in_lidar_ego, lidar.global_from_ego))
+    Ok(WrittenFrame {
+        boxes_in_ego: boxes.iter().map(|b| b.in_ego(&lidar.global_from_ego)).collect(),
+        global_from_ego: lidar.global_from_ego,
+        points_in_global: points
+            .iter()
+            .map(|p| global_from_lidar.transform_point(DVec3::new(p[0].into(), p[1].into(), p[2].into())))
+            .collect(),
+        views,
+    })
 }
 
 /// The lidar channel exported.
@@ -166,6 +191,7 @@ pub struct NuScenesOptions {
     /// Export camera ids (0 CAM_FRONT .. 5 CAM_BACK).
     pub cameras: Vec<usize>,
     pub sky_masks: SkyMasks,
+    pub depth_flows: DepthFlows,
     pub rate: FrameRate,
 }
 
@@ -192,12 +218,30 @@ pub fn convert_scene(
     let channels: Vec<&str> = std::iter::once(LIDAR).chain(options.cameras.iter().map(|&id| names[id])).collect();
     let frames = plan(tables, &samples, &channels, options.rate)?;
     let mut instances = InstanceLog::default();
+    let mut depth_flows = (options.depth_flows == DepthFlows::FromBoxes)
+        .then(|| DepthFlowWriter::new(&layout, &tables.sample_annotation.path));
+    let first = frames[0].time_us;
     for (t, frame) in frames.iter().enumerate() {
         progress(t as u64);
-        let (boxes, global_from_ego) = write_frame(tables, frame, t, options, &layout)?;
-        instances.add_frame(t, &global_from_ego, &boxes);
+        let written = write_frame(tables, frame, t, options, &layout)?;
+        if let Some(writer) = &mut depth_flows {
+            let boxes = frame.boxes.iter().map(|b| WorldBox {
+                id: b.id.clone(),
+                world_from_box: b.global_from_box,
+                size: b.size,
+            });
+            writer.push(FrameSample {
+                frame: t,
+                points_in_world: Some(written.points_in_global),
+                boxes: FrameBoxes { time_s: (frame.time_us - first) as f64 * 1e-6, boxes: boxes.collect() },
+                views: written.views,
+            })?;
+        }
+        instances.add_frame(t, &written.global_from_ego, &written.boxes_in_ego);
     }
-    let first = frames[0].time_us;
+    if let Some(writer) = depth_flows {
+        writer.finish()?;
+    }
     let times: Vec<[f64; 2]> =
         frames.iter().enumerate().map(|(t, f)| [t as f64, (f.time_us - first) as f64 * 1e-6]).collect();
     text::write_rows(&layout.timestamps(), &times)?;

@@ -12,6 +12,7 @@
 //! | `dynamic_masks/{all,human,vehicle}/{t:03}_{cam}.png` | [`MaskRule::SeenAndFasterThan`] 1 m/s, calibrated size |
 //! | `instances/` | every vehicle, pedestrian and cyclist ([`crate::instances`]) |
 //! | `sky_masks/` | with [`SkyMasks::Lidar`] only ([`crate::sky`]) |
+//! | `depth_flows_4/{t:03}_{cam}.npy` | with [`DepthFlows::FromBoxes`] only ([`crate::depth_flows`]): the lidar rows' points, flow from the laser labels of the same id at `t + 1` (or `t - 1`), times from `timestamp_micros` |
 //! | [`DONE_MARKER`](crate::marker::DONE_MARKER) | written last |
 //!
 //! Matrices are written with full `f64` precision from the stored doubles. Camera ids are `CameraName - 1`.
@@ -23,6 +24,7 @@ use dggt_data::{ExportLayout, io, text};
 use super::frame::{self, CAMERA_COUNT, CameraCalibration, camera_id};
 use super::lidar::{self, LaserCalibration, LidarRow};
 use super::{ground, proto};
+use crate::depth_flows::{DepthFlowWriter, DepthFlows, FrameSample, MapView};
 use crate::error::{ConvertError, RecordAt, Result};
 use crate::instances::InstanceLog;
 use crate::marker::{DoneMarker, write_done};
@@ -33,16 +35,17 @@ use dggt_geom::glam::DVec3;
 /// Horizontal speed above which a Waymo box counts as moving (m/s).
 pub const MOVING_SPEED_M_S: f64 = 1.0;
 
-/// Which cameras to export (export ids, `CameraName - 1`), and whether to write sky masks.
+/// Which cameras to export (export ids, `CameraName - 1`), and whether to write sky masks and depth-flow maps.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct WaymoOptions {
     pub cameras: Vec<usize>,
     pub sky_masks: SkyMasks,
+    pub depth_flows: DepthFlows,
 }
 
 impl Default for WaymoOptions {
     fn default() -> Self {
-        Self { cameras: (0..CAMERA_COUNT).collect(), sky_masks: SkyMasks::None }
+        Self { cameras: (0..CAMERA_COUNT).collect(), sky_masks: SkyMasks::None, depth_flows: DepthFlows::None }
     }
 }
 
@@ -75,6 +78,7 @@ pub fn convert_segment(
     let mut calibration: Option<Calibration> = None;
     let mut instances = InstanceLog::default();
     let mut times_us = Vec::new();
+    let mut depth_flows = (options.depth_flows == DepthFlows::FromBoxes).then(|| DepthFlowWriter::new(&layout, input));
     let (mut images, mut lidar_frames) = (0, 0);
     while let Some((record, payload)) = reader.next_record()? {
         let at = RecordAt { path: input, record };
@@ -100,14 +104,23 @@ pub fn convert_segment(
             lidar_frames += 1;
         }
         let boxes = frame::laser_boxes(at, &frame.laser_labels)?;
+        // A row's point: columns 3..6, vehicle frame.
+        let point = |r: &LidarRow| DVec3::new(r[3].into(), r[4].into(), r[5].into());
         for camera in calibration.cameras.iter().filter(|c| options.cameras.contains(&c.id)) {
             let masks = DynamicMasks::draw(&camera.camera, &boxes, MaskRule::SeenAndFasterThan(MOVING_SPEED_M_S));
             masks.write(&layout, record, camera.id)?;
             if options.sky_masks == SkyMasks::Lidar {
-                // Points in columns 3..6, vehicle frame; a frame without lidar gets a mask without sky.
-                let points = lidar_rows.iter().flatten().map(|r| DVec3::new(r[3].into(), r[4].into(), r[5].into()));
+                // A frame without lidar gets a mask without sky.
+                let points = lidar_rows.iter().flatten().map(point);
                 sky::write_lidar_sky_mask(&layout, record, camera.id, &sky::lidar_sky_mask(&camera.camera, points))?;
             }
+        }
+        if let Some(writer) = &mut depth_flows {
+            let time_s = (times_us[record] - times_us[0]) as f64 * 1e-6;
+            let in_view = calibration.cameras.iter().filter(|c| options.cameras.contains(&c.id));
+            let views = in_view.map(|c| MapView::on_ego(c.id, &c.camera, &world_from_ego)).collect();
+            let points = lidar_rows.as_ref().map(|rows| rows.iter().map(point));
+            writer.push(FrameSample::in_ego(record, time_s, &world_from_ego, points, &boxes, views))?;
         }
         instances.add_frame(record, &world_from_ego, &boxes);
         progress(reader.bytes_read());
@@ -119,6 +132,9 @@ pub fn convert_segment(
     let times: Vec<[f64; 2]> =
         times_us.iter().enumerate().map(|(t, us)| [t as f64, (us - times_us[0]) as f64 * 1e-6]).collect();
     text::write_rows(&layout.timestamps(), &times)?;
+    if let Some(writer) = depth_flows {
+        writer.finish()?;
+    }
     instances.write(&layout)?;
     let marker = DoneMarker {
         converter: format!("dggt-convert {} (waymo)", env!("CARGO_PKG_VERSION")),

@@ -1,5 +1,6 @@
 //! A tiny nuScenes data root written by the tests: devkit tables for one scene of two samples, six 80 x 60
-//! cameras (uniform JPEGs), LIDAR_TOP sweeps of two points and one annotated car, with the poses that build them.
+//! cameras (uniform JPEGs), LIDAR_TOP sweeps of three points (one on the car) and one annotated car, with the
+//! poses that build them.
 
 use std::path::{Path, PathBuf};
 
@@ -69,6 +70,21 @@ pub fn car_pose(sample: usize) -> ([f64; 4], [f64; 3]) {
     let pose = ego_pose(sample, 0);
     let centre = world_from(pose).transform_point3(DVec3::new(12.0, 0.0, 1.0));
     (pose.0, centre.to_array())
+}
+
+/// The car's speed along world +y: 5 m per sample, samples 0.5 s apart (m/s).
+pub const CAR_SPEED: f64 = 10.0;
+/// Where the test puts a lidar point on the car: 0.3 m right of its centre (box coordinates).
+pub const ON_THE_CAR: [f64; 3] = [0.0, -0.3, 0.0];
+
+/// The point [`ON_THE_CAR`] in the LIDAR_TOP frame of the reading at `position` (0, 0.5, 1: see [`READINGS`]),
+/// where the car is where the ego (which it keeps pace with) puts it.
+pub fn car_point_in_lidar(position: f64) -> DVec3 {
+    let (r, t) = ego_pose_at(position, 0);
+    let centre = world_from((r, t)).transform_point3(DVec3::new(12.0, 0.0, 1.0));
+    let point = world_from((r, centre.to_array())).transform_point3(DVec3::from_array(ON_THE_CAR));
+    let world_from_lidar = world_from(ego_pose_at(position, 6)) * world_from(lidar_calibration());
+    world_from_lidar.inverse().transform_point3(point)
 }
 
 /// The lidar point (in the LIDAR_TOP frame of sample 0) that CAM_FRONT sees at [`TARGET_PIXEL`].
@@ -165,7 +181,10 @@ pub fn write_root(dir: &Path, edit: impl FnOnce(&mut Vec<(&'static str, Value)>)
             write_jpeg(&path, 40);
         } else {
             let p = target_point_in_lidar().as_vec3();
-            write_sweep(&path, &[[p.x, p.y, p.z, 7.0, 3.0], [0.0, 30.0, -1.0, 1.0, 0.0]]);
+            let position = (row["timestamp"].as_i64().unwrap() - 1_000_000) as f64 / 500_000.0;
+            let car = car_point_in_lidar(position).as_vec3();
+            let points = [[p.x, p.y, p.z, 7.0, 3.0], [0.0, 30.0, -1.0, 1.0, 0.0], [car.x, car.y, car.z, 2.0, 1.0]];
+            write_sweep(&path, &points);
         }
     }
     root
