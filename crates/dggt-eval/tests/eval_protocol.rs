@@ -13,7 +13,7 @@ use dggt_train::{RunOptions, Start, TrainConfig, Trainer};
 use serde_json::Value;
 
 fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+    dggt_test_data::repo_root()
 }
 
 fn fixture() -> PathBuf {
@@ -21,7 +21,7 @@ fn fixture() -> PathBuf {
 }
 
 fn parity_dir() -> PathBuf {
-    std::env::var_os("DGGT_PARITY_DIR").map_or_else(|| repo().join("../shared/parity"), PathBuf::from)
+    dggt_test_data::Shared::Parity.dir()
 }
 
 /// A tiny network after one training step on the fixture, saved as the trainer saves checkpoints.

@@ -11,6 +11,8 @@ pub enum RefineTrainError {
     #[error(transparent)]
     Run(#[from] dggt_run::RunError),
     #[error(transparent)]
+    Safetensors(#[from] dggt_model::safetensors_file::SafetensorsError),
+    #[error(transparent)]
     Infer(#[from] dggt_infer::InferError),
     #[error(transparent)]
     Objective(#[from] dggt_objective::ObjectiveError),

@@ -37,6 +37,14 @@ pub(crate) fn unit_values(
     error: impl FnOnce(String) -> RefineTrainError,
 ) -> Result<Vec<f32>, RefineTrainError> {
     let values: Vec<f32> = bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+    unit_range(values, error)
+}
+
+/// `values` when every one lies in [0, 1] (image values), else the error `error` makes of the first that does not.
+pub(crate) fn unit_range(
+    values: Vec<f32>,
+    error: impl FnOnce(String) -> RefineTrainError,
+) -> Result<Vec<f32>, RefineTrainError> {
     match values.iter().find(|v| !(0.0..=1.0).contains(*v)) {
         Some(bad) => Err(error(format!("value {bad} outside [0, 1]"))),
         None => Ok(values),

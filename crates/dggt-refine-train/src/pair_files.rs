@@ -17,7 +17,7 @@ use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 
-use dggt_refine::safetensors_file::SafetensorsFile;
+use dggt_model::safetensors_file::SafetensorsFile;
 
 use crate::error::{PairKind, RefineTrainError};
 use crate::pair::{Image, Pair, RenderedPair, unit_values};
@@ -150,7 +150,7 @@ fn index_file(path: &Path) -> Result<(PairFile, (usize, usize)), RefineTrainErro
         .ok_or_else(|| invalid(format!("metadata `{VIEWS_KEY}` missing or not a list of [frame, camera]")))?;
     let (mut size, mut starts) = (None, [0; 3]);
     for (k, name) in TENSORS.into_iter().enumerate() {
-        let entry = file.entry(name, 4)?;
+        let entry = file.entry(name)?;
         if entry.dtype != "F32" {
             return Err(invalid(format!("tensor '{name}' is {}, expected F32", entry.dtype)));
         }

@@ -14,7 +14,9 @@ use rand::rngs::Xoshiro256PlusPlus;
 use rand::{RngExt, SeedableRng};
 
 use crate::error::{PairKind, RefineTrainError};
-use crate::pair::unit_values;
+use dggt_model::safetensors_file::SafetensorsFile;
+
+use crate::pair::unit_range;
 pub use crate::pair::{Image, Pair};
 use crate::pair_files::PairFiles;
 
@@ -93,24 +95,22 @@ impl PairSet {
 /// The tensors `names` of a safetensors file (`[3, H, W]` or `[N, 3, H, W]` float32, values in [0, 1]) as
 /// images, in that order.
 pub fn read_images(path: &Path, names: &[String]) -> Result<Vec<Image>, RefineTrainError> {
-    let bytes = std::fs::read(path).map_err(|source| RefineTrainError::Io { path: path.into(), source })?;
     let invalid = |detail: String| RefineTrainError::ImageFile { path: path.into(), detail };
-    let file =
-        safetensors::SafeTensors::deserialize(&bytes).map_err(|e| invalid(format!("not a safetensors file: {e}")))?;
+    let mut file = SafetensorsFile::open(path)?;
     let mut images = Vec::new();
     for name in names {
         let tensor = |detail: String| invalid(format!("tensor '{name}': {detail}"));
-        let view = file.tensor(name).map_err(|_| tensor("missing".into()))?;
-        if view.dtype() != safetensors::Dtype::F32 {
-            return Err(tensor(format!("{:?}, expected float32", view.dtype())));
+        let entry = file.entry(name)?;
+        if entry.dtype != "F32" {
+            return Err(tensor(format!("{}, expected float32", entry.dtype)));
         }
-        let shape = view.shape().to_vec();
+        let shape = entry.shape.clone();
         let (height, width) = match shape.as_slice() {
             [3, h, w] => (*h, *w),
             [_, 3, h, w] => (*h, *w),
             _ => return Err(tensor(format!("shape {shape:?}, expected [3, H, W] or [N, 3, H, W]"))),
         };
-        let values = unit_values(view.data(), tensor)?;
+        let values = unit_range(file.read_f32(name)?.values, tensor)?;
         let size = 3 * height * width;
         images.extend(values.chunks_exact(size).map(|v| Image { height, width, values: v.to_vec() }));
     }

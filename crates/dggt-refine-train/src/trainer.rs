@@ -13,13 +13,13 @@
 //! is about to write again).
 
 use std::borrow::Cow;
-use std::fs;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use burn::optim::GradientsParams;
 use burn::tensor::Device;
 use dggt_metrics::psnr;
+use dggt_model::safetensors_file::SafetensorsFile;
 use dggt_refine::{Latent, Prompt};
 use dggt_run::checkpoint::{Purpose, RunState, latest, load_model, optimizer_file, read_state, save_folder};
 use dggt_run::divergence::{self, CheckpointDue, CheckpointGate, DivergenceLimit, StepFailure};
@@ -387,11 +387,11 @@ fn prompt_tokens(config: &RefineTrainConfig) -> Result<Vec<i64>, RefineTrainErro
         return Ok(prompt.token_ids(&model.base_dir)?);
     };
     let invalid = |detail: String| RefineTrainError::PromptTokens { path: path.clone(), detail };
-    let bytes = fs::read(path).map_err(|source| RefineTrainError::Io { path: path.clone(), source })?;
-    let file = safetensors::SafeTensors::deserialize(&bytes).map_err(|e| invalid(e.to_string()))?;
-    let ids = file.tensor("input_ids").map_err(|_| invalid("no tensor 'input_ids'".into()))?;
-    if ids.dtype() != safetensors::Dtype::I64 {
-        return Err(invalid(format!("'input_ids' is {:?}, expected int64", ids.dtype())));
+    let mut file = SafetensorsFile::open(path)?;
+    let dtype = &file.entry("input_ids").map_err(|_| invalid("no tensor 'input_ids'".into()))?.dtype;
+    if dtype != "I64" {
+        return Err(invalid(format!("'input_ids' is {dtype}, expected int64")));
     }
-    Ok(ids.data().chunks_exact(8).map(|b| i64::from_le_bytes(b.try_into().expect("8 bytes"))).collect())
+    let ids = file.read_data("input_ids")?;
+    ids.try_into_vec::<i64>().map_err(|e| invalid(format!("'input_ids' not readable as int64: {e:?}")))
 }

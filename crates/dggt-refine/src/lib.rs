@@ -9,9 +9,7 @@
 //! - [`text_encoder`]: the CLIP text encoder for the fixed prompt, run once; [`tokenizer`]: its tokenizer;
 //! - [`scheduler`]: the noise schedule and the step to the clean latent;
 //! - [`refiner`]: the whole computation, and loading a diffusers model folder ([`config`], [`weights`], its
-//!   files read piece by piece by the workspace's reader, `dggt_model::safetensors_file`; [`safetensors_file`]
-//!   gives that reader this crate's error type) with
-//!   a Difix checkpoint ([`checkpoint`]) over it; [`random`]: made-up weights at full size, for timing;
+//!   files read piece by piece by the workspace's reader, `dggt_model::safetensors_file`) with a Difix checkpoint ([`checkpoint`]) over it; [`random`]: made-up weights at full size, for timing;
 //! - [`precision`]: the float types of the UNet and the VAE;
 //! - [`reference`]: which input view a rendered frame attends to in the reference-view mode.
 //!
@@ -27,7 +25,6 @@ pub mod random;
 pub mod reference;
 pub mod refiner;
 pub mod resnet;
-pub mod safetensors_file;
 pub mod scheduler;
 pub mod text_encoder;
 pub mod tokenizer;

@@ -24,7 +24,7 @@ fn scenes(root: &Path, variant: ExportVariant, seeds: std::ops::Range<u64>) {
 
 /// The shared LPIPS-Alex weights: the linear layers and the AlexNet features.
 fn lpips_alex() -> (PathBuf, PathBuf) {
-    let parity = std::env::var_os("DGGT_PARITY_DIR").map_or_else(|| repo().join("../shared/parity"), PathBuf::from);
+    let parity = dggt_test_data::Shared::Parity.dir();
     let files = (
         parity.join("metrics/lpips_alex.safetensors"),
         parity.join("metrics/alexnet_features_torchvision_names.safetensors"),
@@ -167,9 +167,7 @@ fn a_sample_no_scene_can_give_names_each_failed_scene_once() {
 
 #[test]
 fn a_starting_checkpoint_that_does_not_cover_the_network_is_refused_by_name() {
-    let parity =
-        std::env::var("DGGT_PARITY_DIR").map(PathBuf::from).unwrap_or_else(|_| repo().join("../shared/parity"));
-    let weights = parity.join("dggt_tiny_s3_56x70/weights.safetensors");
+    let weights = dggt_test_data::parity("dggt_tiny_s3_56x70").join("weights.safetensors");
     assert!(weights.is_file(), "parity weights missing: {} (set DGGT_PARITY_DIR)", weights.display());
     let device = Device::flex();
     let tiny = TrainConfig::default().model.architecture();

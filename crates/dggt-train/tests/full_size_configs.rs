@@ -13,17 +13,12 @@ use burn::tensor::{Device, Tensor};
 use dggt_train::{DepthFlowMaps, Start, TrainConfig, Trainer};
 
 fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+    dggt_test_data::repo_root()
 }
 
 fn parity_dir() -> PathBuf {
-    let root = std::env::var("DGGT_PARITY_DIR").map(PathBuf::from).unwrap_or_else(|_| repo().join("../shared/parity"));
-    assert!(
-        root.join("dggt_tiny_s3_56x70/weights.safetensors").is_file(),
-        "parity vectors not found under {} (set DGGT_PARITY_DIR to the shared parity folder)",
-        root.display()
-    );
-    root
+    dggt_test_data::parity("dggt_tiny_s3_56x70");
+    dggt_test_data::Shared::Parity.dir()
 }
 
 /// The parity weights restricted to the parts a VGGT-1B checkpoint has.

@@ -7,7 +7,8 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use burn::tensor::{Device, Tensor, TensorData};
-use safetensors::{Dtype, SafeTensors};
+use dggt_model::safetensors_file::SafetensorsFile;
+use safetensors::Dtype;
 
 /// `$DGGT_PARITY_DIR/metrics`, or `shared/parity/metrics` next to the repository. Panics (failing the
 /// test) when the folder is missing.
@@ -46,21 +47,14 @@ impl Host {
     }
 }
 
-/// Every tensor of a safetensors file as f32.
+/// Every tensor of a safetensors file as f32 (the workspace's reader, which widens f64 and the half types).
 pub fn read_safetensors(path: &Path) -> HashMap<String, Host> {
-    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("reading {}: {e}", path.display()));
-    let file = SafeTensors::deserialize(&bytes).unwrap_or_else(|e| panic!("parsing {}: {e}", path.display()));
-    file.tensors()
+    let mut file = SafetensorsFile::open(path).unwrap_or_else(|e| panic!("{e}"));
+    file.names_in_file_order()
         .into_iter()
-        .map(|(name, view)| {
-            let values = match view.dtype() {
-                Dtype::F32 => view.data().chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().unwrap())).collect(),
-                Dtype::F64 => {
-                    view.data().chunks_exact(8).map(|b| f64::from_le_bytes(b.try_into().unwrap()) as f32).collect()
-                }
-                other => panic!("{name}: unexpected dtype {other:?}"),
-            };
-            (name, Host::new(view.shape().to_vec(), values))
+        .map(|name| {
+            let tensor = file.read_f32(&name).unwrap_or_else(|e| panic!("{e}"));
+            (name, Host::new(tensor.shape, tensor.values))
         })
         .collect()
 }

@@ -7,14 +7,9 @@ use burn::tensor::Device;
 use dggt_refine_train::RefineTrainConfig;
 use dggt_refine_train::config::{LossSection, LpipsKind, ModelSection, OptimSettings, PairsSection, RunSection};
 
-/// `$DGGT_PARITY_DIR`, else the nearest `shared/parity` beside the tests' package or a folder above it (the
-/// workspace's sibling `shared/parity`, whether the tests are this crate's or the workspace root's).
+/// The shared parity folder, which must hold the tiny refiner and the VGG-16 weights.
 pub fn parity_dir() -> PathBuf {
-    let package = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let root = std::env::var_os("DGGT_PARITY_DIR").map(PathBuf::from).unwrap_or_else(|| {
-        let nearest = package.ancestors().map(|dir| dir.join("shared/parity")).find(|dir| dir.is_dir());
-        nearest.unwrap_or_else(|| package.join("../../../shared/parity"))
-    });
+    let root = dggt_test_data::Shared::Parity.dir();
     let refiner = root.join("difix_tiny_s1");
     assert!(
         refiner.join("model_difix.pkl").is_file() && root.join("metrics/vgg16_features.safetensors").is_file(),

@@ -9,7 +9,7 @@ use dggt_model::Dggt;
 use dggt_train::{TrainConfig, Trainer};
 
 pub fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+    dggt_test_data::repo_root()
 }
 
 /// The overfit configuration made small: 56-pixel-wide images, four inputs, no input re-renders.
