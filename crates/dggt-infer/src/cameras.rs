@@ -6,6 +6,7 @@
 
 use burn::tensor::Tensor;
 use dggt_geom::{ImageSize, PoseEncoding, PosedCamera};
+use dggt_model::host::host_f32;
 use dggt_scene::InputView;
 
 use crate::error::InferError;
@@ -54,7 +55,7 @@ pub fn input_views(
 
 /// Decodes `[1, S, 9]` encodings to cameras (fields of view clamped to [`FOV_RANGE`]).
 pub fn decode_cameras(encoding: Tensor<3>, size: ImageSize) -> Result<Vec<PosedCamera>, InferError> {
-    let values = encoding.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default();
+    let values = host_f32(encoding, "pose encodings")?;
     values
         .chunks_exact(9)
         .map(|v| {

@@ -4,6 +4,8 @@ use std::path::PathBuf;
 
 #[derive(Debug, thiserror::Error)]
 pub enum InferError {
+    #[error(transparent)]
+    ReadBack(#[from] dggt_model::host::ReadBackError),
     #[error("{}: {detail}", path.display())]
     Input { path: PathBuf, detail: String },
     #[error("checkpoint {}: {detail}", path.display())]

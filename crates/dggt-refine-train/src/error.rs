@@ -54,9 +54,8 @@ pub enum RefineTrainError {
     /// A rendered target view with no input view of its camera to take the reference from.
     #[error("sample {sample}: no input view of camera {camera} to take the reference from")]
     NoReference { sample: u64, camera: usize },
-    /// An image that cannot be read back from its device.
-    #[error("{stage}: {image} not readable: {detail}")]
-    Readback { stage: &'static str, image: &'static str, detail: String },
+    #[error(transparent)]
+    ReadBack(#[from] dggt_model::host::ReadBackError),
     /// More training pairs failed to read than `pairs.max_bad_pairs` allows.
     #[error("pairs.max_bad_pairs: {failed} pairs could not be read (at most {limit} may fail); the last: {last}")]
     TooManyBadPairs { failed: u64, limit: u64, last: String },

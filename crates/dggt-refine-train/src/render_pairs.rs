@@ -8,6 +8,7 @@ use burn::module::Module;
 use burn::tensor::{Device, Tensor};
 use dggt_data::{DatasetSampling, Preprocess};
 use dggt_model::Dggt;
+use dggt_model::host::host_f32;
 use dggt_objective::{DepthFlowMaps, Objective, StepBatch, ViewTruth, ViewsToRender};
 use dggt_scene::nearest_in_time;
 
@@ -64,11 +65,6 @@ fn nearest_input<'a>(inputs: &'a [ViewTruth], target: &ViewTruth) -> Option<&'a 
 /// `[H, W, 3]` in [0, 1] to a host image.
 fn host_image(hwc: Tensor<3>) -> Result<Image, RefineTrainError> {
     let [height, width, _] = hwc.dims();
-    let values = hwc
-        .permute([2, 0, 1])
-        .into_data()
-        .convert::<f32>()
-        .try_into_vec::<f32>()
-        .map_err(|e| RefineTrainError::Readback { stage: "render", image: "image", detail: format!("{e:?}") })?;
+    let values = host_f32(hwc.permute([2, 0, 1]), "render: image")?;
     Ok(Image { height, width, values: values.into_iter().map(|v| v.clamp(0.0, 1.0)).collect() })
 }

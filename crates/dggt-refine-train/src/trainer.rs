@@ -19,6 +19,7 @@ use std::time::Instant;
 use burn::optim::GradientsParams;
 use burn::tensor::Device;
 use dggt_metrics::psnr;
+use dggt_model::host::host_f32;
 use dggt_model::safetensors_file::SafetensorsFile;
 use dggt_refine::{Latent, Prompt};
 use dggt_run::checkpoint::{Purpose, RunState, latest, load_model, optimizer_file, read_state, save_folder};
@@ -262,11 +263,7 @@ impl RefineTrainer {
             scored += 1;
             let (render, _, reference) = batch_pairs(&[&pair], &self.plain_device)?;
             let refined = model.refine(render, reference, Latent::PosteriorMean)?;
-            let refined: Vec<f32> = refined.into_data().try_into_vec().map_err(|e| RefineTrainError::Readback {
-                stage: "validation",
-                image: "refined image",
-                detail: format!("{e:?}"),
-            })?;
+            let refined = host_f32(refined, "validation: refined image")?;
             refined_sum += psnr(&refined, &pair.target.values)?;
             render_sum += psnr(&pair.render.values, &pair.target.values)?;
         }
@@ -293,11 +290,7 @@ impl RefineTrainer {
         let reference = reference.map(|r| batch(&[r], &self.plain_device)).transpose()?;
         let image = batch(&[image], &self.plain_device)?;
         let refined = self.model.valid().refine(image, reference, Latent::PosteriorMean)?;
-        refined.into_data().try_into_vec().map_err(|e| RefineTrainError::Readback {
-            stage: "refine",
-            image: "refined image",
-            detail: format!("{e:?}"),
-        })
+        Ok(host_f32(refined, "refined image")?)
     }
 
     /// Writes `checkpoints/step-NNNNNNNN/` and points `latest` at it; keeps the newest `run.keep_checkpoints`.

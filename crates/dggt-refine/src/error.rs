@@ -22,6 +22,8 @@ pub enum RefineError {
     Config { path: String, message: String },
     #[error(transparent)]
     Safetensors(#[from] dggt_model::safetensors_file::SafetensorsError),
+    #[error(transparent)]
+    ReadBack(#[from] dggt_model::host::ReadBackError),
     #[error("invalid input: {0}")]
     Input(String),
 }

@@ -12,6 +12,7 @@ use std::path::{Path, PathBuf};
 
 use burn::tensor::ops::PadMode;
 use burn::tensor::{Device, FloatDType, Tensor, TensorData};
+use dggt_model::host::host_f32;
 use rand::rngs::Xoshiro256PlusPlus;
 use rand::{RngExt, SeedableRng};
 
@@ -348,10 +349,7 @@ pub fn frame_from_interleaved(
 pub fn frame_to_interleaved(frames: &Tensor<4>, index: usize) -> Result<Vec<f32>, RefineError> {
     let [_, channels, height, width] = frames.dims();
     let hwc = frames.clone().narrow(0, index, 1).reshape([channels, height, width]).permute([1, 2, 0]);
-    hwc.into_data()
-        .convert::<f32>()
-        .try_into_vec::<f32>()
-        .map_err(|e| RefineError::Input(format!("frame {index}: {e:?}")))
+    Ok(host_f32(hwc, &format!("frame {index}"))?)
 }
 
 /// Pads the bottom and right of `x` with copies of its edge pixels to sides that are multiples of `multiple`.

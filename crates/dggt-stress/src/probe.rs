@@ -4,6 +4,7 @@
 use std::fmt;
 
 use burn::tensor::Tensor;
+use dggt_model::host::host_f32;
 use serde::Serialize;
 
 /// Where in the pipeline a value was read, in data-flow order.
@@ -75,14 +76,14 @@ pub struct Probe {
 impl Probe {
     /// Checks every value of `tensor` (read back to the host as `f32`).
     pub fn tensor<const D: usize>(&mut self, stage: Stage, what: &str, tensor: &Tensor<D>) {
-        match tensor.clone().into_data().convert::<f32>().try_into_vec::<f32>() {
+        match host_f32(tensor.clone(), what) {
             Ok(values) => self.values(stage, what, values.iter().map(|&v| f64::from(v))),
             Err(error) => self.findings.push(Finding {
                 stage,
                 what: what.to_string(),
                 bad: tensor.shape().num_elements(),
                 total: tensor.shape().num_elements(),
-                detail: format!("unreadable: {error:?}"),
+                detail: format!("unreadable: {}", error.detail),
             }),
         }
     }

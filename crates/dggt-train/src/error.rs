@@ -61,6 +61,8 @@ pub enum TrainError {
     /// A validation render's comparison image that cannot be written.
     #[error("{}: {detail}", path.display())]
     Comparison { path: PathBuf, detail: String },
+    #[error(transparent)]
+    ReadBack(#[from] dggt_model::host::ReadBackError),
     /// A validation depth score that cannot be computed.
     #[error("validation D-RMSE: {0}")]
     DepthScore(dggt_metrics::MetricError),

@@ -15,6 +15,7 @@ use dggt_data::{IndexedScene, LoadedSample, Preprocess, Scene, TrainingSample, l
 use dggt_losses::Lpips;
 use dggt_metrics::{MetricError, aligned_depth_rmse, image_metrics};
 use dggt_model::Dggt;
+use dggt_model::host::host_f32;
 use dggt_objective::{DepthFlowMaps, Objective, RenderedView, StepBatch, ViewsToRender, depth_flow_samples};
 use serde::Serialize;
 
@@ -152,7 +153,7 @@ impl Validator<'_> {
         let expected =
             Tensor::stack::<4>(views.iter().map(|v| batch.targets[v.truth_index].image.clone()).collect(), 0);
         let lpips = match self.lpips {
-            Some(lpips) => Some(host(lpips.eval(rendered.clone(), expected.clone())?.into_data())),
+            Some(lpips) => Some(host_f32(lpips.eval(rendered.clone(), expected.clone())?, "LPIPS")?),
             None => None,
         };
         let metrics = image_metrics(rendered, expected)?;
@@ -186,7 +187,7 @@ impl Validator<'_> {
     fn depth_rmse(&self, scene: &Scene, loaded: &LoadedSample, view: &RenderedView) -> Result<Option<f64>, TrainError> {
         let target = &loaded.targets[view.truth_index];
         let Some(cells) = depth_flow_samples(scene, self.preprocess, target)? else { return Ok(None) };
-        let rendered = host(view.depth.clone().into_data());
+        let rendered = host_f32(view.depth.clone(), "rendered depth")?;
         let predicted: Vec<f32> = cells.pixels.iter().map(|&p| rendered[p as usize]).collect();
         match aligned_depth_rmse(&predicted, &cells.depths) {
             Ok(alignment) => Ok(Some(alignment.rmse)),
@@ -218,17 +219,13 @@ fn scene_score(views: &[ViewScore]) -> SceneScore {
     }
 }
 
-fn host(data: burn::tensor::TensorData) -> Vec<f32> {
-    data.convert::<f32>().try_into_vec::<f32>().unwrap_or_default()
-}
-
 /// Writes every target's render, truth and difference into `dir`.
 fn save_comparisons(dir: &Path, views: &[RenderedView], batch: &StepBatch) -> Result<(), TrainError> {
     std::fs::create_dir_all(dir).map_err(|source| TrainError::Io { path: dir.into(), source })?;
     for view in views {
         let truth = &batch.targets[view.truth_index];
         let path = dir.join(format!("frame{:03}_camera{}.png", truth.frame, truth.rig_camera));
-        comparison(view.rgb.clone(), truth.image.clone())
+        comparison(view.rgb.clone(), truth.image.clone())?
             .save(&path)
             .map_err(|e| TrainError::Comparison { path: path.clone(), detail: e.to_string() })?;
     }
@@ -236,12 +233,11 @@ fn save_comparisons(dir: &Path, views: &[RenderedView], batch: &StepBatch) -> Re
 }
 
 /// `[H, W, 3]` render and truth in `[0, 1]` as one RGB image: render | truth | 4 |render - truth|.
-fn comparison(rendered: Tensor<3>, truth: Tensor<3>) -> image::RgbImage {
+fn comparison(rendered: Tensor<3>, truth: Tensor<3>) -> Result<image::RgbImage, TrainError> {
     let [h, w, _] = rendered.dims();
-    let pixels = |t: Tensor<3>| host(t.into_data());
-    let (rendered, truth) = (pixels(rendered), pixels(truth));
+    let (rendered, truth) = (host_f32(rendered, "validation render")?, host_f32(truth, "validation truth")?);
     let byte = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
-    image::RgbImage::from_fn(3 * w as u32, h as u32, |x, y| {
+    Ok(image::RgbImage::from_fn(3 * w as u32, h as u32, |x, y| {
         let (panel, x) = (x as usize / w, x as usize % w);
         let at = (y as usize * w + x) * 3;
         image::Rgb(std::array::from_fn(|k| match panel {
@@ -249,5 +245,5 @@ fn comparison(rendered: Tensor<3>, truth: Tensor<3>) -> image::RgbImage {
             1 => byte(truth[at + k]),
             _ => byte(4.0 * (rendered[at + k] - truth[at + k]).abs()),
         }))
-    })
+    }))
 }
