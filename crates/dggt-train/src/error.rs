@@ -42,7 +42,7 @@ pub enum TrainError {
         checkpoint.display(),
         changes.iter().map(ToString::to_string).collect::<Vec<_>>().join("; ")
     )]
-    ArchitectureChanged { checkpoint: PathBuf, changes: Vec<crate::resume::Change> },
+    ArchitectureChanged { checkpoint: PathBuf, changes: Vec<Change> },
     /// The single scene of a run (`data.scene`) that cannot be indexed.
     #[error("data.scene {}: {reason}", scene.display())]
     SceneExcluded { scene: PathBuf, reason: String },
@@ -69,4 +69,20 @@ pub enum TrainError {
     /// An error of a validation pass, with the step it validated.
     #[error("validation at step {step}: {source}")]
     Validation { step: u64, source: Box<TrainError> },
+}
+
+/// A setting whose value differs between a checkpoint and the configuration.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Change {
+    /// Its dotted name (`model.pixel_skip`, `optim.lr`; for an older checkpoint the network configuration's
+    /// own names, `network.dpt.pixel_skip`).
+    pub setting: String,
+    pub checkpoint: String,
+    pub configured: String,
+}
+
+impl std::fmt::Display for Change {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} is {} in the checkpoint, {} in the configuration", self.setting, self.checkpoint, self.configured)
+    }
 }

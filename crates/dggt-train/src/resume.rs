@@ -10,7 +10,6 @@
 //! optimiser setting goes unreported.
 
 use std::collections::BTreeSet;
-use std::fmt;
 use std::path::Path;
 
 use dggt_model::ModelConfig;
@@ -19,6 +18,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use crate::config::{ModelSection, TrainConfig};
+use crate::error::Change;
 use crate::error::TrainError;
 
 /// The sections a checkpoint records, in its folder.
@@ -37,22 +37,6 @@ pub struct ConfiguredSections {
 impl ConfiguredSections {
     pub fn of(config: &TrainConfig) -> Self {
         Self { model: config.model.clone(), optim: config.optim.clone() }
-    }
-}
-
-/// A setting whose value differs between a checkpoint and the configuration.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Change {
-    /// Its dotted name (`model.pixel_skip`, `optim.lr`; for an older checkpoint the network configuration's
-    /// own names, `network.dpt.pixel_skip`).
-    pub setting: String,
-    pub checkpoint: String,
-    pub configured: String,
-}
-
-impl fmt::Display for Change {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{} is {} in the checkpoint, {} in the configuration", self.setting, self.checkpoint, self.configured)
     }
 }
 
