@@ -17,9 +17,7 @@ use std::time::Instant;
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_data::{PreparedView, Preprocess, Scene, prepare_view};
 use dggt_geom::{ImageSize, PixelConvention, PosedCamera};
-use dggt_infer::{
-    InputCameras, MotionPath, Scene4d, SceneOptions, SkyChoice, ViewSlot, fresh_model, input_views, load_network,
-};
+use dggt_infer::{InputCameras, MotionPath, SceneOptions, SkyChoice, ViewSlot, fresh_model, input_views, load_network};
 use dggt_losses::{Lpips, LpipsKind};
 use dggt_metrics::ImageShape;
 use dggt_model::host::host_f32;
@@ -671,7 +669,8 @@ impl Runner<'_> {
             PoseSource::Predicted => InputCameras::Predicted,
         };
         let views = input_views(&prediction, &setup.input_slots, cameras, setup.size)?;
-        let scene = Scene4d::build(model, &prediction, images, views, &setup.timeline, &setup.scene_options)?
+        let scene = prediction
+            .scene(model, images, views, &setup.timeline, &setup.scene_options)?
             .ok_or_else(|| BenchError::Missing("network: no Gaussian head: nothing to render"))?;
         let mut targets = Vec::new();
         for &(slot, camera) in &setup.target_truth {

@@ -14,10 +14,11 @@
 //! ran made the heads' outputs NaN on wgpu with burn 0.22.1.
 
 use burn::tensor::Tensor;
-use dggt_infer::{MotionPath, Prediction, Scene4d, heads_chunked};
+use dggt_infer::{MotionPath, Prediction, heads_chunked};
 use dggt_model::Dggt;
 use dggt_model::aggregator::AggregatorOutput;
 use dggt_model::host::host_f32;
+use dggt_scene::Scene4d;
 use dggt_scene::{AssembledGaussians, TargetView};
 
 use crate::error::BenchError;

@@ -12,8 +12,9 @@ use dggt_bench::report::CSV_HEADER;
 use dggt_bench::run::fresh_tiny_config;
 use dggt_bench::{BenchOptions, RowOutcome, run_bench, stages, write_outputs};
 use dggt_geom::{PinholeIntrinsics, PosedCamera, WorldFromCamera};
-use dggt_infer::{Scene4d, SkyChoice};
+use dggt_infer::SkyChoice;
 use dggt_refine::{Latent, Prompt, ReferenceView, RefinerSpec};
+use dggt_scene::Scene4d;
 use dggt_scene::{AssemblySettings, InputView, MeansGradient, PixelGaussians, TargetView, render_target};
 
 fn fixture() -> PathBuf {

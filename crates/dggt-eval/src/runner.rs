@@ -25,13 +25,13 @@ use burn::tensor::{Device, Tensor, TensorData};
 use dggt_data::{DepthFlowMap, DepthSource, PlanarImage, Preprocess, Scene, images, open_scene, prepare_view};
 use dggt_geom::ImageSize;
 use dggt_infer::{
-    Architecture, GroundTruth, InputCameras, InputSet, LoadedNetwork, MotionPath, Scene4d, SceneOptions, ViewSlot,
+    Architecture, GroundTruth, InputCameras, InputSet, LoadedNetwork, MotionPath, SceneOptions, ViewSlot,
     forward_chunked, input_views, load_network,
 };
 use dggt_losses::{Lpips, LpipsKind};
 use dggt_model::host::host_f32;
 use dggt_refine::{ReferenceView, Refiner, RefinerSpec, frame_from_interleaved, frame_to_interleaved};
-use dggt_scene::{TargetView, Timeline, nearest_in_time};
+use dggt_scene::{Scene4d, TargetView, Timeline, nearest_in_time};
 
 use crate::error::EvalError;
 use crate::grid::{CellMapping, cell_has_sky};
@@ -468,7 +468,8 @@ fn forward_scene(root: &Path, context: &SceneContext<'_>, watch: &mut Stopwatch)
 
     let started = Instant::now();
     let scene_options = SceneOptions { assembly: network.assembly, ..SceneOptions::default() };
-    let scene = Scene4d::build(&network.model, &prediction, &batch, views, &timeline, &scene_options)?
+    let scene = prediction
+        .scene(&network.model, &batch, views, &timeline, &scene_options)?
         .ok_or_else(|| EvalError::NoGaussianHead { checkpoint: context.options.checkpoint.clone() })?;
     drop(prediction);
     watch.add(ASSEMBLY, started);

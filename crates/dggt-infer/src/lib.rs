@@ -10,7 +10,8 @@
 //! 2. [`inputs`]: the views of an image folder, glob or scene export, preprocessed to the network's size;
 //! 3. [`forward`]: the forward pass, dense heads a few frames at a time;
 //! 4. [`cameras`]: the input views' cameras, predicted or given;
-//! 5. [`scene`]: the 4D scene (pixel and sky Gaussians) and its renders at any time.
+//! 5. [`scene`]: the 4D scene of the prediction ([`dggt_scene::Scene4d`]: pixel and sky Gaussians, renders at any
+//!    time).
 //!
 //! Parity with the release's reference vectors (`dggt parity`) is `dggt-parity`'s.
 //!
@@ -34,5 +35,5 @@ pub use inputs::{GroundTruth, InputImage, InputSet};
 pub use network::{
     Architecture, CheckpointInfo, DEFAULT_PRESET, LoadedNetwork, StartingWeights, fresh_model, load_network,
 };
-pub use scene::{Scene4d, SceneOptions, SkyChoice};
+pub use scene::{SceneOptions, SkyChoice};
 pub use settings::{CameraSource, ModelSection, RenderSection, TrainedSettings};

@@ -1,15 +1,10 @@
-//! The 4D scene of one forward pass: every input pixel's Gaussian placed with its view's camera (moving with
-//! the predicted velocities when the network predicts them), the sky Gaussians coloured from the input images,
-//! and how targets are assembled and rasterised. Any target view at any time renders from it.
+//! The 4D scene of one forward pass ([`dggt_scene::Scene4d`]) built from the network's outputs: every input
+//! pixel's Gaussian placed with its view's camera (moving with the predicted velocities when the network
+//! predicts them) and the sky Gaussians coloured from the input images, as the options choose.
 
 use burn::tensor::Tensor;
-use dggt_geom::PosedCamera;
 use dggt_model::Dggt;
-use dggt_model::sky::SkyGaussians;
-use dggt_scene::{
-    AssembledGaussians, AssemblySettings, InputView, MeansGradient, PixelGaussians, TargetView, Timeline, ViewRender,
-    assemble, interpolate_camera, render_assembled, render_target,
-};
+use dggt_scene::{AssemblySettings, InputView, MeansGradient, PixelGaussians, Scene4d, Timeline};
 
 use crate::error::InferError;
 use crate::forward::Prediction;
@@ -33,35 +28,27 @@ pub struct SceneOptions {
     pub assembly: AssemblySettings,
 }
 
-/// One forward pass's Gaussians, ready to render at any time.
-#[derive(Debug, Clone)]
-pub struct Scene4d {
-    pub pixels: PixelGaussians,
-    pub sky: Option<SkyGaussians>,
-    pub assembly: AssemblySettings,
-}
-
-impl Scene4d {
-    /// The scene of `prediction` over `views` (one per input frame of `images`, `[1, S, 3, H, W]` in `[0, 1]`,
-    /// which colour the sky); `None` when the network has no Gaussian head.
-    pub fn build(
+impl Prediction {
+    /// The 4D scene of this prediction over `views` (one per input frame of `images`, `[1, S, 3, H, W]` in
+    /// `[0, 1]`, which colour the sky); `None` when the network has no Gaussian head.
+    pub fn scene(
+        &self,
         model: &Dggt,
-        prediction: &Prediction,
         images: &Tensor<5>,
         views: Vec<InputView>,
         timeline: &Timeline,
         options: &SceneOptions,
-    ) -> Result<Option<Self>, InferError> {
-        let Some(maps) = &prediction.gaussians else { return Ok(None) };
+    ) -> Result<Option<Scene4d>, InferError> {
+        let Some(maps) = &self.gaussians else { return Ok(None) };
         let pixels = PixelGaussians::new(
             maps,
-            prediction.depth.clone(),
-            prediction.dynamic_logit.clone(),
+            self.depth.clone(),
+            self.dynamic_logit.clone(),
             views,
             options.means_gradient,
             model.unproject_at,
         )?;
-        let pixels = match &prediction.velocity {
+        let pixels = match &self.velocity {
             Some(velocity) => pixels.with_motion(velocity.clone(), timeline.frames_per_time())?,
             None => pixels,
         };
@@ -74,35 +61,6 @@ impl Scene4d {
             }
             _ => None,
         };
-        Ok(Some(Self { pixels, sky, assembly: options.assembly }))
-    }
-
-    /// The input views the Gaussians were placed with.
-    pub fn views(&self) -> &[InputView] {
-        &self.pixels.views
-    }
-
-    /// The camera of `rig_camera` at scene time `time`, interpolated between its input views.
-    pub fn camera_at(&self, rig_camera: usize, time: f64) -> Result<PosedCamera, InferError> {
-        Ok(interpolate_camera(&self.pixels.views, rig_camera, time)?)
-    }
-
-    /// Assembles and renders `target` over the sky.
-    pub fn render(&self, target: &TargetView) -> Result<ViewRender, InferError> {
-        Ok(render_target(&self.pixels, self.sky.as_ref(), target, &self.assembly)?)
-    }
-
-    /// The first half of [`Scene4d::render`]: the Gaussians visible at `target`.
-    pub fn assemble(&self, target: &TargetView) -> Result<AssembledGaussians, InferError> {
-        Ok(assemble(&self.pixels, target, &self.assembly)?)
-    }
-
-    /// The second half of [`Scene4d::render`]: Gaussians assembled for `target`, rasterised over the sky.
-    pub fn render_assembled(
-        &self,
-        assembled: &AssembledGaussians,
-        target: &TargetView,
-    ) -> Result<ViewRender, InferError> {
-        Ok(render_assembled(assembled, self.sky.as_ref(), target, self.pixels.size, &self.assembly)?)
+        Ok(Some(Scene4d { pixels, sky, assembly: options.assembly }))
     }
 }

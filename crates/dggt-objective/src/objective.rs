@@ -18,14 +18,14 @@ use std::collections::BTreeMap;
 use burn::tensor::{FloatDType, Int, Tensor, TensorData};
 use dggt_geom::PoseEncoding;
 use dggt_infer::{
-    CameraSource, InputCameras, MotionPath, RenderSection, Scene4d, SceneOptions, SkyChoice, ViewSlot, forward_chunked,
+    CameraSource, InputCameras, MotionPath, RenderSection, SceneOptions, SkyChoice, ViewSlot, forward_chunked,
     input_views,
 };
 use dggt_losses::{GramLoss, Lpips, bce_with_logits, l2, lifespan_l1, opacity_loss};
 use dggt_metrics::psnr;
 use dggt_model::Dggt;
 use dggt_model::host::host_f32;
-use dggt_scene::{AssemblyCounts, PixelGaussians, TargetView};
+use dggt_scene::{AssemblyCounts, PixelGaussians, Scene4d, TargetView};
 
 use crate::batch::{DepthFlowSamples, StepBatch, ViewTruth};
 use crate::error::ObjectiveError;
@@ -299,7 +299,7 @@ impl Forward {
             sky: if render.sky { SkyChoice::Render } else { SkyChoice::Skip },
             assembly: render.assembly(),
         };
-        let scene = Scene4d::build(model, &prediction, &batch.images, views, &batch.timeline, &options)?.ok_or(
+        let scene = prediction.scene(model, &batch.images, views, &batch.timeline, &options)?.ok_or(
             ObjectiveError::Unsupported(
                 "the configuration has no Gaussian head (gs_head); it cannot be trained to render",
             ),

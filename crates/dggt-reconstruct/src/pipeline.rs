@@ -33,11 +33,12 @@ use dggt_formats::nerfstudio::{NerfstudioFrame, write_transforms};
 use dggt_formats::ply::{GaussianCloud, write_ply};
 use dggt_geom::{ImageSize, PosedCamera, WorldFromCamera};
 use dggt_infer::{
-    InputCameras, InputSet, MotionPath, Scene4d, SceneOptions, ViewSlot, forward_chunked, input_views, load_network,
+    InputCameras, InputSet, MotionPath, SceneOptions, ViewSlot, forward_chunked, input_views, load_network,
 };
 use dggt_model::host::host_f32;
 use dggt_scene::{
-    AssemblyCounts, InputView, MIN_OPACITY, PixelGaussians, TargetView, Timeline, nearest_in_time, nearest_view,
+    AssemblyCounts, InputView, MIN_OPACITY, PixelGaussians, Scene4d, TargetView, Timeline, nearest_in_time,
+    nearest_view,
 };
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
@@ -183,7 +184,7 @@ pub fn reconstruct(options: &ReconstructOptions, device: &Device) -> Result<Summ
     stages.done("write cameras and maps");
 
     let scene_options = SceneOptions { assembly: network.assembly, ..SceneOptions::default() };
-    let scene = Scene4d::build(&network.model, &prediction, &batch, views, &timeline, &scene_options)?;
+    let scene = prediction.scene(&network.model, &batch, views, &timeline, &scene_options)?;
     drop(prediction);
     let (counts, renders, input_psnr_db) = match scene {
         None => {

@@ -6,7 +6,8 @@
 //! 2. [`pixels`]: the per-pixel Gaussians of every input view, means unprojected from the predicted depth.
 //! 3. [`assemble`]: the static union faded by the lifespan to the target time, the dynamic Gaussians of the
 //!    view(s) nearest in time, and culling of what the rasteriser would skip.
-//! 4. [`compose`]: rasterising the assembled Gaussians and compositing them over the sky.
+//! 4. [`compose`]: rasterising the assembled Gaussians and compositing them over the sky;
+//! 5. [`scene4d`]: all of it as one value, [`Scene4d`], that renders any target view at any time.
 //!
 //! Conventions: cameras are [`PosedCamera`](dggt_geom::PosedCamera)s (world-from-camera poses, OpenCV axes);
 //! quaternions `w x y z`; scales linear; opacities in `[0, 1]`; the world is the first input camera's frame
@@ -16,12 +17,14 @@ pub mod assemble;
 pub mod compose;
 mod error;
 pub mod pixels;
+pub mod scene4d;
 pub mod timeline;
 
 pub use assemble::{AssembledGaussians, AssemblyCounts, AssemblySettings, HiddenSky, MIN_OPACITY, assemble};
 pub use compose::{ViewRender, camera_tensors, composite, render_assembled, render_target, sky_splats};
 pub use error::SceneError;
 pub use pixels::{MeansGradient, PixelGaussians};
+pub use scene4d::Scene4d;
 pub use timeline::{
     DynamicBlend, InputView, TargetView, Timeline, dynamic_sources, interpolate_camera, nearest_in_time, nearest_view,
 };

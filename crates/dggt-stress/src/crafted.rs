@@ -11,10 +11,10 @@ use std::ops::Range;
 
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_geom::PixelConvention;
-use dggt_infer::Scene4d;
 use dggt_model::gaussian_maps::GaussianMaps;
 use dggt_model::sky::SkyModel;
 use dggt_objective::{Forward, Objective};
+use dggt_scene::Scene4d;
 use dggt_scene::{InputView, MeansGradient, PixelGaussians};
 
 use crate::error::StressError;
