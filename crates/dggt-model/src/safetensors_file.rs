@@ -64,15 +64,7 @@ pub enum SafetensorsError {
 
 /// A tensor whose byte range lies outside the data section or does not span its shape.
 #[derive(Debug, thiserror::Error)]
-#[error(
-    "{}: not a safetensors file: tensor '{name}': bytes {}..{} of {data_len}, expected {} bytes for {} {:?}",
-    path.display(),
-    entry.data_offsets[0],
-    entry.data_offsets[1],
-    expected.map_or("too many".to_string(), |bytes| bytes.to_string()),
-    entry.dtype,
-    entry.shape
-)]
+#[error("{}: not a safetensors file: tensor '{name}': {}", path.display(), self.what_is_wrong())]
 pub struct BadSpan {
     pub path: PathBuf,
     pub name: String,
@@ -81,6 +73,26 @@ pub struct BadSpan {
     pub data_len: u64,
     /// The bytes the shape needs (`None` when that overflows).
     pub expected: Option<usize>,
+}
+
+impl BadSpan {
+    /// A cut-short file (the range runs past the end of the data), or a range that does not fit the shape.
+    fn what_is_wrong(&self) -> String {
+        let [begin, end] = self.entry.data_offsets;
+        if end > self.data_len || begin > end {
+            return format!(
+                "bytes {begin}..{end} run past the end of the data ({} bytes): the file is cut short",
+                self.data_len
+            );
+        }
+        let expected = self.expected.map_or("too many".to_string(), |bytes| bytes.to_string());
+        format!(
+            "bytes {begin}..{end} ({} bytes), expected {expected} bytes for {} {:?}",
+            end - begin,
+            self.entry.dtype,
+            self.entry.shape
+        )
+    }
 }
 
 /// One tensor of the header: its type name as stored (`F32`, `BF16`, `I64`, ...), shape and byte range in the
