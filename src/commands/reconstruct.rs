@@ -96,7 +96,7 @@ pub fn run(args: Args) -> Result<()> {
     options.width = args.width;
     options.chunk_frames = args.chunk;
     options.max_output_bytes = args.bound.bytes();
-    options.progress = std::io::IsTerminal::is_terminal(&std::io::stderr());
+    options.progress = dggt_run::progress::Visibility::on_terminal();
     tracing::info!("reconstructing {} with {} on {device:?}", options.images.display(), options.checkpoint.display());
     let summary = reconstruct(&options, &device)?;
     println!("{summary}");

@@ -12,7 +12,7 @@ use dggt_refine::checkpoint::DifixCheckpoint;
 use dggt_refine::{
     Latent, Prompt, ReferenceView, Refiner, RefinerPrecision, RefinerSpec, frame_from_interleaved, frame_to_interleaved,
 };
-use indicatif::{ProgressBar, ProgressStyle};
+use dggt_run::progress::{Visibility, styled_bar};
 
 use crate::backend::DeviceList;
 use crate::commands::output::{self, OutputKind, OverwriteArg, OverwriteFileArg};
@@ -226,8 +226,11 @@ pub struct RefineJob {
 /// Refines every job's image (8-bit PNG out), one frame at a time, with a progress bar. A sampled latent
 /// draws job `i`'s noise from `seed + i`.
 pub fn refine_files(refiner: &Refiner, jobs: &[RefineJob], latent: Latent, device: &Device) -> Result<()> {
-    let bar = ProgressBar::new(jobs.len() as u64);
-    bar.set_style(ProgressStyle::with_template("refining {bar:30} {pos}/{len} [{elapsed_precise}]")?);
+    let bar = styled_bar(
+        "refining {bar:30} {pos}/{len} [{elapsed_precise}]",
+        Visibility::on_terminal(),
+        Some(jobs.len() as u64),
+    );
     let read = |path: &Path| -> Result<_> {
         let (size, rgb) = read_rgb_png(path)?;
         Ok((size, frame_from_interleaved(&rgb, size.height as usize, size.width as usize, device)?))

@@ -36,11 +36,11 @@ use dggt_infer::{
     InputCameras, InputSet, MotionPath, SceneOptions, ViewSlot, forward_chunked, input_views, load_network,
 };
 use dggt_model::host::host_f32;
+use dggt_run::progress::{Visibility, styled_bar};
 use dggt_scene::{
     AssemblyCounts, InputView, MIN_OPACITY, PixelGaussians, Scene4d, TargetView, Timeline, nearest_in_time,
     nearest_view,
 };
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::align::pose_error;
 use crate::error::ReconstructError;
@@ -78,8 +78,8 @@ pub struct ReconstructOptions {
     /// Frames per chunk of the dense heads.
     pub chunk_frames: usize,
     pub out: PathBuf,
-    /// Show a progress bar on stderr.
-    pub progress: bool,
+    /// Whether the rendering progress bar is drawn on stderr.
+    pub progress: Visibility,
     /// The most the outputs may take at most ([`OutputEstimate`]), checked before the forward pass.
     pub max_output_bytes: u64,
 }
@@ -97,7 +97,7 @@ impl ReconstructOptions {
             width: None,
             chunk_frames: 4,
             out: out.into(),
-            progress: false,
+            progress: Visibility::Hidden,
             max_output_bytes: DEFAULT_MAX_OUTPUT_BYTES,
         }
     }
@@ -286,12 +286,12 @@ fn render_views(
     written: &mut Written,
     scene: &Scene4d,
     request: &RenderRequest<'_>,
-    progress: bool,
+    progress: Visibility,
 ) -> Result<(Vec<RenderRecord>, Vec<f64>), ReconstructError> {
     let (inputs, size) = (request.inputs, request.size);
     let views = scene.views();
     let total = inputs.views.len() + request.times_s.len() * inputs.cameras.len();
-    let bar = progress_bar(progress, total as u64);
+    let bar = styled_bar("rendering {bar:30} {pos}/{len} [{elapsed}<{eta}]", progress, Some(total as u64));
     // Input views re-rendered: the sky masks, the PSNR, and the renders at input times.
     let mut at_inputs: HashMap<(usize, u64), (Vec<f32>, AssemblyCounts)> = HashMap::new();
     let mut input_psnr_db = Vec::new();
@@ -556,15 +556,4 @@ fn sky_cloud(sky: &dggt_model::sky::SkyGaussians) -> Result<GaussianCloud, Recon
         opacities: host(sky.opacities.clone(), "sky opacities")?,
         colors: triples(&sky.colors, "sky colours")?,
     })
-}
-
-fn progress_bar(show: bool, total: u64) -> ProgressBar {
-    let bar = ProgressBar::with_draw_target(
-        Some(total),
-        if show { ProgressDrawTarget::stderr() } else { ProgressDrawTarget::hidden() },
-    );
-    if let Ok(style) = ProgressStyle::with_template("rendering {bar:30} {pos}/{len} [{elapsed}<{eta}]") {
-        bar.set_style(style);
-    }
-    bar
 }
