@@ -79,19 +79,15 @@ impl BadSpan {
     /// A cut-short file (the range runs past the end of the data), or a range that does not fit the shape.
     fn what_is_wrong(&self) -> String {
         let [begin, end] = self.entry.data_offsets;
+        let expected = self.expected.map_or("too many".to_string(), |bytes| bytes.to_string());
+        let needed = format!("expected {expected} bytes for {} {:?}", self.entry.dtype, self.entry.shape);
         if end > self.data_len || begin > end {
+            let data_len = self.data_len;
             return format!(
-                "bytes {begin}..{end} run past the end of the data ({} bytes): the file is cut short",
-                self.data_len
+                "bytes {begin}..{end} run past the end of the data ({data_len} bytes; {needed}): cut short"
             );
         }
-        let expected = self.expected.map_or("too many".to_string(), |bytes| bytes.to_string());
-        format!(
-            "bytes {begin}..{end} ({} bytes), expected {expected} bytes for {} {:?}",
-            end - begin,
-            self.entry.dtype,
-            self.entry.shape
-        )
+        format!("bytes {begin}..{end} ({} bytes), {needed}", end - begin)
     }
 }
 
