@@ -1,5 +1,7 @@
 //! Errors of the process group; each says what was expected.
 
+use crate::group::Rank;
+
 /// What went wrong in a collective operation or in setting the group up.
 #[derive(Debug, thiserror::Error)]
 pub enum CollectiveError {
@@ -21,5 +23,3 @@ pub enum CollectiveError {
     #[error("bucket size must be at least one element")]
     EmptyBucket,
 }
-
-use crate::group::Rank;
