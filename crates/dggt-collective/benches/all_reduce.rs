@@ -52,7 +52,7 @@ fn main() {
             "all-reduce of {gb:.2} GB of f32 gradients over {} ranks in buckets of {} MiB: median {median:.2} s of 3 \
              ({:.2} GB/s per rank)",
             group.size(),
-            bucket * 4 >> 20,
+            (bucket * 4) >> 20,
             gb / median
         );
     }

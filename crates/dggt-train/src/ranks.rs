@@ -194,7 +194,7 @@ mod tests {
         let (local, ranks) = (3, 4);
         let per_rank: Vec<Vec<u64>> =
             (0..ranks).map(|r| sample_positions(2, local, r, ranks).take(3 * local as usize).collect()).collect();
-        let mut merged = Vec::new();
+        let mut merged: Vec<u64> = Vec::new();
         for step in 0..3 {
             for rank in &per_rank {
                 merged.extend(&rank[step * local as usize..(step + 1) * local as usize]);
