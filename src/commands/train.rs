@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 use dggt_run::RunError;
 use dggt_run::progress::Visibility;
-use dggt_train::{RunOptions, Start, TrainConfig, TrainError, Trainer};
+use dggt_train::{ProcessGroup, RunOptions, Start, TrainConfig, TrainError, Trainer};
 
 use crate::backend::DeviceList;
 
@@ -50,7 +50,12 @@ pub fn run(args: Args) -> Result<()> {
             .map_err(|e| anyhow::anyhow!("{}: run.devices: {e}", path.display()))?,
     };
     let start = if args.resume { Start::Resume } else { Start::Fresh };
-    let mut trainer = Trainer::new(config, devices.devices()?, start).map_err(with_flags)?;
+    // One process, or one rank of `mpirun -np P dggt train` (docs/DISTRIBUTED.md).
+    let group = ProcessGroup::from_environment()?;
+    if group.size() > 1 {
+        tracing::info!(rank = group.rank(), ranks = group.size(), "training as one rank of an MPI job");
+    }
+    let mut trainer = Trainer::in_group(config, devices.devices()?, start, group).map_err(with_flags)?;
     let params = burn::module::Module::num_params(trainer.model());
     tracing::info!(
         "{} parameters, starting at step {} of {}",
@@ -59,6 +64,9 @@ pub fn run(args: Args) -> Result<()> {
         trainer.config().run.steps
     );
     if args.dry_run {
+        if !trainer.group().is_writer() {
+            return Ok(());
+        }
         let validation = trainer.validate()?;
         println!(
             "dry run: configuration, scene, network ({params} parameters), losses and optimiser built; validation {}",
@@ -67,6 +75,9 @@ pub fn run(args: Args) -> Result<()> {
         return Ok(());
     }
     let summary = trainer.run(RunOptions { progress: Visibility::on_terminal(), stop_after: None })?;
+    if !trainer.group().is_writer() {
+        return Ok(());
+    }
     let out = &trainer.config().run.out_dir;
     print!(
         "trained steps {}..{} in {:.1} s ({} skipped)",

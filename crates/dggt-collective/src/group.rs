@@ -84,6 +84,16 @@ impl ProcessGroup {
         }
     }
 
+    /// [`ProcessGroup::all_reduce_sum`] of `f64` values (losses and counts summed for the log).
+    #[cfg_attr(not(feature = "mpi"), allow(unused_variables))]
+    pub fn all_reduce_sum_f64(&self, values: &mut [f64]) -> Result<(), CollectiveError> {
+        match self {
+            Self::Single => Ok(()),
+            #[cfg(feature = "mpi")]
+            Self::Mpi(group) => group.all_reduce_sum(values),
+        }
+    }
+
     /// Rank 0's `value` on every rank (a seed, a step to resume from).
     pub fn broadcast_u64(&self, value: u64) -> u64 {
         match self {
@@ -94,6 +104,12 @@ impl ProcessGroup {
     }
 }
 
+// The trainer's device threads share the group (only the thread that created it calls collectives).
+const _: () = {
+    const fn shared_between_threads<T: Send + Sync>() {}
+    shared_between_threads::<ProcessGroup>();
+};
+
 /// The rank and size a launcher gave this process, as their text.
 fn launched_rank() -> Option<(String, String)> {
     LAUNCHER_VARIABLES.iter().find_map(|(rank, size)| Some((std::env::var(rank).ok()?, std::env::var(size).ok()?)))
@@ -101,9 +117,12 @@ fn launched_rank() -> Option<(String, String)> {
 
 #[cfg(feature = "mpi")]
 pub(crate) mod mpi_group {
-    //! One rank of an MPI job, over rsmpi.
+    //! One rank of an MPI job, over rsmpi. Only the MPI environment is held (the world communicator is taken
+    //! per call), so the group can sit in a trainer whose worker threads share it; MPI is initialised as
+    //! "funneled": every collective is called from the thread that initialised it.
 
     use mpi::collective::SystemOperation;
+    use mpi::datatype::Equivalence;
     use mpi::environment::Universe;
     use mpi::topology::SimpleCommunicator;
     use mpi::traits::{Communicator, CommunicatorCollectives, Root};
@@ -113,30 +132,38 @@ pub(crate) mod mpi_group {
 
     /// The MPI world of this job; MPI is finalised when it is dropped.
     pub struct MpiGroup {
-        world: SimpleCommunicator,
+        rank: Rank,
+        size: usize,
         _universe: Universe,
     }
 
     impl MpiGroup {
         pub(crate) fn initialise() -> Result<Self, CollectiveError> {
-            let universe = mpi::initialize().ok_or(CollectiveError::Init("it was initialised before"))?;
-            Ok(Self { world: universe.world(), _universe: universe })
+            let (universe, _) = mpi::initialize_with_threading(mpi::Threading::Funneled)
+                .ok_or(CollectiveError::Init("it was initialised before"))?;
+            let world = universe.world();
+            Ok(Self { rank: world.rank() as Rank, size: world.size() as usize, _universe: universe })
+        }
+
+        fn world(&self) -> SimpleCommunicator {
+            SimpleCommunicator::world()
         }
 
         pub(crate) fn rank(&self) -> Rank {
-            self.world.rank() as Rank
+            self.rank
         }
 
         pub(crate) fn size(&self) -> usize {
-            self.world.size() as usize
+            self.size
         }
 
         /// Every rank first learns the smallest and largest length summed (one small all-reduce), so that a
         /// mismatch fails on every rank instead of leaving some waiting on the others.
-        pub(crate) fn all_reduce_sum(&self, values: &mut [f32]) -> Result<(), CollectiveError> {
+        pub(crate) fn all_reduce_sum<T: Equivalence + Copy>(&self, values: &mut [T]) -> Result<(), CollectiveError> {
+            let world = self.world();
             let local = values.len() as i64;
             let mut extremes = [0i64; 2];
-            self.world.all_reduce_into(&[local, -local][..], &mut extremes[..], SystemOperation::max());
+            world.all_reduce_into(&[local, -local][..], &mut extremes[..], SystemOperation::max());
             let (largest, smallest) = (extremes[0], -extremes[1]);
             if largest != smallest {
                 return Err(CollectiveError::SizeMismatch {
@@ -147,13 +174,13 @@ pub(crate) mod mpi_group {
                 });
             }
             let send = values.to_vec();
-            self.world.all_reduce_into(&send[..], values, SystemOperation::sum());
+            world.all_reduce_into(&send[..], values, SystemOperation::sum());
             Ok(())
         }
 
         pub(crate) fn broadcast_u64(&self, value: u64) -> u64 {
             let mut value = value;
-            self.world.process_at_rank(0).broadcast_into(&mut value);
+            self.world().process_at_rank(0).broadcast_into(&mut value);
             value
         }
     }

@@ -65,6 +65,10 @@ fn rank_body() {
     let error = group.all_reduce_sum(&mut uneven).expect_err("lengths 4 and 5 cannot be summed");
     assert!(matches!(error, CollectiveError::SizeMismatch { smallest: 4, largest: 5, .. }), "{error}");
 
+    let mut losses = [0.25 * (rank + 1) as f64, 1e-12];
+    group.all_reduce_sum_f64(&mut losses).expect("the f64 sum");
+    assert_eq!(losses, [0.75, 2e-12]);
+
     assert_eq!(group.broadcast_u64(41 + rank as u64), 41, "rank 0's value everywhere");
     println!("rank {rank} of {size}: sums ok");
 }

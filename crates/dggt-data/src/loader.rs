@@ -145,16 +145,17 @@ impl DatasetSampling {
     }
 }
 
-/// The endless stream of a dataset run's samples from sample `first_sample` on, decoded ahead of time. Sample
-/// `k` is always the same, so a resumed run sees what the uninterrupted one would.
+/// The stream of a dataset run's samples at the positions `samples` lists (`first..` for a run in one process;
+/// a rank of several takes its share of every step), decoded ahead of time. Sample `k` is always the same, so a
+/// resumed run sees what the uninterrupted one would.
 pub fn dataset_stream(
     sampling: DatasetSampling,
     preprocess: Preprocess,
-    first_sample: u64,
+    samples: impl Iterator<Item = u64> + Send + 'static,
     options: LoaderOptions,
 ) -> Result<Prefetcher<LoadedSample>> {
     preprocess.validate()?;
-    Prefetcher::new(first_sample.., options.workers, options.capacity, move |sample| sampling.load(&preprocess, sample))
+    Prefetcher::new(samples, options.workers, options.capacity, move |sample| sampling.load(&preprocess, sample))
 }
 
 /// The endless stream of training samples of the run seeded with `seed`, from step `first_step` on, decoded

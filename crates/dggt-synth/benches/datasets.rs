@@ -131,7 +131,7 @@ fn sampling(root: &Path, layout: LogLayout) -> DatasetSampling {
 /// Views per second of the dataset stream over `SAMPLES` samples, once the first one has arrived.
 fn views_per_second(sampling: DatasetSampling, workers: usize) -> f64 {
     let options = LoaderOptions { workers, capacity: 2 * workers };
-    let mut stream = dataset_stream(sampling, Preprocess::default(), 0, options).expect("stream");
+    let mut stream = dataset_stream(sampling, Preprocess::default(), 0.., options).expect("stream");
     stream.next().expect("a first sample").expect("the first sample loads");
     let (views, time) = seconds(|| {
         let samples = stream.by_ref().take(SAMPLES).map(|s| s.expect("the sample loads"));

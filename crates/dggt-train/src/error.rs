@@ -66,6 +66,18 @@ pub enum TrainError {
     /// A validation depth score that cannot be computed.
     #[error("validation D-RMSE: {0}")]
     DepthScore(dggt_metrics::MetricError),
+    /// A sum or broadcast across the ranks of the job failed.
+    #[error("across ranks: {0}")]
+    Collective(#[from] dggt_collective::CollectiveError),
+    /// Another rank of the job failed (its own message says how); this one stops with it.
+    #[error("another rank failed while {what} (see its message); this rank stops too")]
+    RankFailed { what: &'static str },
+    /// Ranks whose weights differ from rank 0's after the same steps: the run is no longer one run.
+    #[error(
+        "{ranks} rank(s) hold weights that differ from rank 0's (checksum {checksum:016x}): the ranks were \
+         expected to take identical steps"
+    )]
+    RanksOutOfStep { ranks: usize, checksum: u64 },
     /// An error of a validation pass, with the step it validated.
     #[error("validation at step {step}: {source}")]
     Validation { step: u64, source: Box<TrainError> },

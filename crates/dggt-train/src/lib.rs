@@ -12,6 +12,8 @@ pub mod checkpoint;
 pub mod config;
 mod error;
 pub mod modules;
+pub mod rank_gradients;
+pub mod ranks;
 pub mod records;
 pub mod replicas;
 pub mod resume;
@@ -19,6 +21,8 @@ pub mod trainer;
 pub mod validate;
 
 pub use config::TrainConfig;
+/// The processes a run trains in: this one alone, or the ranks of an MPI job.
+pub use dggt_collective::ProcessGroup;
 /// Whether a training step reads the depth-and-flow maps ([`Trainer::train_step`] takes it).
 pub use dggt_objective::DepthFlowMaps;
 /// How a run starts: fresh, or resuming the newest checkpoint of its folder.

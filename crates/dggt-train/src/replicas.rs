@@ -2,10 +2,12 @@
 //! device training on its own samples every step, the gradients all-reduced, every replica stepped with the same
 //! summed gradients so that all stay identical without the weights ever being copied between devices.
 //!
-//! The all-reduce is this crate's own (sum on the first device, then a copy to every other): burn 0.22's
-//! collective all-reduce (`burn::tensor::distributed`, which `ExecutionStrategy::ddp` builds on) is implemented
-//! only for CUDA devices in one process and panics on the CPU and wgpu backends, and burn 0.22 has no
-//! collective across processes or machines.
+//! The gradients are summed on the master ([`Replicas::sum_on_master`]), summed over the processes of the run
+//! when it has several ([`rank_gradients`](crate::rank_gradients)), then shared with every device
+//! ([`Replicas::share`]). The in-process all-reduce is this crate's own (sum on the first device, then a copy to
+//! every other): burn 0.22's collective all-reduce (`burn::tensor::distributed`, which `ExecutionStrategy::ddp`
+//! builds on) is implemented only for CUDA devices in one process and panics on the CPU and wgpu backends, and
+//! burn 0.22 has no collective across processes or machines.
 
 use burn::module::{Module, ModuleVisitor, Param, ParamId};
 use burn::optim::{GradientsAccumulator, GradientsParams};
@@ -55,15 +57,19 @@ impl Replicas {
         self.0.iter()
     }
 
-    /// Sums each device's gradients (given in device order) and returns the sum on every device, in device
-    /// order. The sum is taken in device order on the master, so that it does not depend on thread timing.
-    pub fn all_reduce(&self, per_device: Vec<GradientsParams>) -> Vec<GradientsParams> {
+    /// Sums each device's gradients (given in device order) on the master, in device order, so that the sum
+    /// does not depend on thread timing.
+    pub fn sum_on_master(&self, per_device: Vec<GradientsParams>) -> GradientsParams {
         let master = self.master();
         let mut sum = GradientsAccumulator::<Dggt>::new();
         for grads in per_device {
             sum.accumulate(&master.model, grads.to_device(&master.device, &master.model));
         }
-        let total = sum.grads();
+        sum.grads()
+    }
+
+    /// The master's gradients `total` on every device, in device order.
+    pub fn share(&self, total: GradientsParams) -> Vec<GradientsParams> {
         let mut copies: Vec<GradientsParams> = self.0[1..]
             .iter()
             .map(|replica| {

@@ -1,17 +1,21 @@
 //! The training loop.
 //!
 //! Each optimiser step draws `accumulation` samples for every device (sample `k = step · samples_per_step + j`,
-//! a pure function of the seed); every device computes its samples' losses and gradients on its own replica of
-//! the network (one thread each), the gradients are all-reduced ([`replicas`](crate::replicas)), and every
+//! a pure function of the seed; a run of several processes draws each rank's share, [`ranks`]); every device
+//! computes its samples' losses and gradients on its own replica of the network (one thread each), the
+//! gradients are all-reduced ([`replicas`](crate::replicas), then across ranks,
+//! [`rank_gradients`](crate::rank_gradients)), and every
 //! replica clips the global norm and steps AdamW per parameter group at the scheduled rate. A sample with
 //! a non-finite loss or network output (a depth that overflowed, say), or a step with a non-finite gradient
 //! norm, is skipped with a warning and leaves the weights untouched; an update that makes a weight or moment
 //! non-finite is rolled back; a checkpoint falling due meanwhile waits for a step that trains, and too many
 //! such steps in a row stop the run ([`divergence`]). Metrics go to
 //! `metrics.jsonl` ([`records`](crate::records)), checkpoints to `checkpoints/` (see [`checkpoint`]); an error
-//! of a validation pass names the step it validated.
+//! of a validation pass names the step it validated. Of several ranks, rank 0 alone writes them, validates and
+//! draws the progress bar.
 //!
 //! [`checkpoint`]: crate::checkpoint
+//! [`ranks`]: crate::ranks
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -21,6 +25,7 @@ use std::time::Instant;
 use burn::module::Module;
 use burn::optim::{GradientsAccumulator, GradientsParams};
 use burn::tensor::Device;
+use dggt_collective::ProcessGroup;
 use dggt_data::{
     DatasetIndex, DatasetSampling, IndexedScene, LoadedSample, LoaderOptions, Prefetcher, SceneMix, Split,
     dataset_stream,
@@ -34,12 +39,14 @@ use dggt_run::divergence::{self, CheckpointDue, CheckpointGate, DivergenceLimit,
 use dggt_run::metrics::{MetricsLog, RecordKind};
 use dggt_run::progress::{Visibility, progress_bar, styled_bar};
 use dggt_run::schedule::WarmupCosine;
-use dggt_run::{Start, run_folder};
+use dggt_run::{Start, failpoint, run_folder};
 
 use crate::checkpoint;
 use crate::config::TrainConfig;
 use crate::error::TrainError;
 use crate::modules::{freeze, grouped_optimizer};
+use crate::rank_gradients::sum_over_ranks;
+use crate::ranks;
 use crate::records::{FailureRecord, LoggedStep, StepMeasures, StepRecord, ValidationRecord};
 use crate::replicas::{Replica, Replicas};
 use crate::resume::{self, ConfiguredSections};
@@ -95,18 +102,37 @@ pub struct Trainer {
     last_failure: Option<StepFailure>,
     /// Holds back checkpoints while steps fail.
     checkpoint_gate: CheckpointGate,
+    /// The processes of the run (this one alone, or the ranks of an MPI job).
+    group: ProcessGroup,
 }
 
 impl Trainer {
-    /// Builds a run of `config` (validated here) on `devices` (at least one), started as `start` says.
+    /// Builds a run of `config` (validated here) on `devices` (at least one), started as `start` says, in this
+    /// process alone.
     pub fn new(config: TrainConfig, devices: Vec<Device>, start: Start) -> Result<Self, TrainError> {
+        Self::in_group(config, devices, start, ProcessGroup::Single)
+    }
+
+    /// [`Trainer::new`] as one rank of `group`: every rank calls it with the same configuration; rank 0 checks
+    /// and prepares the output folder and names the checkpoint every rank resumes.
+    pub fn in_group(
+        config: TrainConfig,
+        devices: Vec<Device>,
+        start: Start,
+        group: ProcessGroup,
+    ) -> Result<Self, TrainError> {
         config.validate()?;
         let plain_device = devices.first().cloned().ok_or(TrainError::NoDevice)?;
         let autodiff: Vec<Device> = devices.iter().map(|d| d.clone().autodiff()).collect();
         let device = autodiff[0].clone();
-        // Checked before anything is written into the output folder.
-        let resume_from = resume_point(&config, start)?;
-        let (sampling, validation_scenes) = index_datasets(&config)?;
+        // The folder is checked before anything is written into it.
+        let checkpoints = config.run.out_dir.join(run_folder::CHECKPOINTS);
+        let (resume_from, (sampling, validation_scenes)) = ranks::agree_on_start(
+            &group,
+            &checkpoints,
+            || Ok((resume_point(&config, start)?, index_datasets(&config)?)),
+            || index_datasets(&config),
+        )?;
         let objective = Objective::new(config.loss.clone(), config.render.clone(), &device)?;
 
         let (model, model_config, optimizer, state) = match resume_from {
@@ -138,12 +164,12 @@ impl Trainer {
             return Err(TrainError::SeedChanged { checkpoint: state.seed, configured: config.run.seed });
         }
         let mut state = state;
-        let samples_per_step = config.optim.accumulation as u64 * autodiff.len() as u64;
+        let samples_per_step = config.optim.accumulation as u64 * autodiff.len() as u64 * group.size() as u64;
         if state.samples_per_step != 0 && state.samples_per_step != samples_per_step {
             tracing::warn!(
                 before = state.samples_per_step,
                 now = samples_per_step,
-                "resuming with another number of samples per step (optim.accumulation x devices): the run continues \
+                "resuming with another number of samples per step (optim.accumulation x devices x ranks): the run continues \
                  on a different sample sequence than the uninterrupted run would"
             );
         }
@@ -161,6 +187,7 @@ impl Trainer {
             state,
             last_failure: None,
             checkpoint_gate: CheckpointGate::default(),
+            group,
         })
     }
 
@@ -174,9 +201,19 @@ impl Trainer {
         &self.replicas
     }
 
-    /// Samples drawn per optimiser step: `optim.accumulation` on every device.
+    /// Samples drawn per optimiser step: `optim.accumulation` on every device of every rank.
     pub fn samples_per_step(&self) -> u64 {
         self.state.samples_per_step
+    }
+
+    /// Samples this process draws per optimiser step: `optim.accumulation` on each of its devices.
+    pub fn local_samples_per_step(&self) -> u64 {
+        self.state.samples_per_step / self.group.size() as u64
+    }
+
+    /// The processes of the run.
+    pub fn group(&self) -> &ProcessGroup {
+        &self.group
     }
 
     pub fn model_config(&self) -> &ModelConfig {
@@ -242,18 +279,25 @@ impl Trainer {
     /// Trains until `run.steps` (or the time limit, or `options.stop_after`), checkpointing on the way.
     pub fn run(&mut self, options: RunOptions) -> Result<RunSummary, TrainError> {
         let run = self.config.run.clone();
-        fs::create_dir_all(&run.out_dir).map_err(|source| TrainError::Io { path: run.out_dir.clone(), source })?;
-        let mut metrics = MetricsLog::continuing_at(&run.out_dir.join(run_folder::METRICS), self.state.step)?;
+        let writer = self.group.is_writer();
+        let mut metrics = match writer {
+            true => {
+                fs::create_dir_all(&run.out_dir)
+                    .map_err(|source| TrainError::Io { path: run.out_dir.clone(), source })?;
+                Some(MetricsLog::continuing_at(&run.out_dir.join(run_folder::METRICS), self.state.step)?)
+            }
+            false => None,
+        };
 
-        let samples_per_step = self.samples_per_step();
-        let first_sample = self.state.step * samples_per_step;
+        let local = self.local_samples_per_step();
+        let positions = ranks::sample_positions(self.state.step, local, self.group.rank(), self.group.size());
         let options_loader =
             LoaderOptions { workers: self.config.data.workers.max(1), capacity: 2 * self.config.data.workers.max(1) };
-        let mut stream =
-            dataset_stream(self.sampling.clone(), self.config.data.preprocess, first_sample, options_loader)?;
+        let mut stream = dataset_stream(self.sampling.clone(), self.config.data.preprocess, positions, options_loader)?;
 
         let last_step = options.stop_after.map_or(run.steps, |s| s.min(run.steps));
-        let bar = progress_bar(options.progress, self.state.step, run.steps);
+        let visibility = if writer { options.progress } else { Visibility::Hidden };
+        let bar = progress_bar(visibility, self.state.step, run.steps);
         let started = Instant::now();
         let elapsed_before = self.state.elapsed_s;
         let schedule = self.schedule();
@@ -278,7 +322,8 @@ impl Trainer {
 
         while self.state.step < last_step {
             let step = self.state.step;
-            let samples = (0..samples_per_step).map(|_| next_sample(&mut stream)).collect::<Result<Vec<_>, _>>()?;
+            failpoint::exit_before_step(self.group.rank(), step);
+            let samples = (0..local).map(|_| next_sample(&mut stream)).collect::<Result<Vec<_>, _>>()?;
             self.count_bad_samples(&samples)?;
             let record = self.train_step(&samples, schedule.factor(step), maps)?;
             let pose_warmup = step < self.config.optim.pose_warmup_steps;
@@ -301,23 +346,27 @@ impl Trainer {
                 bad_samples: self.state.bad_samples,
                 time_s: elapsed,
             };
-            metrics.append(RecordKind::Train, &logged)?;
+            if let Some(metrics) = &mut metrics {
+                metrics.append(RecordKind::Train, &logged)?;
+            }
             bar.inc(1);
             // No checkpoint then: the weights are those the last one holds, and a new one could prune it.
             self.check_divergence()?;
 
+            let out_of_time = run.time_limit_s.is_some_and(|limit| started.elapsed().as_secs_f64() >= limit);
             let done = self.state.step >= last_step
-                || run.time_limit_s.is_some_and(|limit| started.elapsed().as_secs_f64() >= limit);
+                || (run.time_limit_s.is_some() && ranks::rank_zero_decides(&self.group, out_of_time));
             let due = match (done, self.state.step.is_multiple_of(run.checkpoint_every)) {
                 (true, _) => CheckpointDue::EndOfRun,
                 (false, true) => CheckpointDue::Periodic,
                 (false, false) => CheckpointDue::No,
             };
             // Saved before validating, so that a failing validation never loses the step's weights.
-            if self.checkpoint_gate.write_now(&self.state, due) {
+            if self.checkpoint_gate.write_now(&self.state, due) && writer {
                 summary.checkpoint = Some(self.save_checkpoint()?);
             }
-            if (run.validate_every > 0 && self.state.step.is_multiple_of(run.validate_every)) || done {
+            let validate_now = (run.validate_every > 0 && self.state.step.is_multiple_of(run.validate_every)) || done;
+            if validate_now && writer {
                 let renders = run.out_dir.join(run_folder::VALIDATION).join(format!("step-{:08}", self.state.step));
                 let validated = self
                     .validate_into(Some(&renders))
@@ -330,7 +379,9 @@ impl Trainer {
                         "validation"
                     );
                     let record = ValidationRecord { step: self.state.step, validation: &validation, time_s: elapsed };
-                    metrics.append(RecordKind::Validation, &record)?;
+                    if let Some(metrics) = &mut metrics {
+                        metrics.append(RecordKind::Validation, &record)?;
+                    }
                     bar.println(format!(
                         "validation at step {} on {} scene(s): {}",
                         self.state.step,
@@ -345,6 +396,10 @@ impl Trainer {
             }
         }
         bar.finish_and_clear();
+        if self.group.size() > 1 {
+            let checksum = ranks::check_in_step(&self.group, self.model())?;
+            tracing::info!(ranks = self.group.size(), "every rank holds the same weights (checksum {checksum:016x})");
+        }
         summary.final_step = self.state.step;
         summary.skipped_steps = self.state.skipped_steps;
         summary.rolled_back_steps = self.state.rolled_back_steps;
@@ -364,20 +419,23 @@ impl Trainer {
         let step = self.state.step;
         let started = Instant::now();
         let outcome = self.accumulate(samples, maps)?;
+        // Every rank learns whether any rank's loss was not finite, so that all skip the step together.
+        let measures = ranks::sum_measures(&self.group, outcome.as_ref().map(|o| o.measures.clone()))?;
         let mut record =
             StepRecord { step, lr_factor: factor, update: None, measures: None, failure: None, step_s: 0.0 };
-        let failure = match outcome {
-            Some(outcome) => {
+        let failure = match (outcome, measures) {
+            (Some(outcome), Some(mut measures)) => {
                 let update = Instant::now();
-                let grads = self.replicas.all_reduce(outcome.grads);
-                let stepped = self.replicas.step(grads, factor);
+                let master = self.replicas.master();
+                let total = self.replicas.sum_on_master(outcome.grads);
+                let total = sum_over_ranks(&self.group, &master.model, total)?;
+                let stepped = self.replicas.step(self.replicas.share(total), factor);
                 record.update = stepped.report().map(Into::into);
-                let mut measures = outcome.measures;
                 measures.stage_seconds.insert("update".into(), update.elapsed().as_secs_f64());
                 record.measures = Some(measures);
                 StepFailure::of(&stepped)
             }
-            None => Some(StepFailure::NonFiniteLoss),
+            _ => Some(StepFailure::NonFiniteLoss),
         };
         record.failure = failure.as_ref().map(FailureRecord::from);
         record.step_s = started.elapsed().as_secs_f64();
@@ -396,11 +454,12 @@ impl Trainer {
         Ok(divergence::check(&self.state, self.last_failure.as_ref(), limit)?)
     }
 
-    /// Loss and gradients of the samples of one step: every device takes its own consecutive
+    /// Loss and gradients of this process's samples of one step: every device takes its own consecutive
     /// `optim.accumulation` samples (on its own thread) and sums their gradients; `None` when a loss is not
-    /// finite. The gradients come back per device, in device order, for [`Replicas::all_reduce`].
+    /// finite. Each loss is scaled by one over the step's samples on all ranks. The gradients come back per
+    /// device, in device order, for [`Replicas::sum_on_master`].
     fn accumulate(&self, samples: &[LoadedSample], maps: DepthFlowMaps) -> Result<Option<StepOutcome>, TrainError> {
-        let scale = 1.0 / samples.len() as f64;
+        let scale = 1.0 / (samples.len() * self.group.size()) as f64;
         let shares: Vec<&[LoadedSample]> = samples.chunks(samples.len().div_ceil(self.replicas.len())).collect();
         let results: Vec<Result<DeviceShare, TrainError>> = if shares.len() == 1 {
             vec![self.run_share(self.replicas.master(), shares[0], scale, maps)]
@@ -521,12 +580,14 @@ impl Trainer {
     /// checkpoint of the weights so far.
     fn count_bad_samples(&mut self, samples: &[LoadedSample]) -> Result<(), TrainError> {
         let failures: Vec<&String> = samples.iter().flat_map(|s| &s.failures).collect();
-        self.state.bad_samples += failures.len() as u64;
+        self.state.bad_samples += ranks::sum_count(&self.group, failures.len() as u64)?;
         let limit = self.config.data.max_bad_samples;
         if self.state.bad_samples <= limit {
             return Ok(());
         }
-        self.save_checkpoint()?;
+        if self.group.is_writer() {
+            self.save_checkpoint()?;
+        }
         Err(TrainError::TooManyBadSamples {
             failed: self.state.bad_samples,
             limit,

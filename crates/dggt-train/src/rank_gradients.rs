@@ -1,0 +1,124 @@
+//! The sum of a step's gradients over the ranks of a process group, after each rank has summed its own
+//! devices' ([`Replicas::sum_on_master`](crate::replicas::Replicas::sum_on_master)).
+//!
+//! Every rank lists the network's parameters in the module's own order (the order in which [`Module::visit`]
+//! walks its fields, which the code fixes: never a hash map's), so tensor `i` is the same parameter on every
+//! rank. The ranks first agree on which parameters have a gradient (one small sum of a presence mask): a
+//! parameter that received one on any rank is summed everywhere, a rank without it contributing zeros, as the
+//! sum over samples within one process would; one that received none anywhere stays without (AdamW leaves it
+//! alone, as in one process). The gradients then travel bucket by bucket through the host
+//! ([`all_reduce_bucketed`]), and a read-back failure on any rank fails the step on every rank before a
+//! partial sum can be used.
+
+use burn::module::{Module, ModuleVisitor, Param, ParamId};
+use burn::optim::GradientsParams;
+use burn::tensor::{Device, Shape, Tensor, TensorData};
+use dggt_collective::bucket::DEFAULT_BUCKET_VALUES;
+use dggt_collective::{ProcessGroup, all_reduce_bucketed};
+use dggt_model::Dggt;
+use dggt_model::host::{ReadBackError, host_f32};
+
+use crate::error::TrainError;
+
+/// One trainable parameter's gradient on this rank, flattened.
+struct Slot {
+    id: ParamId,
+    shape: Vec<usize>,
+    device: Device,
+    grad: Option<Tensor<1>>,
+}
+
+impl Slot {
+    fn len(&self) -> usize {
+        self.shape.iter().product()
+    }
+}
+
+/// Sums `grads` (of `model`, on its device) over the ranks of `group`; every rank gets the same sum.
+pub fn sum_over_ranks(
+    group: &ProcessGroup,
+    model: &Dggt,
+    grads: GradientsParams,
+) -> Result<GradientsParams, TrainError> {
+    if group.size() == 1 {
+        return Ok(grads);
+    }
+    let mut take = TakeInOrder { grads, slots: Vec::new() };
+    model.visit(&mut take);
+    let mut present: Vec<f32> = take.slots.iter().map(|s| if s.grad.is_some() { 1.0 } else { 0.0 }).collect();
+    group.all_reduce_sum(&mut present)?;
+    let slots: Vec<Slot> =
+        take.slots.into_iter().zip(present).filter(|(_, count)| *count > 0.0).map(|(s, _)| s).collect();
+
+    let lengths: Vec<usize> = slots.iter().map(Slot::len).collect();
+    let mut failure: Option<ReadBackError> = None;
+    let mut summed: Vec<Option<Tensor<1>>> = (0..slots.len()).map(|_| None).collect();
+    all_reduce_bucketed(
+        group,
+        &lengths,
+        DEFAULT_BUCKET_VALUES,
+        |i| read(&slots[i], &mut failure),
+        |i, values| {
+            let data = TensorData::new(values.to_vec(), [values.len()]);
+            summed[i] = Some(Tensor::from_data(data, &slots[i].device));
+        },
+    )?;
+    let mut failed = [if failure.is_some() { 1.0f32 } else { 0.0 }];
+    group.all_reduce_sum(&mut failed)?;
+    if let Some(error) = failure {
+        return Err(error.into());
+    }
+    if failed[0] > 0.0 {
+        return Err(TrainError::RankFailed { what: "reading its gradients back from the device" });
+    }
+
+    let mut result = GradientsParams::new();
+    for (slot, sum) in slots.iter().zip(summed) {
+        let sum = sum.expect("every bucket was written back");
+        register(&mut result, slot, sum);
+    }
+    Ok(result)
+}
+
+/// Tensor `slot`'s values on the host, or zeros when this rank has no gradient for it (or its read-back failed:
+/// the failure is kept and fails the step on every rank once the sums are done).
+fn read(slot: &Slot, failure: &mut Option<ReadBackError>) -> Vec<f32> {
+    let Some(grad) = &slot.grad else { return vec![0.0; slot.len()] };
+    match host_f32(grad.clone(), "a gradient") {
+        Ok(values) => values,
+        Err(error) => {
+            failure.get_or_insert(error);
+            vec![0.0; slot.len()]
+        }
+    }
+}
+
+/// Registers `sum` as the gradient of `slot`'s parameter, in the parameter's shape.
+fn register(grads: &mut GradientsParams, slot: &Slot, sum: Tensor<1>) {
+    macro_rules! as_rank {
+        ($($d:literal),*) => {
+            match slot.shape.len() {
+                $($d => grads.register::<$d>(slot.id, sum.reshape(Shape::from(slot.shape.clone()))),)*
+                other => unreachable!("parameters of rank {other} are not in the network"),
+            }
+        };
+    }
+    as_rank!(1, 2, 3, 4, 5, 6)
+}
+
+/// Takes every gradient out of a [`GradientsParams`] in the module's parameter order, flattened; a parameter
+/// without one (frozen, or unused by this rank's samples) gets an empty slot.
+struct TakeInOrder {
+    grads: GradientsParams,
+    slots: Vec<Slot>,
+}
+
+impl ModuleVisitor for TakeInOrder {
+    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+        let value = param.val();
+        let shape = value.dims().to_vec();
+        let grad = self.grads.remove::<D>(param.id).map(|g| g.reshape([shape.iter().product::<usize>()]));
+        // Gradients live on the device without autodiff.
+        self.slots.push(Slot { id: param.id, shape, device: value.device().inner(), grad });
+    }
+}
