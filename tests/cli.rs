@@ -22,6 +22,7 @@ fn inspect_summarises_the_fixture() {
     for key in ["sky_masks", "dynamic_masks", "fine_dynamic_masks", "depth_flows"] {
         assert_eq!(summary[key], true, "{key}");
     }
+    assert_eq!(summary["scene_flow"], "synthetic", "the generated scene's flow is exact");
     let length = summary["trajectory_length_m"].as_f64().unwrap();
     assert!((10.0..25.0).contains(&length), "{length}");
 
@@ -30,6 +31,7 @@ fn inspect_summarises_the_fixture() {
     let stdout = String::from_utf8_lossy(&text.stdout);
     assert!(stdout.contains("frames     5 (indices 5..=9"), "{stdout}");
     assert!(stdout.contains("FRONT") && !stdout.contains("FRONT_LEFT"), "{stdout}");
+    assert!(stdout.contains("flow       exact, from the generated scene"), "{stdout}");
 }
 
 #[test]

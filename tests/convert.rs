@@ -231,6 +231,7 @@ fn convert_argoverse2_with_depth_flows_writes_maps_the_loader_reads_and_records_
     assert!(inspect.status.success(), "{}", text(&inspect));
     let summary: serde_json::Value = serde_json::from_slice(&inspect.stdout).unwrap();
     assert_eq!(summary["depth_flows"], true, "{summary}");
+    assert_eq!(summary["scene_flow"], "tracked_boxes", "{summary}");
     let marker: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("000").join(dggt_convert::DONE_MARKER)).unwrap()).unwrap();
     assert_eq!(marker["provenance"]["depth_flows"], "boxes");

@@ -26,7 +26,8 @@ pub struct Args {
 pub fn run(args: Args) -> Result<()> {
     let scene = dggt_data::open_scene(&args.dir, args.frames, args.cameras)
         .with_context(|| format!("reading the log at {}", args.dir.display()))?;
-    let summary = dggt_data::SceneSummary::of(&scene);
+    let summary = dggt_data::SceneSummary::of(&scene)
+        .with_context(|| format!("summarising the log at {}", args.dir.display()))?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {

@@ -22,4 +22,19 @@ pub enum CollectiveError {
     /// A bucket size of zero elements cannot make progress.
     #[error("bucket size must be at least one element")]
     EmptyBucket,
+    /// NCCL sums CUDA tensors, and this rank's gradients live elsewhere.
+    #[error("NCCL sums gradients on CUDA devices, and this rank's live on {device}")]
+    NotCuda { device: String },
+    /// The build sums through NCCL, and the machine has no NCCL library.
+    #[error(
+        "NCCL (libnccl.so.2) was not found on this machine: install it (NVIDIA's `libnccl2` package) or put it on \
+         LD_LIBRARY_PATH"
+    )]
+    NcclMissing,
+    /// NCCL sums contiguous `f32` device buffers.
+    #[error("NCCL sums contiguous f32 device buffers; this one is {dtype}")]
+    DeviceLayout { dtype: String },
+    /// NCCL, the CUDA driver or the device's runtime failed.
+    #[error("NCCL on the device failed while {doing}: {code}")]
+    Nccl { doing: &'static str, code: String },
 }

@@ -10,9 +10,15 @@ use crate::error::CollectiveError;
 /// A rank's number in its group, from 0.
 pub type Rank = usize;
 
-/// The environment variables by which launchers tell a process its rank and the job's size.
-const LAUNCHER_VARIABLES: [(&str, &str); 3] =
-    [("OMPI_COMM_WORLD_RANK", "OMPI_COMM_WORLD_SIZE"), ("PMI_RANK", "PMI_SIZE"), ("SLURM_PROCID", "SLURM_NTASKS")];
+/// The environment variables by which launchers tell a process its rank and the job's size: Open MPI's
+/// `mpirun`, MPICH's (and Slurm's PMI), and a Slurm job step started by `srun`. Slurm's job-wide
+/// `SLURM_NTASKS` is not one of them: a batch script sees it too, and a `dggt` started there without `srun` is
+/// one process, not rank 0 of the tasks the job asked for.
+const LAUNCHER_VARIABLES: [(&str, &str); 3] = [
+    ("OMPI_COMM_WORLD_RANK", "OMPI_COMM_WORLD_SIZE"),
+    ("PMI_RANK", "PMI_SIZE"),
+    ("SLURM_PROCID", "SLURM_STEP_NUM_TASKS"),
+];
 
 /// The group of processes that train together.
 pub enum ProcessGroup {
@@ -33,7 +39,7 @@ impl ProcessGroup {
     /// The group this process was started in: the MPI world when a launcher started it as one of several
     /// ranks, else this process alone.
     pub fn from_environment() -> Result<Self, CollectiveError> {
-        match launched_rank() {
+        match launched_rank(|name| std::env::var(name).ok()) {
             Some((rank, size)) if size != "1" => Self::join_mpi(rank, size),
             _ => Ok(Self::Single),
         }
@@ -102,6 +108,17 @@ impl ProcessGroup {
             Self::Mpi(group) => group.broadcast_u64(value),
         }
     }
+
+    /// Overwrites `bytes` on every rank with rank 0's (an identifier another library's group is set up with).
+    /// Every rank passes a buffer of the same length.
+    #[cfg_attr(not(feature = "mpi"), allow(unused_variables))]
+    pub fn broadcast_bytes(&self, bytes: &mut [u8]) {
+        match self {
+            Self::Single => {}
+            #[cfg(feature = "mpi")]
+            Self::Mpi(group) => group.broadcast_bytes(bytes),
+        }
+    }
 }
 
 // The trainer's device threads share the group (only the thread that created it calls collectives).
@@ -110,9 +127,33 @@ const _: () = {
     shared_between_threads::<ProcessGroup>();
 };
 
-/// The rank and size a launcher gave this process, as their text.
-fn launched_rank() -> Option<(String, String)> {
-    LAUNCHER_VARIABLES.iter().find_map(|(rank, size)| Some((std::env::var(rank).ok()?, std::env::var(size).ok()?)))
+/// The rank and size a launcher gave this process, as their text, `variable` reading the environment.
+fn launched_rank(variable: impl Fn(&str) -> Option<String>) -> Option<(String, String)> {
+    LAUNCHER_VARIABLES.iter().find_map(|(rank, size)| Some((variable(rank)?, variable(size)?)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::launched_rank;
+
+    fn environment(pairs: &[(&str, &str)]) -> impl Fn(&str) -> Option<String> {
+        let pairs: Vec<(String, String)> = pairs.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect();
+        move |name| pairs.iter().find(|(key, _)| key == name).map(|(_, value)| value.clone())
+    }
+
+    #[test]
+    fn mpirun_and_srun_name_the_rank_and_size() {
+        let open_mpi = environment(&[("OMPI_COMM_WORLD_RANK", "1"), ("OMPI_COMM_WORLD_SIZE", "4")]);
+        assert_eq!(launched_rank(open_mpi), Some(("1".into(), "4".into())));
+        let srun = environment(&[("SLURM_PROCID", "2"), ("SLURM_STEP_NUM_TASKS", "8"), ("SLURM_NTASKS", "8")]);
+        assert_eq!(launched_rank(srun), Some(("2".into(), "8".into())));
+    }
+
+    #[test]
+    fn a_slurm_batch_script_without_srun_is_one_process() {
+        let batch = environment(&[("SLURM_PROCID", "0"), ("SLURM_NTASKS", "8"), ("SLURM_JOB_ID", "77")]);
+        assert_eq!(launched_rank(batch), None);
+    }
 }
 
 #[cfg(feature = "mpi")]
@@ -182,6 +223,10 @@ pub(crate) mod mpi_group {
             let mut value = value;
             self.world().process_at_rank(0).broadcast_into(&mut value);
             value
+        }
+
+        pub(crate) fn broadcast_bytes(&self, bytes: &mut [u8]) {
+            self.world().process_at_rank(0).broadcast_into(bytes);
         }
     }
 }

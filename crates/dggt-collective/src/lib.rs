@@ -4,14 +4,17 @@
 //! - [`group`]: the process group: one process alone, or the ranks of an MPI job (`mpirun -np P`, `srun`), with
 //!   the feature `mpi`;
 //! - [`bucket`]: the all-reduce of a model's gradients in buckets of bounded size, so that the host copy never
-//!   holds a second full set of gradients.
+//!   holds a second full set of gradients;
+//! - `nccl` (feature `nccl`): the sum of CUDA gradients on the device by NCCL, bootstrapped over the MPI group.
 //!
-//! The sums are of host `f32` buffers: GPU gradients are copied to the host bucket by bucket. Within one
-//! process, replicas on several devices are summed by the trainer first; the group then sums across processes.
+//! Without NCCL the sums are of host `f32` buffers: GPU gradients are copied to the host bucket by bucket. Within
+//! one process, replicas on several devices are summed by the trainer first; the group then sums across processes.
 
 pub mod bucket;
 mod error;
 pub mod group;
+#[cfg(feature = "nccl")]
+pub mod nccl;
 
 pub use bucket::{BucketPlan, all_reduce_bucketed};
 pub use error::CollectiveError;

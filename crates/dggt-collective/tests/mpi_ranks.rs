@@ -70,5 +70,9 @@ fn rank_body() {
     assert_eq!(losses, [0.75, 2e-12]);
 
     assert_eq!(group.broadcast_u64(41 + rank as u64), 41, "rank 0's value everywhere");
+    // 128 bytes, the size of an NCCL id, each different per rank before the broadcast.
+    let mut bytes: Vec<u8> = (0..128).map(|k| (k * 3 + rank * 101) as u8).collect();
+    group.broadcast_bytes(&mut bytes);
+    assert_eq!(bytes, (0..128).map(|k| (k * 3) as u8).collect::<Vec<_>>(), "rank 0's bytes everywhere");
     println!("rank {rank} of {size}: sums ok");
 }

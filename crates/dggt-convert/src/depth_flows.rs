@@ -15,7 +15,7 @@
 
 use std::path::{Path, PathBuf};
 
-use dggt_data::depth_flow::DEPTH_FLOW_STRIDE;
+use dggt_data::depth_flow::{DEPTH_FLOW_STRIDE, FlowOrigin, write_flow_origin};
 use dggt_data::{ExportLayout, npy};
 use dggt_geom::frames::Frame;
 use dggt_geom::glam::DVec3;
@@ -167,8 +167,9 @@ impl<'a> DepthFlowWriter<'a> {
         Ok(())
     }
 
-    /// Writes the last frame and, when any frame had lidar, empty maps for the frames without; returns how
-    /// many frames got maps from lidar.
+    /// Writes the last frame and, when any frame had lidar, empty maps for the frames without and the record
+    /// of where the flow comes from (`depth_flows_4/origin.json`: tracked boxes); returns how many frames got
+    /// maps from lidar.
     pub fn finish(mut self) -> Result<usize> {
         if let Some(pending) = self.pending.take() {
             self.write(&pending, None)?;
@@ -184,6 +185,7 @@ impl<'a> DepthFlowWriter<'a> {
                     )?;
                 }
             }
+            write_flow_origin(self.layout, FlowOrigin::TrackedBoxes)?;
         }
         Ok(self.written)
     }

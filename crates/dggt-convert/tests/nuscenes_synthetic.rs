@@ -133,6 +133,11 @@ fn a_synthetic_scene_converts_to_the_hand_computed_poses_points_and_masks() {
 fn assert_front_depth_flows(out: &Path, frames: usize) {
     let scene = dggt_data::read_export(out, &Default::default()).unwrap();
     assert_eq!(scene.depth_source(), Some(dggt_data::DepthSource::DepthFlows4));
+    assert_eq!(
+        scene.flow_origin().unwrap(),
+        dggt_data::FlowOrigin::TrackedBoxes,
+        "the maps say where their flow is from"
+    );
     let front = scene.cameras.iter().position(|c| c.id == 0).unwrap();
     for frame in 0..frames {
         let map = scene.depth_map(frame, front).unwrap().unwrap();

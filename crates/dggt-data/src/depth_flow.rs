@@ -18,6 +18,7 @@ use dggt_geom::glam::DVec3;
 use dggt_geom::{CameraFromWorld, ImageSize, PinholeIntrinsics};
 
 use crate::error::{DataError, Result};
+use crate::layout::ExportLayout;
 use crate::lidar::project_to_depth;
 use crate::npy::read_npy_f32;
 use crate::scene::Scene;
@@ -32,6 +33,47 @@ pub enum DepthSource {
     DepthFlows4,
     /// The export's lidar sweeps projected into each view (depth only).
     Lidar,
+}
+
+/// Where a scene's scene flow (the `depth_flows_4` maps' channels 1-3) comes from, as the export records it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FlowOrigin {
+    /// No `depth_flows_4` maps: no scene flow (lidar sweeps carry none).
+    Absent,
+    /// The exact surface velocities of a generated scene (`dggt synth`, `synth.json`).
+    Synthetic,
+    /// Lidar returns moved with the tracked 3D box they lie in, zero outside boxes (`dggt convert --depth-flows
+    /// boxes`).
+    TrackedBoxes,
+    /// Maps the export came with from elsewhere (STORM's Waymo export): the flow as that export computed it.
+    Export,
+}
+
+impl FlowOrigin {
+    /// What `dggt inspect` and `dggt eval` call it.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Self::Absent => "none",
+            Self::Synthetic => "exact, from the generated scene's trajectories",
+            Self::TrackedBoxes => "tracked 3D boxes (dggt convert --depth-flows boxes)",
+            Self::Export => "the export's own depth_flows_4 (not written by dggt)",
+        }
+    }
+}
+
+/// What `depth_flows_4/origin.json` holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+struct FlowRecord {
+    scene_flow: FlowOrigin,
+}
+
+/// Records beside a scene's maps where their flow comes from (what [`Scene::flow_origin`] reads).
+pub fn write_flow_origin(layout: &ExportLayout, origin: FlowOrigin) -> Result<()> {
+    let path = layout.depth_flow_origin();
+    let bytes = serde_json::to_vec_pretty(&FlowRecord { scene_flow: origin })
+        .map_err(|e| DataError::malformed(&path, "a serialisable flow record", e.to_string()))?;
+    crate::io::write_atomically(&path, &bytes)
 }
 
 /// One quarter-resolution depth map, with scene flow where the source has it.
@@ -96,6 +138,24 @@ impl Scene {
             Some(DepthSource::Lidar)
         } else {
             None
+        }
+    }
+
+    /// Where this scene's scene flow comes from: the record beside the maps (`depth_flows_4/origin.json`, which
+    /// the converters write), else a generated scene's exact flow (`synth.json`), else the export's own maps;
+    /// [`FlowOrigin::Absent`] without `depth_flows_4` maps for every view.
+    pub fn flow_origin(&self) -> Result<FlowOrigin> {
+        if self.depth_source() != Some(DepthSource::DepthFlows4) {
+            return Ok(FlowOrigin::Absent);
+        }
+        let layout = ExportLayout::new(&self.root);
+        let record = layout.depth_flow_origin();
+        match std::fs::read(&record) {
+            Ok(bytes) => serde_json::from_slice::<FlowRecord>(&bytes)
+                .map(|r| r.scene_flow)
+                .map_err(|e| DataError::malformed(&record, "`{\"scene_flow\": ...}`", e.to_string())),
+            Err(_) if layout.synth_description().is_file() => Ok(FlowOrigin::Synthetic),
+            Err(_) => Ok(FlowOrigin::Export),
         }
     }
 

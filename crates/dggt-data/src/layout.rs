@@ -7,6 +7,9 @@
 
 use std::path::{Path, PathBuf};
 
+/// The file a generated scene is described in.
+pub const SYNTH_DESCRIPTION: &str = "synth.json";
+
 /// Which dynamic-mask folder to read.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum DynamicMaskKind {
@@ -104,6 +107,16 @@ impl ExportLayout {
     /// `depth_flows_4/{t:03}_{cam}.npy`: (H/4, W/4, 4) float32, depth then scene flow xyz.
     pub fn depth_flow(&self, frame: usize, camera: usize) -> PathBuf {
         self.root.join("depth_flows_4").join(format!("{frame:03}_{camera}.npy"))
+    }
+
+    /// `depth_flows_4/origin.json`: where the maps' scene flow comes from (`{"scene_flow": "tracked_boxes"}`).
+    pub fn depth_flow_origin(&self) -> PathBuf {
+        self.root.join("depth_flows_4").join("origin.json")
+    }
+
+    /// `synth.json`: a generated scene's description (`dggt synth`).
+    pub fn synth_description(&self) -> PathBuf {
+        self.root.join(SYNTH_DESCRIPTION)
     }
 
     /// `instances/instances_info.json`.

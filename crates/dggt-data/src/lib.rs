@@ -43,7 +43,7 @@ pub mod variant;
 pub mod views;
 pub mod window;
 
-pub use depth_flow::{DepthFlowMap, DepthSource};
+pub use depth_flow::{DepthFlowMap, DepthSource, FlowOrigin};
 pub use error::{DataError, Result};
 pub use export::{ExportOptions, read_export};
 pub use index::{DatasetIndex, DatasetSpec, HeldOut, IndexedScene, Split};

@@ -95,8 +95,9 @@ pub fn open_scene_as(
         }
         return read_kitti_odometry(root, frames);
     }
-    if layout == LogLayout::Synthetic && !root.join("synth.json").is_file() {
-        return Err(DataError::malformed(&root.join("synth.json"), "a synthetic scene's description", "missing"));
+    let description = root.join(crate::layout::SYNTH_DESCRIPTION);
+    if layout == LogLayout::Synthetic && !description.is_file() {
+        return Err(DataError::malformed(&description, "a synthetic scene's description", "missing"));
     }
     read_export(root, &ExportOptions { cameras, frames, frame_rate_hz: None, variant: layout.export_variant() })
 }

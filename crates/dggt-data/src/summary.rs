@@ -4,6 +4,8 @@ use std::fmt;
 
 use serde::Serialize;
 
+use crate::depth_flow::FlowOrigin;
+use crate::error::Result;
 use crate::preprocess::Preprocess;
 use crate::scene::Scene;
 
@@ -22,6 +24,8 @@ pub struct SceneSummary {
     pub dynamic_masks: bool,
     pub fine_dynamic_masks: bool,
     pub depth_flows: bool,
+    /// Where the `depth_flows_4` maps' scene flow comes from.
+    pub scene_flow: FlowOrigin,
     pub lidar_sweeps: usize,
     /// Path length driven by the first camera, metres.
     pub trajectory_length_m: f64,
@@ -48,7 +52,8 @@ pub struct CameraSummary {
 }
 
 impl SceneSummary {
-    pub fn of(scene: &Scene) -> Self {
+    /// The summary of `scene`; fails only on a conversion marker that cannot be read.
+    pub fn of(scene: &Scene) -> Result<Self> {
         let preprocess = Preprocess::default();
         let cameras = scene
             .cameras
@@ -75,7 +80,7 @@ impl SceneSummary {
             .collect();
         let duration_s = scene.frames.last().map_or(0.0, |f| f.timestamp);
         let trajectory_length_m = if scene.cameras.is_empty() { 0.0 } else { scene.trajectory_length(0) };
-        Self {
+        Ok(Self {
             name: scene.name.clone(),
             root: scene.root.display().to_string(),
             source: scene.source.describe(),
@@ -88,10 +93,11 @@ impl SceneSummary {
             dynamic_masks: scene.all_views_have(|v| v.dynamic_mask.is_some()),
             fine_dynamic_masks: scene.all_views_have(|v| v.fine_dynamic_mask.is_some()),
             depth_flows: scene.all_views_have(|v| v.depth_flow.is_some()),
+            scene_flow: scene.flow_origin()?,
             lidar_sweeps: scene.lidar.iter().filter(|l| l.is_some()).count(),
             trajectory_length_m,
             mean_speed_m_s: if duration_s > 0.0 { trajectory_length_m / duration_s } else { 0.0 },
-        }
+        })
     }
 }
 
@@ -143,6 +149,7 @@ impl fmt::Display for SceneSummary {
             yes_no(self.dynamic_masks),
             yes_no(self.fine_dynamic_masks)
         )?;
-        write!(f, "depth      depth_flows_4: {}, lidar sweeps: {}", yes_no(self.depth_flows), self.lidar_sweeps)
+        writeln!(f, "depth      depth_flows_4: {}, lidar sweeps: {}", yes_no(self.depth_flows), self.lidar_sweeps)?;
+        write!(f, "flow       {}", self.scene_flow.describe())
     }
 }

@@ -211,7 +211,7 @@ fn axes_of_mounting(rows: &[[f64; 4]; 4]) -> Option<CameraAxes> {
 
 /// The variant named by a synthetic scene's `synth.json` (`"layout"`), if the folder is one.
 fn synthetic_variant(root: &Path) -> Result<Option<ExportVariant>> {
-    let path = root.join("synth.json");
+    let path = root.join(crate::layout::SYNTH_DESCRIPTION);
     let Ok(bytes) = std::fs::read(&path) else { return Ok(None) };
     #[derive(serde::Deserialize)]
     struct Layout {

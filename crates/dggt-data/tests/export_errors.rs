@@ -2,7 +2,10 @@
 
 use std::path::Path;
 
-use dggt_data::{DataError, ExportLayout, ExportOptions, Preprocess, images, prepare_view, read_export, text};
+use dggt_data::depth_flow::write_flow_origin;
+use dggt_data::{
+    DataError, ExportLayout, ExportOptions, FlowOrigin, Preprocess, images, npy, prepare_view, read_export, text,
+};
 use image::{GrayImage, RgbImage};
 
 const IDENTITY_FLU_MOUNT: [[f64; 4]; 4] =
@@ -138,4 +141,26 @@ fn corrupt_mask_is_reported_when_prepared() {
     let scene = read_export(dir.path(), &ExportOptions::default()).unwrap();
     let message = prepare_view(&scene, 0, 0, &Preprocess::default()).unwrap_err().to_string();
     assert!(message.contains("000_0.png"), "{message}");
+}
+
+#[test]
+fn the_scene_flow_says_where_it_comes_from() {
+    let dir = tempfile::tempdir().unwrap();
+    let layout = write_minimal_export(dir.path());
+    let origin = || read_export(dir.path(), &ExportOptions::default()).unwrap().flow_origin();
+    assert_eq!(origin().unwrap(), FlowOrigin::Absent, "no maps, no flow");
+
+    // Maps of 64x48 images: a 12x16 grid of depth and flow.
+    for t in 0..2 {
+        npy::write_npy_f32(&layout.depth_flow(t, 0), &[12, 16, 4], &vec![0.0; 12 * 16 * 4]).unwrap();
+    }
+    assert_eq!(origin().unwrap(), FlowOrigin::Export, "maps without a record came with the export");
+
+    write_flow_origin(&layout, FlowOrigin::TrackedBoxes).unwrap();
+    assert_eq!(origin().unwrap(), FlowOrigin::TrackedBoxes);
+
+    let record = layout.depth_flow_origin();
+    std::fs::write(&record, br#"{"scene_flow": "guessed"}"#).unwrap();
+    let message = origin().expect_err("an unknown origin").to_string();
+    assert!(message.contains(&record.display().to_string()) && message.contains("guessed"), "{message}");
 }

@@ -116,6 +116,8 @@ pub struct SceneReport {
     pub views: Vec<ViewRecord>,
     pub splits: Vec<SplitSummary>,
     pub stages: Vec<StageTime>,
+    /// Where the true scene flow the motion is scored against comes from.
+    pub scene_flow: dggt_data::FlowOrigin,
     pub notes: Vec<String>,
 }
 
@@ -267,6 +269,9 @@ impl EvalReport {
         let _ = writeln!(md, "- motion source: {}", self.motion_source);
         let _ = writeln!(md, "- depth: {}", self.depth_protocol);
         let _ = writeln!(md, "- motion: {}", self.motion_protocol);
+        for scene in &self.scenes {
+            let _ = writeln!(md, "- true scene flow of {}: {}", scene.name, scene.scene_flow.describe());
+        }
         if let Some(note) = &self.lpips_note {
             let _ = writeln!(md, "- LPIPS: {note}");
         }

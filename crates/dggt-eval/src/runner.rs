@@ -439,6 +439,7 @@ fn evaluate_scene(root: &Path, scene: &Scene, context: &SceneContext<'_>) -> Res
         views: records,
         splits,
         stages: watch.list(),
+        scene_flow: scene.flow_origin()?,
         notes,
     })
 }

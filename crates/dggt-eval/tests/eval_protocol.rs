@@ -61,6 +61,7 @@ fn paper_protocol_scores_every_view_of_the_fixture() {
     let scenes = report["scenes"].as_array().unwrap();
     assert_eq!(scenes.len(), 1);
     assert_eq!(scenes[0]["network_size"], serde_json::json!([84, 56]));
+    assert_eq!(scenes[0]["scene_flow"], "synthetic", "motion is scored against the generator's exact flow");
     let views = scenes[0]["views"].as_array().unwrap();
     // Every (frame, camera) of the window once: 4 input frames x 3 cameras reconstruction, 16 x 3 novel.
     let seen: BTreeSet<(u64, u64, String)> = views
@@ -117,7 +118,13 @@ fn paper_protocol_scores_every_view_of_the_fixture() {
 
     let markdown = std::fs::read_to_string(out.path().join("eval.md")).unwrap();
     assert_eq!(markdown, evaluated.markdown());
-    for heading in ["## reconstruction (input frames)", "## novel view synthesis", MOTION_HELD, "LPIPS: not computed"] {
+    for heading in [
+        "## reconstruction (input frames)",
+        "## novel view synthesis",
+        MOTION_HELD,
+        "LPIPS: not computed",
+        "true scene flow of synth-s0: exact",
+    ] {
         assert!(markdown.contains(heading), "{heading} missing from\n{markdown}");
     }
     assert_eq!(markdown.matches("| synth-s0 |").count(), 2, "{markdown}");

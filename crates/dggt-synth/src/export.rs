@@ -34,6 +34,7 @@ use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
 use dggt_data::instances::{FrameAnnotations, OrderedMap};
+use dggt_data::layout::SYNTH_DESCRIPTION;
 use dggt_data::lidar::write_lidar;
 use dggt_data::variant::{CameraAxes, CameraMounting, DynamicMaskFolders, FramePoses, nuscenes_lidar_from_ego};
 use dggt_data::{DynamicMaskKind, ExportLayout, ExportVariant, images, io, npy, text};
@@ -321,7 +322,7 @@ pub fn write_export(
         parked_instances: parked,
         conventions: CONVENTIONS,
     };
-    io::write_atomically(&layout.root().join("synth.json"), &json_bytes("synth.json", &description)?)?;
+    io::write_atomically(&layout.synth_description(), &json_bytes(SYNTH_DESCRIPTION, &description)?)?;
 
     tracing::debug!(root = %out_dir.display(), views = records.len(), "synthetic scene written");
     Ok(SynthSummary {

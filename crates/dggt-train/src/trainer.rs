@@ -45,7 +45,7 @@ use crate::checkpoint;
 use crate::config::TrainConfig;
 use crate::error::TrainError;
 use crate::modules::{freeze, grouped_optimizer};
-use crate::rank_gradients::sum_over_ranks;
+use crate::rank_gradients::{GradientTransport, sum_over_ranks};
 use crate::ranks;
 use crate::records::{FailureRecord, LoggedStep, StepMeasures, StepRecord, ValidationRecord};
 use crate::replicas::{Replica, Replicas};
@@ -104,6 +104,8 @@ pub struct Trainer {
     checkpoint_gate: CheckpointGate,
     /// The processes of the run (this one alone, or the ranks of an MPI job).
     group: ProcessGroup,
+    /// How the ranks' gradients travel (host buffers, or NCCL on CUDA devices).
+    transport: GradientTransport,
 }
 
 impl Trainer {
@@ -175,6 +177,7 @@ impl Trainer {
         }
         state.samples_per_step = samples_per_step;
         let validation_lpips = validation_lpips(&config, &plain_device)?;
+        let transport = GradientTransport::agree(&group, &plain_device)?;
         Ok(Self {
             config,
             model_config,
@@ -188,6 +191,7 @@ impl Trainer {
             last_failure: None,
             checkpoint_gate: CheckpointGate::default(),
             group,
+            transport,
         })
     }
 
@@ -428,7 +432,7 @@ impl Trainer {
                 let update = Instant::now();
                 let master = self.replicas.master();
                 let total = self.replicas.sum_on_master(outcome.grads);
-                let total = sum_over_ranks(&self.group, &master.model, total)?;
+                let total = sum_over_ranks(&self.group, &self.transport, &master.model, total)?;
                 let stepped = self.replicas.step(self.replicas.share(total), factor);
                 record.update = stepped.report().map(Into::into);
                 measures.stage_seconds.insert("update".into(), update.elapsed().as_secs_f64());
