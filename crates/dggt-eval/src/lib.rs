@@ -5,16 +5,18 @@
 //! - the scores themselves (PSNR, SSIM, D-RMSE, scene flow) come from `dggt-metrics`, LPIPS-Alex from
 //!   `dggt-losses`;
 //! - [`grid`]: where the export's quarter-resolution lidar cells fall in the rendered view;
+//! - [`motion`]: the predicted flow of the surface at an input view, in the export's axes and units;
 //! - [`runner`]: forward pass, renders of every target view, metrics, stage times;
 //! - [`report`]: per-view records, per-scene and overall means, `eval.json` and `eval.md`.
 
 mod error;
 pub mod grid;
+pub mod motion;
 pub mod protocol;
 pub mod report;
 pub mod runner;
 
 pub use error::EvalError;
 pub use protocol::{Protocol, ProtocolKind, TargetKind};
-pub use report::{EvalReport, MOTION_HELD, SceneReport, SplitSummary, ViewRecord};
+pub use report::{EvalReport, MOTION_HELD, MOTION_VELOCITY, SceneReport, SplitSummary, ViewRecord};
 pub use runner::{EvalOptions, LpipsWeights, MotionSource, evaluate};

@@ -22,6 +22,11 @@ use dggt_metrics::{FlowMetrics, mean_present};
 /// How the predicted 3D motion was obtained.
 pub const MOTION_HELD: &str = "held (no motion head)";
 
+/// The motion source of a model that predicts velocities.
+pub const MOTION_VELOCITY: &str = "predicted velocities: the expected flow (dynamic probability x velocity) of each input pixel at the input views' \
+     lidar cells, in metres by the view's depth scale (least squares, no shift); views between the inputs are not \
+     scored for motion";
+
 /// Metrics of one rendered target view.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ViewRecord {

@@ -13,7 +13,9 @@
 //! Motion: without predicted velocities, dynamic Gaussians are held where they were predicted and the
 //! predicted motion of every surface point is zero ([`MotionSource::Held`]); its metrics are computed anyway
 //! and labelled. With predicted velocities (a motion head, or the Gaussian head's velocity channels) the
-//! renders use them, but motion is not scored ([`MotionSource::PredictedUnscored`]). As STORM does, motion is
+//! renders use them, and the expected flow of the surface seen at each lidar cell of an input view is scored
+//! in the export's axes and units ([`MotionSource::Velocity`], [`crate::motion`]); views between the inputs
+//! are not scored for motion (their flow would have to be rendered). As STORM does, motion is
 //! scored at the lidar cells (positive depth; here also not sky and inside the view) and only for windows
 //! where some true flow exceeds [`MOTION_GATE`] (STORM skips samples without such motion, whose accuracies
 //! would be trivially high).
@@ -24,6 +26,7 @@ use std::time::Instant;
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_data::{DepthFlowMap, DepthSource, PlanarImage, Preprocess, Scene, images, open_scene, prepare_view};
 use dggt_geom::ImageSize;
+use dggt_geom::glam::DMat3;
 use dggt_infer::{
     Architecture, GroundTruth, InputCameras, InputSet, LoadedNetwork, MotionPath, SceneOptions, ViewSlot,
     forward_chunked, input_views, load_network,
@@ -35,9 +38,11 @@ use dggt_scene::{Scene4d, TargetView, Timeline, nearest_in_time};
 
 use crate::error::EvalError;
 use crate::grid::{CellMapping, cell_has_sky};
+use crate::motion::{InputFlow, log_from_reconstruction, metres_per_unit};
 use crate::protocol::Protocol;
 use crate::report::{
-    EvalReport, ImageScores, MOTION_HELD, SceneReport, StageTime, ViewRecord, summarise_scenes, summarise_views,
+    EvalReport, ImageScores, MOTION_HELD, MOTION_VELOCITY, SceneReport, StageTime, ViewRecord, summarise_scenes,
+    summarise_views,
 };
 use dggt_metrics::{ImageShape, MetricError, aligned_depth_rmse, psnr, scene_flow_metrics, ssim};
 
@@ -53,9 +58,9 @@ const STAGES: [&str; 5] = ["load", "forward", "assembly", "render", "metrics"];
 pub enum MotionSource {
     /// No motion head: every Gaussian is held in place, so the predicted flow is zero.
     Held,
-    /// Predicted velocities move the dynamic Gaussians, but they are not rendered at the scored cells, so
-    /// motion is not scored (rather than scored as zero).
-    PredictedUnscored,
+    /// Predicted velocities move the dynamic Gaussians; the expected flow `p · v` of each input pixel is scored
+    /// at the input views' lidar cells.
+    Velocity,
 }
 
 impl MotionSource {
@@ -63,15 +68,7 @@ impl MotionSource {
     pub fn label(self) -> &'static str {
         match self {
             Self::Held => MOTION_HELD,
-            Self::PredictedUnscored => "predicted velocities (not rendered at the scored cells: not scored)",
-        }
-    }
-
-    /// The predicted flow at `points` scored points of one view; `None` when motion is not scored.
-    pub fn predicted_flow(self, points: usize) -> Option<Vec<[f32; 3]>> {
-        match self {
-            Self::Held => Some(vec![[0.0; 3]; points]),
-            Self::PredictedUnscored => None,
+            Self::Velocity => MOTION_VELOCITY,
         }
     }
 }
@@ -185,7 +182,7 @@ pub fn evaluate(options: &EvalOptions, device: &Device) -> Result<EvalReport, Ev
         warnings.push("the network has no sky model: renders have a black sky".into());
     }
 
-    let motion = if network.config.predicts_motion() { MotionSource::PredictedUnscored } else { MotionSource::Held };
+    let motion = if network.config.predicts_motion() { MotionSource::Velocity } else { MotionSource::Held };
     let mut reports = Vec::new();
     for (root, scene) in options.scenes.iter().zip(&scenes) {
         tracing::info!("evaluating {}", root.display());
@@ -313,21 +310,25 @@ fn interleaved(image: &PlanarImage) -> Vec<f32> {
     (0..plane).flat_map(|i| [image.data[i], image.data[plane + i], image.data[2 * plane + i]]).collect()
 }
 
-/// The scored cells of one view: rendered depth, lidar depth and true flow, paired.
+/// The scored cells of one view: rendered depth, lidar depth and true flow, paired, and at an input view of a
+/// moving reconstruction the expected flow of its pixels ([`InputFlow::planes`]).
 #[derive(Debug, Default)]
 struct Cells {
     predicted_depth: Vec<f32>,
     true_depth: Vec<f32>,
     true_flow: Vec<[f32; 3]>,
+    predicted_flow: Vec<[f32; 3]>,
 }
 
-/// Pairs the rendered depth with the lidar cells of `map` that are not sky and fall inside the view.
+/// Pairs the rendered depth (and the flow `planes`, when given) with the lidar cells of `map` that are not sky
+/// and fall inside the view.
 fn collect_cells(
     map: &DepthFlowMap,
     sky: Option<&[u8]>,
     original: ImageSize,
     mapping: &CellMapping,
     depth: &[f32],
+    planes: Option<&[Vec<f32>; 3]>,
 ) -> Cells {
     let mut cells = Cells::default();
     let (grid_w, grid_h) = (map.size.width as usize, map.size.height as usize);
@@ -343,6 +344,10 @@ fn collect_cells(
                 cells.true_depth.push(map.depth[i]);
                 if let Some(flow) = &map.flow {
                     cells.true_flow.push(flow[i]);
+                }
+                if let Some(planes) = planes {
+                    let axis = |a: usize| mapping.sample(&planes[a], row, col).unwrap_or(0.0);
+                    cells.predicted_flow.push([axis(0), axis(1), axis(2)]);
                 }
             }
         }
@@ -370,6 +375,8 @@ struct ForwardScene {
     mapping: CellMapping,
     timeline: Timeline,
     scene: Scene4d,
+    /// The input pixels' expected flow, when the reconstruction moves and its time base is known.
+    flow: Option<InputFlow>,
 }
 
 /// Whether the scene's scored cells carry depth and flow, and the longest true flow among them.
@@ -382,7 +389,11 @@ struct FlowSeen {
 fn evaluate_scene(root: &Path, scene: &Scene, context: &SceneContext<'_>) -> Result<SceneReport, EvalError> {
     let protocol = &context.options.protocol;
     let mut watch = Stopwatch::default();
-    let forward = forward_scene(root, context, &mut watch)?;
+    let mut forward = forward_scene(root, context, &mut watch)?;
+    if context.motion == MotionSource::Velocity {
+        forward.flow =
+            InputFlow::of(&forward.scene.pixels, forward.timeline.frames_per_time(), scene.seconds_per_frame())?;
+    }
     let mut records = Vec::new();
     let mut seen = FlowSeen::default();
     for (frame, split) in protocol.targets() {
@@ -418,6 +429,10 @@ fn evaluate_scene(root: &Path, scene: &Scene, context: &SceneContext<'_>) -> Res
         notes.push("the export has neither depth_flows_4 nor lidar: no D-RMSE or motion metrics".into());
     } else if scene.depth_source() == Some(DepthSource::Lidar) {
         notes.push("depth from the projected lidar sweeps, which carry no scene flow: no motion metrics".into());
+    } else if context.motion == MotionSource::Velocity && forward.flow.is_none() {
+        notes.push(
+            "one input frame or no frame interval: predicted velocities have no time base, motion not scored".into(),
+        );
     } else if seen.largest_flow <= MOTION_GATE {
         for record in &mut records {
             record.motion = None;
@@ -474,7 +489,7 @@ fn forward_scene(root: &Path, context: &SceneContext<'_>, watch: &mut Stopwatch)
         .ok_or_else(|| EvalError::NoGaussianHead { checkpoint: context.options.checkpoint.clone() })?;
     drop(prediction);
     watch.add(ASSEMBLY, started);
-    Ok(ForwardScene { inputs, input_images, size, mapping, timeline, scene })
+    Ok(ForwardScene { inputs, input_images, size, mapping, timeline, scene, flow: None })
 }
 
 /// The view of the protocol's camera `camera_position` at log frame `frame`: an input view from its own
@@ -602,8 +617,13 @@ fn score_view(
         Some(map) => {
             seen.has_depth_flow = true;
             let sky_mask = read_sky_mask(files.sky_mask.as_deref(), camera.size)?;
-            let cells = collect_cells(&map, sky_mask.as_deref(), camera.size, &forward.mapping, depth);
-            score_cells(&mut record, &cells, context.motion, seen)?;
+            let predicted = predicted_flow(scene, forward, context.motion, view);
+            let planes = match predicted {
+                CellFlow::Sampled { flow, input_view, .. } => Some(flow.planes(input_view)),
+                CellFlow::Held | CellFlow::Unscored => None,
+            };
+            let cells = collect_cells(&map, sky_mask.as_deref(), camera.size, &forward.mapping, depth, planes);
+            score_cells(&mut record, &cells, predicted, seen)?;
         }
     }
     Ok(record)
@@ -617,11 +637,44 @@ fn read_sky_mask(path: Option<&Path>, original: ImageSize) -> Result<Option<Vec<
     Ok(Some(mask.into_raw()))
 }
 
-/// D-RMSE and the scene-flow metrics of `cells` into `record`.
+/// What the predicted flow at a view's cells is.
+#[derive(Clone, Copy)]
+enum CellFlow<'a> {
+    /// Zero everywhere: nothing moves.
+    Held,
+    /// Not known at this view (one between the inputs, or no time base).
+    Unscored,
+    /// Sampled from input view `input_view`'s planes and brought into the log world's axes by `log_from_world`.
+    Sampled { flow: &'a InputFlow, input_view: usize, log_from_world: DMat3 },
+}
+
+/// The predicted flow `view` is scored with.
+fn predicted_flow<'a>(
+    scene: &Scene,
+    forward: &'a ForwardScene,
+    motion: MotionSource,
+    view: &ScoredView,
+) -> CellFlow<'a> {
+    let input_position = forward.inputs.frames.iter().position(|&f| f == view.frame);
+    match (motion, &forward.flow, input_position) {
+        (MotionSource::Held, _, _) => CellFlow::Held,
+        (MotionSource::Velocity, Some(flow), Some(position)) => {
+            let input_view = position * forward.inputs.cameras.len() + view.camera_position;
+            let predicted = forward.scene.views()[input_view].camera.world_from_camera.rotation_matrix();
+            let truth = scene.view(view.frame_position, view.camera_position).world_from_camera.rotation_matrix();
+            let log_from_world = log_from_reconstruction(scene.world_from_log.rotation_matrix(), truth, predicted);
+            CellFlow::Sampled { flow, input_view, log_from_world }
+        }
+        (MotionSource::Velocity, _, _) => CellFlow::Unscored,
+    }
+}
+
+/// D-RMSE and the scene-flow metrics of `cells` into `record`; a sampled flow is brought to metres by the
+/// view's depth scale ([`metres_per_unit`]; not scored without one).
 fn score_cells(
     record: &mut ViewRecord,
     cells: &Cells,
-    motion: MotionSource,
+    predicted: CellFlow<'_>,
     seen: &mut FlowSeen,
 ) -> Result<(), EvalError> {
     record.depth_cells = cells.true_depth.len();
@@ -637,7 +690,16 @@ fn score_cells(
         Err(other) => return Err(other.into()),
     }
     if !cells.true_flow.is_empty() {
-        if let Some(predicted) = motion.predicted_flow(cells.true_flow.len()) {
+        let predicted: Option<Vec<[f32; 3]>> = match predicted {
+            CellFlow::Held => Some(vec![[0.0; 3]; cells.true_flow.len()]),
+            CellFlow::Unscored => None,
+            CellFlow::Sampled { flow, log_from_world, .. } => {
+                metres_per_unit(&cells.predicted_depth, &cells.true_depth).map(|scale| {
+                    cells.predicted_flow.iter().map(|&f| flow.in_export_units(f, log_from_world, scale)).collect()
+                })
+            }
+        };
+        if let Some(predicted) = predicted {
             record.motion = Some(scene_flow_metrics(&predicted, &cells.true_flow)?);
         }
         let longest = cells

@@ -7,7 +7,7 @@ use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
 use burn::tensor::Device;
-use dggt_eval::{EvalOptions, LpipsWeights, MOTION_HELD, Protocol, evaluate};
+use dggt_eval::{EvalOptions, LpipsWeights, MOTION_HELD, MOTION_VELOCITY, Protocol, evaluate};
 use dggt_refine::{Latent, Prompt, ReferenceView, RefinerSpec};
 use dggt_train::{RunOptions, Start, TrainConfig, Trainer};
 use serde_json::Value;
@@ -24,9 +24,21 @@ fn parity_dir() -> PathBuf {
     dggt_test_data::Shared::Parity.dir()
 }
 
+/// Whether the tiny network predicts velocities.
+#[derive(Clone, Copy, PartialEq)]
+enum Motion {
+    Held,
+    GaussianVelocity,
+}
+
 /// A tiny network after one training step on the fixture, saved as the trainer saves checkpoints.
 fn tiny_checkpoint(run: &Path) {
+    tiny_checkpoint_with(run, Motion::Held);
+}
+
+fn tiny_checkpoint_with(run: &Path, motion: Motion) {
     let mut config = TrainConfig::load(&repo().join("configs/tiny-overfit.toml")).expect("tiny-overfit.toml loads");
+    config.model.gaussian_velocity = motion == Motion::GaussianVelocity;
     config.data.scene = fixture();
     config.data.frames = None;
     config.data.preprocess.target_width = 56;
@@ -201,6 +213,41 @@ fn paper_protocol_scores_every_view_of_the_fixture() {
 
 fn error_of(options: &EvalOptions) -> String {
     evaluate(options, &Device::flex()).map(|_| ()).unwrap_err().to_string()
+}
+
+#[test]
+fn predicted_velocities_are_scored_at_the_input_views() {
+    let run_dir = tempfile::tempdir().unwrap();
+    tiny_checkpoint_with(run_dir.path(), Motion::GaussianVelocity);
+    let out = tempfile::tempdir().unwrap();
+    let mut options = EvalOptions::new(vec![fixture()], run_dir.path(), out.path());
+    options.width = Some(84);
+    evaluate(&options, &Device::flex()).unwrap();
+
+    let report: Value = serde_json::from_slice(&std::fs::read(out.path().join("eval.json")).unwrap()).unwrap();
+    assert_eq!(report["motion_source"], MOTION_VELOCITY);
+    let views = report["scenes"][0]["views"].as_array().unwrap();
+    let (mut scored, mut unscored, mut moving) = (0, 0, 0);
+    for view in views {
+        match (view["split"].as_str().unwrap(), view.get("motion")) {
+            ("reconstruction", Some(motion)) => {
+                scored += 1;
+                assert!(number(motion, "epe3d").is_finite() && number(motion, "epe3d") >= 0.0, "{motion}");
+                // A prediction that is not zero: the angles are not pi/2 as a held one's are.
+                if let Some(angle) = motion["angle_error_rad"].as_f64() {
+                    assert!(angle.is_finite(), "{motion}");
+                    moving += usize::from((angle - std::f64::consts::FRAC_PI_2).abs() > 1e-6);
+                }
+            }
+            ("novel_view", None) => unscored += 1,
+            (split, motion) => panic!("{split} view with motion {motion:?}: {view}\n{}", report["scenes"][0]["notes"]),
+        }
+    }
+    assert_eq!((scored, unscored), (12, 48), "every input view scored, no view between them");
+    assert!(moving > 0, "the predicted flow is not zero at the moving cells of any view");
+    let overall = &report["overall"][0];
+    assert_eq!(overall["split"], "reconstruction");
+    assert!(number(overall, "epe3d").is_finite(), "{overall}");
 }
 
 #[test]
