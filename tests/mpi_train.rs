@@ -35,14 +35,7 @@ fn train(ranks: usize, config: &Path, out: &Path, resume: bool, failpoint: Optio
     let binary = env!("CARGO_BIN_EXE_dggt");
     let mut command = match ranks {
         1 => Command::new(binary),
-        _ => {
-            let mut command = Command::new("mpirun");
-            command
-                .args(["--allow-run-as-root", "--oversubscribe", "--bind-to", "none", "--mca", "btl", "self,vader"])
-                .args(["-np", &ranks.to_string(), binary])
-                .env("OMPI_MCA_btl_vader_single_copy_mechanism", "none");
-            command
-        }
+        _ => dggt_test_data::mpi_launcher(ranks, binary),
     };
     command.args(["train", "--config"]).arg(config).arg("--out").arg(out);
     if resume {

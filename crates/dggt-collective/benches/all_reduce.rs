@@ -6,7 +6,6 @@
 //! full-size network, an upper bound of its trainable ones) and `DGGT_BENCH_BUCKET` the bucket (values).
 //! One bucket buffer is reused, so the volume passes through the transport without being held in memory.
 
-use std::process::Command;
 use std::time::Instant;
 
 use dggt_collective::ProcessGroup;
@@ -19,13 +18,7 @@ fn setting(name: &str, default: usize) -> usize {
 fn main() {
     if std::env::var_os("OMPI_COMM_WORLD_SIZE").is_none() && std::env::var_os("PMI_SIZE").is_none() {
         let program = std::env::current_exe().expect("the bench binary's path");
-        let status = Command::new("mpirun")
-            .args(["--allow-run-as-root", "--oversubscribe", "--bind-to", "none", "--mca", "btl", "self,vader"])
-            .args(["-np", "2"])
-            .arg(program)
-            .env("OMPI_MCA_btl_vader_single_copy_mechanism", "none")
-            .status()
-            .expect("mpirun runs");
+        let status = dggt_test_data::mpi_launcher(2, program).status().expect("mpirun runs");
         std::process::exit(status.code().unwrap_or(1));
     }
     let group = ProcessGroup::from_environment().expect("joins the MPI world");

@@ -5,25 +5,12 @@
 //! The parent test starts the launcher on this test binary's `rank_body`, which is ignored in a plain run (it
 //! only makes sense as one of two ranks) and checks that both ranks ran it and reported success.
 
-use std::process::Command;
-
 use dggt_collective::{CollectiveError, ProcessGroup, all_reduce_bucketed};
-
-/// The launcher's arguments for `ranks` ranks of `program` on one machine: as root in a container, any core
-/// count, shared memory and loopback transports only.
-fn launcher(ranks: usize, program: &str) -> Command {
-    let mut command = Command::new("mpirun");
-    command
-        .args(["--allow-run-as-root", "--oversubscribe", "--bind-to", "none", "--mca", "btl", "self,vader"])
-        .args(["-np", &ranks.to_string(), program])
-        .env("OMPI_MCA_btl_vader_single_copy_mechanism", "none");
-    command
-}
 
 #[test]
 fn two_ranks_sum_their_gradients_bucket_by_bucket() {
     let program = std::env::current_exe().expect("the test binary's path");
-    let output = launcher(2, program.to_str().expect("a UTF-8 path"))
+    let output = dggt_test_data::mpi_launcher(2, program)
         .args(["--exact", "rank_body", "--ignored", "--nocapture", "--test-threads", "1"])
         .output()
         .expect("mpirun runs (install openmpi-bin and libopenmpi-dev)");

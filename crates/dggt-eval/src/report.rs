@@ -44,6 +44,12 @@ pub struct ViewRecord {
     /// LPIPS-Alex; absent without weights (see [`EvalReport::lpips_note`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub lpips: Option<f64>,
+    /// PSNR in dB over the pixels of the export's dynamic mask (moving objects); absent without a mask or
+    /// with an empty one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dynamic_psnr: Option<f64>,
+    /// Pixels of the dynamic mask at the network's resolution.
+    pub dynamic_pixels: usize,
     /// D-RMSE in metres; absent when the view has no usable lidar cell (see `depth_note`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub d_rmse: Option<f64>,
@@ -81,6 +87,9 @@ pub struct SplitSummary {
     pub psnr: Option<f64>,
     pub ssim: Option<f64>,
     pub lpips: Option<f64>,
+    /// PSNR over the moving objects' pixels, and the views (or scenes) that have some.
+    pub dynamic_psnr: Option<f64>,
+    pub dynamic_psnr_count: usize,
     pub d_rmse: Option<f64>,
     /// Views (or scenes) with a D-RMSE.
     pub d_rmse_count: usize,
@@ -159,6 +168,7 @@ pub fn summarise_views(views: &[ViewRecord], split: TargetKind) -> SplitSummary 
     let views: Vec<&ViewRecord> = views.iter().filter(|v| v.split == split).collect();
     let motion = |f: fn(&FlowMetrics) -> Option<f64>| mean_present(views.iter().map(|v| v.motion.as_ref().and_then(f)));
     let (d_rmse, d_rmse_count) = mean_present(views.iter().map(|v| v.d_rmse));
+    let (dynamic_psnr, dynamic_psnr_count) = mean_present(views.iter().map(|v| v.dynamic_psnr));
     let (epe3d, motion_count) = motion(|m| Some(m.epe3d));
     SplitSummary {
         split,
@@ -166,6 +176,8 @@ pub fn summarise_views(views: &[ViewRecord], split: TargetKind) -> SplitSummary 
         psnr: mean_present(views.iter().map(|v| Some(v.psnr))).0,
         ssim: mean_present(views.iter().map(|v| Some(v.ssim))).0,
         lpips: mean_present(views.iter().map(|v| v.lpips)).0,
+        dynamic_psnr,
+        dynamic_psnr_count,
         d_rmse,
         d_rmse_count,
         epe3d,
@@ -200,6 +212,8 @@ pub fn summarise_scenes(scenes: &[SceneReport], splits: &[TargetKind]) -> Vec<Sp
                 psnr: mean(|r| r.psnr).0,
                 ssim: mean(|r| r.ssim).0,
                 lpips: mean(|r| r.lpips).0,
+                dynamic_psnr: mean(|r| r.dynamic_psnr).0,
+                dynamic_psnr_count: mean(|r| r.dynamic_psnr).1,
                 d_rmse: mean(|r| r.d_rmse).0,
                 d_rmse_count: mean(|r| r.d_rmse).1,
                 epe3d: mean(|r| r.epe3d).0,
@@ -228,10 +242,11 @@ fn percent(value: Option<f64>) -> String {
 
 fn row(label: &str, count: String, s: &SplitSummary) -> String {
     format!(
-        "| {label} | {count} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+        "| {label} | {count} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
         cell(s.psnr, 2),
         cell(s.ssim, 4),
         cell(s.lpips, 4),
+        cell(s.dynamic_psnr, 2),
         cell(s.d_rmse, 3),
         cell(s.epe3d, 3),
         percent(s.acc5),
@@ -286,9 +301,10 @@ impl EvalReport {
         for summary in &self.overall {
             let _ = writeln!(md, "\n## {}\n", summary.split.title());
             md.push_str(
-                "| scene | views | PSNR (dB) | SSIM | LPIPS | D-RMSE (m) | EPE3D | Acc5 (%) | Acc10 (%) | angle (rad) |\n",
+                "| scene | views | PSNR (dB) | SSIM | LPIPS | moving PSNR (dB) | D-RMSE (m) | EPE3D | Acc5 (%) | Acc10 (%) | \
+                 angle (rad) |\n",
             );
-            md.push_str("|---|---|---|---|---|---|---|---|---|---|\n");
+            md.push_str("|---|---|---|---|---|---|---|---|---|---|---|\n");
             for scene in &self.scenes {
                 if let Some(s) = scene.splits.iter().find(|s| s.split == summary.split) {
                     md.push_str(&row(&scene.name, s.count.to_string(), s));

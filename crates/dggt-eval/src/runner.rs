@@ -24,7 +24,9 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use burn::tensor::{Device, Tensor, TensorData};
-use dggt_data::{DepthFlowMap, DepthSource, PlanarImage, Preprocess, Scene, images, open_scene, prepare_view};
+use dggt_data::{
+    BinaryMask, DepthFlowMap, DepthSource, PlanarImage, Preprocess, Scene, images, open_scene, prepare_view,
+};
 use dggt_geom::ImageSize;
 use dggt_geom::glam::DMat3;
 use dggt_infer::{
@@ -44,7 +46,7 @@ use crate::report::{
     EvalReport, ImageScores, MOTION_HELD, MOTION_VELOCITY, SceneReport, StageTime, ViewRecord, summarise_scenes,
     summarise_views,
 };
-use dggt_metrics::{ImageShape, MetricError, aligned_depth_rmse, psnr, scene_flow_metrics, ssim};
+use dggt_metrics::{ImageShape, MetricError, aligned_depth_rmse, masked_psnr, psnr, scene_flow_metrics, ssim};
 
 /// Motion is scored only in windows where some true flow is longer than this (STORM's rule; m/s for
 /// velocity-valued exports).
@@ -593,6 +595,7 @@ fn score_view(
     let truth = interleaved(&prepared.image);
     let scores = image_scores(images.rgb, &truth, forward.size, context)?;
     let refined = images.refined.map(|rgb| image_scores(rgb, &truth, forward.size, context)).transpose()?;
+    let (dynamic_psnr, dynamic_pixels) = moving_region_psnr(images.rgb, &truth, prepared.dynamic_mask.as_ref())?;
     let camera = &scene.cameras[view.camera_position];
     let mut record = ViewRecord {
         frame: view.frame,
@@ -603,6 +606,8 @@ fn score_view(
         psnr: scores.psnr,
         ssim: scores.ssim,
         lpips: scores.lpips,
+        dynamic_psnr,
+        dynamic_pixels,
         d_rmse: None,
         depth_scale: None,
         depth_shift: None,
@@ -627,6 +632,23 @@ fn score_view(
         }
     }
     Ok(record)
+}
+
+/// PSNR of the render over the pixels of the view's dynamic mask (interleaved RGB of the network's size), and
+/// how many pixels that is; `None` without a mask or with an empty one.
+fn moving_region_psnr(
+    rgb: &[f32],
+    truth: &[f32],
+    mask: Option<&BinaryMask>,
+) -> Result<(Option<f64>, usize), EvalError> {
+    let Some(mask) = mask else { return Ok((None, 0)) };
+    let moving: Vec<bool> = mask.data.iter().map(|&v| v > 0).collect();
+    let pixels = moving.iter().filter(|&&m| m).count();
+    match masked_psnr(rgb, truth, 3, &moving) {
+        Ok(value) => Ok((Some(value), pixels)),
+        Err(MetricError::Empty { .. }) => Ok((None, 0)),
+        Err(other) => Err(other.into()),
+    }
 }
 
 /// The export's sky mask of a view at its original size, if it has one.

@@ -100,6 +100,8 @@ fn record(split: TargetKind, psnr: f64, d_rmse: Option<f64>) -> ViewRecord {
         psnr,
         ssim: 0.5,
         lpips: None,
+        dynamic_psnr: None,
+        dynamic_pixels: 0,
         d_rmse,
         depth_scale: None,
         depth_shift: None,

@@ -113,6 +113,17 @@ fn paper_protocol_scores_every_view_of_the_fixture() {
     }
     // The fixture's cars move faster than 1 m/s: motion is scored on every view.
     assert_eq!(motion_views, 60, "motion metrics on every view");
+    // The moving cars' pixels are scored on their own where a view sees them, and only there.
+    let moving: Vec<&Value> = views.iter().filter(|v| v["dynamic_pixels"].as_u64().unwrap() > 0).collect();
+    assert!(!moving.is_empty(), "some view sees a moving car");
+    for view in views {
+        let seen = view["dynamic_pixels"].as_u64().unwrap() > 0;
+        assert_eq!(view.get("dynamic_psnr").is_some(), seen, "{view}");
+        if seen {
+            let value = number(view, "dynamic_psnr");
+            assert!(value.is_finite() && value > 0.0, "{view}");
+        }
+    }
 
     let overall = report["overall"].as_array().unwrap();
     let splits: Vec<&str> = overall.iter().map(|s| s["split"].as_str().unwrap()).collect();
@@ -120,7 +131,7 @@ fn paper_protocol_scores_every_view_of_the_fixture() {
     assert_eq!(scenes[0]["splits"][0]["count"], 12);
     assert_eq!(scenes[0]["splits"][1]["count"], 48);
     for summary in overall {
-        for key in ["psnr", "ssim", "d_rmse", "epe3d", "acc5", "acc10", "angle_error_rad"] {
+        for key in ["psnr", "ssim", "dynamic_psnr", "d_rmse", "epe3d", "acc5", "acc10", "angle_error_rad"] {
             assert!(number(summary, key).is_finite(), "{key} in {summary}");
         }
         assert!(summary["lpips"].is_null());

@@ -88,6 +88,22 @@ pub fn psnr(a: &[f32], b: &[f32]) -> Result<f64, MetricError> {
     Ok(10.0 * (1.0 / mse).log10())
 }
 
+/// PSNR in dB over the pixels of interleaved `[.., channels]` images where `mask` (one entry per pixel) is set:
+/// the region of moving objects, say. [`MetricError::Empty`] when no pixel is set.
+pub fn masked_psnr(a: &[f32], b: &[f32], channels: usize, mask: &[bool]) -> Result<f64, MetricError> {
+    const METRIC: &str = "masked PSNR";
+    crate::error::check_lengths(METRIC, a.len(), b.len())?;
+    crate::error::check_lengths(METRIC, a.len(), mask.len() * channels)?;
+    let pick = |image: &[f32]| -> Vec<f32> {
+        image.chunks_exact(channels).zip(mask).filter(|(_, set)| **set).flat_map(|(pixel, _)| pixel.to_vec()).collect()
+    };
+    let (a, b) = (pick(a), pick(b));
+    if a.is_empty() {
+        return Err(MetricError::Empty { metric: METRIC });
+    }
+    psnr(&a, &b)
+}
+
 /// Reflected index (`d c b a | a b c d | d c b a`) for `-n <= i < 2n`.
 fn reflect(i: isize, n: usize) -> usize {
     let n = n as isize;
@@ -215,6 +231,18 @@ mod tests {
         let n = 5;
         let got: Vec<usize> = (-3..8).map(|i| reflect(i, n)).collect();
         assert_eq!(got, [2, 1, 0, 0, 1, 2, 3, 4, 4, 3, 2]);
+    }
+
+    #[test]
+    fn masked_psnr_looks_only_at_the_masked_pixels() {
+        // Two RGB pixels: the first off by 0.1 in every channel, the second off by 0.5.
+        let (a, b) = ([0.0, 0.0, 0.0, 0.0, 0.0, 0.0], [0.1, 0.1, 0.1, 0.5, 0.5, 0.5]);
+        let first = masked_psnr(&a, &b, 3, &[true, false]).unwrap();
+        assert!((first - 20.0).abs() < 1e-5, "{first}");
+        let second = masked_psnr(&a, &b, 3, &[false, true]).unwrap();
+        assert!((second - 10.0 * 4f64.log10()).abs() < 1e-5, "{second}");
+        assert!(matches!(masked_psnr(&a, &b, 3, &[false, false]), Err(MetricError::Empty { .. })));
+        assert!(matches!(masked_psnr(&a, &b, 3, &[true]), Err(MetricError::LengthMismatch { .. })));
     }
 
     #[test]

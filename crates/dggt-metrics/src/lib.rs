@@ -18,6 +18,6 @@ pub mod sampling;
 
 pub use depth::{DepthAlignment, aligned_depth_rmse};
 pub use error::MetricError;
-pub use image::{ImageMetrics, ImageShape, Ssim, image_metrics, psnr, ssim, ssim_map};
+pub use image::{ImageMetrics, ImageShape, Ssim, image_metrics, masked_psnr, psnr, ssim, ssim_map};
 pub use motion::{FlowMetrics, scene_flow_metrics};
 pub use sampling::{mean_present, sample_bilinear};

@@ -5,12 +5,16 @@
 //!   parity vectors (`shared/parity`), the released checkpoints' key lists (`shared/reference/checkpoint-keys`)
 //!   and real driving logs under non-commercial licences (`shared/real-data`).
 //!
+//! It also starts MPI jobs the way every multi-rank test does ([`mpi_launcher`]).
+//!
 //! Shared data is looked up as `../shared/...` from the repository or from the nearest folder above it that has
 //! one (a worktree or a clone may sit deeper), or where an environment variable says. A test that needs data
 //! that is not there fails with a message naming where it looked and the variable to set: it never passes
 //! quietly.
 
+use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
+use std::process::Command;
 
 /// The repository's root folder (the workspace that holds this crate).
 pub fn repo_root() -> PathBuf {
@@ -116,6 +120,20 @@ pub fn parity(name: &str) -> PathBuf {
 /// When it is missing.
 pub fn real_data() -> PathBuf {
     Shared::RealData.dir()
+}
+
+/// `mpirun -np ranks program` as the MPI tests and benchmarks start it on one machine: as root in a container,
+/// any number of ranks on any core count, unbound, over the shared-memory and loopback transports only (without
+/// the kernel's single-copy mechanism, which containers refuse). Needs Open MPI's `mpirun` on the `PATH`.
+pub fn mpi_launcher(ranks: usize, program: impl AsRef<OsStr>) -> Command {
+    let mut command = Command::new("mpirun");
+    command
+        .args(["--allow-run-as-root", "--oversubscribe", "--bind-to", "none", "--mca", "btl", "self,vader"])
+        .arg("-np")
+        .arg(ranks.to_string())
+        .arg(program)
+        .env("OMPI_MCA_btl_vader_single_copy_mechanism", "none");
+    command
 }
 
 #[cfg(test)]
