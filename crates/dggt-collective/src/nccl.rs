@@ -63,8 +63,7 @@ impl NcclCommunicator {
     /// it at the same point.
     pub fn join(group: &ProcessGroup, device: &Device) -> Result<Self, CollectiveError> {
         let device_index = cuda_index(device)?;
-        // SAFETY: only probes whether the shared library can be opened.
-        if !unsafe { cudarc::nccl::sys::is_culib_present() } {
+        if !library_present() {
             return Err(CollectiveError::NcclMissing);
         }
         make_current(device_index)?;
@@ -140,6 +139,12 @@ impl Drop for Handles {
 /// Whether `device` is a CUDA device (whose tensors NCCL can sum).
 pub fn is_cuda(device: &Device) -> bool {
     cuda_index(device).is_ok()
+}
+
+/// Whether this machine has the NCCL library ([`NcclCommunicator::join`] fails without it).
+pub fn library_present() -> bool {
+    // SAFETY: only probes whether the shared library can be opened.
+    unsafe { cudarc::nccl::sys::is_culib_present() }
 }
 
 /// The CUDA device number behind a burn device, or an error naming the device when it is not a CUDA one.

@@ -62,9 +62,16 @@ impl GradientTransport {
         Self::join_device(group, device)
     }
 
+    /// A CUDA device on a machine with NCCL (a CUDA rank without it is told why its gradients go through the
+    /// host).
     #[cfg(feature = "nccl")]
     fn device_capable(device: &Device) -> bool {
-        dggt_collective::nccl::is_cuda(device)
+        use dggt_collective::nccl::{is_cuda, library_present};
+        let capable = is_cuda(device) && library_present();
+        if is_cuda(device) && !capable {
+            tracing::warn!("NCCL (libnccl.so.2) was not found: every rank sums its gradients through host buffers");
+        }
+        capable
     }
 
     #[cfg(not(feature = "nccl"))]
