@@ -39,22 +39,21 @@ impl InputFlow {
         frames_per_time: f64,
         seconds_per_frame: Option<f64>,
     ) -> Result<Option<Self>, EvalError> {
-        let Some(velocity) = &pixels.velocity else { return Ok(None) };
+        let Some(velocity) = pixels.host_velocity() else { return Ok(None) };
         let seconds_per_time = frames_per_time * seconds_per_frame.unwrap_or(0.0);
         if !(seconds_per_time > 0.0 && seconds_per_time.is_finite()) {
             return Ok(None);
         }
-        let velocity = host_f32(velocity.clone(), "velocity")?;
         let dynamic = match &pixels.dynamic_logit {
             Some(logit) => host_f32(logit.clone(), "dynamic logit")?.iter().map(|&l| sigmoid(l)).collect(),
-            None => vec![0.0; velocity.len() / 3],
+            None => vec![0.0; velocity.len()],
         };
         let per_view = pixels.per_view();
         let planes = (0..pixels.views.len())
             .map(|view| {
                 let range = view * per_view..(view + 1) * per_view;
                 let component = |axis: usize| -> Vec<f32> {
-                    range.clone().map(|pixel| dynamic[pixel] * velocity[pixel * 3 + axis]).collect()
+                    range.clone().map(|pixel| dynamic[pixel] * velocity[pixel][axis]).collect()
                 };
                 [component(0), component(1), component(2)]
             })

@@ -17,11 +17,7 @@ pub fn write_rgb_png(path: &Path, size: ImageSize, rgb: &[f32]) -> Result<(), Fo
         rgb.iter().map(|&v| if v.is_finite() { (v.clamp(0.0, 1.0) * 255.0).round() as u8 } else { 0 }).collect();
     let image = RgbImage::from_raw(size.width, size.height, bytes)
         .ok_or_else(|| FormatError::invalid(path, "RGB buffer does not fill the image"))?;
-    let mut encoded = std::io::Cursor::new(Vec::new());
-    image
-        .write_to(&mut encoded, image::ImageFormat::Png)
-        .map_err(|e| FormatError::invalid(path, format!("encoding PNG: {e}")))?;
-    crate::write_file(path, &encoded.into_inner())
+    crate::write_png(path, image.into())
 }
 
 /// Reads an image as interleaved RGB in `[0, 1]`.

@@ -27,6 +27,15 @@ pub(crate) fn write_file(path: &std::path::Path, bytes: &[u8]) -> Result<(), For
     Ok(dggt_data::io::write_atomically(path, bytes)?)
 }
 
+/// Encodes `image` as PNG and writes it to `path` ([`write_file`]).
+pub(crate) fn write_png(path: &std::path::Path, image: image::DynamicImage) -> Result<(), FormatError> {
+    let mut encoded = std::io::Cursor::new(Vec::new());
+    image
+        .write_to(&mut encoded, image::ImageFormat::Png)
+        .map_err(|e| FormatError::invalid(path, format!("encoding PNG: {e}")))?;
+    write_file(path, &encoded.into_inner())
+}
+
 pub(crate) fn read_file(path: &std::path::Path) -> Result<Vec<u8>, FormatError> {
     std::fs::read(path).map_err(|e| FormatError::io(path, e))
 }

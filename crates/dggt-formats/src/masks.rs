@@ -25,11 +25,7 @@ fn write_gray(path: &Path, size: ImageSize, values: Vec<u8>) -> Result<(), Forma
     }
     let image = GrayImage::from_raw(size.width, size.height, values)
         .ok_or_else(|| FormatError::invalid(path, "mask buffer does not fill the image"))?;
-    let mut bytes = std::io::Cursor::new(Vec::new());
-    image
-        .write_to(&mut bytes, image::ImageFormat::Png)
-        .map_err(|e| FormatError::invalid(path, format!("encoding PNG: {e}")))?;
-    crate::write_file(path, &bytes.into_inner())
+    crate::write_png(path, image.into())
 }
 
 /// Reads an 8-bit grayscale PNG as values in `[0, 1]`.

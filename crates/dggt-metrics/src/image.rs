@@ -95,7 +95,12 @@ pub fn masked_psnr(a: &[f32], b: &[f32], channels: usize, mask: &[bool]) -> Resu
     crate::error::check_lengths(METRIC, a.len(), b.len())?;
     crate::error::check_lengths(METRIC, a.len(), mask.len() * channels)?;
     let pick = |image: &[f32]| -> Vec<f32> {
-        image.chunks_exact(channels).zip(mask).filter(|(_, set)| **set).flat_map(|(pixel, _)| pixel.to_vec()).collect()
+        image
+            .chunks_exact(channels)
+            .zip(mask)
+            .filter(|(_, set)| **set)
+            .flat_map(|(pixel, _)| pixel.iter().copied())
+            .collect()
     };
     let (a, b) = (pick(a), pick(b));
     if a.is_empty() {

@@ -187,6 +187,11 @@ impl PixelGaussians {
         Ok(self)
     }
 
+    /// The host copy of [`PixelGaussians::velocity`] (world axes per unit of scene time), one row per Gaussian.
+    pub fn host_velocity(&self) -> Option<&[[f32; 3]]> {
+        self.host_velocity.as_deref()
+    }
+
     /// Number of Gaussians `M`.
     pub fn len(&self) -> usize {
         self.host_means.len()
