@@ -1,0 +1,173 @@
+//! The moving objects of one forward pass: each with an id, its pixels and box at every input time it was seen,
+//! and a rigid trajectory through those times ([`find_instances`]).
+
+use dggt_geom::glam::DVec3;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::cluster::{ClusterSettings, ViewPoints, cluster_view};
+use crate::link::{Group, LinkSettings, follow, group_at_time};
+use crate::register::{RegistrationSettings, initial_motion, register};
+use crate::rigid::RigidMotion;
+use crate::trajectory::Trajectory;
+
+/// Everything instance finding is asked.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct InstanceSettings {
+    pub cluster: ClusterSettings,
+    pub link: LinkSettings,
+    pub registration: RegistrationSettings,
+}
+
+/// One object at one input time.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Appearance {
+    /// Scene time of the input.
+    pub time: f64,
+    /// The input views it was seen in (indices into the views given), increasing.
+    pub views: Vec<usize>,
+    /// Its dynamic pixels over those views.
+    pub pixels: usize,
+    /// World-axis-aligned box of its points, `[min, max]`.
+    pub bounds: [DVec3; 2],
+    /// Centroid of its points.
+    pub centre: DVec3,
+}
+
+/// One moving object.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Instance {
+    /// Numbered from 0 in order of first appearance (earlier time first, then more pixels first).
+    pub id: u32,
+    /// One per input time it was seen at, in time order (consecutive input times).
+    pub appearances: Vec<Appearance>,
+    pub trajectory: Trajectory,
+    /// Registration residual of each step between consecutive appearances (world units, root mean square of
+    /// the kept pairs).
+    pub residuals: Vec<f64>,
+}
+
+/// The instances of a set of views, and which pixels belong to which.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Instances {
+    pub instances: Vec<Instance>,
+    /// Per view, per pixel: the instance's position in `instances`, or [`Instances::NONE`].
+    labels: Vec<Vec<u32>>,
+}
+
+impl Instances {
+    /// Label of a pixel that belongs to no instance.
+    pub const NONE: u32 = u32::MAX;
+
+    /// The instance (position in [`Instances::instances`]) pixel `pixel` of view `view` belongs to.
+    pub fn instance_of(&self, view: usize, pixel: usize) -> Option<usize> {
+        let label = *self.labels.get(view)?.get(pixel)?;
+        (label != Self::NONE).then_some(label as usize)
+    }
+
+    /// The labels of view `view`, one per pixel ([`Instances::NONE`] for none).
+    pub fn labels(&self, view: usize) -> &[u32] {
+        &self.labels[view]
+    }
+
+    /// The motion of instance `instance`'s points from scene time `from` to `to`.
+    pub fn motion(&self, instance: usize, from: f64, to: f64) -> RigidMotion {
+        self.instances[instance].trajectory.motion(from, to)
+    }
+
+    pub fn len(&self) -> usize {
+        self.instances.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.instances.is_empty()
+    }
+}
+
+/// Clusters every view's dynamic pixels, joins them per input time, follows them through consecutive input
+/// times and registers each step (see the crate's doc). Views are given in any order; each view's pixels are
+/// `width · height` long.
+pub fn find_instances(views: &[ViewPoints], settings: &InstanceSettings) -> Instances {
+    let clusters: Vec<_> = views.par_iter().map(|view| cluster_view(view, &settings.cluster)).collect();
+    let mut times: Vec<f64> = views.iter().map(|view| view.time).collect();
+    times.sort_by(f64::total_cmp);
+    times.dedup();
+    let groups: Vec<Vec<Group>> =
+        times.iter().map(|&time| group_at_time(views, &clusters, time, &settings.link)).collect();
+    let chains = chains(&groups, &settings.link);
+    let mut instances: Vec<Instance> =
+        chains.par_iter().map(|chain| instance_of_chain(&groups, chain, &settings.registration)).collect();
+    let mut labels: Vec<Vec<u32>> = views.iter().map(|view| vec![Instances::NONE; view.width * view.height]).collect();
+    for (position, (instance, chain)) in instances.iter_mut().zip(&chains).enumerate() {
+        instance.id = position as u32;
+        for &(time, group) in chain {
+            for &(view, pixel) in &groups[time][group].members {
+                labels[view][pixel as usize] = position as u32;
+            }
+        }
+    }
+    Instances { instances, labels }
+}
+
+/// Each object as `(time position, group position)` steps through consecutive times, ordered by first time
+/// then by size.
+fn chains(groups: &[Vec<Group>], settings: &LinkSettings) -> Vec<Vec<(usize, usize)>> {
+    let mut chains: Vec<Vec<(usize, usize)>> = Vec::new();
+    // The chain each group of the previous time continues.
+    let mut open: Vec<Option<usize>> = Vec::new();
+    for (time, at_time) in groups.iter().enumerate() {
+        let mut next_open = vec![None; at_time.len()];
+        let pairs = if time == 0 { Vec::new() } else { follow(&groups[time - 1], at_time, settings) };
+        for (earlier, later) in pairs {
+            if let Some(chain) = open[earlier] {
+                chains[chain].push((time, later));
+                next_open[later] = Some(chain);
+            }
+        }
+        let mut fresh: Vec<usize> = (0..at_time.len()).filter(|&g| next_open[g].is_none()).collect();
+        fresh.sort_by_key(|&g| std::cmp::Reverse(at_time[g].members.len()));
+        for group in fresh {
+            next_open[group] = Some(chains.len());
+            chains.push(vec![(time, group)]);
+        }
+        open = next_open;
+    }
+    chains
+}
+
+fn instance_of_chain(groups: &[Vec<Group>], chain: &[(usize, usize)], settings: &RegistrationSettings) -> Instance {
+    let group = |&(time, position): &(usize, usize)| &groups[time][position];
+    let first = group(&chain[0]);
+    let mut trajectory = Trajectory::start(first.time, first.centre());
+    let mut residuals = Vec::new();
+    for step in chain.windows(2) {
+        let (from, to) = (group(&step[0]), group(&step[1]));
+        let elapsed = to.time - from.time;
+        let displacement: Option<Vec<DVec3>> =
+            from.velocities.as_ref().map(|velocities| velocities.iter().map(|v| *v * elapsed).collect());
+        let start = initial_motion(&from.points, &to.points, displacement.as_deref());
+        let registration = register(&from.points, &to.points, start, settings);
+        let motion = registration.map_or(start, |r| r.motion);
+        residuals.push(registration.map_or(f64::NAN, |r| r.residual));
+        trajectory.push(to.time, &motion);
+    }
+    let appearances = chain
+        .iter()
+        .map(|step| {
+            let group = group(step);
+            let mut views: Vec<usize> = group.members.iter().map(|&(view, _)| view).collect();
+            views.dedup();
+            views.sort_unstable();
+            views.dedup();
+            Appearance {
+                time: group.time,
+                views,
+                pixels: group.members.len(),
+                bounds: group.bounds,
+                centre: group.centre(),
+            }
+        })
+        .collect();
+    Instance { id: 0, appearances, trajectory, residuals }
+}
