@@ -93,11 +93,20 @@ fn view(time: f64, with_cars: bool) -> (Vec<[f32; 3]>, Vec<f32>) {
     (points, dynamic)
 }
 
-fn views_at(times: &[(f64, bool)]) -> Vec<(f64, Vec<[f32; 3]>, Vec<f32>)> {
-    times.iter().map(|&(time, cars)| (time, view(time, cars).0, view(time, cars).1)).collect()
+/// A view's time, point map and dynamic probabilities.
+type PointMap = (f64, Vec<[f32; 3]>, Vec<f32>);
+
+fn views_at(times: &[(f64, bool)]) -> Vec<PointMap> {
+    times
+        .iter()
+        .map(|&(time, cars)| {
+            let (points, dynamic) = view(time, cars);
+            (time, points, dynamic)
+        })
+        .collect()
 }
 
-fn points_of<'a>(maps: &'a [(f64, Vec<[f32; 3]>, Vec<f32>)]) -> Vec<ViewPoints<'a>> {
+fn points_of(maps: &[PointMap]) -> Vec<ViewPoints<'_>> {
     maps.iter()
         .map(|(time, points, dynamic)| ViewPoints {
             rig_camera: 0,
