@@ -1,10 +1,10 @@
 //! The 4D scene of one forward pass ([`dggt_scene::Scene4d`]) built from the network's outputs: every input
 //! pixel's Gaussian placed with its view's camera (moving with the predicted velocities when the network
-//! predicts them) and the sky Gaussians coloured from the input images, as the options choose.
+//! predicts them, or with the objects found among them when the assembly asks) and the sky Gaussians coloured from the input images, as the options choose.
 
 use burn::tensor::Tensor;
 use dggt_model::Dggt;
-use dggt_scene::{AssemblySettings, InputView, MeansGradient, PixelGaussians, Scene4d, Timeline};
+use dggt_scene::{AssemblySettings, DynamicMotion, InputView, MeansGradient, PixelGaussians, Scene4d, Timeline};
 
 use crate::error::InferError;
 use crate::forward::Prediction;
@@ -51,6 +51,10 @@ impl Prediction {
         let pixels = match &self.velocity {
             Some(velocity) => pixels.with_motion(velocity.clone(), timeline.frames_per_time())?,
             None => pixels,
+        };
+        let pixels = match options.assembly.dynamic_motion {
+            DynamicMotion::Instances => pixels.with_instances(&options.assembly.instances)?,
+            DynamicMotion::Velocity => pixels,
         };
         let sky = match (&model.sky_model, options.sky) {
             (Some(sky_model), SkyChoice::Render) => {

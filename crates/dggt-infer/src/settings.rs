@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use dggt_data::Preprocess;
 use dggt_geom::PixelConvention;
 use dggt_model::{ModelConfig, Preset};
-use dggt_scene::{AssemblySettings, DynamicBlend, MeansGradient};
+use dggt_scene::{AssemblySettings, DynamicBlend, DynamicMotion, InstanceSettings, MeansGradient};
 use serde::{Deserialize, Serialize};
 
 use crate::error::InferError;
@@ -98,6 +98,12 @@ pub struct RenderSection {
     /// Which input views' dynamic Gaussians a target shows: `nearest` (the release) or `cross_fade` (the two
     /// bracketing views, opacities weighted by time).
     pub dynamic_blend: DynamicBlend,
+    /// How those dynamic Gaussians reach a target's time: `velocity` (the predicted velocities when the network
+    /// has them, else held where predicted) or `instances` (the dynamic pixels grouped into objects, each moved
+    /// rigidly along its trajectory through the inputs; `[render.instances]` tunes how they are found).
+    pub dynamic_motion: DynamicMotion,
+    /// How moving objects are found when `dynamic_motion = "instances"`.
+    pub instances: InstanceSettings,
     /// The rasteriser's low-pass variance in pixels² (`eps2d`; 0.3 in the release, whose weights assume it).
     /// A model trained from scratch renders sharper with a smaller one.
     pub eps2d: f64,
@@ -110,6 +116,8 @@ impl RenderSection {
         AssemblySettings {
             far_plane: self.far_plane as f32,
             dynamic_blend: self.dynamic_blend,
+            dynamic_motion: self.dynamic_motion,
+            instances: self.instances,
             eps2d: self.eps2d as f32,
             ..AssemblySettings::default()
         }
@@ -125,6 +133,8 @@ impl Default for RenderSection {
             sky: true,
             far_plane: 1e10,
             dynamic_blend: DynamicBlend::Nearest,
+            dynamic_motion: DynamicMotion::Velocity,
+            instances: InstanceSettings::default(),
             eps2d: 0.3,
         }
     }
@@ -164,5 +174,25 @@ impl TrainedSettings {
 
     pub fn preprocess(&self) -> &Preprocess {
         &self.data.preprocess
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn instance_motion_is_chosen_and_tuned_in_the_render_section() {
+        let text =
+            "dynamic_motion = \"instances\"\n[instances.cluster]\nmin_pixels = 4\n[instances.link]\ngate = 2.5\n";
+        let render: RenderSection = toml::from_str(text).unwrap();
+        let assembly = render.assembly();
+        assert_eq!(assembly.dynamic_motion, DynamicMotion::Instances);
+        assert_eq!(assembly.instances.cluster.min_pixels, 4);
+        assert_eq!(assembly.instances.link.gate, 2.5);
+        assert_eq!(assembly.instances.registration, InstanceSettings::default().registration);
+        assert_eq!(RenderSection::default().assembly().dynamic_motion, DynamicMotion::Velocity);
+        let misspelt = toml::from_str::<RenderSection>("[instances.cluster]\nmin_pixel = 4\n");
+        assert!(misspelt.unwrap_err().to_string().contains("min_pixel"));
     }
 }

@@ -4,8 +4,9 @@
 //!   the lifespan to `t` ([`opacity_at`]);
 //! - the **dynamic** Gaussians of the input view of the target's rig camera nearest to `t` (or of the two
 //!   views bracketing `t`, cross-faded: [`DynamicBlend`]), opacity `o · sigmoid(dynamic logit)`, moved to `t`
-//!   by their predicted velocity when the model has a motion head ([`PixelGaussians::with_motion`]), held where
-//!   they were predicted otherwise;
+//!   as [`DynamicMotion`] says: by their predicted velocity when the model has a motion head
+//!   ([`PixelGaussians::with_motion`]), rigidly along their object's trajectory
+//!   ([`PixelGaussians::with_instances`]), held where they were predicted otherwise;
 //! - culled before the rasteriser sees them: a Gaussian whose opacity at `t` is below the rasteriser's own
 //!   1/255 threshold, or whose conservative screen footprint misses the target image, is dropped.
 //!
@@ -14,6 +15,8 @@
 //! culling off to measure that.
 
 use burn::tensor::{Int, Tensor, TensorData};
+use dggt_geom::glam::{DMat3, DVec3};
+use dggt_instances::{InstanceSettings, Instances, RigidMotion};
 use dggt_model::host::host_f32;
 use dggt_model::lifespan::{dynamic_opacity, opacity_at, static_opacity};
 use dggt_splat::constants::{
@@ -44,11 +47,28 @@ pub struct AssemblySettings {
     pub far_plane: f32,
     /// Which input views lend their dynamic Gaussians to the target time.
     pub dynamic_blend: DynamicBlend,
+    /// How those Gaussians move from their view's time to the target's.
+    pub dynamic_motion: DynamicMotion,
+    /// How the moving objects are found when [`DynamicMotion::Instances`] moves them.
+    pub instances: InstanceSettings,
     /// Variance in pixels² added to each projected covariance's diagonal (the rasteriser's `eps2d`; 0.3 in the
     /// release): a low-pass floor under every footprint.
     pub eps2d: f32,
     /// Whether the sky behind a view that the foreground covers is rendered at all.
     pub hidden_sky: HiddenSky,
+}
+
+/// How a dynamic Gaussian moves from the time of the view it came from to the target time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DynamicMotion {
+    /// By its predicted velocity when the model predicts one, held where it was predicted otherwise.
+    #[default]
+    Velocity,
+    /// Rigidly along its object's trajectory when it belongs to one of the instances found
+    /// ([`PixelGaussians::with_instances`]; means and rotations move, scales and colours do not); as under
+    /// `Velocity` otherwise. A target at the view's own time leaves every Gaussian exactly where it was.
+    Instances,
 }
 
 /// Whether the sky is rendered behind a view whose foreground covers it everywhere.
@@ -75,6 +95,8 @@ impl Default for AssemblySettings {
             near_plane: DEFAULT_NEAR_PLANE,
             far_plane: DEFAULT_FAR_PLANE,
             dynamic_blend: DynamicBlend::Nearest,
+            dynamic_motion: DynamicMotion::Velocity,
+            instances: InstanceSettings::default(),
             eps2d: DEFAULT_EPS2D,
             hidden_sky: HiddenSky::Render,
         }
@@ -122,7 +144,7 @@ pub fn assemble(
 ) -> Result<AssembledGaussians, SceneError> {
     let candidates = Candidates::new(pixels, target, settings);
     let verdicts = candidates.verdicts(pixels, target, settings)?;
-    let kept = KeptRows::of(&candidates.sources, &verdicts);
+    let kept = KeptRows::of(&candidates.sources, &verdicts, pixels);
     tracing::debug!(
         time = target.time,
         candidates = kept.counts.candidates,
@@ -168,13 +190,23 @@ impl Candidates {
         };
         let faded = opacity_at(static_opacity_all, pixels.lifespan.clone(), pixels.source_time.clone(), target.time);
         // The dynamic ones of the source views, moved over their `elapsed` scene time and weighted.
+        let instances = match settings.dynamic_motion {
+            DynamicMotion::Instances => pixels.instances(),
+            DynamicMotion::Velocity => None,
+        };
         let sources: Vec<DynamicSource> = match &dynamic {
             Some(_) => dynamic_sources(&pixels.views, target.rig_camera, target.time, settings.dynamic_blend)
                 .into_iter()
-                .map(|(view, weight)| DynamicSource {
-                    range: view * per_view..(view + 1) * per_view,
-                    elapsed: (target.time - pixels.views[view].time) as f32,
-                    weight: weight as f32,
+                .map(|(view, weight)| {
+                    let from = pixels.views[view].time;
+                    DynamicSource {
+                        range: view * per_view..(view + 1) * per_view,
+                        elapsed: (target.time - from) as f32,
+                        weight: weight as f32,
+                        rigid: instances.map_or_else(Vec::new, |found| {
+                            (0..found.len()).map(|k| found.motion(k, from, target.time)).collect()
+                        }),
+                    }
                 })
                 .collect(),
             None => Vec::new(),
@@ -208,9 +240,14 @@ impl Candidates {
                     host_f32(opacity.clone().narrow(0, source.range.start, source.range.len()), "dynamic opacity")?;
                 let displaced = |index: usize| -> [f32; 3] {
                     let mean = pixels.host_means[index];
-                    match &pixels.host_velocity {
-                        Some(velocity) => std::array::from_fn(|k| mean[k] + velocity[index][k] * source.elapsed),
-                        None => mean,
+                    match source.motion(pixels, index) {
+                        RowMotion::Held => mean,
+                        RowMotion::Velocity(velocity, elapsed) => {
+                            std::array::from_fn(|k| mean[k] + velocity[index][k] * elapsed)
+                        }
+                        RowMotion::Rigid(motion) => {
+                            motion.apply(DVec3::from_array(mean.map(f64::from))).to_array().map(|v| v as f32)
+                        }
                     }
                 };
                 let verdicts: Vec<Verdict> = values
@@ -235,22 +272,39 @@ impl Candidates {
         let all: Vec<i64> = kept.statics.iter().chain(kept.dynamics.iter().flatten()).copied().collect();
         let all = index_tensor(&all);
         let pick = |tensor: &Tensor<2>| tensor.clone().select(0, all.clone());
-        // The sources that kept any Gaussian, with their kept rows.
+        // The sources that kept any Gaussian, with their kept rows (grouped by how they move).
         let drawn: Vec<(&DynamicSource, &Vec<i64>)> =
             self.sources.iter().zip(&kept.dynamics).filter(|(_, index)| !index.is_empty()).collect();
-        let means = match &pixels.velocity {
-            Some(velocity) if drawn.iter().any(|(source, _)| source.elapsed != 0.0) => {
-                let mut parts = vec![pixels.means.clone().select(0, index_tensor(&kept.statics))];
-                for &(source, index) in &drawn {
-                    let index = index_tensor(index);
-                    parts.push(
-                        pixels.means.clone().select(0, index.clone())
-                            + velocity.clone().select(0, index).mul_scalar(source.elapsed),
+        let moves = drawn.iter().any(|(source, rows)| {
+            rows.iter().any(|&row| !matches!(source.motion(pixels, row as usize), RowMotion::Held))
+        });
+        let (means, quats_wxyz) = if moves {
+            let statics = index_tensor(&kept.statics);
+            let mut means = vec![pixels.means.clone().select(0, statics.clone())];
+            let mut quats = vec![pixels.quats_wxyz.clone().select(0, statics)];
+            for &(source, rows) in &drawn {
+                for run in rows.chunk_by(|a, b| source.group(pixels, *a as usize) == source.group(pixels, *b as usize))
+                {
+                    let index = index_tensor(run);
+                    let (run_means, run_quats) = (
+                        pixels.means.clone().select(0, index.clone()),
+                        pixels.quats_wxyz.clone().select(0, index.clone()),
                     );
+                    let (moved, turned) = match source.motion(pixels, run[0] as usize) {
+                        RowMotion::Held => (run_means, run_quats),
+                        RowMotion::Velocity(..) => {
+                            let velocity = pixels.velocity.as_ref().expect("a velocity motion has velocities");
+                            (run_means + velocity.clone().select(0, index).mul_scalar(source.elapsed), run_quats)
+                        }
+                        RowMotion::Rigid(motion) => rigidly_moved(run_means, run_quats, motion),
+                    };
+                    means.push(moved);
+                    quats.push(turned);
                 }
-                Tensor::cat(parts, 0)
             }
-            _ => pick(&pixels.means),
+            (Tensor::cat(means, 0), Tensor::cat(quats, 0))
+        } else {
+            (pick(&pixels.means), pick(&pixels.quats_wxyz))
         };
         let mut opacities = vec![self.faded.clone().select(0, index_tensor(&kept.statics))];
         if let Some(dynamic) = &self.dynamic {
@@ -261,7 +315,7 @@ impl Candidates {
         }
         GaussianTensors {
             means,
-            quats_wxyz: pick(&pixels.quats_wxyz),
+            quats_wxyz,
             scales: pick(&pixels.scales),
             opacities: OpacityTensor::Shared(Tensor::cat(opacities, 0)),
             colors: pick(&pixels.colors),
@@ -269,8 +323,26 @@ impl Candidates {
     }
 }
 
+/// Means `[n, 3]` and rotations `[n, 4]` (`w x y z`) moved by `motion`: `R m + t` and `r ⊗ q` (`r` the
+/// motion's rotation), as products with constant matrices so that gradients pass through.
+fn rigidly_moved(means: Tensor<2>, quats_wxyz: Tensor<2>, motion: &RigidMotion) -> (Tensor<2>, Tensor<2>) {
+    let device = means.device();
+    let matrix = DMat3::from_quat(motion.rotation);
+    // Row vectors times Rᵀ: element (i, j) = R(j, i).
+    let rotation: Vec<f32> = (0..3).flat_map(|i| (0..3).map(move |j| matrix.col(i)[j] as f32)).collect();
+    let rotation = Tensor::<2>::from_data(TensorData::new(rotation, [3, 3]), &device);
+    let translation = motion.translation.to_array().map(|v| v as f32);
+    let translation = Tensor::<2>::from_data(TensorData::new(translation.to_vec(), [1, 3]), &device);
+    // r ⊗ q as a row vector q times L: element (i, j) is the weight of q_i in component j of the product.
+    let r = motion.rotation;
+    let (w, x, y, z) = (r.w as f32, r.x as f32, r.y as f32, r.z as f32);
+    let left = [w, x, y, z, -x, w, z, -y, -y, -z, w, x, -z, y, -x, w];
+    let left = Tensor::<2>::from_data(TensorData::new(left.to_vec(), [4, 4]), &device);
+    (means.matmul(rotation) + translation, quats_wxyz.matmul(left))
+}
+
 impl KeptRows {
-    fn of(sources: &[DynamicSource], verdicts: &Verdicts) -> Self {
+    fn of(sources: &[DynamicSource], verdicts: &Verdicts, pixels: &PixelGaussians) -> Self {
         let Verdicts { statics, dynamics } = verdicts;
         let mut counts = AssemblyCounts {
             candidates: statics.len() + dynamics.iter().map(Vec::len).sum::<usize>(),
@@ -288,8 +360,18 @@ impl KeptRows {
             verdicts.iter().enumerate().filter_map(keep).collect()
         };
         let statics = kept(statics, 0);
-        let dynamics: Vec<Vec<i64>> =
-            sources.iter().zip(dynamics).map(|(source, verdicts)| kept(verdicts, source.range.start)).collect();
+        // Each source's rows grouped by how they move (stable: pixel order within a group).
+        let dynamics: Vec<Vec<i64>> = sources
+            .iter()
+            .zip(dynamics)
+            .map(|(source, verdicts)| {
+                let mut rows = kept(verdicts, source.range.start);
+                if source.rigid.iter().any(|motion| *motion != RigidMotion::IDENTITY) {
+                    rows.sort_by_key(|&row| source.group(pixels, row as usize));
+                }
+                rows
+            })
+            .collect();
         counts.static_kept = statics.len();
         counts.dynamic_kept = dynamics.iter().map(Vec::len).sum();
         Self { statics, dynamics, counts }
@@ -304,6 +386,43 @@ struct DynamicSource {
     elapsed: f32,
     /// Multiplies the view's dynamic opacities.
     weight: f32,
+    /// Per instance, its motion from the view's time to the target's; empty unless instances move the
+    /// Gaussians.
+    rigid: Vec<RigidMotion>,
+}
+
+/// How one dynamic row reaches the target time.
+enum RowMotion<'a> {
+    Held,
+    /// By the host velocities, over the elapsed scene time.
+    Velocity(&'a [[f32; 3]], f32),
+    Rigid(&'a RigidMotion),
+}
+
+impl DynamicSource {
+    /// The instance row `row` belongs to when instances move it, else [`Instances::NONE`].
+    fn group(&self, pixels: &PixelGaussians, row: usize) -> u32 {
+        match pixels.instances() {
+            Some(instances) if !self.rigid.is_empty() => {
+                let per_view = pixels.per_view();
+                instances.labels(row / per_view)[row % per_view]
+            }
+            _ => Instances::NONE,
+        }
+    }
+
+    fn motion<'a>(&'a self, pixels: &'a PixelGaussians, row: usize) -> RowMotion<'a> {
+        match self.group(pixels, row) {
+            Instances::NONE => match &pixels.host_velocity {
+                Some(velocity) if self.elapsed != 0.0 => RowMotion::Velocity(velocity, self.elapsed),
+                _ => RowMotion::Held,
+            },
+            instance => match &self.rigid[instance as usize] {
+                motion if *motion == RigidMotion::IDENTITY => RowMotion::Held,
+                motion => RowMotion::Rigid(motion),
+            },
+        }
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -20,8 +20,11 @@ pub mod pixels;
 pub mod scene4d;
 pub mod timeline;
 
-pub use assemble::{AssembledGaussians, AssemblyCounts, AssemblySettings, HiddenSky, MIN_OPACITY, assemble};
+pub use assemble::{
+    AssembledGaussians, AssemblyCounts, AssemblySettings, DynamicMotion, HiddenSky, MIN_OPACITY, assemble,
+};
 pub use compose::{ViewRender, camera_tensors, composite, render_assembled, render_target, sky_splats};
+pub use dggt_instances::{InstanceSettings, Instances};
 pub use error::SceneError;
 pub use pixels::{MeansGradient, PixelGaussians};
 pub use scene4d::Scene4d;

@@ -6,9 +6,12 @@
 //! depth carries gradients unless [`MeansGradient::Detached`] (the release detaches the means). Host copies of
 //! the means and of each Gaussian's largest scale are kept for culling.
 
+use std::sync::Arc;
+
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_geom::glam::DVec3;
 use dggt_geom::{ImageSize, PixelConvention};
+use dggt_instances::{InstanceSettings, Instances, ViewPoints, find_instances};
 use dggt_model::gaussian_maps::GaussianMaps;
 use dggt_model::host::host_f32;
 
@@ -50,6 +53,9 @@ pub struct PixelGaussians {
     /// `[M, 3]` world displacement per unit of scene time, which moves a dynamic Gaussian to the target time
     /// ([`PixelGaussians::with_motion`]); `None`: dynamic Gaussians are held where they were predicted.
     pub velocity: Option<Tensor<2>>,
+    /// The moving objects of the views and their trajectories ([`PixelGaussians::with_instances`]); `None`
+    /// until found.
+    pub(crate) instances: Option<Arc<Instances>>,
     pub(crate) host_means: Vec<[f32; 3]>,
     pub(crate) host_velocity: Option<Vec<[f32; 3]>>,
     pub(crate) host_max_scale: Vec<f32>,
@@ -132,6 +138,7 @@ impl PixelGaussians {
             lifespan: maps.lifespan.clone().reshape([count]),
             source_time: Tensor::from_data(TensorData::new(times, [count]), &device),
             velocity: None,
+            instances: None,
             host_means,
             host_velocity: None,
             host_max_scale,
@@ -185,6 +192,47 @@ impl PixelGaussians {
         self.host_velocity = Some(host.chunks_exact(3).map(|v| [v[0], v[1], v[2]]).collect());
         self.velocity = Some(world);
         Ok(self)
+    }
+
+    /// Finds the moving objects of the views (`dggt_instances`: dynamic pixels clustered, followed through the
+    /// input times, registered rigidly), seeded by the predicted velocities when there are any. Without a dynamic
+    /// head nothing moves and no instance is found.
+    pub fn with_instances(mut self, settings: &InstanceSettings) -> Result<Self, SceneError> {
+        let per_view = self.per_view();
+        let dynamic: Vec<f32> = match &self.dynamic_logit {
+            Some(logit) => {
+                host_f32(logit.clone(), "dynamic logit")?.iter().map(|&l| 1.0 / (1.0 + (-l).exp())).collect()
+            }
+            None => vec![0.0; self.len()],
+        };
+        let (width, height) = (self.size.width as usize, self.size.height as usize);
+        let views: Vec<ViewPoints> = self
+            .views
+            .iter()
+            .enumerate()
+            .map(|(v, view)| {
+                let range = v * per_view..(v + 1) * per_view;
+                ViewPoints {
+                    rig_camera: view.rig_camera,
+                    time: view.time,
+                    width,
+                    height,
+                    camera_centre: view.camera.world_from_camera.translation(),
+                    points: &self.host_means[range.clone()],
+                    dynamic: &dynamic[range.clone()],
+                    velocity: self.host_velocity.as_ref().map(|velocity| &velocity[range]),
+                }
+            })
+            .collect();
+        let instances = find_instances(&views, settings);
+        tracing::debug!(instances = instances.len(), "found the moving objects");
+        self.instances = Some(Arc::new(instances));
+        Ok(self)
+    }
+
+    /// The moving objects found by [`PixelGaussians::with_instances`].
+    pub fn instances(&self) -> Option<&Instances> {
+        self.instances.as_deref()
     }
 
     /// The host copy of [`PixelGaussians::velocity`] (world axes per unit of scene time), one row per Gaussian.

@@ -1,0 +1,131 @@
+//! Dynamic Gaussians moved along their object's trajectory: a patch of dynamic pixels that slides across three
+//! input views is one instance; at an input's own time assembly returns that input's Gaussians exactly, between
+//! inputs the instance's rows move rigidly (means and rotations) and the other rows are held.
+
+use burn::tensor::{Device, Tensor, TensorData};
+use dggt_geom::glam::{DQuat, DVec3};
+use dggt_geom::{PinholeIntrinsics, PixelConvention, PosedCamera, WorldFromCamera};
+use dggt_instances::InstanceSettings;
+use dggt_model::gaussian_maps::GaussianMaps;
+use dggt_scene::{
+    AssemblySettings, DynamicMotion, InputView, MeansGradient, PixelGaussians, TargetView, assemble, interpolate_camera,
+};
+
+const W: usize = 24;
+const H: usize = 16;
+const S: usize = 3;
+
+fn views() -> Vec<InputView> {
+    (0..S)
+        .map(|i| InputView {
+            rig_camera: 0,
+            time: i as f64 * 0.5,
+            camera: PosedCamera {
+                world_from_camera: WorldFromCamera::from_rotation_translation(
+                    DQuat::IDENTITY,
+                    DVec3::new(i as f64 * 0.3, 0.0, 0.0),
+                )
+                .unwrap(),
+                intrinsics: PinholeIntrinsics::new(20.0, 20.0, W as f64 / 2.0, H as f64 / 2.0).unwrap(),
+            },
+        })
+        .collect()
+}
+
+/// Whether pixel `(column, row)` of view `view` shows the moving patch (8 x 6 pixels, two columns further right
+/// in each later view).
+fn in_patch(view: usize, column: usize, row: usize) -> bool {
+    (4..10).contains(&row) && (4 + 2 * view..12 + 2 * view).contains(&column)
+}
+
+/// Opaque Gaussians with rotations away from the identity (so a turn shows), depth 4 on the patch and 8
+/// behind it, dynamic logits +8 on the patch and -8 elsewhere.
+fn pixels(device: &Device) -> PixelGaussians {
+    let mut raw = Vec::with_capacity(S * H * W * 12);
+    let mut depth = Vec::with_capacity(S * H * W);
+    let mut logit = Vec::with_capacity(S * H * W);
+    for view in 0..S {
+        for row in 0..H {
+            for column in 0..W {
+                let patch = in_patch(view, column, row);
+                raw.extend([0.3, 0.5, 0.7, 4.0, -2.5, -2.5, -2.5, 1.0, 0.2, -0.3, 0.1, -5.0]);
+                depth.push(if patch { 4.0 } else { 8.0 });
+                logit.push(if patch { 8.0 } else { -8.0 });
+            }
+        }
+    }
+    let maps = GaussianMaps::from_raw(Tensor::from_data(TensorData::new(raw, [1, S, H, W, 12]), device));
+    let depth = Tensor::from_data(TensorData::new(depth, [1, S, H, W]), device);
+    let logit = Tensor::from_data(TensorData::new(logit, [1, S, H, W]), device);
+    PixelGaussians::new(&maps, depth, Some(logit), views(), MeansGradient::Detached, PixelConvention::Centred).unwrap()
+}
+
+fn host(tensor: Tensor<2>) -> Vec<f32> {
+    tensor.into_data().try_into_vec::<f32>().unwrap()
+}
+
+fn target(pixels: &PixelGaussians, time: f64) -> TargetView {
+    TargetView { rig_camera: 0, time, camera: interpolate_camera(&pixels.views, 0, time).unwrap() }
+}
+
+#[test]
+fn the_patch_is_one_instance_through_every_view() {
+    let settings = InstanceSettings::default();
+    let pixels = pixels(&Device::flex()).with_instances(&settings).unwrap();
+    let instances = pixels.instances().expect("instances were found");
+    assert_eq!(instances.len(), 1, "{:?}", instances.instances);
+    assert_eq!(instances.instances[0].appearances.len(), S);
+    for view in 0..S {
+        for pixel in 0..H * W {
+            let expected = in_patch(view, pixel % W, pixel / W).then_some(0);
+            assert_eq!(instances.instance_of(view, pixel), expected, "view {view}, pixel {pixel}");
+        }
+    }
+    // The patch slides by 2 pixels at depth 4 (0.4) plus the camera's 0.3 per view: 0.7 along x.
+    let step = instances.motion(0, 0.0, 0.5);
+    assert!(step.translation.abs_diff_eq(DVec3::new(0.7, 0.0, 0.0), 1e-4), "{step:?}");
+}
+
+#[test]
+fn at_an_input_time_nothing_moves_and_between_inputs_the_instance_moves_rigidly() {
+    let device = Device::flex();
+    let held = pixels(&device);
+    let moving = held.clone().with_instances(&InstanceSettings::default()).unwrap();
+    let velocity = AssemblySettings::exact();
+    let rigid = AssemblySettings { dynamic_motion: DynamicMotion::Instances, ..AssemblySettings::exact() };
+    // At view 1's own time: the same tensors as without instances, bit for bit.
+    let at_input = target(&held, 0.5);
+    let a = assemble(&held, &at_input, &velocity).unwrap().gaussians;
+    let b = assemble(&moving, &at_input, &rigid).unwrap().gaussians;
+    assert!(host(a.means) == host(b.means), "the means moved at an input's own time");
+    assert!(host(a.quats_wxyz) == host(b.quats_wxyz), "the rotations turned at an input's own time");
+
+    // A quarter of the way from view 0 to view 1 (view 0 nearest): its patch rows come first among its
+    // dynamic rows, moved by the instance's motion; the rest stay.
+    let between = target(&held, 0.125);
+    let assembled = assemble(&moving, &between, &rigid).unwrap().gaussians;
+    let (means, quats) = (host(assembled.means), host(assembled.quats_wxyz));
+    let (original_means, original_quats) = (host(held.means.clone()), host(held.quats_wxyz.clone()));
+    let motion = moving.instances().unwrap().motion(0, 0.0, 0.125);
+    assert!(motion.translation.length() > 0.1, "the patch moves: {motion:?}");
+    let patch: Vec<usize> = (0..H * W).filter(|&p| in_patch(0, p % W, p / W)).collect();
+    let others: Vec<usize> = (0..H * W).filter(|&p| !in_patch(0, p % W, p / W)).collect();
+    let statics = S * H * W;
+    for (slot, &pixel) in patch.iter().chain(&others).enumerate() {
+        let row = statics + slot;
+        let got = DVec3::new(means[row * 3] as f64, means[row * 3 + 1] as f64, means[row * 3 + 2] as f64);
+        let was = DVec3::from_array(std::array::from_fn(|k| original_means[pixel * 3 + k] as f64));
+        let expected = if slot < patch.len() { motion.apply(was) } else { was };
+        assert!(got.abs_diff_eq(expected, 1e-5), "pixel {pixel}: {got} vs {expected}");
+        let q = DQuat::from_xyzw(
+            original_quats[pixel * 4 + 1] as f64,
+            original_quats[pixel * 4 + 2] as f64,
+            original_quats[pixel * 4 + 3] as f64,
+            original_quats[pixel * 4] as f64,
+        );
+        let expected = if slot < patch.len() { motion.rotation * q } else { q };
+        let got = &quats[row * 4..row * 4 + 4];
+        let expected = [expected.w, expected.x, expected.y, expected.z];
+        assert!(got.iter().zip(expected).all(|(g, e)| (*g as f64 - e).abs() < 1e-5), "pixel {pixel}: {got:?}");
+    }
+}
