@@ -17,6 +17,7 @@
 pub mod axes;
 mod error;
 pub mod frames;
+pub mod horn;
 mod interpolate;
 mod intrinsics;
 mod pose_encoding;

@@ -2,11 +2,10 @@
 //!
 //! A [`RigidMotion`] maps a world point `x` to `R x + t` (`R` a unit quaternion, `w x y z` when written out):
 //! both sides are in the reconstruction's world axes and units. The best motion between paired points is Horn's
-//! closed form: the rotation is the unit quaternion maximising `qᵀ N q` for the 4 x 4 symmetric matrix `N` built
-//! from the pairs' cross-covariance, found here by Jacobi's eigenvalue iteration (exact to rounding for a 4 x 4
-//! matrix after a handful of sweeps); the translation takes the weighted centroid of one side onto the other's.
+//! closed form ([`dggt_geom::horn`]); the translation takes the weighted centroid of one side onto the other's.
 
 use dggt_geom::glam::{DQuat, DVec3};
+use dggt_geom::horn::best_rotation;
 
 /// `x -> rotation · x + translation`, in world axes and units.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -118,69 +117,8 @@ pub fn fit_rigid(pairs: impl IntoIterator<Item = (DVec3, DVec3, f64)> + Clone) -
             }
         }
     }
-    let rotation = horn_rotation(&s)?;
+    let rotation = best_rotation(&s)?;
     Some(RigidMotion { rotation, translation: target_mean - rotation * source_mean })
-}
-
-/// The unit quaternion of Horn's method for cross-covariance `s`.
-fn horn_rotation(s: &[[f64; 3]; 3]) -> Option<DQuat> {
-    let [[xx, xy, xz], [yx, yy, yz], [zx, zy, zz]] = *s;
-    let n = [
-        [xx + yy + zz, yz - zy, zx - xz, xy - yx],
-        [yz - zy, xx - yy - zz, xy + yx, zx + xz],
-        [zx - xz, xy + yx, -xx + yy - zz, yz + zy],
-        [xy - yx, zx + xz, yz + zy, -xx - yy + zz],
-    ];
-    let (values, vectors) = symmetric_eigen4(n);
-    let best = (0..4).max_by(|&a, &b| values[a].total_cmp(&values[b]))?;
-    let [w, x, y, z] = std::array::from_fn(|row| vectors[row][best]);
-    let quaternion = DQuat::from_xyzw(x, y, z, w);
-    let length = quaternion.length();
-    (length > 0.0 && length.is_finite()).then(|| quaternion / length)
-}
-
-/// Eigenvalues and eigenvectors (as columns) of a symmetric 4 x 4 matrix by cyclic Jacobi rotations.
-fn symmetric_eigen4(mut a: [[f64; 4]; 4]) -> ([f64; 4], [[f64; 4]; 4]) {
-    let mut v = [[0.0; 4]; 4];
-    for (i, row) in v.iter_mut().enumerate() {
-        row[i] = 1.0;
-    }
-    let scale: f64 = a.iter().flatten().map(|x| x * x).sum::<f64>().sqrt();
-    for _sweep in 0..32 {
-        let off: f64 = (0..4).flat_map(|p| (p + 1..4).map(move |q| (p, q))).map(|(p, q)| a[p][q] * a[p][q]).sum();
-        if off.sqrt() <= 1e-15 * scale || off == 0.0 {
-            break;
-        }
-        for p in 0..4 {
-            for q in p + 1..4 {
-                if a[p][q] == 0.0 {
-                    continue;
-                }
-                // The rotation in the (p, q) plane that zeroes a[p][q].
-                let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
-                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-                let t = if theta == 0.0 { 1.0 } else { t };
-                let c = 1.0 / (t * t + 1.0).sqrt();
-                let s = t * c;
-                for row in &mut a {
-                    let (akp, akq) = (row[p], row[q]);
-                    row[p] = c * akp - s * akq;
-                    row[q] = s * akp + c * akq;
-                }
-                let (row_p, row_q) = (a[p], a[q]);
-                for k in 0..4 {
-                    a[p][k] = c * row_p[k] - s * row_q[k];
-                    a[q][k] = s * row_p[k] + c * row_q[k];
-                }
-                for row in &mut v {
-                    let (vkp, vkq) = (row[p], row[q]);
-                    row[p] = c * vkp - s * vkq;
-                    row[q] = s * vkp + c * vkq;
-                }
-            }
-        }
-    }
-    (std::array::from_fn(|i| a[i][i]), v)
 }
 
 #[cfg(test)]

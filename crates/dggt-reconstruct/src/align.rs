@@ -1,5 +1,5 @@
 //! Similarity alignment of predicted camera centres to reference centres (Umeyama's least-squares similarity:
-//! `b ≈ s R a + t`), with the rotation found as the top eigenvector of Horn's 4x4 quaternion matrix.
+//! `b ≈ s R a + t`), with the rotation from Horn's quaternion method ([`dggt_geom::horn`]).
 //!
 //! Predicted poses live in the first input camera's frame and are up to scale, so comparing them with ground
 //! truth needs this alignment first. Collinear centres (a straight drive) leave the roll about the line free;
@@ -7,6 +7,7 @@
 
 use dggt_geom::WorldFromCamera;
 use dggt_geom::glam::{DQuat, DVec3};
+use dggt_geom::horn::best_rotation;
 use serde::Serialize;
 
 /// `b ≈ scale · rotation · a + translation`.
@@ -45,65 +46,11 @@ pub fn umeyama(source: &[DVec3], target: &[DVec3]) -> Option<Similarity> {
     if variance_a.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
         return None;
     }
-    let [[sxx, sxy, sxz], [syx, syy, syz], [szx, szy, szz]] = s;
-    let horn = [
-        [sxx + syy + szz, syz - szy, szx - sxz, sxy - syx],
-        [syz - szy, sxx - syy - szz, sxy + syx, szx + sxz],
-        [szx - sxz, sxy + syx, -sxx + syy - szz, syz + szy],
-        [sxy - syx, szx + sxz, syz + szy, -sxx - syy + szz],
-    ];
-    let (values, vectors) = jacobi_eigen(horn);
-    let best = (0..4).max_by(|&i, &j| values[i].total_cmp(&values[j]))?;
-    let q = [vectors[0][best], vectors[1][best], vectors[2][best], vectors[3][best]];
-    let rotation = DQuat::from_xyzw(q[1], q[2], q[3], q[0]).normalize();
+    let rotation = best_rotation(&s)?;
     let scale =
         source.iter().zip(target).map(|(a, b)| (*b - mean_b).dot(rotation * (*a - mean_a))).sum::<f64>() / variance_a;
     let translation = mean_b - scale * (rotation * mean_a);
     Some(Similarity { scale, rotation, translation })
-}
-
-/// Eigenvalues and eigenvectors (columns) of a symmetric 4x4 matrix by cyclic Jacobi rotations.
-fn jacobi_eigen(mut a: [[f64; 4]; 4]) -> ([f64; 4], [[f64; 4]; 4]) {
-    let mut v = [[0.0; 4]; 4];
-    for (i, row) in v.iter_mut().enumerate() {
-        row[i] = 1.0;
-    }
-    for _ in 0..64 {
-        let off: f64 = (0..4)
-            .flat_map(|i| (0..4).filter(move |&j| j != i).map(move |j| (i, j)))
-            .map(|(i, j)| a[i][j] * a[i][j])
-            .sum();
-        if off < 1e-30 {
-            break;
-        }
-        for p in 0..3 {
-            for q in p + 1..4 {
-                if a[p][q].abs() < 1e-300 {
-                    continue;
-                }
-                let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
-                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-                let c = 1.0 / (t * t + 1.0).sqrt();
-                let s = t * c;
-                for row in a.iter_mut() {
-                    let (akp, akq) = (row[p], row[q]);
-                    row[p] = c * akp - s * akq;
-                    row[q] = s * akp + c * akq;
-                }
-                let (row_p, row_q) = (a[p], a[q]);
-                for k in 0..4 {
-                    a[p][k] = c * row_p[k] - s * row_q[k];
-                    a[q][k] = s * row_p[k] + c * row_q[k];
-                }
-                for row in v.iter_mut() {
-                    let (vkp, vkq) = (row[p], row[q]);
-                    row[p] = c * vkp - s * vkq;
-                    row[q] = s * vkp + c * vkq;
-                }
-            }
-        }
-    }
-    ([a[0][0], a[1][1], a[2][2], a[3][3]], v)
 }
 
 /// How far predicted poses are from reference poses after aligning the camera centres.
