@@ -5,7 +5,8 @@
 //! - the scores themselves (PSNR, SSIM, D-RMSE, scene flow) come from `dggt-metrics`, LPIPS-Alex from
 //!   `dggt-losses`;
 //! - [`grid`]: where the export's quarter-resolution lidar cells fall in the rendered view;
-//! - [`motion`]: the predicted flow of the surface at an input view, in the export's axes and units;
+//! - [`motion`]: the predicted flow of the surface at an input view under each motion source, in the export's
+//!   axes and units;
 //! - [`runner`]: forward pass, renders of every target view, metrics, stage times;
 //! - [`report`]: per-view records, per-scene and overall means, `eval.json` and `eval.md`.
 
@@ -17,6 +18,10 @@ pub mod report;
 pub mod runner;
 
 pub use error::EvalError;
+pub use motion::MotionSource;
 pub use protocol::{Protocol, ProtocolKind, TargetKind};
-pub use report::{EvalReport, MOTION_HELD, MOTION_VELOCITY, SceneReport, SplitSummary, ViewRecord};
-pub use runner::{EvalOptions, LpipsWeights, MotionSource, evaluate};
+pub use report::{
+    EvalReport, MOTION_HELD, MOTION_INSTANCES, MOTION_VELOCITY, SceneReport, SourceFlowMetrics, SourceSummary,
+    SplitSummary, ViewRecord,
+};
+pub use runner::{EvalOptions, LpipsWeights, evaluate};

@@ -1,10 +1,13 @@
-//! The predicted scene flow of the surface seen at an input view, in the export's units, for scoring motion.
+//! The predicted scene flow of the surface seen at an input view, in the export's units, for scoring motion,
+//! from each [`MotionSource`] a reconstruction can move its dynamic Gaussians with.
 //!
 //! A pixel's Gaussian splits into a static part (opacity `o · (1 - p)`) and a dynamic part (`o · p`, `p` the
-//! sigmoid of the dynamic logit) that moves with the pixel's predicted velocity `v`, so the surface point's
-//! expected flow is `p · v`. At an input view the reconstruction's pixel grid is the view's own: the flow of the
-//! surface at a lidar cell is read at the cell's centre (bilinearly, as the depth is). At any other view it would
-//! have to be rendered; it is not scored there.
+//! sigmoid of the dynamic logit) that moves with velocity `v`, so the surface point's expected flow is `p · v`.
+//! The velocity is the network's prediction ([`MotionSource::Velocity`]), or the velocity of the point on its
+//! object's trajectory at the view's time ([`MotionSource::Instances`]: the twist of the step starting there,
+//! the predicted velocity for a pixel of no object). At an input view the reconstruction's pixel grid is the
+//! view's own: the flow of the surface at a lidar cell is read at the cell's centre (bilinearly, as the depth
+//! is). At any other view it would have to be rendered; it is not scored there.
 //!
 //! Units and axes, from the reconstruction's to the export's:
 //! - the velocity is in the reconstruction's world axes (the first input view's predicted camera), world units
@@ -21,6 +24,38 @@ use dggt_model::host::host_f32;
 use dggt_scene::PixelGaussians;
 
 use crate::error::EvalError;
+use crate::report::{MOTION_HELD, MOTION_INSTANCES, MOTION_VELOCITY};
+
+/// Where the predicted 3D motion of a surface point comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum MotionSource {
+    /// Every Gaussian held in place: the predicted flow is zero.
+    Held,
+    /// The network's predicted velocities.
+    Velocity,
+    /// The objects found among the dynamic pixels, each moving rigidly along its trajectory.
+    Instances,
+}
+
+impl MotionSource {
+    /// The description written to the reports for the source a reconstruction renders with.
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::Held => MOTION_HELD,
+            Self::Velocity => MOTION_VELOCITY,
+            Self::Instances => MOTION_INSTANCES,
+        }
+    }
+
+    /// The short name of the source in the side-by-side tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Held => "held",
+            Self::Velocity => "velocity",
+            Self::Instances => "instances",
+        }
+    }
+}
 
 /// The expected flow `p · v` of every input pixel, as three planes per input view.
 #[derive(Debug, Clone)]
@@ -32,14 +67,21 @@ pub struct InputFlow {
 }
 
 impl InputFlow {
-    /// The expected flow of `pixels`; `None` when they do not move (no velocity) or the time base is unknown
-    /// (one input frame, or a log without a frame interval).
+    /// The expected flow of `pixels` under `source`; `None` for [`MotionSource::Held`], when the source has
+    /// nothing to move them with (no velocity, no instances found), or when the time base is unknown (one input
+    /// frame, or a log without a frame interval).
     pub fn of(
         pixels: &PixelGaussians,
+        source: MotionSource,
         frames_per_time: f64,
         seconds_per_frame: Option<f64>,
     ) -> Result<Option<Self>, EvalError> {
-        let Some(velocity) = pixels.host_velocity() else { return Ok(None) };
+        let velocity = match source {
+            MotionSource::Held => None,
+            MotionSource::Velocity => pixels.host_velocity().map(<[_]>::to_vec),
+            MotionSource::Instances => instance_velocities(pixels),
+        };
+        let Some(velocity) = velocity else { return Ok(None) };
         let seconds_per_time = frames_per_time * seconds_per_frame.unwrap_or(0.0);
         if !(seconds_per_time > 0.0 && seconds_per_time.is_finite()) {
             return Ok(None);
@@ -73,6 +115,29 @@ impl InputFlow {
         let converted = log_from_world * flow * (metres_per_unit / self.seconds_per_time);
         [converted.x as f32, converted.y as f32, converted.z as f32]
     }
+}
+
+/// Every Gaussian's velocity when the instances move the dynamic ones: a pixel of an object moves with its
+/// object's trajectory at its view's time, any other with its predicted velocity (zero without one); `None`
+/// when no instances were found.
+fn instance_velocities(pixels: &PixelGaussians) -> Option<Vec<[f32; 3]>> {
+    let instances = pixels.instances()?;
+    let per_view = pixels.per_view();
+    let means = pixels.host_means();
+    let velocities = (0..pixels.len())
+        .map(|row| {
+            let (view, pixel) = (row / per_view, row % per_view);
+            match instances.instance_of(view, pixel) {
+                Some(k) => {
+                    let point = DVec3::from_array(means[row].map(f64::from));
+                    let time = pixels.views[view].time;
+                    instances.instances[k].trajectory.point_velocity(time, point).to_array().map(|v| v as f32)
+                }
+                None => pixels.host_velocity().map_or([0.0; 3], |velocity| velocity[row]),
+            }
+        })
+        .collect();
+    Some(velocities)
 }
 
 /// Metres per world unit at one view: the least-squares scale `s` minimising `sum (s p - g)^2` over the cells'

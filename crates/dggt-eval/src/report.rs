@@ -27,6 +27,11 @@ pub const MOTION_VELOCITY: &str = "predicted velocities: the expected flow (dyna
      lidar cells, in metres by the view's depth scale (least squares, no shift); views between the inputs are not \
      scored for motion";
 
+/// The motion source of a reconstruction that moves its objects along their trajectories.
+pub const MOTION_INSTANCES: &str = "instances: the dynamic pixels grouped into objects, each moving rigidly along its \
+     trajectory through the inputs; the expected flow (dynamic probability x the object's point velocity at the \
+     view's time) of each input pixel at the input views' lidar cells, as for predicted velocities";
+
 /// Metrics of one rendered target view.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ViewRecord {
@@ -64,9 +69,34 @@ pub struct ViewRecord {
     /// Scene-flow metrics of the predicted motion; absent when not evaluated (see the scene's notes).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub motion: Option<FlowMetrics>,
+    /// The same cells' scene-flow metrics under every motion source the reconstruction has (the one it
+    /// renders with among them), side by side.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub motion_by_source: Vec<SourceFlowMetrics>,
     /// The image metrics of the render after the diffusion refiner; absent without one.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub refined: Option<ImageScores>,
+}
+
+/// The scene-flow metrics of one motion source at one view.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SourceFlowMetrics {
+    /// `held`, `velocity` or `instances`.
+    pub source: String,
+    #[serde(flatten)]
+    pub metrics: FlowMetrics,
+}
+
+/// The means of one motion source's scene-flow metrics over a split's views (or scenes).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SourceSummary {
+    pub source: String,
+    pub epe3d: Option<f64>,
+    pub acc5: Option<f64>,
+    pub acc10: Option<f64>,
+    pub angle_error_rad: Option<f64>,
+    /// Views (or scenes) with this source's metrics.
+    pub count: usize,
 }
 
 /// PSNR (dB), SSIM and LPIPS (absent without weights) of one image against the truth.
@@ -99,6 +129,9 @@ pub struct SplitSummary {
     pub angle_error_rad: Option<f64>,
     /// Views (or scenes) with motion metrics.
     pub motion_count: usize,
+    /// Every motion source's means, side by side.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub motion_by_source: Vec<SourceSummary>,
     /// The image metrics after the diffusion refiner; absent without one.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub refined: Option<RefinedSummary>,
@@ -185,6 +218,22 @@ pub fn summarise_views(views: &[ViewRecord], split: TargetKind) -> SplitSummary 
         acc10: motion(|m| Some(m.acc10)).0,
         angle_error_rad: motion(|m| m.angle_error_rad).0,
         motion_count,
+        motion_by_source: source_names(views.iter().flat_map(|v| &v.motion_by_source).map(|m| &m.source))
+            .into_iter()
+            .map(|source| {
+                let of_source = |v: &&ViewRecord| v.motion_by_source.iter().find(|m| m.source == source).cloned();
+                let metrics: Vec<FlowMetrics> = views.iter().filter_map(of_source).map(|m| m.metrics).collect();
+                let mean = |f: fn(&FlowMetrics) -> Option<f64>| mean_present(metrics.iter().map(f));
+                SourceSummary {
+                    source,
+                    epe3d: mean(|m| Some(m.epe3d)).0,
+                    acc5: mean(|m| Some(m.acc5)).0,
+                    acc10: mean(|m| Some(m.acc10)).0,
+                    angle_error_rad: mean(|m| m.angle_error_rad).0,
+                    count: metrics.len(),
+                }
+            })
+            .collect(),
         refined: views.iter().any(|v| v.refined.is_some()).then(|| {
             let refined = |f: fn(&ImageScores) -> Option<f64>| {
                 mean_present(views.iter().map(|v| v.refined.as_ref().and_then(f))).0
@@ -221,6 +270,24 @@ pub fn summarise_scenes(scenes: &[SceneReport], splits: &[TargetKind]) -> Vec<Sp
                 acc10: mean(|r| r.acc10).0,
                 angle_error_rad: mean(|r| r.angle_error_rad).0,
                 motion_count: mean(|r| r.epe3d).1,
+                motion_by_source: source_names(rows.iter().flat_map(|r| &r.motion_by_source).map(|m| &m.source))
+                    .into_iter()
+                    .map(|source| {
+                        let of_source: Vec<&SourceSummary> = rows
+                            .iter()
+                            .filter_map(|r| r.motion_by_source.iter().find(|m| m.source == source))
+                            .collect();
+                        let mean = |f: fn(&SourceSummary) -> Option<f64>| mean_present(of_source.iter().map(|m| f(m)));
+                        SourceSummary {
+                            source,
+                            epe3d: mean(|m| m.epe3d).0,
+                            acc5: mean(|m| m.acc5).0,
+                            acc10: mean(|m| m.acc10).0,
+                            angle_error_rad: mean(|m| m.angle_error_rad).0,
+                            count: mean(|m| m.epe3d).1,
+                        }
+                    })
+                    .collect(),
                 refined: rows.iter().any(|r| r.refined.is_some()).then(|| {
                     let refined = |f: fn(&RefinedSummary) -> Option<f64>| {
                         mean_present(rows.iter().map(|r| r.refined.as_ref().and_then(f))).0
@@ -230,6 +297,17 @@ pub fn summarise_scenes(scenes: &[SceneReport], splits: &[TargetKind]) -> Vec<Sp
             }
         })
         .collect()
+}
+
+/// The distinct source names among `names`, in order of first appearance.
+fn source_names<'a>(names: impl Iterator<Item = &'a String>) -> Vec<String> {
+    let mut distinct: Vec<String> = Vec::new();
+    for name in names {
+        if !distinct.contains(name) {
+            distinct.push(name.clone());
+        }
+    }
+    distinct
 }
 
 fn cell(value: Option<f64>, digits: usize) -> String {
@@ -312,6 +390,24 @@ impl EvalReport {
             }
             let scenes = if summary.count == 1 { "1 scene".to_string() } else { format!("{} scenes", summary.count) };
             md.push_str(&row("**mean over scenes**", scenes.clone(), summary));
+            if !summary.motion_by_source.is_empty() {
+                md.push_str("\n### motion by source (mean over scenes)\n\n");
+                md.push_str(
+                    "| source | scenes | EPE3D | Acc5 (%) | Acc10 (%) | angle (rad) |\n|---|---|---|---|---|---|\n",
+                );
+                for source in &summary.motion_by_source {
+                    let _ = writeln!(
+                        md,
+                        "| {} | {} | {} | {} | {} | {} |",
+                        source.source,
+                        source.count,
+                        cell(source.epe3d, 3),
+                        percent(source.acc5),
+                        percent(source.acc10),
+                        cell(source.angle_error_rad, 3)
+                    );
+                }
+            }
             if summary.refined.is_some() {
                 md.push_str("\n### without and with the refiner\n\n");
                 md.push_str(

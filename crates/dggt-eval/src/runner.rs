@@ -14,8 +14,12 @@
 //! predicted motion of every surface point is zero ([`MotionSource::Held`]); its metrics are computed anyway
 //! and labelled. With predicted velocities (a motion head, or the Gaussian head's velocity channels) the
 //! renders use them, and the expected flow of the surface seen at each lidar cell of an input view is scored
-//! in the export's axes and units ([`MotionSource::Velocity`], [`crate::motion`]); views between the inputs
-//! are not scored for motion (their flow would have to be rendered). As STORM does, motion is
+//! in the export's axes and units ([`MotionSource::Velocity`], [`crate::motion`]). With
+//! `render.dynamic_motion = "instances"` the renders move each object found among the dynamic pixels along its
+//! trajectory, and that motion is scored ([`MotionSource::Instances`]). Every source the reconstruction has
+//! (held; velocities when predicted; instances whenever there is a dynamic head) is also scored at the same
+//! cells side by side. Views between the inputs are not scored for motion (their flow would have to be
+//! rendered). As STORM does, motion is
 //! scored at the lidar cells (positive depth; here also not sky and inside the view) and only for windows
 //! where some true flow exceeds [`MOTION_GATE`] (STORM skips samples without such motion, whose accuracies
 //! would be trivially high).
@@ -36,17 +40,18 @@ use dggt_infer::{
 use dggt_losses::{Lpips, LpipsKind};
 use dggt_model::host::host_f32;
 use dggt_refine::{ReferenceView, Refiner, RefinerSpec, frame_from_interleaved, frame_to_interleaved};
-use dggt_scene::{Scene4d, TargetView, Timeline, nearest_in_time};
+use dggt_scene::{DynamicMotion, Scene4d, TargetView, Timeline, nearest_in_time};
 
 use crate::error::EvalError;
 use crate::grid::{CellMapping, cell_has_sky};
-use crate::motion::{InputFlow, log_from_reconstruction, metres_per_unit};
+use crate::motion::{InputFlow, MotionSource, log_from_reconstruction, metres_per_unit};
 use crate::protocol::Protocol;
 use crate::report::{
-    EvalReport, ImageScores, MOTION_HELD, MOTION_VELOCITY, SceneReport, StageTime, ViewRecord, summarise_scenes,
-    summarise_views,
+    EvalReport, ImageScores, SceneReport, SourceFlowMetrics, StageTime, ViewRecord, summarise_scenes, summarise_views,
 };
-use dggt_metrics::{ImageShape, MetricError, aligned_depth_rmse, masked_psnr, psnr, scene_flow_metrics, ssim};
+use dggt_metrics::{
+    FlowMetrics, ImageShape, MetricError, aligned_depth_rmse, masked_psnr, psnr, scene_flow_metrics, ssim,
+};
 
 /// Motion is scored only in windows where some true flow is longer than this (STORM's rule; m/s for
 /// velocity-valued exports).
@@ -54,26 +59,6 @@ pub const MOTION_GATE: f64 = 1.0;
 
 /// The stages timed, in order.
 const STAGES: [&str; 5] = ["load", "forward", "assembly", "render", "metrics"];
-
-/// Where the predicted 3D motion of a surface point comes from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum MotionSource {
-    /// No motion head: every Gaussian is held in place, so the predicted flow is zero.
-    Held,
-    /// Predicted velocities move the dynamic Gaussians; the expected flow `p · v` of each input pixel is scored
-    /// at the input views' lidar cells.
-    Velocity,
-}
-
-impl MotionSource {
-    /// The label written to the reports.
-    pub fn label(self) -> &'static str {
-        match self {
-            Self::Held => MOTION_HELD,
-            Self::Velocity => MOTION_VELOCITY,
-        }
-    }
-}
 
 /// The two files of LPIPS-Alex: the lpips package's linear layers and the AlexNet features.
 #[derive(Debug, Clone, PartialEq)]
@@ -184,7 +169,11 @@ pub fn evaluate(options: &EvalOptions, device: &Device) -> Result<EvalReport, Ev
         warnings.push("the network has no sky model: renders have a black sky".into());
     }
 
-    let motion = if network.config.predicts_motion() { MotionSource::Velocity } else { MotionSource::Held };
+    let motion = match network.assembly.dynamic_motion {
+        DynamicMotion::Instances => MotionSource::Instances,
+        DynamicMotion::Velocity if network.config.predicts_motion() => MotionSource::Velocity,
+        DynamicMotion::Velocity => MotionSource::Held,
+    };
     let mut reports = Vec::new();
     for (root, scene) in options.scenes.iter().zip(&scenes) {
         tracing::info!("evaluating {}", root.display());
@@ -377,8 +366,16 @@ struct ForwardScene {
     mapping: CellMapping,
     timeline: Timeline,
     scene: Scene4d,
-    /// The input pixels' expected flow, when the reconstruction moves and its time base is known.
-    flow: Option<InputFlow>,
+    /// Every motion source scored, [`MotionSource::Held`] first, with the input pixels' expected flow under it
+    /// (`None` for held, or without a time base).
+    flows: Vec<(MotionSource, Option<InputFlow>)>,
+}
+
+impl ForwardScene {
+    /// The expected flow under `source`, when it was computed.
+    fn flow(&self, source: MotionSource) -> Option<&InputFlow> {
+        self.flows.iter().find(|(s, _)| *s == source).and_then(|(_, flow)| flow.as_ref())
+    }
 }
 
 /// Whether the scene's scored cells carry depth and flow, and the longest true flow among them.
@@ -392,10 +389,7 @@ fn evaluate_scene(root: &Path, scene: &Scene, context: &SceneContext<'_>) -> Res
     let protocol = &context.options.protocol;
     let mut watch = Stopwatch::default();
     let mut forward = forward_scene(root, context, &mut watch)?;
-    if context.motion == MotionSource::Velocity {
-        forward.flow =
-            InputFlow::of(&forward.scene.pixels, forward.timeline.frames_per_time(), scene.seconds_per_frame())?;
-    }
+    forward.flows = motion_flows(&mut forward, context, scene.seconds_per_frame())?;
     let mut records = Vec::new();
     let mut seen = FlowSeen::default();
     for (frame, split) in protocol.targets() {
@@ -431,13 +425,12 @@ fn evaluate_scene(root: &Path, scene: &Scene, context: &SceneContext<'_>) -> Res
         notes.push("the export has neither depth_flows_4 nor lidar: no D-RMSE or motion metrics".into());
     } else if scene.depth_source() == Some(DepthSource::Lidar) {
         notes.push("depth from the projected lidar sweeps, which carry no scene flow: no motion metrics".into());
-    } else if context.motion == MotionSource::Velocity && forward.flow.is_none() {
-        notes.push(
-            "one input frame or no frame interval: predicted velocities have no time base, motion not scored".into(),
-        );
+    } else if context.motion != MotionSource::Held && forward.flow(context.motion).is_none() {
+        notes.push("one input frame or no frame interval: predicted motion has no time base, motion not scored".into());
     } else if seen.largest_flow <= MOTION_GATE {
         for record in &mut records {
             record.motion = None;
+            record.motion_by_source.clear();
         }
         notes.push(format!(
             "no true scene flow above {MOTION_GATE} at the scored cells (largest {:.3}): motion metrics not evaluated",
@@ -491,7 +484,33 @@ fn forward_scene(root: &Path, context: &SceneContext<'_>, watch: &mut Stopwatch)
         .ok_or_else(|| EvalError::NoGaussianHead { checkpoint: context.options.checkpoint.clone() })?;
     drop(prediction);
     watch.add(ASSEMBLY, started);
-    Ok(ForwardScene { inputs, input_images, size, mapping, timeline, scene, flow: None })
+    Ok(ForwardScene { inputs, input_images, size, mapping, timeline, scene, flows: Vec::new() })
+}
+
+/// The motion sources scored side by side (held; the predicted velocities when the network has them; the
+/// instances when it has a dynamic head, found here for scoring when the reconstruction does not render with
+/// them) and the input pixels' expected flow under each.
+fn motion_flows(
+    forward: &mut ForwardScene,
+    context: &SceneContext<'_>,
+    seconds_per_frame: Option<f64>,
+) -> Result<Vec<(MotionSource, Option<InputFlow>)>, EvalError> {
+    let pixels = &forward.scene.pixels;
+    let mut sources = vec![MotionSource::Held];
+    if pixels.host_velocity().is_some() {
+        sources.push(MotionSource::Velocity);
+    }
+    if pixels.dynamic_logit.is_some() {
+        if pixels.instances().is_none() {
+            forward.scene.pixels = pixels.clone().with_instances(&context.network.assembly.instances)?;
+        }
+        sources.push(MotionSource::Instances);
+    }
+    let frames_per_time = forward.timeline.frames_per_time();
+    sources
+        .into_iter()
+        .map(|source| Ok((source, InputFlow::of(&forward.scene.pixels, source, frames_per_time, seconds_per_frame)?)))
+        .collect()
 }
 
 /// The view of the protocol's camera `camera_position` at log frame `frame`: an input view from its own
@@ -614,6 +633,7 @@ fn score_view(
         depth_cells: 0,
         depth_note: None,
         motion: None,
+        motion_by_source: Vec::new(),
         refined,
     };
     let files = &scene.view(view.frame_position, view.camera_position).files;
@@ -622,13 +642,23 @@ fn score_view(
         Some(map) => {
             seen.has_depth_flow = true;
             let sky_mask = read_sky_mask(files.sky_mask.as_deref(), camera.size)?;
-            let predicted = predicted_flow(scene, forward, context.motion, view);
-            let planes = match predicted {
-                CellFlow::Sampled { flow, input_view, .. } => Some(flow.planes(input_view)),
-                CellFlow::Held | CellFlow::Unscored => None,
-            };
-            let cells = collect_cells(&map, sky_mask.as_deref(), camera.size, &forward.mapping, depth, planes);
-            score_cells(&mut record, &cells, predicted, seen)?;
+            for (position, &(source, _)) in forward.flows.iter().enumerate() {
+                let predicted = predicted_flow(scene, forward, source, view);
+                let planes = match predicted {
+                    CellFlow::Sampled { flow, input_view, .. } => Some(flow.planes(input_view)),
+                    CellFlow::Held | CellFlow::Unscored => None,
+                };
+                let cells = collect_cells(&map, sky_mask.as_deref(), camera.size, &forward.mapping, depth, planes);
+                if position == 0 {
+                    score_depth(&mut record, &cells, seen)?;
+                }
+                if let Some(metrics) = score_flow(&cells, predicted)? {
+                    if source == context.motion {
+                        record.motion = Some(metrics.clone());
+                    }
+                    record.motion_by_source.push(SourceFlowMetrics { source: source.name().into(), metrics });
+                }
+            }
         }
     }
     Ok(record)
@@ -670,35 +700,29 @@ enum CellFlow<'a> {
     Sampled { flow: &'a InputFlow, input_view: usize, log_from_world: DMat3 },
 }
 
-/// The predicted flow `view` is scored with.
+/// The predicted flow of `source` that `view` is scored with.
 fn predicted_flow<'a>(
     scene: &Scene,
     forward: &'a ForwardScene,
-    motion: MotionSource,
+    source: MotionSource,
     view: &ScoredView,
 ) -> CellFlow<'a> {
     let input_position = forward.inputs.frames.iter().position(|&f| f == view.frame);
-    match (motion, &forward.flow, input_position) {
+    match (source, forward.flow(source), input_position) {
         (MotionSource::Held, _, _) => CellFlow::Held,
-        (MotionSource::Velocity, Some(flow), Some(position)) => {
+        (_, Some(flow), Some(position)) => {
             let input_view = position * forward.inputs.cameras.len() + view.camera_position;
             let predicted = forward.scene.views()[input_view].camera.world_from_camera.rotation_matrix();
             let truth = scene.view(view.frame_position, view.camera_position).world_from_camera.rotation_matrix();
             let log_from_world = log_from_reconstruction(scene.world_from_log.rotation_matrix(), truth, predicted);
             CellFlow::Sampled { flow, input_view, log_from_world }
         }
-        (MotionSource::Velocity, _, _) => CellFlow::Unscored,
+        _ => CellFlow::Unscored,
     }
 }
 
-/// D-RMSE and the scene-flow metrics of `cells` into `record`; a sampled flow is brought to metres by the
-/// view's depth scale ([`metres_per_unit`]; not scored without one).
-fn score_cells(
-    record: &mut ViewRecord,
-    cells: &Cells,
-    predicted: CellFlow<'_>,
-    seen: &mut FlowSeen,
-) -> Result<(), EvalError> {
+/// D-RMSE of `cells` into `record`, and the longest true flow among them into `seen`.
+fn score_depth(record: &mut ViewRecord, cells: &Cells, seen: &mut FlowSeen) -> Result<(), EvalError> {
     record.depth_cells = cells.true_depth.len();
     match aligned_depth_rmse(&cells.predicted_depth, &cells.true_depth) {
         Ok(alignment) => {
@@ -711,25 +735,25 @@ fn score_cells(
         }
         Err(other) => return Err(other.into()),
     }
-    if !cells.true_flow.is_empty() {
-        let predicted: Option<Vec<[f32; 3]>> = match predicted {
-            CellFlow::Held => Some(vec![[0.0; 3]; cells.true_flow.len()]),
-            CellFlow::Unscored => None,
-            CellFlow::Sampled { flow, log_from_world, .. } => {
-                metres_per_unit(&cells.predicted_depth, &cells.true_depth).map(|scale| {
-                    cells.predicted_flow.iter().map(|&f| flow.in_export_units(f, log_from_world, scale)).collect()
-                })
-            }
-        };
-        if let Some(predicted) = predicted {
-            record.motion = Some(scene_flow_metrics(&predicted, &cells.true_flow)?);
-        }
-        let longest = cells
-            .true_flow
-            .iter()
-            .map(|f| f.iter().map(|c| f64::from(*c).powi(2)).sum::<f64>().sqrt())
-            .fold(0.0, f64::max);
-        seen.largest_flow = seen.largest_flow.max(longest);
-    }
+    let longest =
+        cells.true_flow.iter().map(|f| f.iter().map(|c| f64::from(*c).powi(2)).sum::<f64>().sqrt()).fold(0.0, f64::max);
+    seen.largest_flow = seen.largest_flow.max(longest);
     Ok(())
+}
+
+/// The scene-flow metrics of `cells` under `predicted`; a sampled flow is brought to metres by the view's depth
+/// scale ([`metres_per_unit`]; not scored without one). `None` without true flow or a prediction.
+fn score_flow(cells: &Cells, predicted: CellFlow<'_>) -> Result<Option<FlowMetrics>, EvalError> {
+    if cells.true_flow.is_empty() {
+        return Ok(None);
+    }
+    let predicted: Option<Vec<[f32; 3]>> = match predicted {
+        CellFlow::Held => Some(vec![[0.0; 3]; cells.true_flow.len()]),
+        CellFlow::Unscored => None,
+        CellFlow::Sampled { flow, log_from_world, .. } => metres_per_unit(&cells.predicted_depth, &cells.true_depth)
+            .map(|scale| {
+                cells.predicted_flow.iter().map(|&f| flow.in_export_units(f, log_from_world, scale)).collect()
+            }),
+    };
+    predicted.map(|predicted| scene_flow_metrics(&predicted, &cells.true_flow)).transpose().map_err(Into::into)
 }

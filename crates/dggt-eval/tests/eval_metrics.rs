@@ -3,9 +3,10 @@
 
 use dggt_data::Preprocess;
 use dggt_eval::grid::{CellMapping, cell_has_sky};
-use dggt_eval::report::{ViewRecord, summarise_views};
+use dggt_eval::report::{SourceFlowMetrics, ViewRecord, summarise_views};
 use dggt_eval::{Protocol, ProtocolKind, TargetKind};
 use dggt_geom::ImageSize;
+use dggt_metrics::FlowMetrics;
 
 fn close(a: f64, b: f64, tolerance: f64) -> bool {
     (a - b).abs() <= tolerance
@@ -108,8 +109,40 @@ fn record(split: TargetKind, psnr: f64, d_rmse: Option<f64>) -> ViewRecord {
         depth_cells: 0,
         depth_note: None,
         motion: None,
+        motion_by_source: Vec::new(),
         refined: None,
     }
+}
+
+fn flow(epe3d: f64) -> FlowMetrics {
+    FlowMetrics { epe3d, acc5: 0.5, acc10: 0.75, angle_error_rad: None, points: 10, angle_points: 0 }
+}
+
+#[test]
+fn motion_sources_are_averaged_side_by_side() {
+    let scored = |held: f64, instances: Option<f64>| {
+        let mut view = record(TargetKind::Reconstruction, 20.0, None);
+        view.motion_by_source.push(SourceFlowMetrics { source: "held".into(), metrics: flow(held) });
+        if let Some(epe) = instances {
+            view.motion_by_source.push(SourceFlowMetrics { source: "instances".into(), metrics: flow(epe) });
+        }
+        view
+    };
+    let views = [scored(4.0, Some(1.0)), scored(2.0, None), scored(6.0, Some(2.0))];
+    let s = summarise_views(&views, TargetKind::Reconstruction);
+    let names: Vec<&str> = s.motion_by_source.iter().map(|m| m.source.as_str()).collect();
+    assert_eq!(names, ["held", "instances"]);
+    assert_eq!((s.motion_by_source[0].epe3d, s.motion_by_source[0].count), (Some(4.0), 3));
+    assert_eq!((s.motion_by_source[1].epe3d, s.motion_by_source[1].count), (Some(1.5), 2));
+    assert_eq!(s.motion_by_source[1].acc10, Some(0.75));
+    // The record serialises each source's metrics beside its name.
+    let json = serde_json::to_value(&views[0]).unwrap();
+    assert_eq!(json["motion_by_source"][1]["source"], "instances");
+    assert_eq!(json["motion_by_source"][1]["epe3d"], 1.0);
+    // Without sources, nothing is written.
+    assert!(
+        serde_json::to_value(record(TargetKind::Reconstruction, 1.0, None)).unwrap().get("motion_by_source").is_none()
+    );
 }
 
 #[test]

@@ -7,8 +7,10 @@ use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
 use burn::tensor::Device;
-use dggt_eval::{EvalOptions, LpipsWeights, MOTION_HELD, MOTION_VELOCITY, Protocol, evaluate};
+use dggt_eval::{EvalOptions, LpipsWeights, MOTION_HELD, MOTION_INSTANCES, MOTION_VELOCITY, Protocol, evaluate};
+use dggt_infer::Architecture;
 use dggt_refine::{Latent, Prompt, ReferenceView, RefinerSpec};
+use dggt_scene::DynamicMotion;
 use dggt_train::{RunOptions, Start, TrainConfig, Trainer};
 use serde_json::Value;
 
@@ -24,11 +26,13 @@ fn parity_dir() -> PathBuf {
     dggt_test_data::Shared::Parity.dir()
 }
 
-/// Whether the tiny network predicts velocities.
+/// Whether the tiny network predicts velocities, and how its dynamic Gaussians move.
 #[derive(Clone, Copy, PartialEq)]
 enum Motion {
     Held,
     GaussianVelocity,
+    /// No velocities; the objects found among the dynamic pixels move along their trajectories.
+    Instances,
 }
 
 /// A tiny network after one training step on the fixture, saved as the trainer saves checkpoints.
@@ -36,9 +40,13 @@ fn tiny_checkpoint(run: &Path) {
     tiny_checkpoint_with(run, Motion::Held);
 }
 
-fn tiny_checkpoint_with(run: &Path, motion: Motion) {
+/// Trains the tiny network into `run` and returns its configuration.
+fn tiny_checkpoint_with(run: &Path, motion: Motion) -> TrainConfig {
     let mut config = TrainConfig::load(&repo().join("configs/tiny-overfit.toml")).expect("tiny-overfit.toml loads");
     config.model.gaussian_velocity = motion == Motion::GaussianVelocity;
+    if motion == Motion::Instances {
+        config.render.dynamic_motion = DynamicMotion::Instances;
+    }
     config.data.scene = fixture();
     config.data.frames = None;
     config.data.preprocess.target_width = 56;
@@ -48,9 +56,10 @@ fn tiny_checkpoint_with(run: &Path, motion: Motion) {
     config.render.render_inputs = false;
     config.run.steps = 1;
     let mut trainer =
-        Trainer::new(config.unattended(run), vec![Device::flex()], Start::Fresh).expect("the trainer builds");
+        Trainer::new(config.clone().unattended(run), vec![Device::flex()], Start::Fresh).expect("the trainer builds");
     let summary = trainer.run(RunOptions::default()).expect("one step trains");
     assert!(summary.checkpoint.is_some(), "the run ends with a checkpoint");
+    config
 }
 
 fn number(value: &Value, key: &str) -> f64 {
@@ -238,6 +247,7 @@ fn predicted_velocities_are_scored_at_the_input_views() {
     let report: Value = serde_json::from_slice(&std::fs::read(out.path().join("eval.json")).unwrap()).unwrap();
     assert_eq!(report["motion_source"], MOTION_VELOCITY);
     let views = report["scenes"][0]["views"].as_array().unwrap();
+    assert_sources_side_by_side(views, &["held", "velocity", "instances"], "velocity");
     let (mut scored, mut unscored, mut moving) = (0, 0, 0);
     for view in views {
         match (view["split"].as_str().unwrap(), view.get("motion")) {
@@ -259,6 +269,44 @@ fn predicted_velocities_are_scored_at_the_input_views() {
     let overall = &report["overall"][0];
     assert_eq!(overall["split"], "reconstruction");
     assert!(number(overall, "epe3d").is_finite(), "{overall}");
+}
+
+/// Every scored view lists `sources` in order, the rendered source's metrics equal to its `motion`.
+fn assert_sources_side_by_side(views: &[Value], sources: &[&str], rendered: &str) {
+    let (mut scored, mut moving) = (0, 0);
+    for view in views.iter().filter(|v| v.get("motion").is_some()) {
+        let listed = view["motion_by_source"].as_array().unwrap_or_else(|| panic!("no sources: {view}"));
+        let names: Vec<&str> = listed.iter().map(|m| m["source"].as_str().unwrap()).collect();
+        assert_eq!(names, sources, "{view}");
+        let own = listed.iter().find(|m| m["source"] == rendered).unwrap();
+        assert_eq!(own["epe3d"], view["motion"]["epe3d"], "{view}");
+        let held = listed.iter().find(|m| m["source"] == "held").unwrap();
+        moving += usize::from(number(held, "epe3d") > 0.0);
+        scored += 1;
+    }
+    assert!(scored > 0 && moving > 0, "{scored} views scored for motion, {moving} with moving cells");
+}
+
+#[test]
+fn instance_trajectories_are_rendered_and_scored_beside_held() {
+    let run_dir = tempfile::tempdir().unwrap();
+    let config = tiny_checkpoint_with(run_dir.path(), Motion::Instances);
+    // The render settings come from the training configuration given with the checkpoint (`--config`).
+    let config_path = run_dir.path().join("train.toml");
+    std::fs::write(&config_path, toml::to_string(&config).unwrap()).unwrap();
+    let out = tempfile::tempdir().unwrap();
+    let mut options = EvalOptions::new(vec![fixture()], run_dir.path(), out.path());
+    options.width = Some(84);
+    options.architecture = Some(Architecture::Config(config_path));
+    let evaluated = evaluate(&options, &Device::flex()).unwrap();
+    let report: Value = serde_json::from_slice(&std::fs::read(out.path().join("eval.json")).unwrap()).unwrap();
+    assert_eq!(report["motion_source"], MOTION_INSTANCES);
+    assert_sources_side_by_side(report["scenes"][0]["views"].as_array().unwrap(), &["held", "instances"], "instances");
+    let overall = &evaluated.overall[0];
+    let names: Vec<&str> = overall.motion_by_source.iter().map(|m| m.source.as_str()).collect();
+    assert_eq!(names, ["held", "instances"]);
+    let markdown = std::fs::read_to_string(out.path().join("eval.md")).unwrap();
+    assert!(markdown.contains("### motion by source") && markdown.contains("| instances |"), "{markdown}");
 }
 
 #[test]

@@ -240,6 +240,11 @@ impl PixelGaussians {
         self.host_velocity.as_deref()
     }
 
+    /// The host copy of [`PixelGaussians::means`], one row per Gaussian.
+    pub fn host_means(&self) -> &[[f32; 3]] {
+        &self.host_means
+    }
+
     /// Number of Gaussians `M`.
     pub fn len(&self) -> usize {
         self.host_means.len()
