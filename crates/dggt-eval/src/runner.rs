@@ -654,7 +654,7 @@ fn score_view(
                 }
                 if let Some(metrics) = score_flow(&cells, predicted)? {
                     if source == context.motion {
-                        record.motion = Some(metrics.clone());
+                        record.motion = Some(metrics);
                     }
                     record.motion_by_source.push(SourceFlowMetrics { source: source.name().into(), metrics });
                 }
