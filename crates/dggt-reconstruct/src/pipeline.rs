@@ -38,13 +38,15 @@ use dggt_infer::{
 use dggt_model::host::host_f32;
 use dggt_run::progress::{Visibility, styled_bar};
 use dggt_scene::{
-    AssemblyCounts, InputView, MIN_OPACITY, PixelGaussians, Scene4d, TargetView, Timeline, nearest_in_time,
-    nearest_view,
+    AssemblyCounts, AssemblySettings, InputView, Instances, MIN_OPACITY, PixelGaussians, Scene4d, TargetView, Timeline,
+    nearest_in_time, nearest_view,
 };
 
 use crate::align::pose_error;
 use crate::error::ReconstructError;
-use crate::summary::{GaussianCounts, RenderRecord, StageTime, Summary, peak_memory_mib};
+use crate::summary::{
+    GaussianCounts, InstanceAppearance, InstanceRecord, RenderRecord, StageTime, Summary, peak_memory_mib,
+};
 use crate::volume::{DEFAULT_MAX_OUTPUT_BYTES, OutputEstimate, check_every, check_times};
 
 /// Which times to render (and export dynamic Gaussians at).
@@ -186,19 +188,21 @@ pub fn reconstruct(options: &ReconstructOptions, device: &Device) -> Result<Summ
     let scene_options = SceneOptions { assembly: network.assembly, ..SceneOptions::default() };
     let scene = prediction.scene(&network.model, &batch, views, &timeline, &scene_options)?;
     drop(prediction);
-    let (counts, renders, input_psnr_db) = match scene {
+    let (counts, renders, input_psnr_db, instances) = match scene {
         None => {
             warnings.push("the network has no Gaussian head: no Gaussians, sky masks or renders".into());
-            (GaussianCounts::default(), Vec::new(), Vec::new())
+            (GaussianCounts::default(), Vec::new(), Vec::new(), Vec::new())
         }
         Some(scene) => {
+            let scene = with_instances(scene, &network.assembly)?;
+            let instances = scene.pixels.instances().map_or_else(Vec::new, instance_records);
             stages.done("gaussians");
             let request = RenderRequest { inputs: &inputs, images: &images, times_s: &times_s, timeline, size };
             let counts = write_gaussians(&mut written, &scene, &request, &mut warnings)?;
             stages.done("write gaussians");
             let (renders, input_psnr_db) = render_views(&mut written, &scene, &request, options.progress)?;
             stages.done("render");
-            (counts, renders, input_psnr_db)
+            (counts, renders, input_psnr_db, instances)
         }
     };
 
@@ -224,6 +228,7 @@ pub fn reconstruct(options: &ReconstructOptions, device: &Device) -> Result<Summ
         renders,
         input_psnr_db,
         pose_error,
+        instances,
         stages: stages.list,
         peak_memory_mib: peak_memory_mib(),
         warnings,
@@ -233,6 +238,45 @@ pub fn reconstruct(options: &ReconstructOptions, device: &Device) -> Result<Summ
     let text = serde_json::to_string_pretty(&summary).expect("summaries serialise");
     std::fs::write(&path, text).map_err(|e| ReconstructError::input(&path, e.to_string()))?;
     Ok(summary)
+}
+
+/// `scene` with its moving objects found (for the summary, and for editing), when it has a dynamic head and
+/// its assembly has not found them already.
+fn with_instances(scene: Scene4d, assembly: &AssemblySettings) -> Result<Scene4d, ReconstructError> {
+    if scene.pixels.dynamic_logit.is_none() || scene.pixels.instances().is_some() {
+        return Ok(scene);
+    }
+    Ok(Scene4d { pixels: scene.pixels.with_instances(&assembly.instances)?, ..scene })
+}
+
+/// The summary's records of `instances`.
+fn instance_records(instances: &Instances) -> Vec<InstanceRecord> {
+    instances
+        .instances
+        .iter()
+        .map(|instance| InstanceRecord {
+            id: instance.id,
+            appearances: instance
+                .appearances
+                .iter()
+                .map(|appearance| {
+                    let pose = instance.trajectory.pose(appearance.time);
+                    let r = pose.rotation;
+                    InstanceAppearance {
+                        scene_time: appearance.time,
+                        views: appearance.views.clone(),
+                        pixels: appearance.pixels,
+                        box_min: appearance.bounds[0].to_array(),
+                        box_max: appearance.bounds[1].to_array(),
+                        centre: appearance.centre.to_array(),
+                        rotation_wxyz: [r.w, r.x, r.y, r.z],
+                        translation: pose.translation.to_array(),
+                    }
+                })
+                .collect(),
+            residuals: instance.residuals.clone(),
+        })
+        .collect()
 }
 
 /// What the Gaussians are exported and the views rendered for.

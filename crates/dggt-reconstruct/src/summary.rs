@@ -49,6 +49,34 @@ pub struct RenderRecord {
     pub dynamic_kept: usize,
 }
 
+/// One moving object found among the dynamic pixels (`dggt_instances`). Positions are in the reconstruction's
+/// world (the first input camera's frame, OpenCV axes, the network's predicted units); times are scene times.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct InstanceRecord {
+    pub id: u32,
+    /// One per input time it was seen at, in time order.
+    pub appearances: Vec<InstanceAppearance>,
+    /// Registration residual (root mean square, world units) of each step between consecutive appearances.
+    pub residuals: Vec<f64>,
+}
+
+/// An object at one input time.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct InstanceAppearance {
+    pub scene_time: f64,
+    /// The input views it was seen in (positions in the views' order).
+    pub views: Vec<usize>,
+    /// Its dynamic pixels over those views.
+    pub pixels: usize,
+    /// World-axis-aligned box of its points.
+    pub box_min: [f64; 3],
+    pub box_max: [f64; 3],
+    pub centre: [f64; 3],
+    /// The rigid motion from its first appearance to this one: rotation `w x y z`, then translation.
+    pub rotation_wxyz: [f64; 4],
+    pub translation: [f64; 3],
+}
+
 /// The whole report.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Summary {
@@ -71,6 +99,8 @@ pub struct Summary {
     pub input_psnr_db: Vec<f64>,
     /// Predicted poses against the source's (scene exports only), after similarity alignment.
     pub pose_error: Option<PoseError>,
+    /// The moving objects found among the dynamic pixels (none without a dynamic head).
+    pub instances: Vec<InstanceRecord>,
     pub stages: Vec<StageTime>,
     /// Peak resident memory of the process (`VmHWM`), MiB.
     pub peak_memory_mib: Option<f64>,
@@ -137,6 +167,11 @@ impl fmt::Display for Summary {
             g.dynamic_kept.len(),
             g.sky_kept
         )?;
+        if !self.instances.is_empty() {
+            let seen: Vec<String> =
+                self.instances.iter().map(|i| format!("{} at {} inputs", i.id, i.appearances.len())).collect();
+            writeln!(f, "moving objects: {} ({})", self.instances.len(), seen.join(", "))?;
+        }
         if !self.renders.is_empty() {
             let mean = |x: fn(&RenderRecord) -> usize| {
                 self.renders.iter().map(x).sum::<usize>() as f64 / self.renders.len() as f64

@@ -98,8 +98,33 @@ fn reconstructs_the_fixture_from_a_trained_checkpoint() {
     check_maps(out, &names);
     let validation = run.path().join(format!("validation/step-{TRAIN_STEPS:08}"));
     check_renders(&summary, out, &validation);
+    check_instances(&summary, out);
     let elapsed = started.elapsed().as_secs_f64();
     eprintln!("total {elapsed:.1} s");
+}
+
+/// The moving objects listed: numbered in order, each seen at increasing times, its boxes well formed around
+/// its centres, its first pose the identity, one residual per step; the same list in `summary.json`.
+fn check_instances(summary: &Summary, out: &Path) {
+    for (position, instance) in summary.instances.iter().enumerate() {
+        assert_eq!(instance.id as usize, position);
+        assert_eq!(instance.residuals.len() + 1, instance.appearances.len(), "{instance:?}");
+        let first = &instance.appearances[0];
+        assert_eq!((first.rotation_wxyz, first.translation), ([1.0, 0.0, 0.0, 0.0], [0.0; 3]), "{instance:?}");
+        for pair in instance.appearances.windows(2) {
+            assert!(pair[0].scene_time < pair[1].scene_time, "{instance:?}");
+        }
+        for appearance in &instance.appearances {
+            assert!(appearance.pixels > 0 && appearance.views.iter().all(|&v| v < summary.views), "{appearance:?}");
+            for axis in 0..3 {
+                let (low, high, centre) = (appearance.box_min[axis], appearance.box_max[axis], appearance.centre[axis]);
+                assert!(low <= centre && centre <= high, "{appearance:?}");
+            }
+        }
+    }
+    let on_disk: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(on_disk["instances"].as_array().map(Vec::len), Some(summary.instances.len()));
+    eprintln!("{} moving objects", summary.instances.len());
 }
 
 /// Every listed file exists, and the expected ones are listed.
