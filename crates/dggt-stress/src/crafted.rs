@@ -1,7 +1,8 @@
 //! Stress cases that bypass the network: hand-made head outputs at the extremes the activations and the
 //! renderer must survive (opacities at 0 and 1, lifespans near 0 and huge, degenerate, huge and anisotropic
 //! scales, zero quaternions, saturated colours, depths at 0 and 1e6, empty and all-dynamic frames, all-sky and
-//! no-sky views, moderate, huge and non-finite motion-head velocities), pushed through the Gaussian
+//! no-sky views, moderate, huge and non-finite motion-head velocities, and objects moved along their
+//! trajectories among all of these), pushed through the Gaussian
 //! activations, placement, rendering, every loss and the backward pass to the hand-made outputs.
 //!
 //! The raw head output is `[1, S, H, W, 12]`: RGB logits (0-2), opacity logit (3), scale pre-softplus (4-6),
@@ -14,8 +15,7 @@ use dggt_geom::PixelConvention;
 use dggt_model::gaussian_maps::GaussianMaps;
 use dggt_model::sky::SkyModel;
 use dggt_objective::{Forward, Objective};
-use dggt_scene::Scene4d;
-use dggt_scene::{InputView, MeansGradient, PixelGaussians};
+use dggt_scene::{AssemblySettings, DynamicMotion, InputView, MeansGradient, PixelGaussians, Scene4d};
 
 use crate::error::StressError;
 use crate::pipeline::{probe_gradient, render_and_differentiate};
@@ -42,6 +42,9 @@ pub struct Prediction {
     pub dynamic_logit: Vec<f32>,
     /// `[S, H, W, 3]` motion-head velocities (world units per log frame, camera axes); `None`: no motion head.
     pub velocity: Option<Vec<f32>>,
+    /// How the dynamic Gaussians reach the targets' times (with `Instances`, the objects among them are found
+    /// and moved along their trajectories).
+    pub motion: DynamicMotion,
 }
 
 impl Prediction {
@@ -57,7 +60,7 @@ impl Prediction {
             .collect();
         let depth = (0..pixels).map(|_| random.range(2.0, 30.0)).collect();
         let dynamic_logit = (0..pixels).map(|_| random.range(-4.0, 4.0)).collect();
-        Self { raw, depth, dynamic_logit, velocity: None }
+        Self { raw, depth, dynamic_logit, velocity: None, motion: DynamicMotion::Velocity }
     }
 
     /// Gives the prediction motion-head velocities of `magnitude` in random directions.
@@ -122,11 +125,16 @@ pub fn run(
         Some(velocity) => pixels.with_motion(velocity.clone(), batch.timeline.frames_per_time())?,
         None => pixels,
     };
+    let assembly = AssemblySettings { dynamic_motion: prediction.motion, ..objective.render.assembly() };
+    let pixels = match prediction.motion {
+        DynamicMotion::Instances => pixels.with_instances(&assembly.instances)?,
+        DynamicMotion::Velocity => pixels,
+    };
     let cameras: Vec<_> =
         batch.inputs.iter().map(|v| (v.camera.world_from_camera.inverse(), v.camera.intrinsics)).collect();
     let images = batch.images.clone().reshape([frames, 3, height, width]);
     let sky = Some(sky_model.gaussians(images, &cameras));
-    let scene = Scene4d { pixels, sky, assembly: objective.render.assembly() };
+    let scene = Scene4d { pixels, sky, assembly };
     let forward = Forward {
         scene,
         depth: depth.clone(),

@@ -15,6 +15,7 @@ use dggt_infer::{CameraSource, RenderSection, fresh_model};
 use dggt_model::ModelConfig;
 use dggt_model::sky::SkyModel;
 use dggt_objective::{LossWeights, Objective};
+use dggt_scene::DynamicMotion;
 use dggt_scene::MeansGradient;
 use serde::Serialize;
 
@@ -313,6 +314,25 @@ fn crafted_extremes() -> Vec<(&'static str, Expect, Edit)> {
             p.set_velocity(1e6, r);
             p.dynamic_logit.fill(1e4);
             s.fill_dynamic(1.0);
+        }),
+        // A flat wall of dynamic pixels: each view one object, followed through every input.
+        ("instances, all pixels dynamic", Expect::Finite, |s, p, _| {
+            p.motion = DynamicMotion::Instances;
+            p.depth.fill(10.0);
+            p.dynamic_logit.fill(1e4);
+            s.fill_dynamic(1.0);
+        }),
+        ("instances, huge velocities, all dynamic", Expect::Finite, |s, p, r| {
+            p.motion = DynamicMotion::Instances;
+            p.depth.fill(10.0);
+            p.set_velocity(1e6, r);
+            p.dynamic_logit.fill(1e4);
+            s.fill_dynamic(1.0);
+        }),
+        ("instances, depth mixed 0 .. 1e6", Expect::Finite, |_, p, r| {
+            p.motion = DynamicMotion::Instances;
+            p.dynamic_logit.iter_mut().for_each(|l| *l = r.pick(&[-30.0, 30.0]));
+            p.depth.iter_mut().for_each(|d| *d = r.pick(&[0.0, 1e-8, 1.0, 1e6]));
         }),
         ("NaN velocity", Expect::Rejected, |_, p, r| {
             p.set_velocity(1.0, r);
