@@ -7,7 +7,8 @@ use std::path::PathBuf;
 use anyhow::Result;
 use dggt_bench::knobs::parse_opacity;
 use dggt_bench::{
-    BenchOptions, Culling, Knobs, LpipsFiles, PoseSource, Precision, Skips, SweepSpec, report, run_bench, write_outputs,
+    BenchOptions, Culling, Knobs, LpipsFiles, PoseSource, Precision, Skips, SweepSpec, parse_motion, report, run_bench,
+    write_outputs,
 };
 use dggt_infer::SkyChoice;
 
@@ -112,6 +113,13 @@ pub struct SweepArgs {
     /// Shortcuts to sweep.
     #[arg(long, value_delimiter = ',', default_value = "none,motion,sky,all")]
     pub skips: Vec<String>,
+    /// Baseline motion of the dynamic Gaussians between inputs: `velocity` (the predicted velocities, held
+    /// without them) or `instances` (the objects among the dynamic pixels moved along their trajectories).
+    #[arg(long, default_value = "velocity")]
+    pub motion: String,
+    /// Motions to sweep.
+    #[arg(long, value_delimiter = ',', default_value = "velocity,instances")]
+    pub motions: Vec<String>,
     /// Also measure every combination of the swept values.
     #[arg(long)]
     pub grid: bool,
@@ -160,6 +168,7 @@ impl SweepArgs {
                 precision: Precision::parse(&self.precision)?,
                 sky: if self.no_sky { SkyChoice::Skip } else { SkyChoice::Render },
                 skips: Skips::parse(&self.skip)?,
+                motion: parse_motion(&self.motion)?,
             },
             widths: self.widths.clone(),
             input_frames: self.frame_counts.clone(),
@@ -167,6 +176,7 @@ impl SweepArgs {
             precisions: self.precisions.iter().map(|t| Precision::parse(t)).collect::<Result<_, _>>()?,
             sky: self.sky.iter().map(|t| parse_sky(t)).collect::<Result<_, _>>()?,
             skips: self.skips.iter().map(|t| Skips::parse(t)).collect::<Result<_, _>>()?,
+            motions: self.motions.iter().map(|t| parse_motion(t)).collect::<Result<_, _>>()?,
             full_grid: self.grid,
         };
         Ok(BenchOptions {

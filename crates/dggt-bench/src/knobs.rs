@@ -10,6 +10,14 @@ use burn::tensor::FloatDType;
 
 use crate::error::BenchError;
 use dggt_infer::SkyChoice;
+use dggt_scene::DynamicMotion;
+
+/// Parses how dynamic Gaussians move between inputs: `velocity` or `instances`.
+pub fn parse_motion(text: &str) -> Result<DynamicMotion, BenchError> {
+    DynamicMotion::ALL.into_iter().find(|m| m.name().eq_ignore_ascii_case(text.trim())).ok_or_else(|| {
+        BenchError::Setting { setting: "motion", detail: format!("`{text}`: expected velocity or instances") }
+    })
+}
 
 /// The float type the network (aggregator and heads) computes in. Assembly, the sky model and the rasteriser
 /// always compute in f32 (the rasteriser works on flat `f32` buffers).
@@ -162,13 +170,16 @@ pub struct Knobs {
     /// Composite the sky model's Gaussians behind the scene, or a black background.
     pub sky: SkyChoice,
     pub skips: Skips,
+    /// How the dynamic Gaussians reach the targets' times (with `Instances`, finding the objects is part of
+    /// the assembly stage).
+    pub motion: DynamicMotion,
 }
 
 impl Knobs {
-    /// A compact label such as `w112 f8 o1/255 f32 sky skip-none`.
+    /// A compact label such as `w112 f8 o1/255 f32 sky skip-none velocity`.
     pub fn label(&self) -> String {
         format!(
-            "w{} f{} o{} {} {} skip-{}",
+            "w{} f{} o{} {} {} skip-{} {}",
             self.width,
             self.input_frames,
             self.culling.label(),
@@ -177,7 +188,8 @@ impl Knobs {
                 SkyChoice::Render => "sky",
                 SkyChoice::Skip => "nosky",
             },
-            self.skips.name()
+            self.skips.name(),
+            self.motion.name()
         )
     }
 }
@@ -194,6 +206,7 @@ pub enum Varied {
     Precision,
     Sky,
     Skips,
+    Motion,
     /// A row of the full grid that is not a one-knob variation.
     Grid,
 }
@@ -209,6 +222,7 @@ impl Varied {
             Self::Precision => "precision",
             Self::Sky => "sky",
             Self::Skips => "skips",
+            Self::Motion => "motion",
             Self::Grid => "grid",
         }
     }
@@ -232,14 +246,15 @@ pub struct SweepSpec {
     pub precisions: Vec<Precision>,
     pub sky: Vec<SkyChoice>,
     pub skips: Vec<Skips>,
+    pub motions: Vec<DynamicMotion>,
     /// Also every combination of the values above.
     pub full_grid: bool,
 }
 
 impl Default for SweepSpec {
     /// Width 84 (the tiny model's training width), 8 input frames, the rasteriser's own 1/255 threshold, f32,
-    /// with sky, nothing skipped; widths 56-168, 4/8/16 frames, thresholds up to 0.05, f16 and bf16, sky off,
-    /// each skip.
+    /// with sky, nothing skipped, dynamic Gaussians moved by their velocities; widths 56-168, 4/8/16 frames,
+    /// thresholds up to 0.05, f16 and bf16, sky off, each skip, objects moved along their trajectories.
     fn default() -> Self {
         Self {
             baseline: Knobs {
@@ -249,6 +264,7 @@ impl Default for SweepSpec {
                 precision: Precision::F32,
                 sky: SkyChoice::Render,
                 skips: Skips::Nothing,
+                motion: DynamicMotion::Velocity,
             },
             widths: vec![56, 84, 112, 168],
             input_frames: vec![4, 8, 16],
@@ -256,6 +272,7 @@ impl Default for SweepSpec {
             precisions: Precision::ALL.to_vec(),
             sky: vec![SkyChoice::Render, SkyChoice::Skip],
             skips: Skips::ALL.to_vec(),
+            motions: DynamicMotion::ALL.to_vec(),
             full_grid: false,
         }
     }
@@ -325,6 +342,9 @@ impl SweepSpec {
         for &skips in &self.skips {
             push(Varied::Skips, Knobs { skips, ..base });
         }
+        for &motion in &self.motions {
+            push(Varied::Motion, Knobs { motion, ..base });
+        }
         if self.full_grid {
             let widths = if self.widths.is_empty() { vec![base.width] } else { self.widths.clone() };
             let frames = if self.input_frames.is_empty() { vec![base.input_frames] } else { self.input_frames.clone() };
@@ -339,7 +359,7 @@ impl SweepSpec {
                     for &culling in &cullings {
                         for &precision in &precisions {
                             for &sky in &or_base(&self.sky, base.sky) {
-                                let knobs = Knobs { width, input_frames, culling, precision, sky, skips: base.skips };
+                                let knobs = Knobs { width, input_frames, culling, precision, sky, ..base };
                                 push(Varied::Grid, knobs);
                             }
                         }

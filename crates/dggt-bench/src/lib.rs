@@ -30,7 +30,7 @@ pub mod stages;
 use std::path::{Path, PathBuf};
 
 pub use error::BenchError;
-pub use knobs::{Configuration, Culling, Knobs, Precision, Skips, SweepSpec, Varied};
+pub use knobs::{Configuration, Culling, Knobs, Precision, Skips, SweepSpec, Varied, parse_motion};
 pub use pareto::pareto_front;
 pub use run::{BenchOptions, BenchReport, LpipsFiles, MeasuredRow, PoseSource, RefinedRow, RowOutcome, run_bench};
 

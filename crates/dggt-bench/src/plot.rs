@@ -134,6 +134,7 @@ pub fn short_label(configuration: &Configuration) -> String {
         Varied::Precision => k.precision.name().into(),
         Varied::Sky => if k.sky == SkyChoice::Render { "sky" } else { "no sky" }.into(),
         Varied::Skips => format!("skip {}", k.skips.name()),
+        Varied::Motion => k.motion.name().into(),
         Varied::Grid => k.label(),
     }
 }
@@ -148,11 +149,12 @@ fn colour(varied: Varied) -> RGBColor {
         Varied::Precision => RGBColor(148, 103, 189),
         Varied::Sky => RGBColor(140, 86, 75),
         Varied::Skips => RGBColor(23, 190, 207),
+        Varied::Motion => RGBColor(188, 189, 34),
         Varied::Grid => RGBColor(127, 127, 127),
     }
 }
 
-const GROUPS: [Varied; 9] = [
+const GROUPS: [Varied; 10] = [
     Varied::Reference,
     Varied::Baseline,
     Varied::Width,
@@ -161,6 +163,7 @@ const GROUPS: [Varied; 9] = [
     Varied::Precision,
     Varied::Sky,
     Varied::Skips,
+    Varied::Motion,
     Varied::Grid,
 ];
 

@@ -10,7 +10,7 @@ use dggt_infer::SkyChoice;
 
 /// The CSV header; the unit of each column is in its name (`_ms`, `_px`, `_db`) or is none.
 pub const CSV_HEADER: &str = "row,varied,label,width_px,height_px,input_frames,min_opacity,precision,sky,skips,\
-backbone_ms,heads_ms,assembly_ms,raster_ms,total_ms,gaussians_kept_per_view,gaussian_candidates_per_view,\
+motion,backbone_ms,heads_ms,assembly_ms,raster_ms,total_ms,gaussians_kept_per_view,gaussian_candidates_per_view,\
 sky_gaussians,motion_skipped_frames,sky_skipped_views,psnr_vs_exact_db,ssim_vs_exact,lpips_vs_exact,\
 psnr_vs_truth_db,ssim_vs_truth,lpips_vs_truth,refine_ms,psnr_refined_vs_truth_db,ssim_refined_vs_truth,\
 lpips_refined_vs_truth,pareto_vs_exact,pareto_vs_truth,status";
@@ -52,6 +52,7 @@ pub fn csv_text(report: &BenchReport) -> String {
                     knobs.precision.name().into(),
                     (knobs.sky == SkyChoice::Render).to_string(),
                     knobs.skips.name().into(),
+                    knobs.motion.name().into(),
                 ]);
                 fields
                     .extend([t.backbone_ms, t.heads_ms, t.assembly_ms, t.raster_ms, t.total_ms].map(|v| number(v, 2)));
@@ -77,6 +78,7 @@ pub fn csv_text(report: &BenchReport) -> String {
                     knobs.precision.name().into(),
                     (knobs.sky == SkyChoice::Render).to_string(),
                     knobs.skips.name().into(),
+                    knobs.motion.name().into(),
                 ]);
                 fields.extend(std::iter::repeat_n(String::new(), 22));
                 fields.push(field(&format!("skipped: {reason}")));

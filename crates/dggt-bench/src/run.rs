@@ -625,7 +625,8 @@ impl Runner<'_> {
             Culling::Off => AssemblySettings::exact(),
             Culling::MinOpacity(min_opacity) => AssemblySettings { min_opacity, ..AssemblySettings::default() },
         };
-        let assembly = AssemblySettings { hidden_sky: knobs.skips.hidden_sky(), ..assembly };
+        let assembly =
+            AssemblySettings { hidden_sky: knobs.skips.hidden_sky(), dynamic_motion: knobs.motion, ..assembly };
         let scene_options = SceneOptions { sky: knobs.sky, assembly, ..SceneOptions::default() };
         let motion = knobs.skips.motion();
         Ok(RowSetup {

@@ -14,8 +14,8 @@ use dggt_bench::{BenchOptions, RowOutcome, run_bench, stages, write_outputs};
 use dggt_geom::{PinholeIntrinsics, PosedCamera, WorldFromCamera};
 use dggt_infer::SkyChoice;
 use dggt_refine::{Latent, Prompt, ReferenceView, RefinerSpec};
-use dggt_scene::Scene4d;
 use dggt_scene::{AssemblySettings, InputView, MeansGradient, PixelGaussians, TargetView, render_target};
+use dggt_scene::{DynamicMotion, Scene4d};
 
 fn fixture() -> PathBuf {
     dggt_test_data::fixture("synth-s0")
@@ -39,6 +39,7 @@ fn bounded_sweep_writes_table_and_plot() {
             precision: Precision::F32,
             sky: SkyChoice::Render,
             skips: Skips::Nothing,
+            motion: DynamicMotion::Velocity,
         },
         widths: vec![],
         // 40 frames exceed the fixture's 16 non-target frames: skipped with the reason.
@@ -47,6 +48,7 @@ fn bounded_sweep_writes_table_and_plot() {
         precisions: vec![Precision::Bf16],
         sky: vec![],
         skips: vec![Skips::All],
+        motions: vec![DynamicMotion::Instances],
         full_grid: false,
     };
     // The tiny random refiner of the parity vectors (plumbing only: its images mean nothing), in the

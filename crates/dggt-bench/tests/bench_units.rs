@@ -5,6 +5,7 @@ use dggt_bench::frames::plan_frames;
 use dggt_bench::knobs::*;
 use dggt_bench::pareto_front;
 use dggt_infer::SkyChoice;
+use dggt_scene::DynamicMotion;
 
 #[test]
 fn one_knob_at_a_time_without_duplicates() {
@@ -13,8 +14,8 @@ fn one_knob_at_a_time_without_duplicates() {
     assert_eq!(rows[0].varied, Varied::Reference);
     assert_eq!(rows[0].knobs.culling, Culling::Off);
     assert_eq!(rows[1].knobs, spec.baseline);
-    // 3 other widths, 2 other frame counts, 2 other thresholds, 2 other precisions, sky off, 3 skips.
-    assert_eq!(rows.len(), 2 + 3 + 2 + 2 + 2 + 1 + 3);
+    // 3 other widths, 2 other frame counts, 2 other thresholds, 2 other precisions, sky off, 3 skips, instances.
+    assert_eq!(rows.len(), 2 + 3 + 2 + 2 + 2 + 1 + 3 + 1);
     for row in &rows[2..] {
         let b = spec.baseline;
         let k = row.knobs;
@@ -25,6 +26,7 @@ fn one_knob_at_a_time_without_duplicates() {
             k.precision != b.precision,
             k.sky != b.sky,
             k.skips != b.skips,
+            k.motion != b.motion,
         ];
         assert_eq!(differing.iter().filter(|d| **d).count(), 1, "{}", k.label());
     }
@@ -39,6 +41,7 @@ fn full_grid_adds_every_combination_once() {
         precisions: vec![Precision::F32],
         sky: vec![SkyChoice::Render, SkyChoice::Skip],
         skips: vec![],
+        motions: vec![],
         full_grid: true,
         baseline: Knobs {
             width: 28,
@@ -47,6 +50,7 @@ fn full_grid_adds_every_combination_once() {
             precision: Precision::F32,
             sky: SkyChoice::Render,
             skips: Skips::Nothing,
+            motion: DynamicMotion::Velocity,
         },
     };
     let rows = spec.configurations();
@@ -64,6 +68,8 @@ fn opacities_parse_as_fractions_and_decimals() {
     assert_eq!(Precision::parse("BF16").unwrap(), Precision::Bf16);
     assert_eq!(Skips::parse("Motion").unwrap(), Skips::StillMotion);
     assert!(Skips::parse("everything").is_err());
+    assert_eq!(parse_motion("Instances").unwrap(), DynamicMotion::Instances);
+    assert!(parse_motion("tracker").unwrap_err().to_string().contains("velocity or instances"));
     assert!(Precision::parse("f8").is_err());
 }
 

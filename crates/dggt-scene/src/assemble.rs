@@ -71,6 +71,18 @@ pub enum DynamicMotion {
     Instances,
 }
 
+impl DynamicMotion {
+    pub const ALL: [DynamicMotion; 2] = [Self::Velocity, Self::Instances];
+
+    /// `velocity` or `instances`, as in configurations.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Velocity => "velocity",
+            Self::Instances => "instances",
+        }
+    }
+}
+
 /// Whether the sky is rendered behind a view whose foreground covers it everywhere.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub enum HiddenSky {
