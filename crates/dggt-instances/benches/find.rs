@@ -38,10 +38,20 @@ fn measure(name: &str, camera: Camera, cameras: usize) {
         .flat_map(|view| (0..cameras).map(move |rig_camera| ViewPoints { rig_camera, ..view }))
         .collect();
     let settings = InstanceSettings::default();
-    let found = find_instances(&views, &settings);
+    let found = find_instances(&views, &settings).expect("the views are consistent");
+    if std::env::var_os("FIND_DEBUG").is_some() {
+        for instance in &found.instances {
+            let seen: Vec<String> = instance
+                .appearances
+                .iter()
+                .map(|a| format!("t{:.2} {}px c{:.1?}", a.time, a.pixels, a.centre))
+                .collect();
+            println!("  {}: {}", instance.id, seen.join("; "));
+        }
+    }
     let pixels: usize = found.instances.iter().flat_map(|i| &i.appearances).map(|a| a.pixels).sum();
     let ms = median_ms(7, || {
-        std::hint::black_box(find_instances(&views, &settings));
+        std::hint::black_box(find_instances(&views, &settings).expect("the views are consistent"));
     });
     println!(
         "{name}: {} views of {}x{}, {} objects over {pixels} dynamic pixels: {ms:.2} ms",

@@ -5,8 +5,10 @@
 //! point's neighbours are the pixels beside it, found in constant time without a spatial index; and a
 //! reconstruction's units are whatever scale the network predicted, so a radius in world units has no meaning
 //! from one scene to the next. Two 4-neighbours join when both are dynamic and their distances from the camera
-//! differ by at most [`ClusterSettings::depth_jump`] of the nearer one: a depth edge (a car in front of another,
-//! a car against the road behind it) separates, a continuous surface does not, at any scale. Components smaller
+//! differ by at most [`ClusterSettings::depth_jump`] pixel footprints (the width a pixel covers at the nearer
+//! one's distance, `distance x pixel angle`): a depth edge (a car in front of another, a car against the road
+//! behind it) separates, a continuous surface does not, at any scale and any resolution, up to the slant the
+//! threshold allows (8 footprints: a surface turned up to 83 degrees from facing the camera). Components smaller
 //! than [`ClusterSettings::min_pixels`] are dropped as mask noise. An object split in one view by an occluder,
 //! or seen by several cameras at once, is joined afterwards ([`crate::link`]).
 
@@ -27,6 +29,8 @@ pub struct ViewPoints<'a> {
     pub height: usize,
     /// World position of the camera centre.
     pub camera_centre: DVec3,
+    /// Angle one pixel spans (radians; `1 / focal length in pixels`).
+    pub pixel_angle: f64,
     /// `[H · W]` Gaussian means.
     pub points: &'a [[f32; 3]],
     /// `[H · W]` probability that the pixel is dynamic (`sigmoid` of the dynamic logit).
@@ -41,7 +45,8 @@ pub struct ViewPoints<'a> {
 pub struct ClusterSettings {
     /// A pixel is dynamic when its dynamic probability is at least this.
     pub dynamic_threshold: f32,
-    /// Largest relative difference of two neighbours' distances from the camera that still joins them.
+    /// Largest difference of two neighbours' distances from the camera that still joins them, in pixel
+    /// footprints at the nearer one's distance.
     pub depth_jump: f64,
     /// Smallest component kept, in pixels.
     pub min_pixels: usize,
@@ -49,7 +54,7 @@ pub struct ClusterSettings {
 
 impl Default for ClusterSettings {
     fn default() -> Self {
-        Self { dynamic_threshold: 0.5, depth_jump: 0.05, min_pixels: 8 }
+        Self { dynamic_threshold: 0.5, depth_jump: 8.0, min_pixels: 8 }
     }
 }
 
@@ -75,8 +80,9 @@ pub fn cluster_view(view: &ViewPoints, settings: &ClusterSettings) -> Vec<Cluste
     let point = |i: usize| DVec3::from_array(view.points[i].map(f64::from));
     let depth: Vec<f64> = (0..width * height).map(|i| point(i).distance(view.camera_centre)).collect();
     let dynamic = |i: usize| view.dynamic[i] >= settings.dynamic_threshold && depth[i].is_finite();
+    let footprints = settings.depth_jump * view.pixel_angle;
     let joined = |a: usize, b: usize| {
-        dynamic(a) && dynamic(b) && (depth[a] - depth[b]).abs() <= settings.depth_jump * depth[a].min(depth[b])
+        dynamic(a) && dynamic(b) && (depth[a] - depth[b]).abs() <= footprints * depth[a].min(depth[b])
     };
     let mut sets = UnionFind::new(width * height);
     for row in 0..height {
@@ -143,6 +149,7 @@ mod tests {
             width: 12,
             height: 6,
             camera_centre: DVec3::ZERO,
+            pixel_angle: 0.1,
             points,
             dynamic,
             velocity: None,
@@ -158,7 +165,7 @@ mod tests {
         assert_eq!(clusters[1].pixels.len(), 12, "the near car");
         assert!(clusters[1].bounds[0].z == 10.0 && clusters[1].bounds[1].z == 10.0);
         // Without the depth test they are one.
-        let loose = ClusterSettings { depth_jump: 2.0, min_pixels: 3, ..Default::default() };
+        let loose = ClusterSettings { depth_jump: 20.0, min_pixels: 3, ..Default::default() };
         assert_eq!(cluster_view(&view(&points, &dynamic), &loose).len(), 1);
     }
 

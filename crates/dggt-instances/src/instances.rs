@@ -85,10 +85,40 @@ impl Instances {
     }
 }
 
+/// A view whose buffers do not hold one entry per pixel.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("view {view}: {buffer} holds {actual} entries, expected {expected} (one per pixel of {width}x{height})")]
+pub struct ShapeError {
+    pub view: usize,
+    pub buffer: &'static str,
+    pub expected: usize,
+    pub actual: usize,
+    pub width: usize,
+    pub height: usize,
+}
+
 /// Clusters every view's dynamic pixels, joins them per input time, follows them through consecutive input
-/// times and registers each step (see the crate's doc). Views are given in any order; each view's pixels are
-/// `width · height` long.
-pub fn find_instances(views: &[ViewPoints], settings: &InstanceSettings) -> Instances {
+/// times and registers each step (see the crate's doc). Views are given in any order; each view's buffers hold
+/// `width · height` entries, or the view is named in the error.
+pub fn find_instances(views: &[ViewPoints], settings: &InstanceSettings) -> Result<Instances, ShapeError> {
+    for (position, view) in views.iter().enumerate() {
+        let expected = view.width * view.height;
+        let lengths = [("points", view.points.len()), ("dynamic", view.dynamic.len())]
+            .into_iter()
+            .chain(view.velocity.map(|v| ("velocity", v.len())));
+        for (buffer, actual) in lengths {
+            if actual != expected {
+                return Err(ShapeError {
+                    view: position,
+                    buffer,
+                    expected,
+                    actual,
+                    width: view.width,
+                    height: view.height,
+                });
+            }
+        }
+    }
     let clusters: Vec<_> = views.par_iter().map(|view| cluster_view(view, &settings.cluster)).collect();
     let mut times: Vec<f64> = views.iter().map(|view| view.time).collect();
     times.sort_by(f64::total_cmp);
@@ -107,7 +137,7 @@ pub fn find_instances(views: &[ViewPoints], settings: &InstanceSettings) -> Inst
             }
         }
     }
-    Instances { instances, labels }
+    Ok(Instances { instances, labels })
 }
 
 /// Each object as `(time position, group position)` steps through consecutive times, ordered by first time

@@ -1,7 +1,7 @@
 //! One object's clusters joined within an input time, and followed from one input time to the next.
 //!
-//! Within a time, clusters whose bounds overlap (after growing each by [`LinkSettings::merge_margin`] of its
-//! extent) are one object: the parts of an object split by an occluder in one view, or the same object seen by
+//! Within a time, clusters whose bounds overlap (after growing both by [`LinkSettings::merge_margin`] of the
+//! larger one's extent) are one object: the parts of an object split by an occluder in one view, or the same object seen by
 //! two cameras of the rig. Between consecutive input times, every object of the earlier time is paired with at
 //! most one of the later: the pair whose centres are closest, the earlier centre moved by its points' mean
 //! predicted velocity when the network predicts one, first; a pair farther apart than
@@ -17,7 +17,8 @@ use crate::union_find::UnionFind;
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct LinkSettings {
-    /// Clusters of one time are joined when their bounds, each grown by this fraction of its extent, overlap.
+    /// Clusters of one time are joined when their bounds, both grown by this fraction of the larger extent,
+    /// overlap.
     pub merge_margin: f64,
     /// Objects of consecutive times are followed when their (predicted) centres are within this many times
     /// the larger extent (a car at 30 m/s covers nearly three of its lengths between inputs 0.4 s apart).
@@ -73,15 +74,13 @@ pub fn group_at_time(
         .filter(|(_, view)| view.time == time)
         .flat_map(|(v, _)| clusters[v].iter().map(move |cluster| (v, cluster)))
         .collect();
-    let grown = |cluster: &Cluster| {
-        let margin = DVec3::splat(settings.merge_margin * cluster.extent());
-        [cluster.bounds[0] - margin, cluster.bounds[1] + margin]
-    };
     let mut sets = UnionFind::new(at_time.len());
     for a in 0..at_time.len() {
         for b in a + 1..at_time.len() {
-            let ([lo_a, hi_a], [lo_b, hi_b]) = (grown(at_time[a].1), grown(at_time[b].1));
-            if lo_a.cmple(hi_b).all() && lo_b.cmple(hi_a).all() {
+            let (one, other) = (at_time[a].1, at_time[b].1);
+            let margin = DVec3::splat(settings.merge_margin * one.extent().max(other.extent()));
+            let ([lo_a, hi_a], [lo_b, hi_b]) = (one.bounds, other.bounds);
+            if (lo_a - margin).cmple(hi_b).all() && (lo_b - margin).cmple(hi_a).all() {
                 sets.union(a, b);
             }
         }

@@ -24,6 +24,8 @@ pub enum SceneError {
     NoInputForCamera { camera: usize },
     #[error(transparent)]
     Geom(#[from] dggt_geom::GeomError),
+    #[error("finding the moving objects: {0}")]
+    Instances(#[from] dggt_instances::ShapeError),
     #[error("rendering {what}: {source}")]
     Render { what: String, source: dggt_splat::SplatError },
 }

@@ -218,13 +218,14 @@ impl PixelGaussians {
                     width,
                     height,
                     camera_centre: view.camera.world_from_camera.translation(),
+                    pixel_angle: 2.0 / (view.camera.intrinsics.fx + view.camera.intrinsics.fy),
                     points: &self.host_means[range.clone()],
                     dynamic: &dynamic[range.clone()],
                     velocity: self.host_velocity.as_ref().map(|velocity| &velocity[range]),
                 }
             })
             .collect();
-        let instances = find_instances(&views, settings);
+        let instances = find_instances(&views, settings)?;
         tracing::debug!(instances = instances.len(), "found the moving objects");
         self.instances = Some(Arc::new(instances));
         Ok(self)

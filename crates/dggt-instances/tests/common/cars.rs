@@ -126,6 +126,7 @@ pub fn points_of(camera: Camera, maps: &[PointMap]) -> Vec<ViewPoints<'_>> {
             width: camera.width,
             height: camera.height,
             camera_centre: DVec3::ZERO,
+            pixel_angle: 1.0 / camera.focal,
             points,
             dynamic,
             velocity: None,
