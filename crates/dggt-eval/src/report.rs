@@ -70,7 +70,8 @@ pub struct ViewRecord {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub motion: Option<FlowMetrics>,
     /// The same cells' scene-flow metrics under every motion source the reconstruction has (the one it
-    /// renders with among them), side by side.
+    /// renders with among them), side by side; only at views where every source is scored (the input views),
+    /// and only when there is more than one source.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub motion_by_source: Vec<SourceFlowMetrics>,
     /// The image metrics of the render after the diffusion refiner; absent without one.

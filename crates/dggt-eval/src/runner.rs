@@ -642,6 +642,7 @@ fn score_view(
         Some(map) => {
             seen.has_depth_flow = true;
             let sky_mask = read_sky_mask(files.sky_mask.as_deref(), camera.size)?;
+            let mut by_source = Vec::new();
             for (position, &(source, _)) in forward.flows.iter().enumerate() {
                 let predicted = predicted_flow(scene, forward, source, view);
                 let planes = match predicted {
@@ -652,12 +653,15 @@ fn score_view(
                 if position == 0 {
                     score_depth(&mut record, &cells, seen)?;
                 }
-                if let Some(metrics) = score_flow(&cells, predicted)? {
-                    if source == context.motion {
-                        record.motion = Some(metrics);
-                    }
-                    record.motion_by_source.push(SourceFlowMetrics { source: source.name().into(), metrics });
+                let metrics = score_flow(&cells, predicted)?;
+                if source == context.motion {
+                    record.motion = metrics;
                 }
+                by_source.push(metrics.map(|metrics| SourceFlowMetrics { source: source.name().into(), metrics }));
+            }
+            // Side by side only where every source is scored, so that the sources' means cover the same views.
+            if by_source.len() > 1 {
+                record.motion_by_source = by_source.into_iter().collect::<Option<Vec<_>>>().unwrap_or_default();
             }
         }
     }

@@ -10,8 +10,6 @@
 //! Medians of seven runs after a warm-up. On scenes where a shortcut does not fire it costs one host read of a
 //! maximum (motion) or minimum (sky); `dggt bench --skips` measures that on a real export.
 
-use std::time::Instant;
-
 use burn::module::Param;
 use burn::tensor::{Device, Distribution, Tensor};
 use dggt_geom::glam::{DQuat, DVec3};
@@ -21,20 +19,7 @@ use dggt_model::gaussian_maps::GaussianMaps;
 use dggt_model::sky::SkyGaussians;
 use dggt_model::{Dggt, ModelConfig};
 use dggt_scene::{AssemblySettings, HiddenSky, InputView, MeansGradient, PixelGaussians, TargetView, render_target};
-
-/// Median milliseconds of `runs` timed calls after one warm-up.
-fn median_ms(runs: usize, mut run: impl FnMut()) -> f64 {
-    run();
-    let mut times: Vec<f64> = (0..runs)
-        .map(|_| {
-            let started = Instant::now();
-            run();
-            started.elapsed().as_secs_f64() * 1e3
-        })
-        .collect();
-    times.sort_by(f64::total_cmp);
-    times[runs / 2]
-}
+use dggt_test_data::median_ms;
 
 fn motion(device: &Device) {
     let mut model = Dggt::new(&ModelConfig::tiny().with_motion_head(), device).expect("tiny model builds");

@@ -11,24 +11,9 @@
 #[path = "../tests/common/cars.rs"]
 mod cars;
 
-use std::time::Instant;
-
 use cars::{Camera, PointMap, points_of, views_at};
 use dggt_instances::{InstanceSettings, ViewPoints, find_instances};
-
-/// Median milliseconds of `runs` timed calls after one warm-up.
-fn median_ms(runs: usize, mut run: impl FnMut()) -> f64 {
-    run();
-    let mut times: Vec<f64> = (0..runs)
-        .map(|_| {
-            let started = Instant::now();
-            run();
-            started.elapsed().as_secs_f64() * 1e3
-        })
-        .collect();
-    times.sort_by(f64::total_cmp);
-    times[runs / 2]
-}
+use dggt_test_data::median_ms;
 
 fn measure(name: &str, camera: Camera, cameras: usize) {
     let times: Vec<(f64, bool)> = (0..4).map(|i| (i as f64 / 3.0, true)).collect();

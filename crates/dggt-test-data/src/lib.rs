@@ -5,7 +5,8 @@
 //!   parity vectors (`shared/parity`), the released checkpoints' key lists (`shared/reference/checkpoint-keys`)
 //!   and real driving logs under non-commercial licences (`shared/real-data`).
 //!
-//! It also starts MPI jobs the way every multi-rank test does ([`mpi_launcher`]).
+//! It also starts MPI jobs the way every multi-rank test does ([`mpi_launcher`]), and times the benchmarks'
+//! calls the way each of them reports them ([`median_ms`]).
 //!
 //! Shared data is looked up as `../shared/...` from the repository or from the nearest folder above it that has
 //! one (a worktree or a clone may sit deeper), or where an environment variable says. A test that needs data
@@ -15,6 +16,20 @@
 use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 use std::process::Command;
+
+/// Median milliseconds of `runs` timed calls of `run` after one untimed warm-up call.
+pub fn median_ms(runs: usize, mut run: impl FnMut()) -> f64 {
+    run();
+    let mut times: Vec<f64> = (0..runs.max(1))
+        .map(|_| {
+            let started = std::time::Instant::now();
+            run();
+            started.elapsed().as_secs_f64() * 1e3
+        })
+        .collect();
+    times.sort_by(f64::total_cmp);
+    times[times.len() / 2]
+}
 
 /// The repository's root folder (the workspace that holds this crate).
 pub fn repo_root() -> PathBuf {
