@@ -7,7 +7,8 @@
 //! object's trajectory at the view's time ([`MotionSource::Instances`]: the twist of the step starting there,
 //! the predicted velocity for a pixel of no object). At an input view the reconstruction's pixel grid is the
 //! view's own: the flow of the surface at a lidar cell is read at the cell's centre (bilinearly, as the depth
-//! is). At any other view it would have to be rendered; it is not scored there.
+//! is). At any other view the same expectation is rasterised from the assembled Gaussians
+//! (`dggt_scene::render_flow`), for the source the renders use.
 //!
 //! Units and axes, from the reconstruction's to the export's:
 //! - the velocity is in the reconstruction's world axes (the first input view's predicted camera), world units

@@ -24,8 +24,8 @@ pub const MOTION_HELD: &str = "held (no motion head)";
 
 /// The motion source of a model that predicts velocities.
 pub const MOTION_VELOCITY: &str = "predicted velocities: the expected flow (dynamic probability x velocity) of each input pixel at the input views' \
-     lidar cells, in metres by the view's depth scale (least squares, no shift); views between the inputs are not \
-     scored for motion";
+     lidar cells, in metres by the view's depth scale (least squares, no shift); at views between the inputs the \
+     velocities of the assembled Gaussians rasterised and divided by the opacity";
 
 /// The motion source of a reconstruction that moves its objects along their trajectories.
 pub const MOTION_INSTANCES: &str = "instances: the dynamic pixels grouped into objects, each moving rigidly along its \
@@ -70,8 +70,8 @@ pub struct ViewRecord {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub motion: Option<FlowMetrics>,
     /// The same cells' scene-flow metrics under every motion source the reconstruction has (the one it
-    /// renders with among them), side by side; only at views where every source is scored (the input views),
-    /// and only when there is more than one source.
+    /// renders with among them), side by side; only at views where every source is scored (the input views;
+    /// between them only the rendered source and held are), and only when there is more than one source.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub motion_by_source: Vec<SourceFlowMetrics>,
     /// The image metrics of the render after the diffusion refiner; absent without one.

@@ -18,8 +18,9 @@
 //! `render.dynamic_motion = "instances"` the renders move each object found among the dynamic pixels along its
 //! trajectory, and that motion is scored ([`MotionSource::Instances`]). Every source the reconstruction has
 //! (held; velocities when predicted; instances whenever there is a dynamic head) is also scored at the same
-//! cells side by side. Views between the inputs are not scored for motion (their flow would have to be
-//! rendered). As STORM does, motion is
+//! cells of the input views side by side. At a view between the inputs the source the renders use is scored
+//! too, its expected flow rasterised from the assembled Gaussians' velocities ([`dggt_scene::render_flow`]). As
+//! STORM does, motion is
 //! scored at the lidar cells (positive depth; here also not sky and inside the view) and only for windows
 //! where some true flow exceeds [`MOTION_GATE`] (STORM skips samples without such motion, whose accuracies
 //! would be trivially high).
@@ -40,7 +41,7 @@ use dggt_infer::{
 use dggt_losses::{Lpips, LpipsKind};
 use dggt_model::host::host_f32;
 use dggt_refine::{ReferenceView, Refiner, RefinerSpec, frame_from_interleaved, frame_to_interleaved};
-use dggt_scene::{DynamicMotion, Scene4d, TargetView, Timeline, nearest_in_time};
+use dggt_scene::{DynamicMotion, Scene4d, TargetView, Timeline, nearest_in_time, render_flow};
 
 use crate::error::EvalError;
 use crate::grid::{CellMapping, cell_has_sky};
@@ -411,10 +412,11 @@ fn evaluate_scene(root: &Path, scene: &Scene, context: &SceneContext<'_>) -> Res
                 }
                 None => None,
             };
+            let rendered_flow = rendered_flow(&forward, context, &target)?;
             watch.add(RENDER, started);
 
             let started = Instant::now();
-            let view = ScoredView { frame, frame_position, camera_position, split, time: target.time };
+            let view = ScoredView { frame, frame_position, camera_position, split, time: target.time, rendered_flow };
             let images = RenderedImages { rgb: &rgb, refined: refined.as_deref() };
             records.push(score_view(scene, &forward, context, &view, images, &depth, &mut seen)?);
             watch.add(METRICS, started);
@@ -452,6 +454,23 @@ fn evaluate_scene(root: &Path, scene: &Scene, context: &SceneContext<'_>) -> Res
         scene_flow: scene.flow_origin()?,
         notes,
     })
+}
+
+/// At a view between the inputs, the expected flow of the source the reconstruction renders with, rasterised
+/// (its motion is known there only through the render); `None` at an input view, for a held reconstruction or
+/// without a time base.
+fn rendered_flow(
+    forward: &ForwardScene,
+    context: &SceneContext<'_>,
+    target: &TargetView,
+) -> Result<Option<RenderedFlow>, EvalError> {
+    let at_input = forward.scene.views().iter().any(|v| v.rig_camera == target.rig_camera && v.time == target.time);
+    if at_input || context.motion == MotionSource::Held || forward.flow(context.motion).is_none() {
+        return Ok(None);
+    }
+    let flow = host(render_flow(&forward.scene.pixels, target, &forward.scene.assembly)?, "rendered flow")?;
+    let planes = std::array::from_fn(|axis| flow.iter().skip(axis).step_by(3).copied().collect());
+    Ok(Some(RenderedFlow { planes, world_from_camera: target.camera.world_from_camera.rotation_matrix() }))
 }
 
 /// Loads the protocol's input views of `root`, runs the network and builds the scene (timed as load, forward
@@ -532,6 +551,16 @@ struct ScoredView {
     camera_position: usize,
     split: crate::protocol::TargetKind,
     time: f64,
+    /// At a view between the inputs, the rendered expected flow of the source the reconstruction renders with.
+    rendered_flow: Option<RenderedFlow>,
+}
+
+/// The expected flow rasterised at one target view ([`dggt_scene::render_flow`]).
+struct RenderedFlow {
+    /// x, y and z planes (`H x W`, row-major) in world axes per unit of scene time.
+    planes: [Vec<f32>; 3],
+    /// The target's camera rotation (world from camera), for the axes.
+    world_from_camera: DMat3,
 }
 
 /// A view's render (interleaved `[H, W, 3]`, clamped) and, with a refiner, the refined render.
@@ -644,9 +673,9 @@ fn score_view(
             let sky_mask = read_sky_mask(files.sky_mask.as_deref(), camera.size)?;
             let mut by_source = Vec::new();
             for (position, &(source, _)) in forward.flows.iter().enumerate() {
-                let predicted = predicted_flow(scene, forward, source, view);
+                let predicted = predicted_flow(scene, forward, context, source, view);
                 let planes = match predicted {
-                    CellFlow::Sampled { flow, input_view, .. } => Some(flow.planes(input_view)),
+                    CellFlow::Sampled { planes, .. } => Some(planes),
                     CellFlow::Held | CellFlow::Unscored => None,
                 };
                 let cells = collect_cells(&map, sky_mask.as_deref(), camera.size, &forward.mapping, depth, planes);
@@ -698,29 +727,37 @@ fn read_sky_mask(path: Option<&Path>, original: ImageSize) -> Result<Option<Vec<
 enum CellFlow<'a> {
     /// Zero everywhere: nothing moves.
     Held,
-    /// Not known at this view (one between the inputs, or no time base).
+    /// Not known at this view (another source than the rendered one between the inputs, or no time base).
     Unscored,
-    /// Sampled from input view `input_view`'s planes and brought into the log world's axes by `log_from_world`.
-    Sampled { flow: &'a InputFlow, input_view: usize, log_from_world: DMat3 },
+    /// Sampled from `planes` (an input view's, or the rendered flow of a view between them), in `flow`'s units,
+    /// and brought into the log world's axes by `log_from_world`.
+    Sampled { flow: &'a InputFlow, planes: &'a [Vec<f32>; 3], log_from_world: DMat3 },
 }
 
 /// The predicted flow of `source` that `view` is scored with.
 fn predicted_flow<'a>(
     scene: &Scene,
     forward: &'a ForwardScene,
+    context: &SceneContext<'_>,
     source: MotionSource,
-    view: &ScoredView,
+    view: &'a ScoredView,
 ) -> CellFlow<'a> {
     let input_position = forward.inputs.frames.iter().position(|&f| f == view.frame);
-    match (source, forward.flow(source), input_position) {
-        (MotionSource::Held, _, _) => CellFlow::Held,
-        (_, Some(flow), Some(position)) => {
+    let truth = scene.view(view.frame_position, view.camera_position).world_from_camera.rotation_matrix();
+    let log_from_world =
+        |predicted: DMat3| log_from_reconstruction(scene.world_from_log.rotation_matrix(), truth, predicted);
+    match (source, forward.flow(source), input_position, &view.rendered_flow) {
+        (MotionSource::Held, _, _, _) => CellFlow::Held,
+        (_, Some(flow), Some(position), _) => {
             let input_view = position * forward.inputs.cameras.len() + view.camera_position;
             let predicted = forward.scene.views()[input_view].camera.world_from_camera.rotation_matrix();
-            let truth = scene.view(view.frame_position, view.camera_position).world_from_camera.rotation_matrix();
-            let log_from_world = log_from_reconstruction(scene.world_from_log.rotation_matrix(), truth, predicted);
-            CellFlow::Sampled { flow, input_view, log_from_world }
+            CellFlow::Sampled { flow, planes: flow.planes(input_view), log_from_world: log_from_world(predicted) }
         }
+        (_, Some(flow), None, Some(rendered)) if source == context.motion => CellFlow::Sampled {
+            flow,
+            planes: &rendered.planes,
+            log_from_world: log_from_world(rendered.world_from_camera),
+        },
         _ => CellFlow::Unscored,
     }
 }

@@ -168,6 +168,25 @@ pub fn assemble(
     Ok(AssembledGaussians { gaussians: candidates.gather(pixels, &kept), counts: kept.counts })
 }
 
+/// The world velocity (world units per unit of scene time, world axes) at the target's time of every Gaussian
+/// [`assemble`] returns for `target`, in the same order: zero for the static union, the predicted velocity for a
+/// dynamic Gaussian the velocities move (zero without them), the velocity of its moved point on its object's
+/// trajectory for one an instance moves. Rasterised as colours, it gives each pixel's expected flow at any view.
+pub fn assembled_velocities(
+    pixels: &PixelGaussians,
+    target: &TargetView,
+    settings: &AssemblySettings,
+) -> Result<Vec<[f32; 3]>, SceneError> {
+    let candidates = Candidates::new(pixels, target, settings);
+    let verdicts = candidates.verdicts(pixels, target, settings)?;
+    let kept = KeptRows::of(&candidates.sources, &verdicts, pixels);
+    let mut velocities = vec![[0.0; 3]; kept.statics.len()];
+    for (source, rows) in candidates.sources.iter().zip(&kept.dynamics) {
+        velocities.extend(rows.iter().map(|&row| source.velocity(pixels, row as usize, target.time)));
+    }
+    Ok(velocities)
+}
+
 /// Every Gaussian as a static candidate, faded to the target time, and the dynamic ones of the source views.
 struct Candidates {
     /// `[M]` static opacities faded by the lifespan to the target time.
@@ -420,6 +439,20 @@ impl DynamicSource {
                 instances.labels(row / per_view)[row % per_view]
             }
             _ => Instances::NONE,
+        }
+    }
+
+    /// Row `row`'s world velocity at time `at` under this source's motion (see [`assembled_velocities`]).
+    fn velocity(&self, pixels: &PixelGaussians, row: usize, at: f64) -> [f32; 3] {
+        match (self.group(pixels, row), pixels.instances()) {
+            (Instances::NONE, _) | (_, None) => {
+                pixels.host_velocity.as_ref().map_or([0.0; 3], |velocity| velocity[row])
+            }
+            (instance, Some(found)) => {
+                let instance = instance as usize;
+                let moved = self.rigid[instance].apply(DVec3::from_array(pixels.host_means[row].map(f64::from)));
+                found.instances[instance].trajectory.point_velocity(at, moved).to_array().map(|v| v as f32)
+            }
         }
     }
 

@@ -17,7 +17,9 @@ use dggt_splat::{
     CameraTensors, GaussianTensors, OpacityTensor, RasterSettings, RenderSettings, RenderTensors, render,
 };
 
-use crate::assemble::{AssembledGaussians, AssemblyCounts, AssemblySettings, HiddenSky, assemble};
+use crate::assemble::{
+    AssembledGaussians, AssemblyCounts, AssemblySettings, HiddenSky, assemble, assembled_velocities,
+};
 use crate::error::SceneError;
 use crate::pixels::PixelGaussians;
 use crate::timeline::TargetView;
@@ -60,13 +62,7 @@ pub fn render_assembled(
     let counts = *counts;
     let device = gaussians.means.device();
     let cameras = camera_tensors(&[target.camera], size, &device)?;
-    let raster = RasterSettings {
-        near_plane: assembly.near_plane,
-        far_plane: assembly.far_plane,
-        eps2d: assembly.eps2d,
-        ..Default::default()
-    };
-    let settings = RenderSettings { raster, background: None };
+    let settings = foreground_settings(assembly);
     let what = || format!("the view of camera {} at t = {}", target.rig_camera, target.time);
     let foreground =
         render(gaussians, &cameras, &settings).map_err(|source| SceneError::Render { what: what(), source })?;
@@ -90,6 +86,41 @@ pub fn render_assembled(
     };
     let squeeze3 = |t: Tensor<4>| t.squeeze_dim::<3>(0);
     Ok(ViewRender { rgb: squeeze3(rgb), alpha, depth, sky: sky.map(squeeze3), counts })
+}
+
+/// How the foreground is rasterised under `assembly`: its planes and low-pass, over no background.
+fn foreground_settings(assembly: &AssemblySettings) -> RenderSettings {
+    let raster = RasterSettings {
+        near_plane: assembly.near_plane,
+        far_plane: assembly.far_plane,
+        eps2d: assembly.eps2d,
+        ..Default::default()
+    };
+    RenderSettings { raster, background: None }
+}
+
+/// `[H, W, 3]` the expected world velocity (world units per unit of scene time) of the surface each pixel of
+/// `target` sees: the velocities of [`assembled_velocities`] rasterised as colours and divided by the
+/// foreground's opacity (zero where nothing is drawn).
+pub fn render_flow(
+    pixels: &PixelGaussians,
+    target: &TargetView,
+    assembly: &AssemblySettings,
+) -> Result<Tensor<3>, SceneError> {
+    let assembled = assemble(pixels, target, assembly)?;
+    let velocities: Vec<f32> = assembled_velocities(pixels, target, assembly)?.into_iter().flatten().collect();
+    let device = assembled.gaussians.means.device();
+    let count = velocities.len() / 3;
+    let gaussians = GaussianTensors {
+        colors: Tensor::from_data(TensorData::new(velocities, [count, 3]), &device),
+        ..assembled.gaussians
+    };
+    let cameras = camera_tensors(&[target.camera], pixels.size, &device)?;
+    let what = || format!("the flow of camera {} at t = {}", target.rig_camera, target.time);
+    let RenderTensors { colors, alpha, .. } = render(&gaussians, &cameras, &foreground_settings(assembly))
+        .map_err(|source| SceneError::Render { what: what(), source })?;
+    let flow = colors / alpha.clamp_min(1e-6).unsqueeze_dim::<4>(3);
+    Ok(flow.squeeze_dim::<3>(0))
 }
 
 /// Whether the foreground opacity `alpha` lets at least `tolerance` of the background through at any pixel.

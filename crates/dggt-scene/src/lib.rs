@@ -22,8 +22,9 @@ pub mod timeline;
 
 pub use assemble::{
     AssembledGaussians, AssemblyCounts, AssemblySettings, DynamicMotion, HiddenSky, MIN_OPACITY, assemble,
+    assembled_velocities,
 };
-pub use compose::{ViewRender, camera_tensors, composite, render_assembled, render_target, sky_splats};
+pub use compose::{ViewRender, camera_tensors, composite, render_assembled, render_flow, render_target, sky_splats};
 pub use dggt_instances::{InstanceSettings, Instances};
 pub use error::SceneError;
 pub use pixels::{MeansGradient, PixelGaussians};

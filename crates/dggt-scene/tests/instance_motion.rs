@@ -8,7 +8,8 @@ use dggt_geom::{PinholeIntrinsics, PixelConvention, PosedCamera, WorldFromCamera
 use dggt_instances::InstanceSettings;
 use dggt_model::gaussian_maps::GaussianMaps;
 use dggt_scene::{
-    AssemblySettings, DynamicMotion, InputView, MeansGradient, PixelGaussians, TargetView, assemble, interpolate_camera,
+    AssemblySettings, DynamicMotion, InputView, MeansGradient, PixelGaussians, TargetView, assemble,
+    assembled_velocities, interpolate_camera, render_flow,
 };
 
 const W: usize = 24;
@@ -128,4 +129,29 @@ fn at_an_input_time_nothing_moves_and_between_inputs_the_instance_moves_rigidly(
         let expected = [expected.w, expected.x, expected.y, expected.z];
         assert!(got.iter().zip(expected).all(|(g, e)| (*g as f64 - e).abs() < 1e-5), "pixel {pixel}: {got:?}");
     }
+}
+
+#[test]
+fn the_flow_of_any_view_is_the_moving_objects_velocity() {
+    let moving = pixels(&Device::flex()).with_instances(&InstanceSettings::default()).unwrap();
+    let rigid = AssemblySettings { dynamic_motion: DynamicMotion::Instances, ..AssemblySettings::exact() };
+    let between = target(&moving, 0.125);
+    // Per assembled Gaussian: the static union's are still, view 0's patch rows move with the instance's step
+    // (0.7 along x per half unit of scene time), the rest of view 0's dynamic rows are held.
+    let velocities = assembled_velocities(&moving, &between, &rigid).unwrap();
+    let statics = S * H * W;
+    assert_eq!(velocities.len(), statics + H * W);
+    assert!(velocities[..statics].iter().all(|v| *v == [0.0; 3]));
+    let patch = (0..H * W).filter(|&p| in_patch(0, p % W, p / W)).count();
+    for v in &velocities[statics..statics + patch] {
+        assert!((v[0] - 1.4).abs() < 1e-3 && v[1].abs() < 1e-3 && v[2].abs() < 1e-3, "{v:?}");
+    }
+    assert!(velocities[statics + patch..].iter().all(|v| *v == [0.0; 3]));
+    // Rendered: the moved patch's pixels see its velocity, the background none.
+    let flow: Vec<f32> = render_flow(&moving, &between, &rigid).unwrap().into_data().try_into_vec().unwrap();
+    let at = |column: usize, row: usize| &flow[(row * W + column) * 3..(row * W + column) * 3 + 3];
+    let centre = at(9, 6);
+    assert!(centre[0] > 1.0 && centre[0] < 1.45 && centre[1].abs() < 0.05, "{centre:?}");
+    let background = at(20, 13);
+    assert!(background.iter().all(|v| v.abs() < 1e-3), "{background:?}");
 }
