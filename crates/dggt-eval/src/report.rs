@@ -70,8 +70,8 @@ pub struct ViewRecord {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub motion: Option<FlowMetrics>,
     /// The same cells' scene-flow metrics under every motion source the reconstruction has (the one it
-    /// renders with among them), side by side; only at views where every source is scored (the input views;
-    /// between them only the rendered source and held are), and only when there is more than one source.
+    /// renders with among them), side by side (between the inputs each rendered its way); only at views where
+    /// every source is scored, and only when there is more than one source.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub motion_by_source: Vec<SourceFlowMetrics>,
     /// The image metrics of the render after the diffusion refiner; absent without one.

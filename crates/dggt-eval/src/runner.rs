@@ -18,9 +18,8 @@
 //! `render.dynamic_motion = "instances"` the renders move each object found among the dynamic pixels along its
 //! trajectory, and that motion is scored ([`MotionSource::Instances`]). Every source the reconstruction has
 //! (held; velocities when predicted; instances whenever there is a dynamic head) is also scored at the same
-//! cells of the input views side by side. At a view between the inputs the source the renders use is scored
-//! too, its expected flow rasterised from the assembled Gaussians' velocities ([`dggt_scene::render_flow`]). As
-//! STORM does, motion is
+//! cells side by side; at a view between the inputs each source's expected flow is rasterised from the
+//! Gaussians assembled its way ([`dggt_scene::render_flow`]). As STORM does, motion is
 //! scored at the lidar cells (positive depth; here also not sky and inside the view) and only for windows
 //! where some true flow exceeds [`MOTION_GATE`] (STORM skips samples without such motion, whose accuracies
 //! would be trivially high).
@@ -41,7 +40,7 @@ use dggt_infer::{
 use dggt_losses::{Lpips, LpipsKind};
 use dggt_model::host::host_f32;
 use dggt_refine::{ReferenceView, Refiner, RefinerSpec, frame_from_interleaved, frame_to_interleaved};
-use dggt_scene::{DynamicMotion, Scene4d, TargetView, Timeline, nearest_in_time, render_flow};
+use dggt_scene::{AssemblySettings, DynamicMotion, Scene4d, TargetView, Timeline, nearest_in_time, render_flow};
 
 use crate::error::EvalError;
 use crate::grid::{CellMapping, cell_has_sky};
@@ -412,11 +411,11 @@ fn evaluate_scene(root: &Path, scene: &Scene, context: &SceneContext<'_>) -> Res
                 }
                 None => None,
             };
-            let rendered_flow = rendered_flow(&forward, context, &target)?;
+            let rendered_flows = rendered_flows(&forward, &target)?;
             watch.add(RENDER, started);
 
             let started = Instant::now();
-            let view = ScoredView { frame, frame_position, camera_position, split, time: target.time, rendered_flow };
+            let view = ScoredView { frame, frame_position, camera_position, split, time: target.time, rendered_flows };
             let images = RenderedImages { rgb: &rgb, refined: refined.as_deref() };
             records.push(score_view(scene, &forward, context, &view, images, &depth, &mut seen)?);
             watch.add(METRICS, started);
@@ -456,21 +455,28 @@ fn evaluate_scene(root: &Path, scene: &Scene, context: &SceneContext<'_>) -> Res
     })
 }
 
-/// At a view between the inputs, the expected flow of the source the reconstruction renders with, rasterised
-/// (its motion is known there only through the render); `None` at an input view, for a held reconstruction or
-/// without a time base.
-fn rendered_flow(
-    forward: &ForwardScene,
-    context: &SceneContext<'_>,
-    target: &TargetView,
-) -> Result<Option<RenderedFlow>, EvalError> {
+/// At a view between the inputs, the expected flow of every moving source, rasterised (their motion is known
+/// there only through a render: the source the reconstruction renders with as it renders, the others with the
+/// same assembly moving the dynamic Gaussians their way); empty at an input view or without a time base.
+fn rendered_flows(forward: &ForwardScene, target: &TargetView) -> Result<Vec<(MotionSource, RenderedFlow)>, EvalError> {
     let at_input = forward.scene.views().iter().any(|v| v.rig_camera == target.rig_camera && v.time == target.time);
-    if at_input || context.motion == MotionSource::Held || forward.flow(context.motion).is_none() {
-        return Ok(None);
+    if at_input {
+        return Ok(Vec::new());
     }
-    let flow = host(render_flow(&forward.scene.pixels, target, &forward.scene.assembly)?, "rendered flow")?;
-    let planes = std::array::from_fn(|axis| flow.iter().skip(axis).step_by(3).copied().collect());
-    Ok(Some(RenderedFlow { planes, world_from_camera: target.camera.world_from_camera.rotation_matrix() }))
+    let mut rendered = Vec::new();
+    for &(source, ref flow) in &forward.flows {
+        let dynamic_motion = match (source, flow) {
+            (MotionSource::Velocity, Some(_)) => DynamicMotion::Velocity,
+            (MotionSource::Instances, Some(_)) => DynamicMotion::Instances,
+            _ => continue,
+        };
+        let assembly = AssemblySettings { dynamic_motion, ..forward.scene.assembly };
+        let flow = host(render_flow(&forward.scene.pixels, target, &assembly)?, "rendered flow")?;
+        let planes = std::array::from_fn(|axis| flow.iter().skip(axis).step_by(3).copied().collect());
+        let world_from_camera = target.camera.world_from_camera.rotation_matrix();
+        rendered.push((source, RenderedFlow { planes, world_from_camera }));
+    }
+    Ok(rendered)
 }
 
 /// Loads the protocol's input views of `root`, runs the network and builds the scene (timed as load, forward
@@ -551,8 +557,8 @@ struct ScoredView {
     camera_position: usize,
     split: crate::protocol::TargetKind,
     time: f64,
-    /// At a view between the inputs, the rendered expected flow of the source the reconstruction renders with.
-    rendered_flow: Option<RenderedFlow>,
+    /// At a view between the inputs, the rendered expected flow of every moving source.
+    rendered_flows: Vec<(MotionSource, RenderedFlow)>,
 }
 
 /// The expected flow rasterised at one target view ([`dggt_scene::render_flow`]).
@@ -673,7 +679,7 @@ fn score_view(
             let sky_mask = read_sky_mask(files.sky_mask.as_deref(), camera.size)?;
             let mut by_source = Vec::new();
             for (position, &(source, _)) in forward.flows.iter().enumerate() {
-                let predicted = predicted_flow(scene, forward, context, source, view);
+                let predicted = predicted_flow(scene, forward, source, view);
                 let planes = match predicted {
                     CellFlow::Sampled { planes, .. } => Some(planes),
                     CellFlow::Held | CellFlow::Unscored => None,
@@ -727,7 +733,7 @@ fn read_sky_mask(path: Option<&Path>, original: ImageSize) -> Result<Option<Vec<
 enum CellFlow<'a> {
     /// Zero everywhere: nothing moves.
     Held,
-    /// Not known at this view (another source than the rendered one between the inputs, or no time base).
+    /// Not known at this view (no time base).
     Unscored,
     /// Sampled from `planes` (an input view's, or the rendered flow of a view between them), in `flow`'s units,
     /// and brought into the log world's axes by `log_from_world`.
@@ -738,7 +744,6 @@ enum CellFlow<'a> {
 fn predicted_flow<'a>(
     scene: &Scene,
     forward: &'a ForwardScene,
-    context: &SceneContext<'_>,
     source: MotionSource,
     view: &'a ScoredView,
 ) -> CellFlow<'a> {
@@ -746,14 +751,15 @@ fn predicted_flow<'a>(
     let truth = scene.view(view.frame_position, view.camera_position).world_from_camera.rotation_matrix();
     let log_from_world =
         |predicted: DMat3| log_from_reconstruction(scene.world_from_log.rotation_matrix(), truth, predicted);
-    match (source, forward.flow(source), input_position, &view.rendered_flow) {
+    let rendered = view.rendered_flows.iter().find(|(s, _)| *s == source).map(|(_, rendered)| rendered);
+    match (source, forward.flow(source), input_position, rendered) {
         (MotionSource::Held, _, _, _) => CellFlow::Held,
         (_, Some(flow), Some(position), _) => {
             let input_view = position * forward.inputs.cameras.len() + view.camera_position;
             let predicted = forward.scene.views()[input_view].camera.world_from_camera.rotation_matrix();
             CellFlow::Sampled { flow, planes: flow.planes(input_view), log_from_world: log_from_world(predicted) }
         }
-        (_, Some(flow), None, Some(rendered)) if source == context.motion => CellFlow::Sampled {
+        (_, Some(flow), None, Some(rendered)) => CellFlow::Sampled {
             flow,
             planes: &rendered.planes,
             log_from_world: log_from_world(rendered.world_from_camera),

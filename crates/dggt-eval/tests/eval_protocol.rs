@@ -248,6 +248,8 @@ fn predicted_velocities_are_scored_at_the_input_views() {
     assert_eq!(report["motion_source"], MOTION_VELOCITY);
     let views = report["scenes"][0]["views"].as_array().unwrap();
     assert_sources_side_by_side(views, &["held", "velocity", "instances"], "velocity");
+    let between = |v: &&Value| v["split"] == "novel_view" && v.get("motion_by_source").is_some();
+    assert!(views.iter().any(|v| between(&v)), "no view between the inputs scored side by side");
     let (mut scored, mut unscored, mut moving) = (0, 0, 0);
     for view in views {
         match (view["split"].as_str().unwrap(), view.get("motion")) {
