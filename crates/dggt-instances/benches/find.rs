@@ -24,16 +24,6 @@ fn measure(name: &str, camera: Camera, cameras: usize) {
         .collect();
     let settings = InstanceSettings::default();
     let found = find_instances(&views, &settings).expect("the views are consistent");
-    if std::env::var_os("FIND_DEBUG").is_some() {
-        for instance in &found.instances {
-            let seen: Vec<String> = instance
-                .appearances
-                .iter()
-                .map(|a| format!("t{:.2} {}px c{:.1?}", a.time, a.pixels, a.centre))
-                .collect();
-            println!("  {}: {}", instance.id, seen.join("; "));
-        }
-    }
     let pixels: usize = found.instances.iter().flat_map(|i| &i.appearances).map(|a| a.pixels).sum();
     let ms = median_ms(7, || {
         std::hint::black_box(find_instances(&views, &settings).expect("the views are consistent"));

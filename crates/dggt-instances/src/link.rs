@@ -113,12 +113,13 @@ pub fn group_at_time(
 
 /// Pairs `(earlier, later)` of indices into `earlier` and `later`, each index at most once, closest first.
 pub fn follow(earlier: &[Group], later: &[Group], settings: &LinkSettings) -> Vec<(usize, usize)> {
+    let later_centres: Vec<DVec3> = later.iter().map(Group::centre).collect();
     let mut candidates: Vec<(f64, usize, usize)> = Vec::new();
     for (a, from) in earlier.iter().enumerate() {
         let predicted =
             from.centre() + from.mean_velocity() * (later.first().map_or(from.time, |g| g.time) - from.time);
         for (b, to) in later.iter().enumerate() {
-            let distance = predicted.distance(to.centre());
+            let distance = predicted.distance(later_centres[b]);
             if distance <= settings.gate * from.extent().max(to.extent()) {
                 candidates.push((distance, a, b));
             }

@@ -154,17 +154,7 @@ pub fn assemble(
     target: &TargetView,
     settings: &AssemblySettings,
 ) -> Result<AssembledGaussians, SceneError> {
-    let candidates = Candidates::new(pixels, target, settings);
-    let verdicts = candidates.verdicts(pixels, target, settings)?;
-    let kept = KeptRows::of(&candidates.sources, &verdicts, pixels);
-    tracing::debug!(
-        time = target.time,
-        candidates = kept.counts.candidates,
-        transparent = kept.counts.transparent,
-        off_screen = kept.counts.off_screen,
-        kept = kept.counts.kept(),
-        "assembled a target view"
-    );
+    let (candidates, kept) = Candidates::choose(pixels, target, settings)?;
     Ok(AssembledGaussians { gaussians: candidates.gather(pixels, &kept), counts: kept.counts })
 }
 
@@ -177,14 +167,19 @@ pub fn assembled_velocities(
     target: &TargetView,
     settings: &AssemblySettings,
 ) -> Result<Vec<[f32; 3]>, SceneError> {
-    let candidates = Candidates::new(pixels, target, settings);
-    let verdicts = candidates.verdicts(pixels, target, settings)?;
-    let kept = KeptRows::of(&candidates.sources, &verdicts, pixels);
-    let mut velocities = vec![[0.0; 3]; kept.statics.len()];
-    for (source, rows) in candidates.sources.iter().zip(&kept.dynamics) {
-        velocities.extend(rows.iter().map(|&row| source.velocity(pixels, row as usize, target.time)));
-    }
-    Ok(velocities)
+    let (candidates, kept) = Candidates::choose(pixels, target, settings)?;
+    Ok(candidates.velocities(pixels, &kept, target.time))
+}
+
+/// [`assemble`] and [`assembled_velocities`] at once, choosing the Gaussians once.
+pub fn assemble_with_velocities(
+    pixels: &PixelGaussians,
+    target: &TargetView,
+    settings: &AssemblySettings,
+) -> Result<(AssembledGaussians, Vec<[f32; 3]>), SceneError> {
+    let (candidates, kept) = Candidates::choose(pixels, target, settings)?;
+    let velocities = candidates.velocities(pixels, &kept, target.time);
+    Ok((AssembledGaussians { gaussians: candidates.gather(pixels, &kept), counts: kept.counts }, velocities))
 }
 
 /// Every Gaussian as a static candidate, faded to the target time, and the dynamic ones of the source views.
@@ -210,6 +205,35 @@ struct KeptRows {
 }
 
 impl Candidates {
+    /// The candidates of `target` and the rows of them kept.
+    fn choose(
+        pixels: &PixelGaussians,
+        target: &TargetView,
+        settings: &AssemblySettings,
+    ) -> Result<(Self, KeptRows), SceneError> {
+        let candidates = Self::new(pixels, target, settings);
+        let verdicts = candidates.verdicts(pixels, target, settings)?;
+        let kept = KeptRows::of(&candidates.sources, &verdicts, pixels);
+        tracing::debug!(
+            time = target.time,
+            candidates = kept.counts.candidates,
+            transparent = kept.counts.transparent,
+            off_screen = kept.counts.off_screen,
+            kept = kept.counts.kept(),
+            "assembled a target view"
+        );
+        Ok((candidates, kept))
+    }
+
+    /// The world velocity at time `at` of every kept row, in [`Candidates::gather`]'s order.
+    fn velocities(&self, pixels: &PixelGaussians, kept: &KeptRows, at: f64) -> Vec<[f32; 3]> {
+        let mut velocities = vec![[0.0; 3]; kept.statics.len()];
+        for (source, rows) in self.sources.iter().zip(&kept.dynamics) {
+            velocities.extend(rows.iter().map(|&row| source.velocity(pixels, row as usize, at)));
+        }
+        velocities
+    }
+
     fn new(pixels: &PixelGaussians, target: &TargetView, settings: &AssemblySettings) -> Self {
         let per_view = pixels.per_view();
         let (static_opacity_all, dynamic) = match &pixels.dynamic_logit {

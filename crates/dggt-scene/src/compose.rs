@@ -18,7 +18,7 @@ use dggt_splat::{
 };
 
 use crate::assemble::{
-    AssembledGaussians, AssemblyCounts, AssemblySettings, HiddenSky, assemble, assembled_velocities,
+    AssembledGaussians, AssemblyCounts, AssemblySettings, HiddenSky, assemble, assemble_with_velocities,
 };
 use crate::error::SceneError;
 use crate::pixels::PixelGaussians;
@@ -100,15 +100,15 @@ fn foreground_settings(assembly: &AssemblySettings) -> RenderSettings {
 }
 
 /// `[H, W, 3]` the expected world velocity (world units per unit of scene time) of the surface each pixel of
-/// `target` sees: the velocities of [`assembled_velocities`] rasterised as colours and divided by the
+/// `target` sees: the velocities of [`crate::assembled_velocities`] rasterised as colours and divided by the
 /// foreground's opacity (zero where nothing is drawn).
 pub fn render_flow(
     pixels: &PixelGaussians,
     target: &TargetView,
     assembly: &AssemblySettings,
 ) -> Result<Tensor<3>, SceneError> {
-    let assembled = assemble(pixels, target, assembly)?;
-    let velocities: Vec<f32> = assembled_velocities(pixels, target, assembly)?.into_iter().flatten().collect();
+    let (assembled, velocities) = assemble_with_velocities(pixels, target, assembly)?;
+    let velocities: Vec<f32> = velocities.into_iter().flatten().collect();
     let device = assembled.gaussians.means.device();
     let count = velocities.len() / 3;
     let gaussians = GaussianTensors {

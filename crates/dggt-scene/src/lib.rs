@@ -22,7 +22,7 @@ pub mod timeline;
 
 pub use assemble::{
     AssembledGaussians, AssemblyCounts, AssemblySettings, DynamicMotion, HiddenSky, MIN_OPACITY, assemble,
-    assembled_velocities,
+    assemble_with_velocities, assembled_velocities,
 };
 pub use compose::{ViewRender, camera_tensors, composite, render_assembled, render_flow, render_target, sky_splats};
 pub use dggt_instances::{InstanceSettings, Instances};
