@@ -46,6 +46,9 @@ pub struct Instance {
     /// Registration residual of each step between consecutive appearances (world units, root mean square of
     /// the kept pairs).
     pub residuals: Vec<f64>,
+    /// A rigid change of world points applied after the trajectory at every time: the identity as found; an
+    /// edit moves the object by setting it (the object is drawn at `placement(trajectory point)`).
+    pub placement: RigidMotion,
 }
 
 /// The instances of a set of views, and which pixels belong to which.
@@ -66,14 +69,38 @@ impl Instances {
         (label != Self::NONE).then_some(label as usize)
     }
 
+    /// How many views the labels cover.
+    pub fn views(&self) -> usize {
+        self.labels.len()
+    }
+
     /// The labels of view `view`, one per pixel ([`Instances::NONE`] for none).
     pub fn labels(&self, view: usize) -> &[u32] {
         &self.labels[view]
     }
 
-    /// The motion of instance `instance`'s points from scene time `from` to `to`.
+    /// Instances with their per-view pixel labels (`labels[view][pixel]`: a position in `instances`, or
+    /// [`Instances::NONE`]); `None` when a label names no instance.
+    pub fn from_parts(instances: Vec<Instance>, labels: Vec<Vec<u32>>) -> Option<Self> {
+        let valid = |&label: &u32| label == Self::NONE || (label as usize) < instances.len();
+        labels.iter().flatten().all(valid).then_some(Self { instances, labels })
+    }
+
+    /// The motion of instance `instance`'s points from where they were found at scene time `from` to where
+    /// they are drawn at `to`: its placement after `trajectory.motion(from, to)` (exactly the identity when
+    /// `from == to` and the placement is the identity).
     pub fn motion(&self, instance: usize, from: f64, to: f64) -> RigidMotion {
-        self.instances[instance].trajectory.motion(from, to)
+        let found = &self.instances[instance];
+        let motion = found.trajectory.motion(from, to);
+        if found.placement == RigidMotion::IDENTITY { motion } else { found.placement.after(&motion) }
+    }
+
+    /// The world velocity (world units per unit of scene time) at time `at` of instance `instance`'s point
+    /// drawn at `point` then (see [`Trajectory::point_velocity`]), turned by the instance's placement.
+    pub fn point_velocity(&self, instance: usize, at: f64, point: DVec3) -> DVec3 {
+        let found = &self.instances[instance];
+        let unplaced = found.placement.inverse().apply(point);
+        found.placement.rotation * found.trajectory.point_velocity(at, unplaced)
     }
 
     pub fn len(&self) -> usize {
@@ -199,5 +226,5 @@ fn instance_of_chain(groups: &[Vec<Group>], chain: &[(usize, usize)], settings: 
             }
         })
         .collect();
-    Instance { id: 0, appearances, trajectory, residuals }
+    Instance { id: 0, appearances, trajectory, residuals, placement: RigidMotion::IDENTITY }
 }

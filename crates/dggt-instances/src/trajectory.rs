@@ -45,6 +45,15 @@ impl Trajectory {
         self.keys.push(KeyPose { time, from_reference });
     }
 
+    /// A trajectory from its keys (as [`Trajectory::keys`] gives them) and reference centroid; `None` unless
+    /// there is at least one key, the times increase and every value is finite.
+    pub fn from_keys(reference_centre: DVec3, keys: Vec<KeyPose>) -> Option<Self> {
+        let finite = reference_centre.is_finite()
+            && keys.iter().all(|key| key.time.is_finite() && key.from_reference.is_finite());
+        let increasing = keys.windows(2).all(|pair| pair[0].time < pair[1].time);
+        (finite && increasing && !keys.is_empty()).then_some(Self { reference_centre, keys })
+    }
+
     pub fn keys(&self) -> &[KeyPose] {
         &self.keys
     }

@@ -475,7 +475,7 @@ impl DynamicSource {
             (instance, Some(found)) => {
                 let instance = instance as usize;
                 let moved = self.rigid[instance].apply(DVec3::from_array(pixels.host_means[row].map(f64::from)));
-                found.instances[instance].trajectory.point_velocity(at, moved).to_array().map(|v| v as f32)
+                found.point_velocity(instance, at, moved).to_array().map(|v| v as f32)
             }
         }
     }

@@ -26,6 +26,9 @@ pub enum SceneError {
     Geom(#[from] dggt_geom::GeomError),
     #[error("finding the moving objects: {0}")]
     Instances(#[from] dggt_instances::ShapeError),
+    /// A saved scene that cannot be written or read back.
+    #[error("{}: {detail}", path.display())]
+    File { path: std::path::PathBuf, detail: String },
     #[error("rendering {what}: {source}")]
     Render { what: String, source: dggt_splat::SplatError },
 }

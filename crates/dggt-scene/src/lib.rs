@@ -7,7 +7,8 @@
 //! 3. [`assemble`]: the static union faded by the lifespan to the target time, the dynamic Gaussians of the
 //!    view(s) nearest in time, and culling of what the rasteriser would skip.
 //! 4. [`compose`]: rasterising the assembled Gaussians and compositing them over the sky;
-//! 5. [`scene4d`]: all of it as one value, [`Scene4d`], that renders any target view at any time.
+//! 5. [`scene4d`]: all of it as one value, [`Scene4d`], that renders any target view at any time;
+//! 6. [`saved`]: a [`Scene4d`] in one file and back, so that it renders (and is edited) without the network.
 //!
 //! Conventions: cameras are [`PosedCamera`](dggt_geom::PosedCamera)s (world-from-camera poses, OpenCV axes);
 //! quaternions `w x y z`; scales linear; opacities in `[0, 1]`; the world is the first input camera's frame
@@ -17,6 +18,7 @@ pub mod assemble;
 pub mod compose;
 mod error;
 pub mod pixels;
+pub mod saved;
 pub mod scene4d;
 pub mod timeline;
 
@@ -28,6 +30,7 @@ pub use compose::{ViewRender, camera_tensors, composite, render_assembled, rende
 pub use dggt_instances::{InstanceSettings, Instances};
 pub use error::SceneError;
 pub use pixels::{MeansGradient, PixelGaussians};
+pub use saved::{SCENE_FILE, load_scene, save_scene};
 pub use scene4d::Scene4d;
 pub use timeline::{
     DynamicBlend, InputView, TargetView, Timeline, dynamic_sources, interpolate_camera, nearest_in_time, nearest_view,

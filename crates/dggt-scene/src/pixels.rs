@@ -29,6 +29,19 @@ pub enum MeansGradient {
     Through,
 }
 
+/// The per-pixel rows of a saved scene ([`crate::saved`]), each `[M, ..]` as [`PixelGaussians`] holds them.
+pub(crate) struct SavedRows {
+    pub means: Tensor<2>,
+    pub quats_wxyz: Tensor<2>,
+    pub scales: Tensor<2>,
+    pub colors: Tensor<2>,
+    pub opacity: Tensor<1>,
+    pub lifespan: Tensor<1>,
+    pub source_time: Tensor<1>,
+    pub dynamic_logit: Option<Tensor<1>>,
+    pub velocity: Option<Tensor<2>>,
+}
+
 /// `M = S · H · W` Gaussians, one per input pixel.
 #[derive(Debug, Clone)]
 pub struct PixelGaussians {
@@ -146,6 +159,33 @@ impl PixelGaussians {
         })
     }
 
+    /// The Gaussians of a saved scene: rows already checked for their shapes and finite values.
+    pub(crate) fn from_saved(views: Vec<InputView>, size: ImageSize, rows: SavedRows) -> Result<Self, SceneError> {
+        let triples = |tensor: &Tensor<2>, name: &str| -> Result<Vec<[f32; 3]>, SceneError> {
+            Ok(host_f32(tensor.clone(), name)?.chunks_exact(3).map(|v| [v[0], v[1], v[2]]).collect())
+        };
+        let host_means = triples(&rows.means, "means")?;
+        let host_max_scale = triples(&rows.scales, "scales")?.iter().map(|s| s[0].max(s[1]).max(s[2])).collect();
+        let host_velocity = rows.velocity.as_ref().map(|v| triples(v, "velocity")).transpose()?;
+        Ok(Self {
+            views,
+            size,
+            means: rows.means,
+            quats_wxyz: rows.quats_wxyz,
+            scales: rows.scales,
+            colors: rows.colors,
+            opacity: rows.opacity,
+            dynamic_logit: rows.dynamic_logit,
+            lifespan: rows.lifespan,
+            source_time: rows.source_time,
+            velocity: rows.velocity,
+            instances: None,
+            host_means,
+            host_velocity,
+            host_max_scale,
+        })
+    }
+
     /// Adds the motion head's prediction: `velocity` `[1, S, H, W, 3]` in world units per log frame along the
     /// axes of each view's camera (OpenCV), and `frames_per_time` log frames per unit of scene time (the
     /// inverse of the timeline's rate). Stored rotated to world axes and per unit of scene time, so that a
@@ -228,6 +268,22 @@ impl PixelGaussians {
         let instances = find_instances(&views, settings)?;
         tracing::debug!(instances = instances.len(), "found the moving objects");
         self.instances = Some(Arc::new(instances));
+        Ok(self)
+    }
+
+    /// Sets the moving objects to `instances` (read back from a file, or edited) instead of finding them; their
+    /// labels must cover every view's pixels.
+    pub fn with_known_instances(mut self, instances: Arc<Instances>) -> Result<Self, SceneError> {
+        let per_view = self.per_view();
+        let views = self.views.len();
+        if instances.views() != views || (0..views).any(|v| instances.labels(v).len() != per_view) {
+            return Err(SceneError::Shape {
+                tensor: "instance labels",
+                expected: format!("{views} views of {per_view} pixels"),
+                actual: (0..instances.views()).map(|v| instances.labels(v).len()).collect(),
+            });
+        }
+        self.instances = Some(instances);
         Ok(self)
     }
 
