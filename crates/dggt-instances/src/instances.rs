@@ -1,7 +1,7 @@
 //! The moving objects of one forward pass: each with an id, its pixels and box at every input time it was seen,
 //! and a rigid trajectory through those times ([`find_instances`]).
 
-use dggt_geom::glam::DVec3;
+use dggt_geom::glam::{DQuat, DVec3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -46,9 +46,33 @@ pub struct Instance {
     /// Registration residual of each step between consecutive appearances (world units, root mean square of
     /// the kept pairs).
     pub residuals: Vec<f64>,
-    /// A rigid change of world points applied after the trajectory at every time: the identity as found; an
-    /// edit moves the object by setting it (the object is drawn at `placement(trajectory point)`).
-    pub placement: RigidMotion,
+    /// A rigid change applied along the trajectory (an edit: the object turned about its own centre and
+    /// shifted at every time); [`Placement::IDENTITY`] as found.
+    pub placement: Placement,
+}
+
+/// A rigid change of an object applied along its trajectory: at every time `t` its points `y` are drawn at
+/// `turn (y - c(t)) + c(t) + offset`, `c(t)` its centre then (world axes and units): the object is turned
+/// about its own centre and shifted, and its path is shifted but not turned.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Placement {
+    /// A unit quaternion.
+    pub turn: DQuat,
+    pub offset: DVec3,
+}
+
+impl Placement {
+    pub const IDENTITY: Self = Self { turn: DQuat::IDENTITY, offset: DVec3::ZERO };
+
+    /// The placement as a motion of world points when the object's centre is at `centre`.
+    pub fn at(&self, centre: DVec3) -> RigidMotion {
+        RigidMotion { rotation: self.turn, translation: centre + self.offset - self.turn * centre }
+    }
+
+    /// Whether every component is finite and `turn` is a unit quaternion (within `1e-6`).
+    pub fn is_valid(&self) -> bool {
+        self.turn.is_finite() && self.offset.is_finite() && (self.turn.length() - 1.0).abs() <= 1e-6
+    }
 }
 
 /// The instances of a set of views, and which pixels belong to which.
@@ -87,20 +111,32 @@ impl Instances {
     }
 
     /// The motion of instance `instance`'s points from where they were found at scene time `from` to where
-    /// they are drawn at `to`: its placement after `trajectory.motion(from, to)` (exactly the identity when
-    /// `from == to` and the placement is the identity).
+    /// they are drawn at `to`: its placement at `to` after `trajectory.motion(from, to)` (exactly the identity
+    /// when `from == to` and the placement is the identity).
     pub fn motion(&self, instance: usize, from: f64, to: f64) -> RigidMotion {
         let found = &self.instances[instance];
         let motion = found.trajectory.motion(from, to);
-        if found.placement == RigidMotion::IDENTITY { motion } else { found.placement.after(&motion) }
+        if found.placement == Placement::IDENTITY {
+            return motion;
+        }
+        found.placement.at(found.trajectory.centre(to)).after(&motion)
     }
 
     /// The world velocity (world units per unit of scene time) at time `at` of instance `instance`'s point
-    /// drawn at `point` then (see [`Trajectory::point_velocity`]), turned by the instance's placement.
+    /// drawn at `point` then (see [`Trajectory::point_velocity`]), placed: `d/dt [E(t) y(t)]` for the
+    /// placement `E(t) y = R (y - c(t)) + c(t) + offset` about the moving centre `c(t)`, i.e.
+    /// `R y' + (I - R) c'`.
     pub fn point_velocity(&self, instance: usize, at: f64, point: DVec3) -> DVec3 {
         let found = &self.instances[instance];
-        let unplaced = found.placement.inverse().apply(point);
-        found.placement.rotation * found.trajectory.point_velocity(at, unplaced)
+        let trajectory = &found.trajectory;
+        if found.placement == Placement::IDENTITY {
+            return trajectory.point_velocity(at, point);
+        }
+        let centre = trajectory.centre(at);
+        let unplaced = found.placement.at(centre).inverse().apply(point);
+        let turn = found.placement.turn;
+        let centre_velocity = trajectory.point_velocity(at, centre);
+        turn * trajectory.point_velocity(at, unplaced) + centre_velocity - turn * centre_velocity
     }
 
     pub fn len(&self) -> usize {
@@ -226,5 +262,60 @@ fn instance_of_chain(groups: &[Vec<Group>], chain: &[(usize, usize)], settings: 
             }
         })
         .collect();
-    Instance { id: 0, appearances, trajectory, residuals, placement: RigidMotion::IDENTITY }
+    Instance { id: 0, appearances, trajectory, residuals, placement: Placement::IDENTITY }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// One object turning through three keys, moved by `placement`, with one labelled pixel.
+    fn placed(placement: Placement) -> Instances {
+        let mut trajectory = Trajectory::start(0.0, DVec3::new(10.0, 2.0, 0.8));
+        let step = RigidMotion { rotation: DQuat::from_rotation_z(0.3), translation: DVec3::new(1.0, 0.5, 0.0) };
+        trajectory.push(0.5, &step);
+        trajectory.push(1.0, &step);
+        let instance = Instance { id: 0, appearances: Vec::new(), trajectory, residuals: vec![0.0; 2], placement };
+        Instances::from_parts(vec![instance], vec![vec![0, Instances::NONE]]).unwrap()
+    }
+
+    #[test]
+    fn a_placement_turns_the_object_about_its_centre_and_shifts_it_at_every_time() {
+        let placement = Placement { turn: DQuat::from_rotation_z(0.4), offset: DVec3::new(0.0, 3.5, 0.0) };
+        let (plain, moved) = (placed(Placement::IDENTITY), placed(placement));
+        for time in [0.0, 0.3, 0.5, 0.8] {
+            let centre = plain.instances[0].trajectory.centre(time);
+            // The centre is shifted by the offset alone; a point beside it turns about it.
+            let drawn = moved.motion(0, 0.0, time).apply(plain.instances[0].trajectory.reference_centre());
+            assert!(drawn.abs_diff_eq(centre + placement.offset, 1e-9), "{time}: {drawn} vs {centre}");
+            let beside = DVec3::new(12.0, 2.0, 0.8);
+            let original = plain.motion(0, 0.0, time).apply(beside);
+            let expected = centre + placement.offset + placement.turn * (original - centre);
+            assert!(moved.motion(0, 0.0, time).apply(beside).abs_diff_eq(expected, 1e-9), "{time}");
+        }
+        assert_eq!(plain.motion(0, 0.5, 0.5), RigidMotion::IDENTITY, "no placement, no motion at a key");
+    }
+
+    #[test]
+    fn a_placed_points_velocity_is_the_derivative_of_where_it_is_drawn() {
+        let placement = Placement { turn: DQuat::from_rotation_z(-0.7), offset: DVec3::new(1.0, -2.0, 0.5) };
+        let instances = placed(placement);
+        let point = DVec3::new(11.0, 3.0, 1.0);
+        let drawn = |t: f64| instances.motion(0, 0.0, t).apply(point);
+        for at in [0.1, 0.3, 0.7, 0.9] {
+            let h = 1e-6;
+            let numeric = (drawn(at + h) - drawn(at - h)) / (2.0 * h);
+            let analytic = instances.point_velocity(0, at, drawn(at));
+            assert!(analytic.abs_diff_eq(numeric, 1e-5), "{at}: {analytic} vs {numeric}");
+        }
+    }
+
+    #[test]
+    fn labels_must_name_an_instance() {
+        let instances = placed(Placement::IDENTITY);
+        assert!(Instances::from_parts(instances.instances.clone(), vec![vec![1]]).is_none());
+        assert_eq!(instances.views(), 1);
+        assert_eq!(instances.instance_of(0, 0), Some(0));
+        assert_eq!(instances.instance_of(0, 1), None);
+    }
 }

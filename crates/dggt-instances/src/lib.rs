@@ -27,7 +27,7 @@ pub mod trajectory;
 mod union_find;
 
 pub use cluster::{Cluster, ClusterSettings, ViewPoints, cluster_view};
-pub use instances::{Appearance, Instance, InstanceSettings, Instances, ShapeError, find_instances};
+pub use instances::{Appearance, Instance, InstanceSettings, Instances, Placement, ShapeError, find_instances};
 pub use link::LinkSettings;
 pub use register::{Registration, RegistrationSettings, register};
 pub use rigid::{RigidMotion, fit_rigid};

@@ -23,7 +23,7 @@ use std::sync::Arc;
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_geom::glam::{DQuat, DVec3};
 use dggt_geom::{ImageSize, PinholeIntrinsics, PosedCamera, WorldFromCamera};
-use dggt_instances::{Appearance, Instance, Instances, KeyPose, RigidMotion, Trajectory};
+use dggt_instances::{Appearance, Instance, Instances, KeyPose, Placement, RigidMotion, Trajectory};
 use dggt_model::host::host_f32;
 use dggt_model::sky::SkyGaussians;
 use safetensors::{Dtype, SafeTensors};
@@ -86,7 +86,15 @@ pub struct InstanceRecord {
     pub reference_centre: [f64; 3],
     pub keys: Vec<KeyRecord>,
     pub residuals: Vec<f64>,
-    pub placement: MotionRecord,
+    pub placement: PlacementRecord,
+}
+
+/// An edit's change along the trajectory (see [`Placement`]): `turn` a unit quaternion `w x y z`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlacementRecord {
+    pub turn_wxyz: [f64; 4],
+    pub offset: [f64; 3],
 }
 
 /// One object at one input time (see [`Appearance`]).
@@ -138,7 +146,7 @@ pub fn save_scene(scene: &Scene4d, path: &Path) -> Result<(), SceneError> {
     let file_error = |detail: String| SceneError::File { path: path.to_path_buf(), detail };
     for instance in pixels.instances().map_or(&[][..], |found| &found.instances) {
         let keys = instance.trajectory.keys().iter().map(|key| &key.from_reference);
-        if !std::iter::once(&instance.placement).chain(keys).all(RigidMotion::is_finite) {
+        if !(instance.placement.is_valid() && keys.into_iter().all(RigidMotion::is_finite)) {
             return Err(file_error(format!("instance {}: a pose or the placement is not finite", instance.id)));
         }
     }
@@ -241,7 +249,10 @@ fn instance_record(instance: &Instance) -> InstanceRecord {
             .map(|key| KeyRecord { time: key.time, from_reference: (&key.from_reference).into() })
             .collect(),
         residuals: instance.residuals.clone(),
-        placement: (&instance.placement).into(),
+        placement: {
+            let t = instance.placement.turn;
+            PlacementRecord { turn_wxyz: [t.w, t.x, t.y, t.z], offset: instance.placement.offset.to_array() }
+        },
     }
 }
 
@@ -413,10 +424,12 @@ impl<'a> Reader<'a> {
             Trajectory::from_keys(DVec3::from_array(record.reference_centre), keys.collect()).ok_or_else(|| {
                 self.error(format!("instance {}: trajectory keys not finite or not at increasing times", record.id))
             })?;
-        let placement = record.placement.motion();
-        if !placement.is_finite() || (placement.rotation.length() - 1.0).abs() > 1e-6 {
+        let [w, x, y, z] = record.placement.turn_wxyz;
+        let placement =
+            Placement { turn: DQuat::from_xyzw(x, y, z, w), offset: DVec3::from_array(record.placement.offset) };
+        if !placement.is_valid() {
             return Err(self.error(format!(
-                "instance {}: placement {:?} is not a rigid motion (finite, unit quaternion w x y z)",
+                "instance {}: placement {:?} is not a rigid change (finite, a unit quaternion w x y z)",
                 record.id, record.placement
             )));
         }

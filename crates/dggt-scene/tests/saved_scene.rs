@@ -5,7 +5,7 @@ use std::path::Path;
 
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_geom::glam::{DQuat, DVec3};
-use dggt_instances::{InstanceSettings, RigidMotion};
+use dggt_instances::{InstanceSettings, Placement};
 use dggt_model::sky::SkyGaussians;
 use dggt_scene::{
     AssemblySettings, DynamicBlend, DynamicMotion, Scene4d, TargetView, interpolate_camera, load_scene, save_scene,
@@ -78,8 +78,9 @@ fn a_placement_moves_the_instance_at_every_time() {
     let device = Device::flex();
     let scene = scene(&device);
     let mut instances = scene.pixels.instances().unwrap().clone();
-    let shift = RigidMotion { rotation: DQuat::from_rotation_y(0.2), translation: DVec3::new(0.5, 0.0, 1.0) };
-    instances.instances[0].placement = shift;
+    let placement = Placement { turn: DQuat::from_rotation_y(0.2), offset: DVec3::new(0.5, 0.0, 1.0) };
+    instances.instances[0].placement = placement;
+    let shift = placement.at(instances.instances[0].trajectory.centre(0.5));
     let placed = scene.pixels.clone().with_known_instances(std::sync::Arc::new(instances)).unwrap();
     let settings = AssemblySettings { dynamic_motion: DynamicMotion::Instances, ..AssemblySettings::exact() };
     // At view 1's time its own rows are drawn: the patch's moved by the placement alone, the others held.
@@ -128,7 +129,7 @@ fn a_file_that_is_not_a_consistent_scene_is_refused_by_name() {
     // A placement that is not finite is refused when saving; one that is not a rotation when loading.
     let mut non_finite = scene(&device);
     let mut instances = non_finite.pixels.instances().unwrap().clone();
-    instances.instances[0].placement.translation.x = f64::INFINITY;
+    instances.instances[0].placement.offset.x = f64::INFINITY;
     non_finite.pixels = non_finite.pixels.with_known_instances(std::sync::Arc::new(instances)).unwrap();
     let message = save_scene(&non_finite, &dir.path().join("refused.safetensors")).unwrap_err().to_string();
     assert!(message.contains("instance 0") && message.contains("not finite"), "{message}");
@@ -136,8 +137,8 @@ fn a_file_that_is_not_a_consistent_scene_is_refused_by_name() {
     let path = saved(&scene(&device), dir.path());
     rewrite_record(&path, |record| {
         record.replace(
-            "\"placement\":{\"rotation_wxyz\":[1.0,0.0,0.0,0.0]",
-            "\"placement\":{\"rotation_wxyz\":[0.0,0.0,0.0,0.0]",
+            "\"placement\":{\"turn_wxyz\":[1.0,0.0,0.0,0.0]",
+            "\"placement\":{\"turn_wxyz\":[0.0,0.0,0.0,0.0]",
         )
     });
     let message = load_error(&path);
