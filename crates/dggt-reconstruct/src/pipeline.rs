@@ -12,6 +12,9 @@
 //!   `gaussians/dynamic_tNNNN.ply` (the dynamic part shown at requested time `NNNN`: each camera's nearest input
 //!   view, as the renders use it);
 //! - `renders/tNNNN_camC.png` at the requested times (cameras interpolated between input views);
+//! - `scene.safetensors`: the whole 4D scene (every input pixel's Gaussian, the sky, the cameras and the moving
+//!   objects with their trajectories; [`dggt_scene::saved`]), which renders and edits without the network
+//!   (`dggt edit`);
 //! - `summary.json`.
 //!
 //! The world is the first input view's camera frame (view 0: first frame, first camera); distances are in
@@ -38,8 +41,8 @@ use dggt_infer::{
 use dggt_model::host::host_f32;
 use dggt_run::progress::{Visibility, styled_bar};
 use dggt_scene::{
-    AssemblyCounts, AssemblySettings, InputView, Instances, MIN_OPACITY, PixelGaussians, Scene4d, TargetView, Timeline,
-    nearest_in_time, nearest_view,
+    AssemblyCounts, AssemblySettings, InputView, Instances, MIN_OPACITY, PixelGaussians, SCENE_FILE, Scene4d,
+    TargetView, Timeline, nearest_in_time, nearest_view, save_scene,
 };
 
 use crate::align::pose_error;
@@ -199,6 +202,7 @@ pub fn reconstruct(options: &ReconstructOptions, device: &Device) -> Result<Summ
             stages.done("gaussians");
             let request = RenderRequest { inputs: &inputs, images: &images, times_s: &times_s, timeline, size };
             let counts = write_gaussians(&mut written, &scene, &request, &mut warnings)?;
+            save_scene(&scene, &written.path(SCENE_FILE))?;
             stages.done("write gaussians");
             let (renders, input_psnr_db) = render_views(&mut written, &scene, &request, options.progress)?;
             stages.done("render");

@@ -1,6 +1,6 @@
 //! How much a reconstruction may write, checked before any work: the requested times must lie within the
 //! input frames' time window, and the largest output they could give (every render as raw RGB, every input
-//! pixel's Gaussian in the static PLY and in each per-time dynamic PLY, the per-view maps) must stay under a
+//! pixel's Gaussian in the static PLY, in each per-time dynamic PLY and in the saved scene, the per-view maps) must stay under a
 //! bound, so that a mistyped `--every` or `--times` is refused rather than filling a disk for minutes.
 
 use std::fmt;
@@ -23,6 +23,9 @@ const PLY_VERTEX_BYTES: u64 = INRIA_PROPERTIES.len() as u64 * 4;
 /// Bytes per pixel of an input view's files at most: the image (RGB), depth as `.npy` (float32) and 16-bit
 /// PNG, the dynamic and sky masks.
 const MAP_BYTES_PER_PIXEL: u64 = 3 + 4 + 2 + 1 + 1;
+/// Bytes per input pixel of the saved scene (`scene.safetensors`): twenty float32 values of its Gaussian
+/// (mean, rotation, scale, colour, opacity, lifespan, time, dynamic logit, velocity) and its instance label.
+const SCENE_BYTES_PER_PIXEL: u64 = 20 * 4 + 4;
 /// Bytes per pixel of a render at most (raw RGB; PNG compresses it).
 const RENDER_BYTES_PER_PIXEL: u64 = 3;
 
@@ -42,7 +45,7 @@ impl OutputEstimate {
     pub fn new(views: usize, cameras: usize, times: usize, size: ImageSize) -> Self {
         let pixels = size.width as u64 * size.height as u64;
         let (views_n, cameras_n, times_n) = (views as u64, cameras as u64, times as u64);
-        let per_view = pixels * (MAP_BYTES_PER_PIXEL + PLY_VERTEX_BYTES);
+        let per_view = pixels * (MAP_BYTES_PER_PIXEL + PLY_VERTEX_BYTES + SCENE_BYTES_PER_PIXEL);
         let per_time = cameras_n * pixels * (RENDER_BYTES_PER_PIXEL + PLY_VERTEX_BYTES);
         let bytes = views_n.saturating_mul(per_view).saturating_add(times_n.saturating_mul(per_time));
         Self { views, cameras, times, size, bytes }

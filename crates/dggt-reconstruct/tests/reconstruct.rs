@@ -99,6 +99,7 @@ fn reconstructs_the_fixture_from_a_trained_checkpoint() {
     let validation = run.path().join(format!("validation/step-{TRAIN_STEPS:08}"));
     check_renders(&summary, out, &validation);
     check_instances(&summary, out);
+    check_saved_scene(&summary, out);
     let elapsed = started.elapsed().as_secs_f64();
     eprintln!("total {elapsed:.1} s");
 }
@@ -127,6 +128,20 @@ fn check_instances(summary: &Summary, out: &Path) {
     eprintln!("{} moving objects", summary.instances.len());
 }
 
+/// The saved scene reads back with the summary's objects and renders the first input view as its render file
+/// shows it (8-bit rounding apart).
+fn check_saved_scene(summary: &Summary, out: &Path) {
+    let scene = dggt_scene::load_scene(&out.join("scene.safetensors"), &Device::flex()).unwrap();
+    assert_eq!(scene.views().len(), summary.views);
+    assert_eq!(scene.pixels.instances().map_or(0, |found| found.len()), summary.instances.len());
+    let first = scene.views()[0];
+    let target = dggt_scene::TargetView { rig_camera: first.rig_camera, time: first.time, camera: first.camera };
+    let rgb: Vec<f32> = scene.render(&target).unwrap().rgb.into_data().try_into_vec().unwrap();
+    let (_, written) = read_rgb_png(&out.join("renders/t0000_cam0.png")).unwrap();
+    let largest = rgb.iter().zip(&written).map(|(a, b)| (a.clamp(0.0, 1.0) - b).abs()).fold(0.0f32, f32::max);
+    assert!(largest <= 1.0 / 255.0 + 1e-6, "the saved scene renders frame 0 up to {largest} away from its file");
+}
+
 /// Every listed file exists, and the expected ones are listed.
 fn check_files(summary: &Summary, out: &Path, names: &[String]) {
     // Every listed file exists, and the expected ones are listed.
@@ -141,6 +156,7 @@ fn check_files(summary: &Summary, out: &Path, names: &[String]) {
         "sparse/0/points3D.txt",
         "gaussians/static.ply",
         "gaussians/sky.ply",
+        "scene.safetensors",
         "summary.json",
     ]
     .map(String::from)
