@@ -19,7 +19,7 @@
 //! | `depth_flows_4/{t:03}_{cam}.npy` | float32 `(H/4, W/4, 4)` (integer division): the ray through full-resolution coordinates `(4 col + 2, 4 row + 2)`; channel 0 its z-depth (m, along the optical axis, 0 for sky), channels 1-3 the world-frame velocity (m/s) of the surface point hit (zero for static surfaces and sky), including the rotation of turning cars |
 //! | `instances/instances_info.json` | every car, see below |
 //! | `instances/frame_instances.json` | `{"<frame>": [instance ids present], ...}` for every frame |
-//! | `synth.json` | the configuration, the variant (`layout`), the command line that reproduces the scene, and these conventions in brief |
+//! | `synth.json` | the configuration, the variant (`layout`), the command line that reproduces the scene (edits included), these conventions in brief, and for an edited scene (`--remove-object`, `--move-object`) its `edits`: the exact [`ObjectEdit`](crate::ObjectEdit) of each edited object and their convention |
 //!
 //! `instances_info.json` maps each instance id (a string; ids are `0..N`, moving cars first) to
 //! `{"id", "class_name": "vehicle", "dynamic", "box_size": [length, width, height], "frame_annotations":
@@ -27,8 +27,8 @@
 //! box coordinates (origin at the box centre, x forward, y left, z up) to the world of `ego_pose`. An instance is
 //! *present* in a frame, and annotated there, when a pixel-centre ray of some camera hits it or, for moving cars,
 //! crosses its box; so every dynamic-mask pixel belongs to an instance annotated in that frame. Objects are listed
-//! in id order and frames in time order. Every file is written atomically; files already in the folder that this
-//! export does not produce are left alone.
+//! in id order and frames in time order; objects removed by an edit are not listed, and their ids are not reused.
+//! Every file is written atomically; files already in the folder that this export does not produce are left alone.
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
@@ -43,6 +43,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::config::{FRAME_INTERVAL_S, SynthConfig};
+use crate::edit::{ObjectEdit, Presence};
 use crate::error::{Result, SynthError};
 use crate::generate::generate;
 use crate::rig::HORIZONTAL_FOV_DEG;
@@ -66,6 +67,10 @@ pub struct SynthSummary {
     pub dynamic_pixels: u64,
     /// Pixels set in all sky masks together.
     pub sky_pixels: u64,
+    /// Objects an edit removed, in id order.
+    pub removed_objects: Vec<ObjectId>,
+    /// Objects an edit moved, in id order.
+    pub moved_objects: Vec<ObjectId>,
 }
 
 /// Whether an export gets the lidar sweeps of [`crate::lidar`] (`lidar/{t}.bin`, about 0.6 MB a frame).
@@ -137,7 +142,20 @@ struct Description<'a> {
     moving_instances: Vec<ObjectId>,
     parked_instances: Vec<ObjectId>,
     conventions: Conventions,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    edits: Option<Edits>,
 }
+
+/// The edits of an edited scene, as `synth.json` records them.
+#[derive(Serialize)]
+struct Edits {
+    convention: &'static str,
+    objects: Vec<ObjectEdit>,
+}
+
+const EDIT_CONVENTION: &str = "applied after each object's placement at every time; remove: the object is drawn \
+                               nowhere; move: x' = Rz(yaw) (x - pivot) + pivot + offset, world axes, offset and \
+                               pivot in m, yaw in radians counter-clockwise seen from above (about +z)";
 
 const CONVENTIONS: Conventions = Conventions {
     world: "metric, z up, x along the road; the first ego pose is the identity",
@@ -250,6 +268,11 @@ fn write_sweeps(scene: &SynthScene, layout: &ExportLayout, variant: ExportVarian
     })
 }
 
+/// The ids of the objects whose presence passes `select`.
+fn edited_objects(scene: &SynthScene, select: impl Fn(Presence) -> bool) -> Vec<ObjectId> {
+    scene.objects().iter().filter(|o| select(o.presence())).map(|o| o.id()).collect()
+}
+
 /// Renders every view of `scene` and writes the whole export to `out_dir` (created if needed) in `variant`.
 pub fn write_export(
     scene: &SynthScene,
@@ -313,7 +336,7 @@ pub fn write_export(
         description: "Procedural driving street rendered by an analytic ray caster: road with lane markings, \
                       sidewalks, textured buildings, poles, trees, parked cars and moving cars (one turning into a \
                       side street), seen from a forward-driving ego vehicle at 10 Hz.",
-        command: config.command_line(),
+        command: scene.command_line(),
         config,
         frame_interval_s: FRAME_INTERVAL_S,
         camera_names: (0..config.cameras).map(|id| variant.camera_name(id)).collect(),
@@ -321,6 +344,9 @@ pub fn write_export(
         moving_instances: moving.clone(),
         parked_instances: parked,
         conventions: CONVENTIONS,
+        edits: Some(scene.edits())
+            .filter(|edits| !edits.is_empty())
+            .map(|objects| Edits { convention: EDIT_CONVENTION, objects }),
     };
     io::write_atomically(&layout.synth_description(), &json_bytes(SYNTH_DESCRIPTION, &description)?)?;
 
@@ -334,5 +360,7 @@ pub fn write_export(
         moving_instances: moving.len(),
         dynamic_pixels: records.iter().map(|r| r.dynamic_pixels).sum(),
         sky_pixels: records.iter().map(|r| r.sky_pixels).sum(),
+        removed_objects: edited_objects(scene, |p| matches!(p, Presence::Removed)),
+        moved_objects: edited_objects(scene, |p| matches!(p, Presence::Moved(_))),
     })
 }

@@ -3,12 +3,14 @@
 //! A [`SynthScene`] holds the static objects, the moving cars with their trajectories, the ego trajectory and
 //! the camera rig. [`SceneAt`] is the scene frozen at one instant (every object placed), which is what rays are
 //! cast against: [`SceneAt::cast`] returns the nearest surface with its distance, object, motion and colour.
+//! An object removed by an edit ([`crate::edit`]) is never placed; a moved one is placed where the edit puts it.
 
 use dggt_geom::glam::DVec3;
 use dggt_geom::{ImageSize, PinholeIntrinsics, Rigid, World, WorldFromCamera, WorldFromEgo};
 use serde::Serialize;
 
 use crate::config::SynthConfig;
+use crate::edit::Presence;
 use crate::grid::StreetGrid;
 use crate::motion::{CarMotion, CarState, Object, WorldFromObject};
 use crate::rig::RigCamera;
@@ -56,7 +58,8 @@ pub(crate) enum Placement {
     Driving(CarMotion),
 }
 
-/// One object: primitives in its own frame and how that frame is placed in the world over time.
+/// One object: primitives in its own frame, how that frame is placed in the world over time, and whether an
+/// edit moved or removed it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SceneObject {
     pub(crate) id: ObjectId,
@@ -64,12 +67,13 @@ pub struct SceneObject {
     pub(crate) parts: Vec<Part>,
     pub(crate) bounds: Aabb,
     pub(crate) placement: Placement,
+    pub(crate) presence: Presence,
 }
 
 impl SceneObject {
     pub(crate) fn new(id: ObjectId, kind: ObjectKind, parts: Vec<Part>, placement: Placement) -> Self {
         let bounds = parts[1..].iter().fold(parts[0].shape.bounds(), |b, p| b.union(&p.shape.bounds()));
-        Self { id, kind, parts, bounds, placement }
+        Self { id, kind, parts, bounds, placement, presence: Presence::Generated }
     }
 
     pub fn id(&self) -> ObjectId {
@@ -85,7 +89,17 @@ impl SceneObject {
         self.bounds.size().to_array()
     }
 
-    /// The trajectory of a moving car; `None` for static objects.
+    /// Whether an edit moved or removed the object.
+    pub fn presence(&self) -> Presence {
+        self.presence
+    }
+
+    /// Whether the scene draws the object: false once an edit removed it.
+    pub fn is_drawn(&self) -> bool {
+        !matches!(self.presence, Presence::Removed)
+    }
+
+    /// The trajectory of a moving car as generated, before any move; `None` for static objects.
     pub fn motion(&self) -> Option<&CarMotion> {
         match &self.placement {
             Placement::Driving(motion) => Some(motion),
@@ -93,21 +107,53 @@ impl SceneObject {
         }
     }
 
-    /// Object frame -> world at `time` (for cars: `obj_to_world`). Panics for a moving car if `time` is not
-    /// finite.
+    /// A moving car's state at `time`, moved as an edit says; `None` for static objects.
+    pub fn state(&self, time: f64) -> Option<CarState> {
+        self.motion().map(|motion| self.moved_state(motion.state(time)))
+    }
+
+    fn moved_state(&self, state: CarState) -> CarState {
+        match &self.presence {
+            Presence::Moved(change) => change.after_state(&state),
+            Presence::Generated | Presence::Removed => state,
+        }
+    }
+
+    /// Object frame -> world at `time` (for cars: `obj_to_world`), moved as an edit says; a removed object
+    /// keeps the pose it would have. Panics for a moving car if `time` is not finite.
     pub fn world_from_object(&self, time: f64) -> WorldFromObject {
-        match &self.placement {
+        match (&self.placement, &self.presence) {
+            (Placement::Fixed(pose), Presence::Moved(change)) => {
+                change.after(pose).expect("edits are checked to be finite before they are applied")
+            }
+            (Placement::Fixed(pose), Presence::Generated | Presence::Removed) => *pose,
+            (Placement::Driving(motion), _) => self.moved_state(motion.state(time)).world_from_object(),
+        }
+    }
+
+    /// World centre (m) at `time` of the object's enclosing box: the natural pivot of a move. Panics for a
+    /// moving car if `time` is not finite.
+    pub fn centre(&self, time: f64) -> DVec3 {
+        self.world_from_object(time).transform_point(self.box_centre())
+    }
+
+    /// The box centre at `time` where the generator placed it, before any move.
+    pub(crate) fn generated_centre(&self, time: f64) -> DVec3 {
+        let pose = match &self.placement {
             Placement::Fixed(pose) => *pose,
             Placement::Driving(motion) => motion.state(time).world_from_object(),
-        }
+        };
+        pose.transform_point(self.box_centre())
+    }
+
+    /// Centre of the enclosing box in the object frame.
+    fn box_centre(&self) -> DVec3 {
+        (self.bounds.min + self.bounds.max) * 0.5
     }
 
     /// World velocity (m/s) at `time` of the world point `point` attached to this object.
     pub fn point_velocity(&self, point: DVec3, time: f64) -> DVec3 {
-        match &self.placement {
-            Placement::Fixed(_) => DVec3::ZERO,
-            Placement::Driving(motion) => motion.state(time).point_velocity(point),
-        }
+        self.state(time).map_or(DVec3::ZERO, |state| state.point_velocity(point))
     }
 }
 
@@ -158,18 +204,19 @@ impl SynthScene {
         Some(self.world_from_ego(frame)? * self.rig.get(camera)?.ego_from_camera)
     }
 
-    /// Every object; an object's id is its index.
+    /// Every object, removed ones included ([`SceneObject::is_drawn`]); an object's id is its index.
     pub fn objects(&self) -> &[SceneObject] {
         &self.objects
     }
 
+    /// The object `id`, removed or not.
     pub fn object(&self, id: ObjectId) -> Option<&SceneObject> {
         self.objects.get(id as usize)
     }
 
-    /// The cars (moving first, then parked): the instances of the export.
+    /// The cars the scene draws (moving first, then parked): the instances of the export.
     pub fn instances(&self) -> impl Iterator<Item = &SceneObject> {
-        self.objects.iter().filter(|o| o.kind.is_vehicle())
+        self.objects.iter().filter(|o| o.kind.is_vehicle() && o.is_drawn())
     }
 
     /// The scene frozen at `time` (seconds); `None` when `time` is not finite.
@@ -243,13 +290,14 @@ pub struct SceneAt<'a> {
 }
 
 impl<'a> SceneAt<'a> {
-    /// Places every object at `time` (finite), keeping those whose world box passes `keep`.
+    /// Places every drawn object at `time` (finite), keeping those whose world box passes `keep`.
     pub(crate) fn new(scene: &'a SynthScene, time: f64, keep: impl Fn(&Aabb) -> bool) -> Self {
         let placed: Vec<Placed<'a>> = scene
             .objects
             .iter()
+            .filter(|object| object.is_drawn())
             .filter_map(|object| {
-                let state = object.motion().map(|m| m.state(time));
+                let state = object.state(time);
                 let world_from_object = state.map_or_else(|| object.world_from_object(time), |s| s.world_from_object());
                 let world_box = object.bounds.transformed(&world_from_object);
                 keep(&world_box).then(|| Placed {
