@@ -14,8 +14,8 @@ use clap::{Parser, Subcommand};
 use tracing_subscriber::EnvFilter;
 
 use crate::commands::{
-    bench, convert, devices, eval, inspect, parity, reconstruct, refine, refine_pairs, refine_train, stress, synth,
-    train,
+    bench, convert, devices, edit, eval, inspect, parity, reconstruct, refine, refine_pairs, refine_train, stress,
+    synth, train,
 };
 
 #[derive(Debug, Parser)]
@@ -35,6 +35,7 @@ enum Command {
     Parity(parity::Args),
     Train(train::Args),
     Reconstruct(reconstruct::Args),
+    Edit(edit::Args),
     RefinePairs(refine_pairs::Args),
     RefineTrain(refine_train::Args),
     Stress(stress::Args),
@@ -74,6 +75,7 @@ fn run(command: Command) -> Result<()> {
         Command::Parity(args) => parity::run(args),
         Command::Train(args) => train::run(args),
         Command::Reconstruct(args) => reconstruct::run(args),
+        Command::Edit(args) => edit::run(args),
         Command::RefinePairs(args) => refine_pairs::run(args),
         Command::RefineTrain(args) => refine_train::run(args),
         Command::Stress(args) => stress::run(args),

@@ -6,6 +6,7 @@ pub mod bench_compute;
 pub mod bench_refiner;
 pub mod convert;
 pub mod devices;
+pub mod edit;
 pub mod eval;
 pub mod inspect;
 pub mod output;

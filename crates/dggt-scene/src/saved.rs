@@ -3,7 +3,7 @@
 //!
 //! The file is safetensors. Tensors, little-endian:
 //! - `pixels.means` `[M, 3]`, `pixels.quats_wxyz` `[M, 4]`, `pixels.scales` `[M, 3]` (linear),
-//!   `pixels.colors` `[M, 3]`, `pixels.opacity`, `pixels.lifespan`, `pixels.source_time` `[M]` and, when the
+//!   `pixels.colors` `[M, K]` (`K` colour channels, 3 for RGB), `pixels.opacity`, `pixels.lifespan`, `pixels.source_time` `[M]` and, when the
 //!   network predicts them, `pixels.dynamic_logit` `[M]` and `pixels.velocity` `[M, 3]` (world axes per unit of
 //!   scene time): f32, one row per input pixel, view-major as [`PixelGaussians`] holds them;
 //! - `instances.labels` `[S, H·W]` u32 (position in the instance list, `u32::MAX` for none), when found;
@@ -312,7 +312,7 @@ impl<'a> Reader<'a> {
                 means: rows("pixels.means", 3)?,
                 quats_wxyz: rows("pixels.quats_wxyz", 4)?,
                 scales: rows("pixels.scales", 3)?,
-                colors: rows("pixels.colors", 3)?,
+                colors: rows("pixels.colors", self.columns("pixels.colors")?)?,
                 opacity: flat(rows("pixels.opacity", 1)?),
                 lifespan: flat(rows("pixels.lifespan", 1)?),
                 source_time: flat(rows("pixels.source_time", 1)?),
@@ -357,6 +357,15 @@ impl<'a> Reader<'a> {
                 Ok(InputView { rig_camera: view.rig_camera, time: view.time, camera })
             })
             .collect()
+    }
+
+    /// The number of columns of the two-dimensional tensor `name` (colours have as many as the scene's layout).
+    fn columns(&self, name: &str) -> Result<usize, SceneError> {
+        let view = self.tensors.tensor(name).map_err(|_| self.error(format!("no tensor `{name}`")))?;
+        match view.shape() {
+            [_, columns] if *columns > 0 => Ok(*columns),
+            shape => Err(self.error(format!("`{name}`: expected [rows, channels], found {shape:?}"))),
+        }
     }
 
     /// The tensor `name` as `[rows, columns]` f32, every value finite.

@@ -100,7 +100,7 @@ fn a_placement_moves_the_instance_at_every_time() {
 }
 
 fn load_error(path: &Path) -> String {
-    load_scene(path, &Device::flex()).err().expect("the file is refused").to_string()
+    load_scene(path, &Device::flex()).expect_err("the file is refused").to_string()
 }
 
 #[test]
@@ -120,11 +120,11 @@ fn a_file_that_is_not_a_consistent_scene_is_refused_by_name() {
     let message = load_error(&saved(&broken, dir.path()));
     assert!(message.contains("pixels.means") && message.contains("row 7"), "{message}");
 
-    // Colours of another width.
+    // Scales of another width.
     let mut other_layout = scene(&device);
-    other_layout.pixels.colors = Tensor::zeros([S * H * W, 4], &device);
+    other_layout.pixels.scales = Tensor::zeros([S * H * W, 4], &device);
     let message = load_error(&saved(&other_layout, dir.path()));
-    assert!(message.contains("pixels.colors") && message.contains(&format!("{:?}", [S * H * W, 3])), "{message}");
+    assert!(message.contains("pixels.scales") && message.contains(&format!("{:?}", [S * H * W, 3])), "{message}");
 
     // A placement that is not finite is refused when saving; one that is not a rotation when loading.
     let mut non_finite = scene(&device);
@@ -136,10 +136,8 @@ fn a_file_that_is_not_a_consistent_scene_is_refused_by_name() {
     assert!(!dir.path().join("refused.safetensors").exists(), "nothing is written for a refused scene");
     let path = saved(&scene(&device), dir.path());
     rewrite_record(&path, |record| {
-        record.replace(
-            "\"placement\":{\"turn_wxyz\":[1.0,0.0,0.0,0.0]",
-            "\"placement\":{\"turn_wxyz\":[0.0,0.0,0.0,0.0]",
-        )
+        record
+            .replace("\"placement\":{\"turn_wxyz\":[1.0,0.0,0.0,0.0]", "\"placement\":{\"turn_wxyz\":[0.0,0.0,0.0,0.0]")
     });
     let message = load_error(&path);
     assert!(message.contains("instance 0") && message.contains("placement"), "{message}");
