@@ -34,6 +34,10 @@ pub struct Args {
     /// units (repeatable; moves of one instance add up).
     #[arg(long = "move", value_name = "ID:DX,DY,DZ,YAW")]
     moves: Vec<String>,
+    /// Remove every Gaussian whose centre lies in the world-axis-aligned box between two opposite corners
+    /// (static objects, which are no instance; repeatable).
+    #[arg(long = "remove-box", value_name = "X0,Y0,Z0,X1,Y1,Z1")]
+    remove_boxes: Vec<String>,
     /// Insert instance ID of another reconstruction (its folder or `scene.safetensors`): its first appearance's
     /// centre placed at X,Y,Z of this world, turned by YAW degrees; it keeps its motion (repeatable).
     #[arg(long, value_name = "SCENE:ID@X,Y,Z,YAW")]
@@ -66,9 +70,10 @@ pub fn run(args: Args) -> Result<()> {
         .map(|text| Edit::remove(text))
         .chain(args.moves.iter().map(|text| Edit::moved(text)))
         .chain(args.insert.iter().map(|text| Edit::insert(text)))
+        .chain(args.remove_boxes.iter().map(|text| Edit::remove_box(text)))
         .collect::<Result<_, _>>()?;
     if edits.is_empty() {
-        bail!("nothing to edit: give --remove, --move or --insert");
+        bail!("nothing to edit: give --remove, --move, --insert or --remove-box");
     }
     let refine = args.refine.spec()?;
     if refine.as_ref().is_some_and(|spec| spec.reference != ReferenceView::None) {

@@ -6,6 +6,8 @@
 //! - **Move**: the instance's placement ([`Placement`]) turns it about its centre and shifts it at every time;
 //!   two moves of one instance add up (turns composed, offsets summed).
 //! - **Insert**: an instance of another saved scene, carried into this world ([`CarriedObject`]).
+//! - **Remove a box**: every Gaussian whose mean lies in a world-axis-aligned box gets zero opacity (static
+//!   objects, which are no instance: a parked car, a sign).
 //!
 //! An edited instance first takes in its soft fringe: pixels within [`FRINGE_PIXELS`] of its labelled pixels
 //! whose dynamic probability is at least [`FRINGE_PROBABILITY`] (the object's outline, which the instance
@@ -15,6 +17,7 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use burn::tensor::{Device, Tensor, TensorData};
+use dggt_geom::glam::DVec3;
 use dggt_instances::{Instances, Placement, RigidMotion};
 use dggt_model::host::host_f32;
 use dggt_scene::{DynamicMotion, Scene4d, TargetView, ViewRender, load_scene};
@@ -29,6 +32,9 @@ use crate::request::{Edit, EditKind, Insertion};
 pub const FRINGE_PIXELS: usize = 2;
 /// The least dynamic probability of a fringe pixel.
 pub const FRINGE_PROBABILITY: f32 = 0.1;
+/// The dynamic logit a moved instance's pixels get at least: its static share `1 - sigmoid(12)` is below
+/// `1e-5`, so no copy of it stays where it was.
+pub const WHOLLY_DYNAMIC_LOGIT: f32 = 12.0;
 
 /// A scene with its edits applied.
 #[derive(Debug, Clone)]
@@ -88,7 +94,15 @@ pub fn apply_edits(mut scene: Scene4d, edits: &[Edit], device: &Device) -> Resul
     if changes.values().any(|change| matches!(change, Change::Move(_))) {
         scene.assembly.dynamic_motion = DynamicMotion::Instances;
     }
-    let edited = if changes.is_empty() { scene.clone() } else { changed(&scene, &changes)? };
+    let boxes: Vec<[DVec3; 2]> = edits
+        .iter()
+        .filter_map(|edit| match edit.kind {
+            EditKind::RemoveBox { min, max } => Some([min, max]),
+            _ => None,
+        })
+        .collect();
+    let edited =
+        if changes.is_empty() && boxes.is_empty() { scene.clone() } else { changed(&scene, &changes, &boxes)? };
     Ok(EditedScene { original: scene, edited, carried, up })
 }
 
@@ -138,42 +152,77 @@ fn instance_position(scene: &Scene4d, id: u32, argument: &str) -> Result<usize, 
     })
 }
 
-/// `scene` with its instances grown into their fringes, removed ones transparent and moved ones placed.
-fn changed(scene: &Scene4d, changes: &BTreeMap<usize, Change>) -> Result<Scene4d, EditError> {
+/// `scene` with its instances grown into their fringes, removed ones and the Gaussians in removed boxes
+/// transparent, moved ones placed and made wholly dynamic (so that no static copy stays behind).
+fn changed(scene: &Scene4d, changes: &BTreeMap<usize, Change>, boxes: &[[DVec3; 2]]) -> Result<Scene4d, EditError> {
     let pixels = &scene.pixels;
-    let found = pixels.instances().expect("edited instances exist");
-    let dynamic = match &pixels.dynamic_logit {
-        Some(logit) => host_f32(burn::tensor::activation::sigmoid(logit.clone()), "dynamic probability")?,
-        None => vec![0.0; pixels.len()],
+    let per_view = pixels.per_view();
+    let mut logit = match &pixels.dynamic_logit {
+        Some(logit) => Some(host_f32(logit.clone(), "dynamic logit")?),
+        None => None,
     };
-    let (width, height) = (pixels.size.width as usize, pixels.size.height as usize);
-    let mut labels: Vec<Vec<u32>> = (0..found.views()).map(|view| found.labels(view).to_vec()).collect();
-    for (view, labels) in labels.iter_mut().enumerate() {
-        let probability = &dynamic[view * width * height..(view + 1) * width * height];
-        for &position in changes.keys() {
-            grow(labels, position as u32, probability, width, height);
+    let mut keep = vec![1.0f32; pixels.len()];
+    for (row, mean) in pixels.host_means().iter().enumerate() {
+        let mean = DVec3::from_array(mean.map(f64::from));
+        if boxes.iter().any(|[low, high]| mean.cmpge(*low).all() && mean.cmple(*high).all()) {
+            keep[row] = 0.0;
         }
     }
-    let mut instances = found.instances.clone();
-    let mut keep = vec![1.0f32; pixels.len()];
+    let mut instances = pixels.instances().map(|found| found.instances.clone()).unwrap_or_default();
+    let labels = grown_labels(scene, changes, logit.as_deref())?;
     for (&position, change) in changes {
+        let rows = labels.iter().enumerate().flat_map(|(view, labels)| {
+            labels
+                .iter()
+                .enumerate()
+                .filter(move |(_, l)| **l as usize == position)
+                .map(move |(p, _)| view * per_view + p)
+        });
         match change {
-            Change::Move(placement) => instances[position].placement = *placement,
-            Change::Remove => {
-                for (view, labels) in labels.iter().enumerate() {
-                    for (pixel, _) in labels.iter().enumerate().filter(|(_, l)| **l as usize == position) {
-                        keep[view * width * height + pixel] = 0.0;
-                    }
+            Change::Remove => rows.for_each(|row| keep[row] = 0.0),
+            Change::Move(placement) => {
+                instances[position].placement = *placement;
+                if let Some(logit) = logit.as_mut() {
+                    rows.for_each(|row| logit[row] = logit[row].max(WHOLLY_DYNAMIC_LOGIT));
                 }
             }
         }
     }
-    let instances = Instances::from_parts(instances, labels).expect("labels name the same instances");
     let mut edited = scene.clone();
     let device = pixels.opacity.device();
-    edited.pixels.opacity = pixels.opacity.clone() * Tensor::from_data(TensorData::new(keep, [pixels.len()]), &device);
-    edited.pixels = edited.pixels.with_known_instances(Arc::new(instances))?;
+    let count = pixels.len();
+    edited.pixels.opacity = pixels.opacity.clone() * Tensor::from_data(TensorData::new(keep, [count]), &device);
+    if let Some(logit) = logit {
+        edited.pixels.dynamic_logit = Some(Tensor::from_data(TensorData::new(logit, [count]), &device));
+    }
+    if !labels.is_empty() {
+        let instances = Instances::from_parts(instances, labels).expect("labels name the same instances");
+        edited.pixels = edited.pixels.with_known_instances(Arc::new(instances))?;
+    }
     Ok(edited)
+}
+
+/// The scene's instance labels with every changed instance grown into its fringe; empty without instances.
+fn grown_labels(
+    scene: &Scene4d,
+    changes: &BTreeMap<usize, Change>,
+    logit: Option<&[f32]>,
+) -> Result<Vec<Vec<u32>>, EditError> {
+    let pixels = &scene.pixels;
+    let Some(found) = pixels.instances() else { return Ok(Vec::new()) };
+    let (width, height) = (pixels.size.width as usize, pixels.size.height as usize);
+    let mut labels: Vec<Vec<u32>> = (0..found.views()).map(|view| found.labels(view).to_vec()).collect();
+    let Some(logit) = logit else { return Ok(labels) };
+    for (view, labels) in labels.iter_mut().enumerate() {
+        let probability: Vec<f32> = logit[view * width * height..(view + 1) * width * height]
+            .iter()
+            .map(|l| 1.0 / (1.0 + (-l).exp()))
+            .collect();
+        for &position in changes.keys() {
+            grow(labels, position as u32, &probability, width, height);
+        }
+    }
+    Ok(labels)
 }
 
 /// Grows the pixels labelled `label` by [`FRINGE_PIXELS`] 4-neighbour steps over unlabelled pixels whose

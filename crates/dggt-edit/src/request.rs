@@ -24,6 +24,8 @@ pub enum EditKind {
     Move { instance: u32, offset: DVec3, yaw_degrees: f64 },
     /// An object of another reconstruction drawn in this one.
     Insert(Insertion),
+    /// Every Gaussian whose mean lies in the world-axis-aligned box `[min, max]` is not drawn (world units).
+    RemoveBox { min: DVec3, max: DVec3 },
 }
 
 /// Instance `instance` of the reconstruction saved at `source` drawn in this one: its centre at its first
@@ -73,11 +75,19 @@ impl Edit {
         Ok(Self { argument, kind })
     }
 
-    /// The instance of the edited scene this edit changes; `None` for an insertion.
+    /// `--remove-box X0,Y0,Z0,X1,Y1,Z1` (two opposite corners, world units).
+    pub fn remove_box(text: &str) -> Result<Self, EditError> {
+        let argument = format!("--remove-box {text}");
+        let [x0, y0, z0, x1, y1, z1] = parse_numbers(&argument, text, "X0,Y0,Z0,X1,Y1,Z1")?;
+        let (a, b) = (DVec3::new(x0, y0, z0), DVec3::new(x1, y1, z1));
+        Ok(Self { argument, kind: EditKind::RemoveBox { min: a.min(b), max: a.max(b) } })
+    }
+
+    /// The instance of the edited scene this edit changes; `None` for an insertion or a box.
     pub fn target_instance(&self) -> Option<u32> {
         match self.kind {
             EditKind::Remove { instance } | EditKind::Move { instance, .. } => Some(instance),
-            EditKind::Insert(_) => None,
+            EditKind::Insert(_) | EditKind::RemoveBox { .. } => None,
         }
     }
 }
@@ -88,13 +98,13 @@ fn parse_id(argument: &str, text: &str) -> Result<u32, EditError> {
         .map_err(|_| EditError::argument(argument, format!("`{text}` is not an instance id (a whole number)")))
 }
 
-/// Four comma-separated finite numbers, named by `names` in errors.
-fn parse_numbers(argument: &str, text: &str, names: &str) -> Result<[f64; 4], EditError> {
+/// `N` comma-separated finite numbers, named by `names` in errors.
+fn parse_numbers<const N: usize>(argument: &str, text: &str, names: &str) -> Result<[f64; N], EditError> {
     let values: Vec<&str> = text.split(',').collect();
-    if values.len() != 4 {
-        return Err(EditError::argument(argument, format!("expected four numbers {names}, found `{text}`")));
+    if values.len() != N {
+        return Err(EditError::argument(argument, format!("expected {N} numbers {names}, found `{text}`")));
     }
-    let mut numbers = [0.0; 4];
+    let mut numbers = [0.0; N];
     for (number, value) in numbers.iter_mut().zip(values) {
         *number = value
             .trim()
@@ -124,6 +134,11 @@ mod tests {
         });
         assert_eq!(inserted.kind, expected);
         assert_eq!(Edit::remove("7").unwrap().target_instance(), Some(7));
+        let corners = Edit::remove_box("4,1,0,2,-1,3").unwrap();
+        assert_eq!(
+            corners.kind,
+            EditKind::RemoveBox { min: DVec3::new(2.0, -1.0, 0.0), max: DVec3::new(4.0, 1.0, 3.0) }
+        );
     }
 
     #[test]
@@ -135,6 +150,7 @@ mod tests {
             (Edit::moved("1"), "--move 1"),
             (Edit::insert("scene:2@0,0,0,inf"), "--insert scene:2@0,0,0,inf"),
             (Edit::insert("2@0,0,0,0"), "--insert 2@0,0,0,0"),
+            (Edit::remove_box("0,0,0,1,1"), "--remove-box 0,0,0,1,1"),
         ] {
             let message = result.unwrap_err().to_string();
             assert!(message.starts_with(argument), "{message}");

@@ -124,6 +124,49 @@ fn moving_a_car_matches_the_scene_with_it_moved() {
 }
 
 #[test]
+fn removing_a_parked_car_by_its_box_brings_its_region_closer_to_the_scene_without_it() {
+    let device = Device::flex();
+    let synth = synth(0, 13);
+    let scene = oracle(&synth, &FRAMES, &device);
+    let frame = 4;
+    let parked = synth
+        .instances()
+        .filter(|object| object.motion().is_none())
+        .max_by_key(|object| object_mask(&synth, frame, object.id()).iter().filter(|m| **m).count())
+        .unwrap();
+    // A world box around it: its centre, half its diagonal across, from above the road to its roof.
+    let [length, width, height] = parked.box_size();
+    let centre = parked.centre(0.0);
+    let half = 0.5 * (length * length + width * width).sqrt() + 0.1;
+    let (low, high) = (
+        DVec3::new(centre.x - half, centre.y - half, 0.05),
+        DVec3::new(centre.x + half, centre.y + half, height + 0.2),
+    );
+    let text = format!("{},{},{},{},{},{}", low.x, low.y, low.z, high.x, high.y, high.z);
+    let edited = apply_edits(scene, &[Edit::remove_box(&text).unwrap()], &device).unwrap();
+    let without = synth.edited(&[ObjectEdit::Remove(parked.id())]).unwrap();
+    let mask = object_mask(&synth, frame, parked.id());
+    let (before, after) = before_and_after(&edited, &synth, frame, &truth(&without, frame), &mask);
+    // What no view saw behind a parked car stays a hole; the rest of its region improves.
+    let view = target(&synth, frame);
+    let alpha = |render: dggt_scene::ViewRender| -> Vec<f32> { render.alpha.into_data().try_into_vec().unwrap() };
+    let (alpha_before, alpha_after) =
+        (alpha(edited.original.render(&view).unwrap()), alpha(edited.render(&view).unwrap()));
+    let holes = mask
+        .iter()
+        .zip(alpha_before.iter().zip(&alpha_after))
+        .filter(|(m, (b, a))| **m && **b >= 0.5 && **a < 0.5)
+        .count();
+    let pixels = mask.iter().filter(|m| **m).count();
+    eprintln!(
+        "remove parked car {} by its box, frame {frame}: {before:.2} -> {after:.2} dB on its {pixels} pixels, {holes} of them holes",
+        parked.id()
+    );
+    assert!(after >= before + 0.5, "{before:.2} -> {after:.2} dB");
+    assert!(holes > 0 && holes < pixels, "{holes} holes among {pixels} pixels");
+}
+
+#[test]
 fn an_inserted_car_shows_where_it_was_put() {
     let device = Device::flex();
     let dir = tempfile::tempdir().unwrap();
