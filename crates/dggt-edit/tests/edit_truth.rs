@@ -7,7 +7,7 @@ mod common;
 use std::collections::BTreeMap;
 
 use burn::tensor::Device;
-use common::{colours, masked_psnr, object_mask, oracle, synth, target, truth};
+use common::{box_around, colours, largest_parked_car, masked_psnr, object_mask, oracle, synth, target, truth};
 use dggt_edit::object::tensors;
 use dggt_edit::{Edit, EditedScene, apply_edits};
 use dggt_geom::PixelConvention;

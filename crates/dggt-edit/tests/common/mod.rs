@@ -16,7 +16,12 @@ use dggt_synth::{SynthConfig, SynthScene};
 
 /// The generator's scene at `seed`: `frames` frames of the front camera at 96x64.
 pub fn synth(seed: u64, frames: usize) -> SynthScene {
-    dggt_synth::generate(&SynthConfig { seed, frames, cameras: 1, width: 96, height: 64 }).unwrap()
+    synth_sized(seed, frames, 96, 64)
+}
+
+/// The generator's scene at `seed`: `frames` frames of the front camera at `width` x `height`.
+pub fn synth_sized(seed: u64, frames: usize, width: u32, height: u32) -> SynthScene {
+    dggt_synth::generate(&SynthConfig { seed, frames, cameras: 1, width, height }).unwrap()
 }
 
 /// The inverse of the Gaussian head's scale activation (`0.1 · softplus`).
@@ -124,4 +129,23 @@ pub fn masked_psnr(a: &[f32], b: &[f32], mask: &[bool]) -> f64 {
 /// A render's colours on the host, clamped to `[0, 1]`.
 pub fn colours(render: dggt_scene::ViewRender) -> Vec<f32> {
     render.rgb.into_data().try_into_vec::<f32>().unwrap().into_iter().map(|v| v.clamp(0.0, 1.0)).collect()
+}
+
+/// The world-axis-aligned box around a parked object, from just above the road to above its roof, as
+/// `X0,Y0,Z0,X1,Y1,Z1` for `--remove-box`.
+pub fn box_around(object: &dggt_synth::SceneObject) -> String {
+    let [length, width, height] = object.box_size();
+    let centre = object.centre(0.0);
+    let half = 0.5 * (length * length + width * width).sqrt() + 0.1;
+    let (low, high) = (centre - DVec3::new(half, half, 0.0), centre + DVec3::new(half, half, 0.0));
+    format!("{},{},{},{},{},{}", low.x, low.y, 0.05, high.x, high.y, height + 0.2)
+}
+
+/// The parked car of `synth` that covers most of `frame`.
+pub fn largest_parked_car(synth: &SynthScene, frame: usize) -> &dggt_synth::SceneObject {
+    synth
+        .instances()
+        .filter(|object| object.motion().is_none())
+        .max_by_key(|object| object_mask(synth, frame, object.id()).iter().filter(|m| **m).count())
+        .expect("the scene has parked cars")
 }
