@@ -334,3 +334,67 @@ fn gpu_bench_script_measures_every_part_at_reduced_scale() {
     let table = std::fs::read_to_string(again.join("compute.md")).unwrap();
     assert!(table.contains("Baseline: dggt-rs, ") && table.contains("1.0 ms (release)"), "{table}");
 }
+
+/// A saved scene of one view, 8x6 opaque grey Gaussians at depth 4, without a dynamic head.
+fn tiny_saved_scene(dir: &std::path::Path) -> std::path::PathBuf {
+    use burn::tensor::{Device, Tensor, TensorData};
+    use dggt_geom::glam::{DQuat, DVec3};
+    use dggt_geom::{PinholeIntrinsics, PixelConvention, PosedCamera, WorldFromCamera};
+    let device = Device::flex();
+    let (width, height) = (8, 6);
+    let raw: Vec<f32> =
+        (0..width * height).flat_map(|_| [0.0, 0.0, 0.0, 6.0, -1.0, -1.0, -1.0, 1.0, 0.0, 0.0, 0.0, 0.0]).collect();
+    let maps = dggt_model::gaussian_maps::GaussianMaps::from_raw(Tensor::from_data(
+        TensorData::new(raw, [1, 1, height, width, 12]),
+        &device,
+    ));
+    let depth = Tensor::from_data(TensorData::new(vec![4.0f32; width * height], [1, 1, height, width]), &device);
+    let camera = PosedCamera {
+        world_from_camera: WorldFromCamera::from_rotation_translation(DQuat::IDENTITY, DVec3::ZERO).unwrap(),
+        intrinsics: PinholeIntrinsics::new(8.0, 8.0, 4.0, 3.0).unwrap(),
+    };
+    let views = vec![dggt_scene::InputView { rig_camera: 0, time: 0.0, camera }];
+    let pixels =
+        dggt_scene::PixelGaussians::new(&maps, depth, None, views, Default::default(), PixelConvention::Centred)
+            .unwrap();
+    let scene = dggt_scene::Scene4d { pixels, sky: None, assembly: Default::default() };
+    let file = dir.join("scene.safetensors");
+    dggt_scene::save_scene(&scene, &file).unwrap();
+    file
+}
+
+#[test]
+fn edit_checks_every_edit_before_writing_and_never_mixes_outputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = tiny_saved_scene(dir.path());
+    let scene = scene.to_str().unwrap();
+    let out = dir.path().join("edited");
+    let out_arg = out.to_str().unwrap();
+    assert!(refused(&["edit", "--scene", scene, "--out", out_arg]).contains("nothing to edit"));
+    let message = refused(&["edit", "--scene", scene, "--remove", "0", "--out", out_arg]);
+    assert!(message.contains("--remove 0") && message.contains("no moving objects"), "{message}");
+    let message = refused(&["edit", "--scene", scene, "--move", "0:1,nan,0,0", "--out", out_arg]);
+    assert!(message.contains("--move 0:1,nan,0,0") && message.contains("not a finite number"), "{message}");
+    assert!(!out.exists(), "a refused edit writes nothing");
+
+    let remove_box = ["edit", "--scene", scene, "--remove-box", "-1,-1,3,0,1,5", "--out", out_arg];
+    let done = dggt(&remove_box);
+    assert!(done.status.success(), "{}", String::from_utf8_lossy(&done.stderr));
+    for file in [
+        "edit.json",
+        "renders/t0000_cam0.png",
+        "before_after/t0000_cam0.png",
+        "holes/t0000_cam0.png",
+        "gaussians/t0000.ply",
+    ] {
+        assert!(out.join(file).is_file(), "{file} missing");
+    }
+    let summary: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("edit.json")).unwrap()).unwrap();
+    assert!(
+        summary["renders"][0]["hole_pixels"].as_u64().unwrap() > 0,
+        "the box's left half uncovers nothing: {summary}"
+    );
+    assert!(refused(&remove_box).contains("not empty"));
+    let again = dggt(&[&remove_box[..], &["--overwrite"]].concat());
+    assert!(again.status.success(), "{}", String::from_utf8_lossy(&again.stderr));
+}

@@ -8,7 +8,7 @@ use dggt_edit::{Edit, EditOptions, prepare_edits};
 use dggt_refine::ReferenceView;
 
 use crate::backend::DeviceList;
-use crate::commands::output::{self, OutputKind, OverwriteArg};
+use crate::commands::output::{self, OutputBoundArg, OutputKind, OverwriteArg};
 use crate::commands::refine::{RefineArgs, RefineJob, load_refiner, refine_files};
 
 /// An edit's folder; `edit.json` is written once everything else is.
@@ -32,22 +32,22 @@ pub struct Args {
     remove: Vec<String>,
     /// Move instance ID: at every time turned by YAW degrees about its centre and shifted by DX,DY,DZ world
     /// units (repeatable; moves of one instance add up).
-    #[arg(long = "move", value_name = "ID:DX,DY,DZ,YAW")]
+    #[arg(long = "move", value_name = "ID:DX,DY,DZ,YAW", allow_hyphen_values = true)]
     moves: Vec<String>,
     /// Remove every Gaussian whose centre lies in the world-axis-aligned box between two opposite corners
     /// (static objects, which are no instance; repeatable).
-    #[arg(long = "remove-box", value_name = "X0,Y0,Z0,X1,Y1,Z1")]
+    #[arg(long = "remove-box", value_name = "X0,Y0,Z0,X1,Y1,Z1", allow_hyphen_values = true)]
     remove_boxes: Vec<String>,
     /// Insert instance ID of another reconstruction (its folder or `scene.safetensors`): its first appearance's
     /// centre placed at X,Y,Z of this world, turned by YAW degrees; it keeps its motion (repeatable).
-    #[arg(long, value_name = "SCENE:ID@X,Y,Z,YAW")]
+    #[arg(long, value_name = "SCENE:ID@X,Y,Z,YAW", allow_hyphen_values = true)]
     insert: Vec<String>,
     /// Rig cameras to render [default: every camera of the scene].
     #[arg(long, value_delimiter = ',')]
     cameras: Option<Vec<usize>>,
     /// Scene times to render (those of the reconstruction's input views, as `scene.safetensors` holds them)
     /// [default: the input views' times].
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     times: Option<Vec<f64>>,
     /// Device: cpu, ndarray, wgpu[:N], cuda[:N].
     #[arg(long, default_value = "cpu")]
@@ -57,6 +57,8 @@ pub struct Args {
     out: PathBuf,
     #[command(flatten)]
     overwrite: OverwriteArg,
+    #[command(flatten)]
+    bound: OutputBoundArg,
     #[command(flatten)]
     refine: RefineArgs,
 }
@@ -82,6 +84,8 @@ pub fn run(args: Args) -> Result<()> {
     let device = args.device.single()?;
     let options = EditOptions { scene: args.scene, edits, cameras: args.cameras, times: args.times };
     let job = prepare_edits(&options, &device)?;
+    let what = format!("{} times x {} cameras", job.times.len(), job.cameras.len());
+    args.bound.check(job.largest_output_bytes(), &what)?;
     let refiner = refine.as_ref().map(|spec| load_refiner(spec, &device)).transpose()?;
     output::prepare(&args.out, OUTPUT, args.overwrite.existing())?;
     let summary = job.write(&args.out)?;

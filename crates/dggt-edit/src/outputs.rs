@@ -96,7 +96,22 @@ pub fn write_edits(options: &EditOptions, out: &Path, device: &Device) -> Result
     prepare_edits(options, device)?.write(out)
 }
 
+/// Bytes per Gaussian in a PLY file (INRIA layout, float32 properties).
+const PLY_VERTEX_BYTES: u64 = dggt_formats::ply::INRIA_PROPERTIES.len() as u64 * 4;
+/// Bytes per pixel of one edited view's images at most (raw): the render, the side-by-side pair, the mask.
+const VIEW_BYTES_PER_PIXEL: u64 = 3 + 6 + 1;
+
 impl EditJob {
+    /// The most the outputs could take: per time every Gaussian of the scene and of the inserted objects in a
+    /// PLY, per view its images uncompressed.
+    pub fn largest_output_bytes(&self) -> u64 {
+        let gaussians =
+            (self.scene.edited.pixels.len() + self.scene.carried.iter().map(|o| o.largest()).sum::<usize>()) as u64;
+        let pixels = self.scene.edited.pixels.size.area() as u64;
+        let (times, cameras) = (self.times.len() as u64, self.cameras.len() as u64);
+        times.saturating_mul(gaussians * PLY_VERTEX_BYTES + cameras * pixels * VIEW_BYTES_PER_PIXEL)
+    }
+
     /// Writes the renders, images, masks, PLYs and `edit.json` into `out`.
     pub fn write(&self, out: &Path) -> Result<EditSummary, EditError> {
         let mut files = Vec::new();
