@@ -34,6 +34,15 @@ fn main() {
     let started = std::time::Instant::now();
     let scene = oracle(&synth, &FRAMES, &device);
     println!("ground-truth scene: {} Gaussians in {:.0} ms", scene.pixels.len(), started.elapsed().as_secs_f64() * 1e3);
+    let file = out.join("edit-truth-scene.safetensors");
+    let save_ms = median_ms(5, || dggt_scene::save_scene(&scene, &file).unwrap());
+    let load_ms = median_ms(5, || drop(dggt_scene::load_scene(&file, &device).unwrap()));
+    let bytes = std::fs::metadata(&file).unwrap().len();
+    std::fs::remove_file(&file).unwrap();
+    println!(
+        "saved scene: {:.2} MB, written in {save_ms:.1} ms, read in {load_ms:.1} ms (medians of 5)",
+        bytes as f64 / 1e6
+    );
     let found = scene.pixels.instances().unwrap();
     println!("instances: {}", found.len());
     let mut car_instance = Vec::new();
