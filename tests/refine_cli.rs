@@ -230,6 +230,22 @@ fn reconstruct_writes_refined_renders_beside_the_unrefined() {
     assert!(!refused.status.success() && stderr.contains("is not empty") && stderr.contains("--overwrite"), "{stderr}");
     assert!(folder.join("refined.json").is_file(), "refine images records what it refined");
     succeeded(&dggt(&[&again[..], &["--overwrite"]].concat()));
+
+    // The reconstruction edited and refined from its saved scene: the renders refined under their names.
+    let edited = work.path().join("edited");
+    let mut edit =
+        vec!["edit", "--scene", path(&out), "--remove-box", "-0.5,-0.5,0,0.5,0.5,1000", "--out", path(&edited)];
+    edit.extend(["--refine", path(&base), "--refine-checkpoint", path(&checkpoint), "--refine-prompt-ids", "5,7,9"]);
+    let text = succeeded(&dggt(&edit));
+    assert!(text.contains("refined 2 renders into"), "{text}");
+    let edited_renders: Vec<_> =
+        std::fs::read_dir(edited.join("renders")).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(edited_renders.len(), 2);
+    for name in edited_renders {
+        assert!(edited.join("renders_refined").join(&name).is_file(), "{name:?} not refined");
+    }
+    let nearest = dggt(&[&edit[..], &["--refine-reference", "nearest-input"]].concat());
+    assert!(!nearest.status.success() && String::from_utf8_lossy(&nearest.stderr).contains("--refine-reference"));
 }
 
 fn stdout(out: &Output) -> String {

@@ -198,7 +198,8 @@ pub fn reconstruct(options: &ReconstructOptions, device: &Device) -> Result<Summ
         }
         Some(scene) => {
             let scene = with_instances(scene, &network.assembly)?;
-            let instances = scene.pixels.instances().map_or_else(Vec::new, instance_records);
+            let frame_at = |time: f64| nearest_frame(&inputs.frames, &timeline, time);
+            let instances = scene.pixels.instances().map_or_else(Vec::new, |found| instance_records(found, frame_at));
             stages.done("gaussians");
             let request = RenderRequest { inputs: &inputs, images: &images, times_s: &times_s, timeline, size };
             let counts = write_gaussians(&mut written, &scene, &request, &mut warnings)?;
@@ -253,8 +254,14 @@ fn with_instances(scene: Scene4d, assembly: &AssemblySettings) -> Result<Scene4d
     Ok(Scene4d { pixels: scene.pixels.with_instances(&assembly.instances)?, ..scene })
 }
 
-/// The summary's records of `instances`.
-fn instance_records(instances: &Instances) -> Vec<InstanceRecord> {
+/// The input frame among `frames` whose scene time is nearest `time` (exactly it for an input's time).
+fn nearest_frame(frames: &[usize], timeline: &Timeline, time: f64) -> usize {
+    let distance = |frame: &&usize| (timeline.time(**frame as f64) - time).abs();
+    *frames.iter().min_by(|a, b| distance(a).total_cmp(&distance(b))).expect("a reconstruction has input frames")
+}
+
+/// The summary's records of `instances`, `frame_at` naming the input frame of a scene time.
+fn instance_records(instances: &Instances, frame_at: impl Fn(f64) -> usize) -> Vec<InstanceRecord> {
     instances
         .instances
         .iter()
@@ -268,6 +275,7 @@ fn instance_records(instances: &Instances) -> Vec<InstanceRecord> {
                     let r = pose.rotation;
                     InstanceAppearance {
                         scene_time: appearance.time,
+                        frame: frame_at(appearance.time),
                         views: appearance.views.clone(),
                         pixels: appearance.pixels,
                         box_min: appearance.bounds[0].to_array(),

@@ -64,6 +64,8 @@ pub struct InstanceRecord {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct InstanceAppearance {
     pub scene_time: f64,
+    /// The input's log frame (its index in the source) at that time.
+    pub frame: usize,
     /// The input views it was seen in (positions in the views' order).
     pub views: Vec<usize>,
     /// Its dynamic pixels over those views.

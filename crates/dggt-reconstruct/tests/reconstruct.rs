@@ -113,10 +113,11 @@ fn check_instances(summary: &Summary, out: &Path) {
         let first = &instance.appearances[0];
         assert_eq!((first.rotation_wxyz, first.translation), ([1.0, 0.0, 0.0, 0.0], [0.0; 3]), "{instance:?}");
         for pair in instance.appearances.windows(2) {
-            assert!(pair[0].scene_time < pair[1].scene_time, "{instance:?}");
+            assert!(pair[0].scene_time < pair[1].scene_time && pair[0].frame < pair[1].frame, "{instance:?}");
         }
         for appearance in &instance.appearances {
             assert!(appearance.pixels > 0 && appearance.views.iter().all(|&v| v < summary.views), "{appearance:?}");
+            assert!(appearance.frame < FRAMES, "{appearance:?}");
             for axis in 0..3 {
                 let (low, high, centre) = (appearance.box_min[axis], appearance.box_max[axis], appearance.centre[axis]);
                 assert!(low <= centre && centre <= high, "{appearance:?}");
