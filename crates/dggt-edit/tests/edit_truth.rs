@@ -129,21 +129,8 @@ fn removing_a_parked_car_by_its_box_brings_its_region_closer_to_the_scene_withou
     let synth = synth(0, 13);
     let scene = oracle(&synth, &FRAMES, &device);
     let frame = 4;
-    let parked = synth
-        .instances()
-        .filter(|object| object.motion().is_none())
-        .max_by_key(|object| object_mask(&synth, frame, object.id()).iter().filter(|m| **m).count())
-        .unwrap();
-    // A world box around it: its centre, half its diagonal across, from above the road to its roof.
-    let [length, width, height] = parked.box_size();
-    let centre = parked.centre(0.0);
-    let half = 0.5 * (length * length + width * width).sqrt() + 0.1;
-    let (low, high) = (
-        DVec3::new(centre.x - half, centre.y - half, 0.05),
-        DVec3::new(centre.x + half, centre.y + half, height + 0.2),
-    );
-    let text = format!("{},{},{},{},{},{}", low.x, low.y, low.z, high.x, high.y, high.z);
-    let edited = apply_edits(scene, &[Edit::remove_box(&text).unwrap()], &device).unwrap();
+    let parked = largest_parked_car(&synth, frame);
+    let edited = apply_edits(scene, &[Edit::remove_box(&box_around(parked)).unwrap()], &device).unwrap();
     let without = synth.edited(&[ObjectEdit::Remove(parked.id())]).unwrap();
     let mask = object_mask(&synth, frame, parked.id());
     let (before, after) = before_and_after(&edited, &synth, frame, &truth(&without, frame), &mask);
