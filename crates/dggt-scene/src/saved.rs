@@ -368,19 +368,24 @@ impl<'a> Reader<'a> {
         }
     }
 
-    /// The tensor `name` as `[rows, columns]` f32, every value finite.
-    fn f32_tensor(&self, name: &str, rows: usize, columns: usize, device: &Device) -> Result<Tensor<2>, SceneError> {
+    /// The little-endian 4-byte values of tensor `name`, which must be of type `dtype` and shape `[rows, columns]`.
+    fn words(&self, name: &str, dtype: Dtype, rows: usize, columns: usize) -> Result<Vec<[u8; 4]>, SceneError> {
         let view = self.tensors.tensor(name).map_err(|_| self.error(format!("no tensor `{name}`")))?;
-        if view.dtype() != Dtype::F32 || view.shape() != [rows, columns] {
+        if view.dtype() != dtype || view.shape() != [rows, columns] {
             return Err(self.error(format!(
-                "`{name}`: expected f32 {:?}, found {:?} {:?}",
+                "`{name}`: expected {dtype:?} {:?}, found {:?} {:?}",
                 [rows, columns],
                 view.dtype(),
                 view.shape()
             )));
         }
+        Ok(view.data().chunks_exact(4).map(|b| b.try_into().expect("four bytes")).collect())
+    }
+
+    /// The tensor `name` as `[rows, columns]` f32, every value finite.
+    fn f32_tensor(&self, name: &str, rows: usize, columns: usize, device: &Device) -> Result<Tensor<2>, SceneError> {
         let values: Vec<f32> =
-            view.data().chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().expect("four bytes"))).collect();
+            self.words(name, Dtype::F32, rows, columns)?.into_iter().map(f32::from_le_bytes).collect();
         if let Some(i) = values.iter().position(|v| !v.is_finite()) {
             return Err(self.error(format!("`{name}`: value {} at row {} is not finite", values[i], i / columns)));
         }
@@ -406,20 +411,8 @@ impl<'a> Reader<'a> {
     /// The instances and their labels, when the file has them.
     fn instances(&self, views: usize, per_view: usize) -> Result<Option<Instances>, SceneError> {
         let Some(records) = &self.record.instances else { return Ok(None) };
-        let labels = self
-            .tensors
-            .tensor("instances.labels")
-            .map_err(|_| self.error("the record lists instances but there is no tensor `instances.labels`".into()))?;
-        if labels.dtype() != Dtype::U32 || labels.shape() != [views, per_view] {
-            return Err(self.error(format!(
-                "`instances.labels`: expected u32 {:?}, found {:?} {:?}",
-                [views, per_view],
-                labels.dtype(),
-                labels.shape()
-            )));
-        }
         let values: Vec<u32> =
-            labels.data().chunks_exact(4).map(|b| u32::from_le_bytes(b.try_into().expect("four bytes"))).collect();
+            self.words("instances.labels", Dtype::U32, views, per_view)?.into_iter().map(u32::from_le_bytes).collect();
         let labels = values.chunks_exact(per_view).map(<[u32]>::to_vec).collect();
         let instances = records.iter().map(|record| self.instance(record)).collect::<Result<Vec<_>, _>>()?;
         Instances::from_parts(instances, labels)
