@@ -64,6 +64,10 @@ pub struct Args {
     bound: OutputBoundArg,
     #[command(flatten)]
     refine: RefineArgs,
+    /// Also write the reconstruction as a rerun recording (`.rrd`: cameras, images, depth, masks, Gaussians,
+    /// renders and objects on a time line; builds with the `rerun` feature). An existing file needs --overwrite.
+    #[arg(long, value_name = "FILE.rrd")]
+    rerun: Option<PathBuf>,
 }
 
 /// A reconstruction's folder; `summary.json` is written once the reconstruction is complete.
@@ -76,6 +80,10 @@ pub const REFINED_RENDERS: &str = "renders_refined";
 /// render into `renders_refined/` under the same name (attending to its nearest input view in `images/` with
 /// `--refine-reference nearest-input`).
 pub fn run(args: Args) -> Result<()> {
+    if let Some(file) = &args.rerun {
+        check_rerun_build()?;
+        output::prepare_file(file, "--rerun", args.overwrite.existing())?;
+    }
     output::prepare(&args.out, OUTPUT, args.overwrite.existing())?;
     let device = args.device.single()?;
     let refine = args.refine.spec()?;
@@ -123,6 +131,41 @@ pub fn run(args: Args) -> Result<()> {
             options.out.join(REFINED_RENDERS).display()
         );
     }
+    if let Some(file) = &args.rerun {
+        record(&options.out, file)?;
+    }
     println!("outputs: {} (summary.json)", options.out.display());
     Ok(())
+}
+
+/// Refuses `--rerun` in a build without the `rerun` feature, before any work.
+fn check_rerun_build() -> Result<()> {
+    if cfg!(feature = "rerun") {
+        Ok(())
+    } else {
+        anyhow::bail!(
+            "--rerun: this dggt was built without the `rerun` feature (cargo build --release --features rerun)"
+        )
+    }
+}
+
+/// Writes the reconstruction in `folder` as a rerun recording at `file`.
+#[cfg(feature = "rerun")]
+fn record(folder: &Path, file: &Path) -> Result<()> {
+    let report = dggt_rerun::record_reconstruction(folder, file)?;
+    println!(
+        "recording: {} ({:.1} MB, {} cameras, {} static splats, {} times) in {:.1} s",
+        file.display(),
+        report.bytes as f64 / 1e6,
+        report.cameras,
+        report.static_splats,
+        report.dynamic_splats.len(),
+        report.seconds
+    );
+    Ok(())
+}
+
+#[cfg(not(feature = "rerun"))]
+fn record(_folder: &Path, _file: &Path) -> Result<()> {
+    check_rerun_build()
 }

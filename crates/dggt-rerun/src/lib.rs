@@ -1,0 +1,23 @@
+//! A reconstruction written as a [rerun](https://rerun.io) recording (`.rrd`), to be scrubbed through time in
+//! rerun's viewer: each input camera's pose and pinhole, its image, depth, dynamic and sky masks; the static and
+//! sky Gaussians once and the dynamic ones at every rendered time as 3D Gaussian splats; the renders; the moving
+//! objects' boxes and trajectories; the summary's figures.
+//!
+//! The recording is made from a `dggt reconstruct` output folder (its files are the interface: what the
+//! recording shows is what the folder holds), streamed to the file one file at a time, so that memory stays
+//! bounded by the largest single file.
+//!
+//! - [`reconstruction`]: the folder read and logged ([`record_reconstruction`]);
+//! - [`splats`]: Gaussians in rerun's natural form (linear scales, RGBA colours with the opacity).
+//!
+//! Conventions in the recording: the world is the reconstruction's (the first input camera's frame, OpenCV axes:
+//! x right, y down, z forward, declared on `world`); each camera entity carries its world-from-camera transform
+//! and a pinhole in pixels with OpenCV camera axes; two time lines, `time` (seconds since the first chosen frame)
+//! and `frame` (the source log's frame number, 10 Hz).
+
+mod error;
+pub mod reconstruction;
+pub mod splats;
+
+pub use error::RerunError;
+pub use reconstruction::{RecordingReport, record_reconstruction};
