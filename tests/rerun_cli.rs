@@ -73,6 +73,7 @@ fn a_reconstruction_recording_reads_back_as_its_files_say() {
     assert!(text.contains("recording:"), "{text}");
     let recording = read_back(&rrd);
     assert_eq!(recording["rerun_version"], "0.36.3");
+    assert_eq!(recording["blueprints"], 1, "the recording carries its default layout");
     let entities = recording["entities"].as_object().unwrap();
     let summary: Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
 

@@ -33,11 +33,13 @@ def rows(batch):
 
 
 def main(path):
+    reader = rerun.experimental.RrdReader(path)
     entities = {}
-    for chunk in rerun.experimental.RrdReader(path).stream():
+    for chunk in reader.stream():
         entity = entities.setdefault(chunk.entity_path, {"static": chunk.is_static, "rows": []})
         entity["rows"].extend(rows(chunk.to_record_batch()))
-    print(json.dumps({"rerun_version": rerun.__version__, "entities": entities}))
+    blueprints = len(reader.blueprints())
+    print(json.dumps({"rerun_version": rerun.__version__, "blueprints": blueprints, "entities": entities}))
 
 
 if __name__ == "__main__":

@@ -76,8 +76,13 @@ pub fn record_reconstruction(folder: &Path, rrd: &Path) -> Result<RecordingRepor
     })?;
     let (_, cameras) = read_cameras_json(&folder.join("cameras.json"))?;
     let recording_error = |e: &dyn std::fmt::Display| RerunError::Recording { path: rrd.into(), detail: e.to_string() };
-    let recording =
-        rerun::RecordingStreamBuilder::new("dggt_reconstruction").save(rrd).map_err(|e| recording_error(&e))?;
+    let mut rig: Vec<usize> = cameras.iter().map(|c| c.camera).collect();
+    rig.sort_unstable();
+    rig.dedup();
+    let recording = rerun::RecordingStreamBuilder::new("dggt_reconstruction")
+        .with_blueprint(layout(&rig))
+        .save(rrd)
+        .map_err(|e| recording_error(&e))?;
     let log = Logger { recording: &recording, folder, first_frame: cameras.iter().map(|c| c.frame).min().unwrap_or(0) };
     log.statics(&String::from_utf8_lossy(&text)).map_err(|e| recording_error(&e))?;
     for camera in &cameras {
@@ -228,6 +233,29 @@ impl Logger<'_> {
         }
         Ok(())
     }
+}
+
+/// The default layout: the 3D scene beside, per camera, tabs of its image, render, depth and masks; the
+/// summary below.
+fn layout(cameras: &[usize]) -> rerun::blueprint::Blueprint {
+    use rerun::blueprint::{
+        Blueprint, ContainerLike, Horizontal, Spatial2DView, Spatial3DView, Tabs, TextDocumentView, Vertical,
+    };
+    let camera_tabs = |camera: usize| -> ContainerLike {
+        let origin = format!("world/camera_{camera}");
+        let tab = |part: &str| -> ContainerLike {
+            Spatial2DView::new(format!("camera {camera}: {part}"))
+                .with_origin(origin.clone())
+                .with_contents([format!("$origin/{part}")])
+                .into()
+        };
+        Tabs::new(["image", "render", "depth", "dynamic", "sky"].map(tab)).into()
+    };
+    let scene: ContainerLike = Spatial3DView::new("scene").with_origin("world").into();
+    let cameras: ContainerLike = Vertical::new(cameras.iter().map(|&c| camera_tabs(c))).into();
+    let summary: ContainerLike = TextDocumentView::new("summary").with_origin("summary").into();
+    let top: ContainerLike = Horizontal::new([scene, cameras]).with_column_shares([2.0, 1.0]).into();
+    Blueprint::new(Vertical::new([top, summary]).with_row_shares([4.0, 1.0]))
 }
 
 fn read_cloud(path: &Path) -> Result<dggt_formats::ply::GaussianCloud, RerunError> {
