@@ -73,7 +73,9 @@ impl WorldChange {
 
     /// The change as a transform of the world into itself; an error when a field is not finite.
     pub fn to_rigid(&self) -> Result<Rigid<World, World>> {
-        Ok(Rigid::from_rotation_translation(self.rotation(), self.apply(DVec3::ZERO))?)
+        // Not turned at all unless finite: glam's checked builds assert on a non-finite rotation's products.
+        let translation = if self.is_finite() { self.apply(DVec3::ZERO) } else { DVec3::NAN };
+        Ok(Rigid::from_rotation_translation(self.rotation(), translation)?)
     }
 
     /// The placement `pose` followed by this change: object coordinates to changed world points.
