@@ -70,12 +70,14 @@ impl EditedScene {
 }
 
 fn concatenated(a: GaussianTensors, b: GaussianTensors) -> GaussianTensors {
-    let opacity = shared_opacity;
     GaussianTensors {
         means: Tensor::cat(vec![a.means, b.means], 0),
         quats_wxyz: Tensor::cat(vec![a.quats_wxyz, b.quats_wxyz], 0),
         scales: Tensor::cat(vec![a.scales, b.scales], 0),
-        opacities: OpacityTensor::Shared(Tensor::cat(vec![opacity(a.opacities), opacity(b.opacities)], 0)),
+        opacities: OpacityTensor::Shared(Tensor::cat(
+            vec![shared_opacity(a.opacities), shared_opacity(b.opacities)],
+            0,
+        )),
         colors: Tensor::cat(vec![a.colors, b.colors], 0),
     }
 }
@@ -83,7 +85,7 @@ fn concatenated(a: GaussianTensors, b: GaussianTensors) -> GaussianTensors {
 /// Applies `edits` to `scene` (sources of insertions read onto `device`).
 pub fn apply_edits(mut scene: Scene4d, edits: &[Edit], device: &Device) -> Result<EditedScene, EditError> {
     let up = WorldUp::of_camera(&scene.views()[0].camera);
-    let changes = instance_changes(&scene, edits)?;
+    let changes = instance_changes(&scene, up, edits)?;
     let carried = edits
         .iter()
         .filter_map(|edit| match &edit.kind {
@@ -114,8 +116,7 @@ enum Change {
 }
 
 /// The change of every edited instance (by position), each id checked.
-fn instance_changes(scene: &Scene4d, edits: &[Edit]) -> Result<BTreeMap<usize, Change>, EditError> {
-    let up = WorldUp::of_camera(&scene.views()[0].camera);
+fn instance_changes(scene: &Scene4d, up: WorldUp, edits: &[Edit]) -> Result<BTreeMap<usize, Change>, EditError> {
     let mut changes: BTreeMap<usize, Change> = BTreeMap::new();
     for edit in edits {
         let Some(id) = edit.target_instance() else { continue };
@@ -169,7 +170,7 @@ fn changed(scene: &Scene4d, changes: &BTreeMap<usize, Change>, boxes: &[[DVec3; 
         }
     }
     let mut instances = pixels.instances().map(|found| found.instances.clone()).unwrap_or_default();
-    let labels = grown_labels(scene, changes, logit.as_deref())?;
+    let labels = grown_labels(scene, changes, logit.as_deref());
     for (&position, change) in changes {
         let rows = labels.iter().enumerate().flat_map(|(view, labels)| {
             labels
@@ -203,16 +204,12 @@ fn changed(scene: &Scene4d, changes: &BTreeMap<usize, Change>, boxes: &[[DVec3; 
 }
 
 /// The scene's instance labels with every changed instance grown into its fringe; empty without instances.
-fn grown_labels(
-    scene: &Scene4d,
-    changes: &BTreeMap<usize, Change>,
-    logit: Option<&[f32]>,
-) -> Result<Vec<Vec<u32>>, EditError> {
+fn grown_labels(scene: &Scene4d, changes: &BTreeMap<usize, Change>, logit: Option<&[f32]>) -> Vec<Vec<u32>> {
     let pixels = &scene.pixels;
-    let Some(found) = pixels.instances() else { return Ok(Vec::new()) };
+    let Some(found) = pixels.instances() else { return Vec::new() };
     let (width, height) = (pixels.size.width as usize, pixels.size.height as usize);
     let mut labels: Vec<Vec<u32>> = (0..found.views()).map(|view| found.labels(view).to_vec()).collect();
-    let Some(logit) = logit else { return Ok(labels) };
+    let Some(logit) = logit else { return labels };
     for (view, labels) in labels.iter_mut().enumerate() {
         let probability: Vec<f32> = logit[view * width * height..(view + 1) * width * height]
             .iter()
@@ -222,7 +219,7 @@ fn grown_labels(
             grow(labels, position as u32, &probability, width, height);
         }
     }
-    Ok(labels)
+    labels
 }
 
 /// Grows the pixels labelled `label` by [`FRINGE_PIXELS`] 4-neighbour steps over unlabelled pixels whose
@@ -260,7 +257,7 @@ fn carry(
 ) -> Result<CarriedObject, EditError> {
     let Insertion { source, instance: id, position, yaw_degrees } = insertion;
     let (id, position, yaw_degrees) = (*id, *position, *yaw_degrees);
-    let file = if source.is_dir() { source.join(dggt_scene::SCENE_FILE) } else { source.to_path_buf() };
+    let file = dggt_scene::scene_file(source);
     let scene = load_scene(&file, device).map_err(|e| EditError::argument(argument, e.to_string()))?;
     let layout = |scene: &Scene4d| scene.pixels.colors.dims()[1];
     if layout(&scene) != layout(destination) {

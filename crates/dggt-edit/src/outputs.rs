@@ -1,7 +1,7 @@
 //! The edited scene written out: for every chosen camera and time the edited render, the render before and
 //! after side by side, and the mask of its holes (pixels the edit uncovered where nothing was seen behind:
 //! foreground opacity at least one half before the edit, below one half after it); per time the Gaussians the
-//! edited scene draws, as an INRIA-layout PLY; and `edit.json` listing what was done and written.
+//! edited scene draws for the first chosen camera (culled to its view), as an INRIA-layout PLY; and `edit.json` listing what was done and written.
 //!
 //! Output folder layout (`NNNN` the position of the time, `C` the rig camera):
 //! `renders/tNNNN_camC.png`, `before_after/tNNNN_camC.png`, `holes/tNNNN_camC.png`, `gaussians/tNNNN.ply`,
@@ -15,7 +15,7 @@ use dggt_formats::masks::write_binary_png;
 use dggt_formats::ply::write_ply;
 use dggt_geom::ImageSize;
 use dggt_model::host::host_f32;
-use dggt_scene::{Scene4d, TargetView, load_scene};
+use dggt_scene::{AssembledGaussians, Scene4d, TargetView, load_scene};
 use serde::Serialize;
 
 use crate::apply::{EditedScene, apply_edits};
@@ -71,8 +71,7 @@ pub struct EditedRender {
 
 /// The first write of [`write_edits`]: loads, edits and checks everything.
 pub fn prepare_edits(options: &EditOptions, device: &Device) -> Result<EditJob, EditError> {
-    let scene_file =
-        if options.scene.is_dir() { options.scene.join(dggt_scene::SCENE_FILE) } else { options.scene.clone() };
+    let scene_file = dggt_scene::scene_file(&options.scene);
     let scene: Scene4d = load_scene(&scene_file, device)?;
     let mut rig: Vec<usize> = scene.views().iter().map(|view| view.rig_camera).collect();
     rig.sort_unstable();
@@ -127,14 +126,14 @@ impl EditJob {
             for (c, &camera) in self.cameras.iter().enumerate() {
                 let target =
                     TargetView { rig_camera: camera, time, camera: self.scene.edited.camera_at(camera, time)? };
+                let assembled = self.scene.gaussians(&target)?;
                 if c == 0 {
-                    let gaussians = cloud_of(&self.scene.gaussians(&target)?.gaussians)?;
-                    write_ply(&path(format!("gaussians/t{k:04}.ply"))?, &gaussians)?;
+                    write_ply(&path(format!("gaussians/t{k:04}.ply"))?, &cloud_of(&assembled.gaussians)?)?;
                 }
-                let view = ViewPair::render(&self.scene, &target)?;
+                let view = ViewPair::render(&self.scene, &assembled, &target)?;
                 let name = format!("t{k:04}_cam{camera}.png");
                 write_rgb_png(&path(format!("renders/{name}"))?, view.size, &view.after)?;
-                write_rgb_png(&path(format!("before_after/{name}"))?, view.size.doubled_width(), &view.side_by_side())?;
+                write_rgb_png(&path(format!("before_after/{name}"))?, doubled_width(view.size), &view.side_by_side())?;
                 let holes = view.holes();
                 write_binary_png(&path(format!("holes/{name}"))?, view.size, &holes)?;
                 renders.push(EditedRender {
@@ -170,20 +169,16 @@ struct ViewPair {
     alpha_after: Vec<f32>,
 }
 
-trait DoubledWidth {
-    fn doubled_width(self) -> Self;
-}
-
-impl DoubledWidth for ImageSize {
-    fn doubled_width(self) -> Self {
-        ImageSize::new(self.width * 2, self.height).expect("a valid size doubled is valid")
-    }
+/// Two images side by side.
+fn doubled_width(size: ImageSize) -> ImageSize {
+    ImageSize::new(size.width * 2, size.height).expect("a valid size doubled is valid")
 }
 
 impl ViewPair {
-    fn render(scene: &EditedScene, target: &TargetView) -> Result<Self, EditError> {
+    /// `target` before the edits, and after them from the edited Gaussians `assembled` for it.
+    fn render(scene: &EditedScene, assembled: &AssembledGaussians, target: &TargetView) -> Result<Self, EditError> {
         let before = scene.original.render(target)?;
-        let after = scene.render(target)?;
+        let after = scene.edited.render_assembled(assembled, target)?;
         let clamp = |values: Vec<f32>| values.into_iter().map(|v| v.clamp(0.0, 1.0)).collect::<Vec<f32>>();
         Ok(Self {
             size: scene.original.pixels.size,

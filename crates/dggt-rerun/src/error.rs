@@ -12,4 +12,6 @@ pub enum RerunError {
     Input { path: PathBuf, detail: String },
     #[error("writing the recording {}: {detail}", path.display())]
     Recording { path: PathBuf, detail: String },
+    #[error("logging {entity}: {detail}")]
+    Entity { entity: String, detail: String },
 }

@@ -133,13 +133,13 @@ impl Logger<'_> {
     fn send(&self, entity: &str, data: &impl rerun::AsComponents) -> Result<(), RerunError> {
         self.recording
             .log(entity, data)
-            .map_err(|e| RerunError::Recording { path: entity.into(), detail: e.to_string() })
+            .map_err(|e| RerunError::Entity { entity: entity.into(), detail: e.to_string() })
     }
 
     fn send_static(&self, entity: &str, data: &impl rerun::AsComponents) -> Result<(), RerunError> {
         self.recording
             .log_static(entity, data)
-            .map_err(|e| RerunError::Recording { path: entity.into(), detail: e.to_string() })
+            .map_err(|e| RerunError::Entity { entity: entity.into(), detail: e.to_string() })
     }
 
     /// The world's axes and the summary as text.

@@ -30,7 +30,7 @@ pub use compose::{ViewRender, camera_tensors, composite, render_assembled, rende
 pub use dggt_instances::{InstanceSettings, Instances};
 pub use error::SceneError;
 pub use pixels::{MeansGradient, PixelGaussians};
-pub use saved::{SCENE_FILE, load_scene, save_scene};
+pub use saved::{SCENE_FILE, load_scene, save_scene, scene_file};
 pub use scene4d::Scene4d;
 pub use timeline::{
     DynamicBlend, InputView, TargetView, Timeline, dynamic_sources, interpolate_camera, nearest_in_time, nearest_view,

@@ -139,6 +139,11 @@ impl MotionRecord {
     }
 }
 
+/// The saved scene `path` names: a reconstruction folder's [`SCENE_FILE`], or the file itself.
+pub fn scene_file(path: &Path) -> PathBuf {
+    if path.is_dir() { path.join(SCENE_FILE) } else { path.to_path_buf() }
+}
+
 /// Writes `scene` to `path` (see the module's doc), atomically: a reader never sees half a file. A scene whose
 /// instances are not finite is refused (JSON has no infinity).
 pub fn save_scene(scene: &Scene4d, path: &Path) -> Result<(), SceneError> {
