@@ -114,11 +114,12 @@ pub struct SweepArgs {
     #[arg(long, value_delimiter = ',', default_value = "none,motion,sky,all")]
     pub skips: Vec<String>,
     /// Baseline motion of the dynamic Gaussians between inputs: `velocity` (the predicted velocities, held
-    /// without them) or `instances` (the objects among the dynamic pixels moved along their trajectories).
+    /// without them), `held` (where predicted) or `instances` (the objects among the dynamic pixels moved along
+    /// their trajectories).
     #[arg(long, default_value = "velocity")]
     pub motion: String,
     /// Motions to sweep.
-    #[arg(long, value_delimiter = ',', default_value = "velocity,instances")]
+    #[arg(long, value_delimiter = ',', default_value = "held,velocity,instances")]
     pub motions: Vec<String>,
     /// Also measure every combination of the swept values.
     #[arg(long)]

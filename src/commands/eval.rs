@@ -8,7 +8,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use dggt_eval::protocol::{DEFAULT_CAMERAS, DEFAULT_WINDOW, PAPER_EVERY};
-use dggt_eval::{EvalOptions, LpipsWeights, Protocol, evaluate};
+use dggt_eval::{CropImages, EvalOptions, LpipsWeights, Protocol, evaluate};
 use dggt_infer::Architecture;
 use dggt_model::Preset;
 
@@ -84,6 +84,11 @@ pub struct Args {
     /// With `--refine MODEL_DIR`, every render is also scored after the diffusion refiner, side by side.
     #[command(flatten)]
     pub refine: RefineArgs,
+    /// Also write `crops/<scene>/f<frame>_c<camera>.png` for every view between the inputs with moving objects:
+    /// the truth around the dynamic mask, then the view drawn by each motion source (held, cross-fade,
+    /// velocity, instances: those the model has), enlarged.
+    #[arg(long)]
+    pub crops: bool,
 }
 
 impl Args {
@@ -126,6 +131,7 @@ impl Args {
             alexnet: self.alexnet.clone().unwrap_or_else(|| linear.clone()),
         });
         options.refine = self.refine.spec()?;
+        options.crops = if self.crops { CropImages::Write } else { CropImages::Skip };
         Ok(options)
     }
 }

@@ -12,10 +12,10 @@ use crate::error::BenchError;
 use dggt_infer::SkyChoice;
 use dggt_scene::DynamicMotion;
 
-/// Parses how dynamic Gaussians move between inputs: `velocity` or `instances`.
+/// Parses how dynamic Gaussians move between inputs: `held`, `velocity` or `instances`.
 pub fn parse_motion(text: &str) -> Result<DynamicMotion, BenchError> {
     DynamicMotion::ALL.into_iter().find(|m| m.name().eq_ignore_ascii_case(text.trim())).ok_or_else(|| {
-        BenchError::Setting { setting: "motion", detail: format!("`{text}`: expected velocity or instances") }
+        BenchError::Setting { setting: "motion", detail: format!("`{text}`: expected held, velocity or instances") }
     })
 }
 

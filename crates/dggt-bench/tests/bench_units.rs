@@ -14,8 +14,9 @@ fn one_knob_at_a_time_without_duplicates() {
     assert_eq!(rows[0].varied, Varied::Reference);
     assert_eq!(rows[0].knobs.culling, Culling::Off);
     assert_eq!(rows[1].knobs, spec.baseline);
-    // 3 other widths, 2 other frame counts, 2 other thresholds, 2 other precisions, sky off, 3 skips, instances.
-    assert_eq!(rows.len(), 2 + 3 + 2 + 2 + 2 + 1 + 3 + 1);
+    // 3 other widths, 2 other frame counts, 2 other thresholds, 2 other precisions, sky off, 3 skips, held and
+    // instances.
+    assert_eq!(rows.len(), 2 + 3 + 2 + 2 + 2 + 1 + 3 + 2);
     for row in &rows[2..] {
         let b = spec.baseline;
         let k = row.knobs;

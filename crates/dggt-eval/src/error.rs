@@ -34,6 +34,9 @@ pub enum EvalError {
     Loss(#[from] dggt_losses::LossError),
     #[error(transparent)]
     Metric(#[from] dggt_metrics::MetricError),
+    /// A crop of the moving objects could not be written.
+    #[error("writing the crops {}", path.display())]
+    Crops { path: PathBuf, source: dggt_formats::FormatError },
 }
 
 impl EvalError {

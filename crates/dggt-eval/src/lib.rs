@@ -7,6 +7,8 @@
 //! - [`grid`]: where the export's quarter-resolution lidar cells fall in the rendered view;
 //! - [`motion`]: the predicted flow of the surface at an input view under each motion source, in the export's
 //!   axes and units;
+//! - [`sources`]: the moving objects between the inputs drawn every way the scene can draw them (held,
+//!   cross-faded, by velocity, by instance), scored on the dynamic mask and cropped side by side;
 //! - [`runner`]: forward pass, renders of every target view, metrics, stage times;
 //! - [`report`]: per-view records, per-scene and overall means, `eval.json` and `eval.md`.
 
@@ -16,12 +18,14 @@ pub mod motion;
 pub mod protocol;
 pub mod report;
 pub mod runner;
+pub mod sources;
 
 pub use error::EvalError;
 pub use motion::MotionSource;
 pub use protocol::{Protocol, ProtocolKind, TargetKind};
 pub use report::{
-    EvalReport, MOTION_HELD, MOTION_INSTANCES, MOTION_VELOCITY, SceneReport, SourceFlowMetrics, SourceSummary,
-    SplitSummary, ViewRecord,
+    EvalReport, MOTION_HELD, MOTION_INSTANCES, MOTION_VELOCITY, SceneReport, SourceFlowMetrics, SourcePsnr,
+    SourceSummary, SplitSummary, ViewRecord,
 };
 pub use runner::{EvalOptions, LpipsWeights, evaluate};
+pub use sources::{CropImages, ImageSource};

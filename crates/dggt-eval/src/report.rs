@@ -74,6 +74,10 @@ pub struct ViewRecord {
     /// every source is scored, and only when there is more than one source.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub motion_by_source: Vec<SourceFlowMetrics>,
+    /// At a view between the inputs with moving objects in its mask, the PSNR over the mask of the view
+    /// rendered under every image source the scene has ([`crate::ImageSource`]), side by side.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub dynamic_psnr_by_source: Vec<SourcePsnr>,
     /// The image metrics of the render after the diffusion refiner; absent without one.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub refined: Option<ImageScores>,
@@ -86,6 +90,17 @@ pub struct SourceFlowMetrics {
     pub source: String,
     #[serde(flatten)]
     pub metrics: FlowMetrics,
+}
+
+/// The PSNR (dB) over the moving objects' pixels of one image source at one view, or its mean over a split's
+/// views (or scenes) with `count` of them.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SourcePsnr {
+    /// `held`, `cross-fade`, `velocity` or `instances`.
+    pub source: String,
+    pub dynamic_psnr: f64,
+    /// Views (or scenes) averaged; 1 for a view.
+    pub count: usize,
 }
 
 /// The means of one motion source's scene-flow metrics over a split's views (or scenes).
@@ -133,6 +148,9 @@ pub struct SplitSummary {
     /// Every motion source's means, side by side.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub motion_by_source: Vec<SourceSummary>,
+    /// Every image source's moving-object PSNR, side by side (views between the inputs).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub dynamic_psnr_by_source: Vec<SourcePsnr>,
     /// The image metrics after the diffusion refiner; absent without one.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub refined: Option<RefinedSummary>,
@@ -235,6 +253,7 @@ pub fn summarise_views(views: &[ViewRecord], split: TargetKind) -> SplitSummary 
                 }
             })
             .collect(),
+        dynamic_psnr_by_source: mean_by_source(views.iter().flat_map(|v| &v.dynamic_psnr_by_source)),
         refined: views.iter().any(|v| v.refined.is_some()).then(|| {
             let refined = |f: fn(&ImageScores) -> Option<f64>| {
                 mean_present(views.iter().map(|v| v.refined.as_ref().and_then(f))).0
@@ -289,6 +308,7 @@ pub fn summarise_scenes(scenes: &[SceneReport], splits: &[TargetKind]) -> Vec<Sp
                         }
                     })
                     .collect(),
+                dynamic_psnr_by_source: mean_by_source(rows.iter().flat_map(|r| &r.dynamic_psnr_by_source)),
                 refined: rows.iter().any(|r| r.refined.is_some()).then(|| {
                     let refined = |f: fn(&RefinedSummary) -> Option<f64>| {
                         mean_present(rows.iter().map(|r| r.refined.as_ref().and_then(f))).0
@@ -296,6 +316,18 @@ pub fn summarise_scenes(scenes: &[SceneReport], splits: &[TargetKind]) -> Vec<Sp
                     RefinedSummary { psnr: refined(|r| r.psnr), ssim: refined(|r| r.ssim), lpips: refined(|r| r.lpips) }
                 }),
             }
+        })
+        .collect()
+}
+
+/// Per source (in order of first appearance), the mean of its PSNRs among `scores` and how many there are.
+fn mean_by_source<'a>(scores: impl Iterator<Item = &'a SourcePsnr> + Clone) -> Vec<SourcePsnr> {
+    source_names(scores.clone().map(|s| &s.source))
+        .into_iter()
+        .map(|source| {
+            let (mean, count) =
+                mean_present(scores.clone().filter(|s| s.source == source).map(|s| Some(s.dynamic_psnr)));
+            SourcePsnr { source, dynamic_psnr: mean.unwrap_or(f64::NAN), count }
         })
         .collect()
 }
@@ -407,6 +439,13 @@ impl EvalReport {
                         percent(source.acc10),
                         cell(source.angle_error_rad, 3)
                     );
+                }
+            }
+            if !summary.dynamic_psnr_by_source.is_empty() {
+                md.push_str("\n### moving objects between the inputs by source (mean over scenes)\n\n");
+                md.push_str("| source | scenes | moving PSNR (dB) |\n|---|---|---|\n");
+                for source in &summary.dynamic_psnr_by_source {
+                    let _ = writeln!(md, "| {} | {} | {:.2} |", source.source, source.count, source.dynamic_psnr);
                 }
             }
             if summary.refined.is_some() {

@@ -47,8 +47,10 @@ use crate::grid::{CellMapping, cell_has_sky};
 use crate::motion::{InputFlow, MotionSource, log_from_reconstruction, metres_per_unit};
 use crate::protocol::Protocol;
 use crate::report::{
-    EvalReport, ImageScores, SceneReport, SourceFlowMetrics, StageTime, ViewRecord, summarise_scenes, summarise_views,
+    EvalReport, ImageScores, SceneReport, SourceFlowMetrics, SourcePsnr, StageTime, ViewRecord, summarise_scenes,
+    summarise_views,
 };
+use crate::sources::{CropImages, ImageSource, crop_box, render_sources, write_crop_strip};
 use dggt_metrics::{
     FlowMetrics, ImageShape, MetricError, aligned_depth_rmse, masked_psnr, psnr, scene_flow_metrics, ssim,
 };
@@ -90,6 +92,8 @@ pub struct EvalOptions {
     pub refine: Option<RefinerSpec>,
     /// Output folder of `eval.json` and `eval.md`.
     pub out: PathBuf,
+    /// Whether crops of the moving objects under every image source are written to `out/crops/`.
+    pub crops: CropImages,
 }
 
 impl EvalOptions {
@@ -105,6 +109,7 @@ impl EvalOptions {
             lpips: None,
             refine: None,
             out: out.into(),
+            crops: CropImages::Skip,
         }
     }
 }
@@ -172,7 +177,7 @@ pub fn evaluate(options: &EvalOptions, device: &Device) -> Result<EvalReport, Ev
     let motion = match network.assembly.dynamic_motion {
         DynamicMotion::Instances => MotionSource::Instances,
         DynamicMotion::Velocity if network.config.predicts_motion() => MotionSource::Velocity,
-        DynamicMotion::Velocity => MotionSource::Held,
+        DynamicMotion::Velocity | DynamicMotion::Held => MotionSource::Held,
     };
     let mut reports = Vec::new();
     for (root, scene) in options.scenes.iter().zip(&scenes) {
@@ -372,6 +377,11 @@ struct ForwardScene {
 }
 
 impl ForwardScene {
+    /// Whether `target` is one of the input views (its camera at an input's time).
+    fn at_input(&self, target: &TargetView) -> bool {
+        self.scene.views().iter().any(|v| v.rig_camera == target.rig_camera && v.time == target.time)
+    }
+
     /// The expected flow under `source`, when it was computed.
     fn flow(&self, source: MotionSource) -> Option<&InputFlow> {
         self.flows.iter().find(|(s, _)| *s == source).and_then(|(_, flow)| flow.as_ref())
@@ -392,6 +402,11 @@ fn evaluate_scene(root: &Path, scene: &Scene, context: &SceneContext<'_>) -> Res
     forward.flows = motion_flows(&mut forward, context, scene.seconds_per_frame())?;
     let mut records = Vec::new();
     let mut seen = FlowSeen::default();
+    let image_sources = ImageSource::available(&forward.scene.pixels);
+    let crops = match context.options.crops {
+        CropImages::Write => Some(context.options.out.join("crops").join(scene_name(root))),
+        CropImages::Skip => None,
+    };
     for (frame, split) in protocol.targets() {
         let frame_position = scene
             .frames
@@ -412,10 +427,24 @@ fn evaluate_scene(root: &Path, scene: &Scene, context: &SceneContext<'_>) -> Res
                 None => None,
             };
             let rendered_flows = rendered_flows(&forward, &target)?;
+            let has_mask = scene.view(frame_position, camera_position).files.dynamic_mask.is_some();
+            let source_renders = match has_mask && !forward.at_input(&target) {
+                true => render_sources(&forward.scene, &target, &image_sources)?,
+                false => Vec::new(),
+            };
             watch.add(RENDER, started);
 
             let started = Instant::now();
-            let view = ScoredView { frame, frame_position, camera_position, split, time: target.time, rendered_flows };
+            let view = ScoredView {
+                frame,
+                frame_position,
+                camera_position,
+                split,
+                time: target.time,
+                rendered_flows,
+                source_renders,
+                crops: crops.as_deref(),
+            };
             let images = RenderedImages { rgb: &rgb, refined: refined.as_deref() };
             records.push(score_view(scene, &forward, context, &view, images, &depth, &mut seen)?);
             watch.add(METRICS, started);
@@ -444,7 +473,7 @@ fn evaluate_scene(root: &Path, scene: &Scene, context: &SceneContext<'_>) -> Res
     let splits = protocol.splits().into_iter().map(|split| summarise_views(&records, split)).collect();
     Ok(SceneReport {
         path: root.to_path_buf(),
-        name: root.file_name().map_or_else(|| root.display().to_string(), |n| n.to_string_lossy().into_owned()),
+        name: scene_name(root),
         input_frames: protocol.input_frames(),
         network_size: [forward.size.width, forward.size.height],
         views: records,
@@ -455,12 +484,16 @@ fn evaluate_scene(root: &Path, scene: &Scene, context: &SceneContext<'_>) -> Res
     })
 }
 
+/// A scene's name in the reports: its folder's name.
+fn scene_name(root: &Path) -> String {
+    root.file_name().map_or_else(|| root.display().to_string(), |n| n.to_string_lossy().into_owned())
+}
+
 /// At a view between the inputs, the expected flow of every moving source, rasterised (their motion is known
 /// there only through a render: the source the reconstruction renders with as it renders, the others with the
 /// same assembly moving the dynamic Gaussians their way); empty at an input view or without a time base.
 fn rendered_flows(forward: &ForwardScene, target: &TargetView) -> Result<Vec<(MotionSource, RenderedFlow)>, EvalError> {
-    let at_input = forward.scene.views().iter().any(|v| v.rig_camera == target.rig_camera && v.time == target.time);
-    if at_input {
+    if forward.at_input(target) {
         return Ok(Vec::new());
     }
     let mut rendered = Vec::new();
@@ -551,7 +584,7 @@ fn target_view(forward: &ForwardScene, frame: usize, camera_position: usize) -> 
 }
 
 /// Which view a render is scored as.
-struct ScoredView {
+struct ScoredView<'a> {
     frame: usize,
     frame_position: usize,
     camera_position: usize,
@@ -559,6 +592,11 @@ struct ScoredView {
     time: f64,
     /// At a view between the inputs, the rendered expected flow of every moving source.
     rendered_flows: Vec<(MotionSource, RenderedFlow)>,
+    /// At a view between the inputs with a dynamic mask, the view rendered under every image source
+    /// (interleaved, clamped).
+    source_renders: Vec<(ImageSource, Vec<f32>)>,
+    /// The scene's folder of crops, when they are written.
+    crops: Option<&'a Path>,
 }
 
 /// The expected flow rasterised at one target view ([`dggt_scene::render_flow`]).
@@ -640,7 +678,7 @@ fn score_view(
     scene: &Scene,
     forward: &ForwardScene,
     context: &SceneContext<'_>,
-    view: &ScoredView,
+    view: &ScoredView<'_>,
     images: RenderedImages<'_>,
     depth: &[f32],
     seen: &mut FlowSeen,
@@ -669,8 +707,12 @@ fn score_view(
         depth_note: None,
         motion: None,
         motion_by_source: Vec::new(),
+        dynamic_psnr_by_source: Vec::new(),
         refined,
     };
+    if let Some(mask) = prepared.dynamic_mask.as_ref().filter(|_| !view.source_renders.is_empty()) {
+        record.dynamic_psnr_by_source = sources_on_mask(view, &truth, mask, forward.size, &record)?;
+    }
     let files = &scene.view(view.frame_position, view.camera_position).files;
     match scene.depth_map(view.frame_position, view.camera_position)? {
         None => record.depth_note = Some("the export has neither a depth_flows_4 map nor lidar for this view".into()),
@@ -701,6 +743,31 @@ fn score_view(
         }
     }
     Ok(record)
+}
+
+/// Every image source's PSNR over `mask` at `view`, and with a crop folder the strip of their crops beside the
+/// truth (none for an empty mask).
+fn sources_on_mask(
+    view: &ScoredView<'_>,
+    truth: &[f32],
+    mask: &BinaryMask,
+    size: ImageSize,
+    record: &ViewRecord,
+) -> Result<Vec<SourcePsnr>, EvalError> {
+    let Some(area) = crop_box(mask) else { return Ok(Vec::new()) };
+    let mut scores = Vec::new();
+    for (source, rgb) in &view.source_renders {
+        if let (Some(dynamic_psnr), _) = moving_region_psnr(rgb, truth, Some(mask))? {
+            scores.push(SourcePsnr { source: source.name().into(), dynamic_psnr, count: 1 });
+        }
+    }
+    if let Some(folder) = view.crops {
+        let path = folder.join(format!("f{:04}_c{}.png", record.frame, record.camera));
+        let images: Vec<&[f32]> =
+            std::iter::once(truth).chain(view.source_renders.iter().map(|(_, rgb)| &rgb[..])).collect();
+        write_crop_strip(&path, size, area, &images)?;
+    }
+    Ok(scores)
 }
 
 /// PSNR of the render over the pixels of the view's dynamic mask (interleaved RGB of the network's size), and

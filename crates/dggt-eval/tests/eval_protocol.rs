@@ -7,7 +7,9 @@ use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
 use burn::tensor::Device;
-use dggt_eval::{EvalOptions, LpipsWeights, MOTION_HELD, MOTION_INSTANCES, MOTION_VELOCITY, Protocol, evaluate};
+use dggt_eval::{
+    CropImages, EvalOptions, LpipsWeights, MOTION_HELD, MOTION_INSTANCES, MOTION_VELOCITY, Protocol, evaluate,
+};
 use dggt_infer::Architecture;
 use dggt_refine::{Latent, Prompt, ReferenceView, RefinerSpec};
 use dggt_scene::DynamicMotion;
@@ -242,12 +244,14 @@ fn predicted_velocities_are_scored_at_the_input_views() {
     let out = tempfile::tempdir().unwrap();
     let mut options = EvalOptions::new(vec![fixture()], run_dir.path(), out.path());
     options.width = Some(84);
+    options.crops = CropImages::Write;
     evaluate(&options, &Device::flex()).unwrap();
 
     let report: Value = serde_json::from_slice(&std::fs::read(out.path().join("eval.json")).unwrap()).unwrap();
     assert_eq!(report["motion_source"], MOTION_VELOCITY);
     let views = report["scenes"][0]["views"].as_array().unwrap();
     assert_sources_side_by_side(views, &["held", "velocity", "instances"], "velocity");
+    assert_images_side_by_side(views, &out.path().join("crops/synth-s0"));
     let between = |v: &&Value| v["split"] == "novel_view" && v.get("motion_by_source").is_some();
     assert!(views.iter().any(|v| between(&v)), "no view between the inputs scored side by side");
     let (mut scored, mut unscored, mut moving) = (0, 0, 0);
@@ -275,6 +279,37 @@ fn predicted_velocities_are_scored_at_the_input_views() {
     let overall = &report["overall"][0];
     assert_eq!(overall["split"], "reconstruction");
     assert!(number(overall, "epe3d").is_finite(), "{overall}");
+}
+
+/// Every view between the inputs with moving objects is drawn by every image source, the one the
+/// reconstruction renders with (velocity, cross-faded as the configuration says) scoring as the render does;
+/// the crops are one strip per such view, the truth and four sources wide; an input view has none.
+fn assert_images_side_by_side(views: &[Value], crops: &Path) {
+    let mut drawn = 0;
+    let mut differ = 0;
+    for view in views {
+        let Some(listed) = view["dynamic_psnr_by_source"].as_array() else {
+            let between_with_mask = view["split"] == "novel_view" && number(view, "dynamic_pixels") > 0.0;
+            assert!(!between_with_mask, "a view between the inputs without its sources: {view}");
+            continue;
+        };
+        assert_eq!(view["split"], "novel_view", "{view}");
+        let psnr = |name: &str| number(listed.iter().find(|m| m["source"] == name).unwrap(), "dynamic_psnr");
+        let names: Vec<&str> = listed.iter().map(|m| m["source"].as_str().unwrap()).collect();
+        assert_eq!(names, ["held", "cross-fade", "velocity", "instances"], "{view}");
+        assert_eq!(psnr("velocity"), number(view, "dynamic_psnr"), "{view}");
+        differ += usize::from(psnr("held") != psnr("cross-fade"));
+        let strip = crops.join(format!("f{:04}_c{}.png", number(view, "frame"), number(view, "camera")));
+        let (size, _) =
+            dggt_formats::images::read_rgb_png(&strip).unwrap_or_else(|e| panic!("{}: {e}", strip.display()));
+        let tile = (size.width - 4 * 2) / 5;
+        assert_eq!(size.width, 5 * tile + 4 * 2, "{}", strip.display());
+        assert!(size.height >= 96, "{}", strip.display());
+        drawn += 1;
+    }
+    let files = std::fs::read_dir(crops).unwrap().count();
+    assert!(drawn > 0 && files == drawn, "{drawn} views drawn by every source, {files} crops");
+    assert!(differ > 0, "held and cross-faded never differ");
 }
 
 /// Every scored input view lists `sources` in order, the rendered source's metrics equal to its `motion`; a view

@@ -54,7 +54,7 @@ impl Prediction {
         };
         let pixels = match options.assembly.dynamic_motion {
             DynamicMotion::Instances => pixels.with_instances(&options.assembly.instances)?,
-            DynamicMotion::Velocity => pixels,
+            DynamicMotion::Velocity | DynamicMotion::Held => pixels,
         };
         let sky = match (&model.sky_model, options.sky) {
             (Some(sky_model), SkyChoice::Render) => {

@@ -99,7 +99,7 @@ pub struct RenderSection {
     /// bracketing views, opacities weighted by time).
     pub dynamic_blend: DynamicBlend,
     /// How those dynamic Gaussians reach a target's time: `velocity` (the predicted velocities when the network
-    /// has them, else held where predicted) or `instances` (the dynamic pixels grouped into objects, each moved
+    /// has them, else held where predicted), `held` (where predicted, velocities or not) or `instances` (the dynamic pixels grouped into objects, each moved
     /// rigidly along its trajectory through the inputs; `[render.instances]` tunes how they are found).
     pub dynamic_motion: DynamicMotion,
     /// How moving objects are found when `dynamic_motion = "instances"`.

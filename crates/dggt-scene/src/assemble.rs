@@ -62,6 +62,9 @@ pub struct AssemblySettings {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum DynamicMotion {
+    /// Held where it was predicted, even when the model predicts velocities (the reference every moving
+    /// source is scored against).
+    Held,
     /// By its predicted velocity when the model predicts one, held where it was predicted otherwise.
     #[default]
     Velocity,
@@ -72,11 +75,12 @@ pub enum DynamicMotion {
 }
 
 impl DynamicMotion {
-    pub const ALL: [DynamicMotion; 2] = [Self::Velocity, Self::Instances];
+    pub const ALL: [DynamicMotion; 3] = [Self::Held, Self::Velocity, Self::Instances];
 
-    /// `velocity` or `instances`, as in configurations.
+    /// `held`, `velocity` or `instances`, as in configurations.
     pub fn name(self) -> &'static str {
         match self {
+            Self::Held => "held",
             Self::Velocity => "velocity",
             Self::Instances => "instances",
         }
@@ -247,7 +251,7 @@ impl Candidates {
         // The dynamic ones of the source views, moved over their `elapsed` scene time and weighted.
         let instances = match settings.dynamic_motion {
             DynamicMotion::Instances => pixels.instances(),
-            DynamicMotion::Velocity => None,
+            DynamicMotion::Velocity | DynamicMotion::Held => None,
         };
         let sources: Vec<DynamicSource> = match &dynamic {
             Some(_) => dynamic_sources(&pixels.views, target.rig_camera, target.time, settings.dynamic_blend)
@@ -258,6 +262,7 @@ impl Candidates {
                         range: view * per_view..(view + 1) * per_view,
                         elapsed: (target.time - from) as f32,
                         weight: weight as f32,
+                        motion: settings.dynamic_motion,
                         rigid: instances.map_or_else(Vec::new, |found| {
                             (0..found.len()).map(|k| found.motion(k, from, target.time)).collect()
                         }),
@@ -441,6 +446,8 @@ struct DynamicSource {
     elapsed: f32,
     /// Multiplies the view's dynamic opacities.
     weight: f32,
+    /// Whether the predicted velocities move the rows no instance moves ([`DynamicMotion::Held`] holds them).
+    motion: DynamicMotion,
     /// Per instance, its motion from the view's time to the target's; empty unless instances move the
     /// Gaussians.
     rigid: Vec<RigidMotion>,
@@ -466,12 +473,18 @@ impl DynamicSource {
         }
     }
 
+    /// The host velocities that move the rows no instance moves, unless this source holds them.
+    fn host_velocity<'a>(&self, pixels: &'a PixelGaussians) -> Option<&'a [[f32; 3]]> {
+        match self.motion {
+            DynamicMotion::Held => None,
+            DynamicMotion::Velocity | DynamicMotion::Instances => pixels.host_velocity.as_deref(),
+        }
+    }
+
     /// Row `row`'s world velocity at time `at` under this source's motion (see [`assembled_velocities`]).
     fn velocity(&self, pixels: &PixelGaussians, row: usize, at: f64) -> [f32; 3] {
         match (self.group(pixels, row), pixels.instances()) {
-            (Instances::NONE, _) | (_, None) => {
-                pixels.host_velocity.as_ref().map_or([0.0; 3], |velocity| velocity[row])
-            }
+            (Instances::NONE, _) | (_, None) => self.host_velocity(pixels).map_or([0.0; 3], |velocity| velocity[row]),
             (instance, Some(found)) => {
                 let instance = instance as usize;
                 let moved = self.rigid[instance].apply(DVec3::from_array(pixels.host_means[row].map(f64::from)));
@@ -482,7 +495,7 @@ impl DynamicSource {
 
     fn motion<'a>(&'a self, pixels: &'a PixelGaussians, row: usize) -> RowMotion<'a> {
         match self.group(pixels, row) {
-            Instances::NONE => match &pixels.host_velocity {
+            Instances::NONE => match self.host_velocity(pixels) {
                 Some(velocity) if self.elapsed != 0.0 => RowMotion::Velocity(velocity, self.elapsed),
                 _ => RowMotion::Held,
             },

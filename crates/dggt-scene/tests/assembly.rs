@@ -8,8 +8,8 @@ use dggt_geom::glam::{DQuat, DVec3};
 use dggt_geom::{PinholeIntrinsics, PixelConvention, PosedCamera, WorldFromCamera};
 use dggt_model::gaussian_maps::GaussianMaps;
 use dggt_scene::{
-    AssemblySettings, DynamicBlend, HiddenSky, InputView, MeansGradient, PixelGaussians, TargetView, assemble,
-    interpolate_camera, render_target,
+    AssemblySettings, DynamicBlend, DynamicMotion, HiddenSky, InputView, MeansGradient, PixelGaussians, TargetView,
+    assemble, interpolate_camera, render_target,
 };
 use dggt_splat::OpacityTensor;
 
@@ -312,6 +312,11 @@ fn the_motion_head_moves_dynamic_gaussians_to_the_target_time() {
             );
         }
     }
+    // Held motion ignores the velocities: the moving pixels assemble as the still ones, and their flow is zero.
+    let held_motion = AssemblySettings { dynamic_motion: DynamicMotion::Held, ..exact };
+    assert_eq!(means(&assemble(&moving, &target, &held_motion).unwrap()), held_means);
+    let still = dggt_scene::assembled_velocities(&moving, &target, &held_motion).unwrap();
+    assert!(still.iter().flatten().all(|&v| v == 0.0), "held Gaussians have no velocity");
     // At an input's own time nothing moves.
     let at_input = TargetView { rig_camera: 0, time: 1.0, camera: turned[2].camera };
     let (a, b) = (assemble(&held, &at_input, &exact).unwrap(), assemble(&moving, &at_input, &exact).unwrap());
