@@ -66,8 +66,8 @@ impl FrameCloud {
         self.len() == 0
     }
 
-    /// Rows `start..start + len` of both tensors.
-    pub fn rows(&self, start: usize, len: usize) -> Self {
+    /// Rows `start..start + len` of both tensors (`len > 0`: burn's `narrow` refuses an empty range).
+    pub(crate) fn rows(&self, start: usize, len: usize) -> Self {
         Self::new(self.points.clone().narrow(0, start, len), self.features.clone().narrow(0, start, len))
     }
 

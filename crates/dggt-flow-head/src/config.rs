@@ -63,7 +63,7 @@ impl FlowHeadConfig {
         if let Some((field, _)) = counts.iter().find(|(_, value)| *value == 0) {
             return Err(ConfigError::Zero { field });
         }
-        if self.hidden % self.heads != 0 {
+        if !self.hidden.is_multiple_of(self.heads) {
             return Err(ConfigError::HeadsDoNotDivideHidden { hidden: self.hidden, heads: self.heads });
         }
         Ok(())

@@ -38,6 +38,7 @@ pub struct FlowHead {
     /// Encoding of a neighbour's normalised offset from the query.
     pub offset_in: Mlp,
     pub query: Linear,
+    /// Without bias (it would cancel in the softmax).
     pub key: Linear,
     pub value: Linear,
     /// The attended values and per-head matched offsets into a residual of the state.
@@ -82,7 +83,8 @@ impl FlowHead {
             state_in: Mlp::new(3, hidden, hidden, OutputInit::Random, device),
             offset_in: Mlp::new(3, hidden, hidden, OutputInit::Random, device),
             query: linear(hidden, hidden),
-            key: linear(hidden, hidden),
+            // A key bias would shift all of a query's scores alike, which the softmax ignores.
+            key: LinearConfig::new(hidden, hidden).with_bias(false).init(device),
             value: linear(hidden, hidden),
             merge: linear(hidden + 3 * config.heads, hidden),
             update: Mlp::new(hidden, hidden, 3, OutputInit::Zero, device),
@@ -158,22 +160,33 @@ impl FlowHead {
 
     /// One refinement iteration with the neighbours' `rows` (`k` per query, query after query).
     fn step(&self, target: &Target, queries: Queries, rows: Vec<usize>) -> Queries {
-        let [n, _] = queries.points.dims();
-        let (k, hidden) = (target.k, self.feature_in.weight.dims()[1]);
-        let scale = target.scale.clone();
-        let rows: Vec<i64> = rows.into_iter().map(|r| r as i64).collect();
-        let rows = Tensor::<1, Int>::from_data(TensorData::new(rows, [n * k]), &queries.points.device());
+        let scale = target.scale.clone().reshape([1, 1]);
         let position = queries.points.clone() + queries.displacement.clone();
-        let neighbours = target.points.clone().select(0, rows.clone()).reshape([n, k, 3]);
-        let offsets = (neighbours - position.unsqueeze_dim::<3>(1)) / scale.clone().reshape([1, 1, 1]);
-        let tokens =
-            target.tokens.clone().select(0, rows).reshape([n, k, hidden]) + self.offset_in.forward(offsets.clone());
-        let query =
-            queries.state.clone() + self.state_in.forward(queries.displacement.clone() / scale.clone().reshape([1, 1]));
+        let (offsets, tokens) = self.neighbourhood(target, rows, position, scale.clone());
+        let query = queries.state.clone() + self.state_in.forward(queries.displacement.clone() / scale.clone());
         let attended = self.attend(query, tokens, offsets);
         let state = queries.state + self.merge.forward(attended);
-        let displacement = queries.displacement + self.update.forward(state.clone()) * scale.reshape([1, 1]);
+        let displacement = queries.displacement + self.update.forward(state.clone()) * scale;
         Queries { state, displacement, ..queries }
+    }
+
+    /// The neighbours at `rows` of the queries at `position` `[N, 3]`: their offsets `(p_j - x_q) / s`,
+    /// `[N, k, 3]`, and their tokens, projected features plus the offset's encoding, `[N, k, hidden]`.
+    fn neighbourhood(
+        &self,
+        target: &Target,
+        rows: Vec<usize>,
+        position: Tensor<2>,
+        scale: Tensor<2>,
+    ) -> (Tensor<3>, Tensor<3>) {
+        let [n, _] = position.dims();
+        let (k, hidden) = (target.k, target.tokens.dims()[1]);
+        let rows = TensorData::new(rows.into_iter().map(|r| r as i64).collect(), [n * k]);
+        let rows = Tensor::<1, Int>::from_data(rows, &position.device());
+        let neighbours = target.points.clone().select(0, rows.clone()).reshape([n, k, 3]);
+        let offsets = (neighbours - position.unsqueeze_dim::<3>(1)) / scale.unsqueeze_dim::<3>(0);
+        let tokens = target.tokens.clone().select(0, rows).reshape([n, k, hidden]);
+        (offsets.clone(), tokens + self.offset_in.forward(offsets))
     }
 
     /// Multi-head attention of each query token `[N, hidden]` over its neighbours' tokens `[N, k, hidden]`:
