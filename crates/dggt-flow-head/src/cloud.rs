@@ -4,7 +4,8 @@
 //! A [`FrameCloud`] holds row-aligned tensors: `points` `[N, 3]`, the Gaussian means in world units (`x y z`), and
 //! `features` `[N, C]`, the image features sampled at the same pixels ([`crate::sample_features`]). The points are
 //! read back to the host for the neighbour search, and checked there: the head refuses a non-finite point with
-//! an error naming its cloud and row rather than searching with it.
+//! an error naming its cloud and row rather than searching with it. Features are not read back (a non-finite
+//! feature shows as a non-finite displacement, refused before the next neighbour search).
 
 use burn::tensor::Tensor;
 

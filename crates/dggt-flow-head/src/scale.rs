@@ -8,8 +8,8 @@
 //! Degenerate clouds (one target point, or all coincident) fall back to the RMS distance of both clouds' points
 //! about their joint centroid.
 //!
-//! The spacing depends on the target cloud alone, so the queries may be processed in chunks with identical
-//! results.
+//! The length is computed once per forward pass, from the whole clouds, before the queries are split into chunks,
+//! so the chunking does not change it.
 
 use burn::tensor::{Int, Tensor, TensorData};
 
