@@ -26,5 +26,6 @@ pub mod scale;
 
 pub use cloud::{CloudRole, FlowError, FrameCloud};
 pub use config::{ConfigError, FlowHeadConfig};
+pub use dggt_geom::ImageSize;
 pub use head::FlowHead;
-pub use sample::{ImageSize, PixelIndex, SampleError, sample_features};
+pub use sample::{PixelIndex, SampleError, sample_features};

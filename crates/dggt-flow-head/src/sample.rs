@@ -12,19 +12,13 @@
 //! The scales' samples are concatenated along channels in the order of the maps.
 
 use burn::tensor::{Int, Tensor, TensorData};
+use dggt_geom::ImageSize;
 
 /// A pixel of the full-resolution image.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct PixelIndex {
     pub row: usize,
     pub col: usize,
-}
-
-/// The full image resolution the pixels are named in.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct ImageSize {
-    pub height: usize,
-    pub width: usize,
 }
 
 /// Why features could not be sampled.
@@ -71,7 +65,7 @@ fn check(maps: &[Tensor<4>], frame: usize, image: ImageSize, pixels: &[PixelInde
             return Err(SampleError::FrameOutOfRange { scale, frame, frames });
         }
     }
-    let ImageSize { height, width } = image;
+    let (height, width) = (image.height as usize, image.width as usize);
     match pixels.iter().position(|p| p.row >= height || p.col >= width) {
         Some(index) => {
             let PixelIndex { row, col } = pixels[index];
@@ -108,8 +102,8 @@ impl CornerTaps {
         let n = pixels.len();
         let (mut rows, mut weights) = (vec![0i64; 4 * n], vec![0f32; 4 * n]);
         for (i, pixel) in pixels.iter().enumerate() {
-            let y = AxisTaps::new(pixel.row, image.height, height);
-            let x = AxisTaps::new(pixel.col, image.width, width);
+            let y = AxisTaps::new(pixel.row, image.height as usize, height);
+            let x = AxisTaps::new(pixel.col, image.width as usize, width);
             let corners = [(y.low, x.low), (y.low, x.high), (y.high, x.low), (y.high, x.high)];
             for (corner, ((yi, wy), (xi, wx))) in corners.into_iter().enumerate() {
                 rows[corner * n + i] = (yi * width + xi) as i64;
@@ -166,7 +160,7 @@ mod tests {
         let values = ramp(frames * channels * h * w);
         let maps = [map(values.clone(), [frames, channels, h, w], &device)];
         let pixels = [pixel(0, 0), pixel(4, 6), pixel(2, 3), pixel(1, 5)];
-        let got = host(sample_features(&maps, 1, ImageSize { height: h, width: w }, &pixels).unwrap());
+        let got = host(sample_features(&maps, 1, ImageSize { height: h as u32, width: w as u32 }, &pixels).unwrap());
         for (i, p) in pixels.iter().enumerate() {
             for c in 0..channels {
                 let expected = values[((channels + c) * h + p.row) * w + p.col];
