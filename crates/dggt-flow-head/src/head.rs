@@ -1,0 +1,218 @@
+//! The flow head: the displacement of each query point of time `ta` to time `tb`, refined by attention over its
+//! neighbourhood in `tb`'s feature cloud.
+//!
+//! Each query carries a state (a `hidden`-wide token, initially its projected features) and a displacement
+//! (initially zero: the point is held where it is). One refinement iteration:
+//!
+//! 1. the query's current position `x_q = p_q + d_q` is read back and its `k` nearest target points `j` are found
+//!    on the host ([`crate::neighbours`]); their rows are data, not part of the gradient;
+//! 2. offsets `o_j = (p_j - x_q) / s` are measured in the target's spacing `s` ([`crate::scale`]);
+//! 3. attention, per head: the query token is `state + enc_d(d_q / s)` (the iteration state), each key and value
+//!    token is `proj(f_j) + enc_o(o_j)` (the neighbour's features and where it lies); the attended vector is the
+//!    weighted values together with each head's weighted offset `sum_j a_j o_j` (the head's soft match);
+//! 4. the state takes the attended vector as a residual (`state += merge(attended)`), and the update perceptron
+//!    turns the state into a step of the displacement, `d_q += s * update(state)`.
+//!
+//! The update's last layer starts at zero, so a fresh head predicts exactly zero displacement. Offsets in, steps
+//! out, are in units of `s`, so scaling both clouds' points scales the displacement by the same factor.
+//! Queries are processed in chunks of [`FlowHeadConfig::chunk`] rows; the result does not depend on the chunking.
+
+use burn::module::Module;
+use burn::nn::{Linear, LinearConfig};
+use burn::tensor::activation::softmax;
+use burn::tensor::{Device, Int, Tensor, TensorData};
+
+use crate::cloud::{CloudRole, FlowError, FrameCloud, read_rows};
+use crate::config::FlowHeadConfig;
+use crate::mlp::{Mlp, OutputInit};
+use crate::neighbours::NeighbourSearch;
+use crate::scale::ScaleSource;
+
+/// The learnt scene-flow head `F(ta, tb)`; built by [`FlowHeadConfig::init`].
+#[derive(Module, Debug)]
+pub struct FlowHead {
+    /// Features of either cloud into a token (one projection: both times' features live in the same space).
+    pub feature_in: Linear,
+    /// Encoding of the query's normalised displacement so far.
+    pub state_in: Mlp,
+    /// Encoding of a neighbour's normalised offset from the query.
+    pub offset_in: Mlp,
+    pub query: Linear,
+    /// Without bias (it would cancel in the softmax).
+    pub key: Linear,
+    pub value: Linear,
+    /// The attended values and per-head matched offsets into a residual of the state.
+    pub merge: Linear,
+    /// The state into a step of the normalised displacement; its last layer starts at zero.
+    pub update: Mlp,
+    feature_width: usize,
+    heads: usize,
+    neighbours: usize,
+    iterations: usize,
+    chunk: usize,
+}
+
+/// What every query chunk reads of the target cloud.
+struct Target {
+    points: Tensor<2>,
+    /// `[Nt, hidden]`: the projected features.
+    tokens: Tensor<2>,
+    search: NeighbourSearch,
+    /// `[1]`: the spacing offsets are measured in.
+    scale: Tensor<1>,
+    /// Neighbours per query: the configured count, or every target point when there are fewer.
+    k: usize,
+}
+
+/// One chunk of queries during refinement.
+struct Queries {
+    points: Tensor<2>,
+    host_points: Vec<[f32; 3]>,
+    /// The chunk's first row in the query cloud (for errors).
+    first_row: usize,
+    state: Tensor<2>,
+    displacement: Tensor<2>,
+}
+
+impl FlowHead {
+    pub(crate) fn new(config: &FlowHeadConfig, device: &Device) -> Self {
+        let hidden = config.hidden;
+        let linear = |input: usize, output: usize| LinearConfig::new(input, output).init(device);
+        Self {
+            feature_in: linear(config.feature_width(), hidden),
+            state_in: Mlp::new(3, hidden, hidden, OutputInit::Random, device),
+            offset_in: Mlp::new(3, hidden, hidden, OutputInit::Random, device),
+            query: linear(hidden, hidden),
+            // A key bias would shift all of a query's scores alike, which the softmax ignores.
+            key: LinearConfig::new(hidden, hidden).with_bias(false).init(device),
+            value: linear(hidden, hidden),
+            merge: linear(hidden + 3 * config.heads, hidden),
+            update: Mlp::new(hidden, hidden, 3, OutputInit::Zero, device),
+            feature_width: config.feature_width(),
+            heads: config.heads,
+            neighbours: config.neighbours,
+            iterations: config.iterations,
+            chunk: config.chunk,
+        }
+    }
+
+    /// `[Nq, 3]`: the displacement, in world units, of each query point from the query's time to the target's.
+    /// Zero for every query when the target cloud is empty; `[0, 3]` for an empty query cloud.
+    pub fn forward(&self, query: &FrameCloud, target: &FrameCloud) -> Result<Tensor<2>, FlowError> {
+        query.check_shapes(CloudRole::Query, self.feature_width)?;
+        target.check_shapes(CloudRole::Target, self.feature_width)?;
+        let held = query.points.zeros_like();
+        if query.is_empty() {
+            return Ok(held);
+        }
+        let query_points = query.host_points(CloudRole::Query)?;
+        let target_points = target.host_points(CloudRole::Target)?;
+        if target.is_empty() {
+            return Ok(held);
+        }
+        let target = self.prepare_target(query, target, &target_points);
+        let chunks = (0..query.len())
+            .step_by(self.chunk)
+            .map(|start| {
+                let len = self.chunk.min(query.len() - start);
+                let rows = query.rows(start, len);
+                self.refine(&target, self.start(rows, query_points[start..start + len].to_vec(), start))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(Tensor::cat(chunks, 0))
+    }
+
+    fn prepare_target(&self, query: &FrameCloud, target: &FrameCloud, host_points: &[[f32; 3]]) -> Target {
+        let search = NeighbourSearch::new(host_points);
+        let scale = ScaleSource::of_target(host_points, &search).length(query, target);
+        Target {
+            points: target.points.clone(),
+            tokens: self.feature_in.forward(target.features.clone()),
+            scale,
+            k: self.neighbours.min(search.len()),
+            search,
+        }
+    }
+
+    /// A chunk's initial state: its projected features, and no displacement.
+    fn start(&self, cloud: FrameCloud, host_points: Vec<[f32; 3]>, first_row: usize) -> Queries {
+        Queries {
+            displacement: cloud.points.zeros_like(),
+            state: self.feature_in.forward(cloud.features),
+            points: cloud.points,
+            host_points,
+            first_row,
+        }
+    }
+
+    /// The chunk's displacement after every iteration.
+    fn refine(&self, target: &Target, mut queries: Queries) -> Result<Tensor<2>, FlowError> {
+        let mut positions = queries.host_points.clone();
+        for iteration in 0..self.iterations {
+            let rows = target.search.k_nearest(&positions, target.k);
+            queries = self.step(target, queries, rows);
+            if iteration + 1 < self.iterations {
+                positions = moved(&queries, iteration)?;
+            }
+        }
+        Ok(queries.displacement)
+    }
+
+    /// One refinement iteration with the neighbours' `rows` (`k` per query, query after query).
+    fn step(&self, target: &Target, queries: Queries, rows: Vec<usize>) -> Queries {
+        let scale = target.scale.clone().reshape([1, 1]);
+        let position = queries.points.clone() + queries.displacement.clone();
+        let (offsets, tokens) = self.neighbourhood(target, rows, position, scale.clone());
+        let query = queries.state.clone() + self.state_in.forward(queries.displacement.clone() / scale.clone());
+        let attended = self.attend(query, tokens, offsets);
+        let state = queries.state + self.merge.forward(attended);
+        let displacement = queries.displacement + self.update.forward(state.clone()) * scale;
+        Queries { state, displacement, ..queries }
+    }
+
+    /// The neighbours at `rows` of the queries at `position` `[N, 3]`: their offsets `(p_j - x_q) / s`,
+    /// `[N, k, 3]`, and their tokens, projected features plus the offset's encoding, `[N, k, hidden]`.
+    fn neighbourhood(
+        &self,
+        target: &Target,
+        rows: Vec<usize>,
+        position: Tensor<2>,
+        scale: Tensor<2>,
+    ) -> (Tensor<3>, Tensor<3>) {
+        let [n, _] = position.dims();
+        let (k, hidden) = (target.k, target.tokens.dims()[1]);
+        let rows = TensorData::new(rows.into_iter().map(|r| r as i64).collect(), [n * k]);
+        let rows = Tensor::<1, Int>::from_data(rows, &position.device());
+        let neighbours = target.points.clone().select(0, rows.clone()).reshape([n, k, 3]);
+        let offsets = (neighbours - position.unsqueeze_dim::<3>(1)) / scale.unsqueeze_dim::<3>(0);
+        let tokens = target.tokens.clone().select(0, rows).reshape([n, k, hidden]);
+        (offsets.clone(), tokens + self.offset_in.forward(offsets))
+    }
+
+    /// Multi-head attention of each query token `[N, hidden]` over its neighbours' tokens `[N, k, hidden]`:
+    /// `[N, hidden + 3 heads]`, the attended values, then each head's attention-weighted offset.
+    fn attend(&self, query: Tensor<2>, tokens: Tensor<3>, offsets: Tensor<3>) -> Tensor<2> {
+        let [n, k, hidden] = tokens.dims();
+        let (heads, width) = (self.heads, hidden / self.heads);
+        let split = |t: Tensor<3>| t.reshape([n, k, heads, width]).swap_dims(1, 2);
+        let q = self.query.forward(query).reshape([n, heads, 1, width]);
+        let keys = split(self.key.forward(tokens.clone()));
+        let values = split(self.value.forward(tokens));
+        let weights = softmax(q.matmul(keys.swap_dims(2, 3)) / (width as f64).sqrt(), 3);
+        let attended = weights.clone().matmul(values).reshape([n, hidden]);
+        let matched = weights.matmul(offsets.unsqueeze_dim::<4>(1).expand([n, heads, k, 3])).reshape([n, 3 * heads]);
+        Tensor::cat(vec![attended, matched], 1)
+    }
+}
+
+/// The chunk's current positions `p_q + d_q` on the host, refused if a displacement is not finite.
+fn moved(queries: &Queries, iteration: usize) -> Result<Vec<[f32; 3]>, FlowError> {
+    let displacement = read_rows(queries.displacement.clone())
+        .map_err(|reason| FlowError::Readback { cloud: CloudRole::Query, reason })?;
+    let positions: Vec<[f32; 3]> =
+        queries.host_points.iter().zip(&displacement).map(|(p, d)| [p[0] + d[0], p[1] + d[1], p[2] + d[2]]).collect();
+    match displacement.iter().position(|d| !d.iter().all(|v| v.is_finite())) {
+        Some(row) => Err(FlowError::NonFiniteDisplacement { row: queries.first_row + row, iteration }),
+        None => Ok(positions),
+    }
+}

@@ -1,0 +1,175 @@
+//! The flow head's behaviour on `Device::flex()` in f32: a fresh head holds every point, empty clouds, scale
+//! freedom, chunking, typed errors for bad input, and a small overfit with Adam.
+
+mod common;
+
+use std::time::Instant;
+
+use burn::module::Module;
+use burn::optim::{AdamConfig, GradientsParams};
+use burn::tensor::{Device, Tensor};
+use common::{Host, HostCloud, Rng, randomised, small_config, values};
+use dggt_flow_head::{CloudRole, FlowError, FlowHeadConfig, FrameCloud};
+
+/// `n` points uniform in `[0, extent)^3` with standard normal features.
+fn random_cloud(n: usize, extent: f64, widths: usize, rng: &mut Rng) -> HostCloud {
+    HostCloud {
+        points: Host::new(n, 3, (0..3 * n).map(|_| rng.uniform(0.0, extent)).collect()),
+        features: Host::new(n, widths, rng.normals(n * widths, 1.0)),
+    }
+}
+
+fn clouds(config: &FlowHeadConfig, queries: usize, targets: usize, seed: u64) -> (HostCloud, HostCloud) {
+    let mut rng = Rng::new(seed);
+    let width = config.feature_width();
+    (random_cloud(queries, 4.0, width, &mut rng), random_cloud(targets, 4.0, width, &mut rng))
+}
+
+fn empty(config: &FlowHeadConfig, device: &Device) -> FrameCloud {
+    FrameCloud::new(Tensor::zeros([0, 3], device), Tensor::zeros([0, config.feature_width()], device))
+}
+
+#[test]
+fn a_fresh_head_predicts_exactly_zero() {
+    let device = Device::flex();
+    let config = small_config();
+    let (query, target) = clouds(&config, 12, 40, 1);
+    let head = config.init(&device).unwrap();
+    let flow = head.forward(&query.upload(&device), &target.upload(&device)).unwrap();
+    assert_eq!(flow.dims(), [12, 3]);
+    assert!(values(flow).iter().all(|v| *v == 0.0));
+}
+
+#[test]
+fn empty_clouds() {
+    let device = Device::flex();
+    let config = small_config();
+    let head = randomised(&config, 2, &device);
+    let (query, target) = clouds(&config, 7, 20, 3);
+    let (query, target) = (query.upload(&device), target.upload(&device));
+    assert_eq!(head.forward(&empty(&config, &device), &target).unwrap().dims(), [0, 3]);
+    let flow = head.forward(&query, &empty(&config, &device)).unwrap();
+    assert_eq!(flow.dims(), [7, 3]);
+    assert!(values(flow).iter().all(|v| *v == 0.0));
+    // A head that moves points does move them when there is a target.
+    assert!(values(head.forward(&query, &target).unwrap()).iter().any(|v| *v != 0.0));
+}
+
+#[test]
+fn scaling_both_clouds_scales_the_displacement() {
+    let device = Device::flex();
+    let config = small_config();
+    let head = randomised(&config, 4, &device);
+    let (query, target) = clouds(&config, 30, 50, 5);
+    let flow = |factor: f64| {
+        let scale = |c: &HostCloud| HostCloud { points: c.points.scaled(factor), features: c.features.clone() };
+        values(head.forward(&scale(&query).upload(&device), &scale(&target).upload(&device)).unwrap())
+    };
+    let (unit, tenfold) = (flow(1.0), flow(10.0));
+    let largest = unit.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    assert!(largest > 1e-2, "the head moves the points: {largest}");
+    for (a, b) in unit.iter().zip(&tenfold) {
+        assert!((10.0 * a - b).abs() <= 1e-5 * 10.0 * largest, "{a} x 10 vs {b}");
+    }
+}
+
+#[test]
+fn chunking_does_not_change_the_result() {
+    let device = Device::flex();
+    let small_chunks = small_config();
+    let one_chunk = FlowHeadConfig { chunk: 8192, ..small_config() };
+    let (query, target) = clouds(&small_chunks, 23, 40, 6);
+    let run = |config: &FlowHeadConfig| {
+        let head = randomised(config, 7, &device);
+        values(head.forward(&query.upload(&device), &target.upload(&device)).unwrap())
+    };
+    let (chunked, whole) = (run(&small_chunks), run(&one_chunk));
+    for (a, b) in chunked.iter().zip(&whole) {
+        assert!((a - b).abs() <= 1e-6 * (1.0 + b.abs()), "{a} vs {b}");
+    }
+}
+
+#[test]
+fn bad_input_is_named() {
+    let device = Device::flex();
+    let config = small_config();
+    let head = config.init(&device).unwrap();
+    let (query, target) = clouds(&config, 6, 10, 8);
+    let (query, target) = (query.upload(&device), target.upload(&device));
+    let with = |cloud: &FrameCloud, points: Option<Tensor<2>>, features: Option<Tensor<2>>| {
+        FrameCloud::new(points.unwrap_or(cloud.points.clone()), features.unwrap_or(cloud.features.clone()))
+    };
+    let fewer_features = with(&target, None, Some(target.features.clone().narrow(0, 0, 9)));
+    assert_eq!(
+        head.forward(&query, &fewer_features).unwrap_err(),
+        FlowError::RowMismatch { cloud: CloudRole::Target, points: 10, features: 9 }
+    );
+    let narrow_features = with(&query, None, Some(query.features.clone().narrow(1, 0, 4)));
+    assert_eq!(
+        head.forward(&narrow_features, &target).unwrap_err(),
+        FlowError::FeatureWidth { cloud: CloudRole::Query, expected: 5, found: 4 }
+    );
+    let flat_points = with(&query, Some(query.points.clone().narrow(1, 0, 2)), None);
+    assert_eq!(
+        head.forward(&flat_points, &target).unwrap_err(),
+        FlowError::PointWidth { cloud: CloudRole::Query, columns: 2 }
+    );
+    let mut nan = values(target.points.clone());
+    nan[3 * 4 + 1] = f64::NAN;
+    let nan_target = with(&target, Some(Host::new(10, 3, nan).tensor(&device)), None);
+    let error = head.forward(&query, &nan_target).unwrap_err();
+    assert!(matches!(error, FlowError::NonFinitePoint { cloud: CloudRole::Target, row: 4, .. }), "{error}");
+    // Mismatched shapes are reported even when the other cloud is empty.
+    assert!(matches!(head.forward(&empty(&config, &device), &fewer_features), Err(FlowError::RowMismatch { .. })));
+}
+
+/// Sets every parameter to NaN.
+struct Poison;
+
+impl burn::module::ModuleMapper for Poison {
+    fn map_float<const D: usize>(&mut self, param: burn::module::Param<Tensor<D>>) -> burn::module::Param<Tensor<D>> {
+        param.map(|old| old.zeros_like() + f32::NAN)
+    }
+}
+
+#[test]
+fn a_non_finite_displacement_stops_the_search() {
+    let device = Device::flex();
+    let config = small_config();
+    let head = config.init(&device).unwrap().map(&mut Poison);
+    let (query, target) = clouds(&config, 8, 10, 9);
+    let error = head.forward(&query.upload(&device), &target.upload(&device)).unwrap_err();
+    assert_eq!(error, FlowError::NonFiniteDisplacement { row: 0, iteration: 0 });
+}
+
+/// A target that is the query translated by `t`, features equal per point: a few hundred Adam steps bring the
+/// mean displacement error below 10% of `|t|`.
+#[test]
+fn overfits_a_translation() {
+    let device = Device::flex().autodiff();
+    let config =
+        FlowHeadConfig { feature_widths: vec![8], hidden: 32, heads: 4, neighbours: 8, iterations: 2, chunk: 8192 };
+    let mut rng = Rng::new(10);
+    let query = random_cloud(48, 4.0, 8, &mut rng);
+    let shift = [0.3, -0.2, 0.25];
+    let moved = query.points.values.iter().enumerate().map(|(i, v)| v + shift[i % 3]).collect();
+    let target = HostCloud { points: Host::new(48, 3, moved), features: query.features.clone() };
+    let (query, target) = (query.upload(&device), target.upload(&device));
+    let shift_t = Host::new(1, 3, shift.to_vec()).tensor(&device);
+    let norm = shift.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let mean_error = |flow: Tensor<2>| (flow - shift_t.clone()).powi_scalar(2).sum_dim(1).sqrt().mean() / norm;
+    let mut head = config.init(&device).unwrap();
+    let mut optimizer = AdamConfig::new().init();
+    let start = Instant::now();
+    let initial = values(mean_error(head.forward(&query, &target).unwrap()))[0];
+    for _ in 0..300 {
+        let flow = head.forward(&query, &target).unwrap();
+        let loss = (flow - shift_t.clone()).powi_scalar(2).mean() / (norm * norm);
+        let grads = GradientsParams::from_grads(loss.backward(), &head);
+        head = optimizer.step(3e-3, head, grads);
+    }
+    let error = values(mean_error(head.forward(&query, &target).unwrap()))[0];
+    println!("mean error / |t|: {initial:.3} -> {error:.4} in {:.1?}", start.elapsed());
+    assert!((initial - 1.0).abs() < 1e-6, "a fresh head holds the points: {initial}");
+    assert!(error < 0.1, "mean error {error} of |t| after training");
+}
