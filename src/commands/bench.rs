@@ -114,8 +114,8 @@ pub struct SweepArgs {
     #[arg(long, value_delimiter = ',', default_value = "none,motion,sky,all")]
     pub skips: Vec<String>,
     /// Baseline motion of the dynamic Gaussians between inputs: `velocity` (the predicted velocities, held
-    /// without them), `held` (where predicted) or `instances` (the objects among the dynamic pixels moved along
-    /// their trajectories).
+    /// without them), `held` (where predicted), `instances` (the objects among the dynamic pixels moved along
+    /// their trajectories) or `learnt` (along the flow head's learnt flow; a network with a flow head).
     #[arg(long, default_value = "velocity")]
     pub motion: String,
     /// Motions to sweep.

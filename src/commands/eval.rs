@@ -86,7 +86,7 @@ pub struct Args {
     pub refine: RefineArgs,
     /// Also write `crops/<scene>/f<frame>_c<camera>.png` for every view between the inputs with moving objects:
     /// the truth around the dynamic mask, then the view drawn by each motion source (held, cross-fade,
-    /// velocity, instances: those the model has), enlarged.
+    /// velocity, instances, learnt: those the model has), enlarged.
     #[arg(long)]
     pub crops: bool,
 }

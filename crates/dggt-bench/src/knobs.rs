@@ -12,10 +12,13 @@ use crate::error::BenchError;
 use dggt_infer::SkyChoice;
 use dggt_scene::DynamicMotion;
 
-/// Parses how dynamic Gaussians move between inputs: `held`, `velocity` or `instances`.
+/// Parses how dynamic Gaussians move between inputs: `held`, `velocity`, `instances` or `learnt`.
 pub fn parse_motion(text: &str) -> Result<DynamicMotion, BenchError> {
     DynamicMotion::ALL.into_iter().find(|m| m.name().eq_ignore_ascii_case(text.trim())).ok_or_else(|| {
-        BenchError::Setting { setting: "motion", detail: format!("`{text}`: expected held, velocity or instances") }
+        BenchError::Setting {
+            setting: "motion",
+            detail: format!("`{text}`: expected held, velocity, instances or learnt"),
+        }
     })
 }
 
@@ -272,7 +275,7 @@ impl Default for SweepSpec {
             precisions: Precision::ALL.to_vec(),
             sky: vec![SkyChoice::Render, SkyChoice::Skip],
             skips: Skips::ALL.to_vec(),
-            motions: DynamicMotion::ALL.to_vec(),
+            motions: vec![DynamicMotion::Held, DynamicMotion::Velocity, DynamicMotion::Instances],
             full_grid: false,
         }
     }

@@ -8,7 +8,7 @@
 //! - [`motion`]: the predicted flow of the surface at an input view under each motion source, in the export's
 //!   axes and units;
 //! - [`sources`]: the moving objects between the inputs drawn every way the scene can draw them (held,
-//!   cross-faded, by velocity, by instance), scored on the dynamic mask and cropped side by side;
+//!   cross-faded, by velocity, by instance, by the learnt flow), scored on the dynamic mask and cropped side by side;
 //! - [`runner`]: forward pass, renders of every target view, metrics, stage times;
 //! - [`report`]: per-view records, per-scene and overall means, `eval.json` and `eval.md`.
 
@@ -24,8 +24,8 @@ pub use error::EvalError;
 pub use motion::MotionSource;
 pub use protocol::{Protocol, ProtocolKind, TargetKind};
 pub use report::{
-    EvalReport, MOTION_HELD, MOTION_INSTANCES, MOTION_VELOCITY, SceneReport, SourceFlowMetrics, SourcePsnr,
-    SourceSummary, SplitSummary, ViewRecord,
+    EvalReport, MOTION_HELD, MOTION_INSTANCES, MOTION_LEARNT, MOTION_VELOCITY, SceneReport, SourceFlowMetrics,
+    SourcePsnr, SourceSummary, SplitSummary, ViewRecord,
 };
 pub use runner::{EvalOptions, LpipsWeights, evaluate};
 pub use sources::{CropImages, ImageSource};

@@ -25,7 +25,7 @@ use dggt_model::host::host_f32;
 use dggt_scene::PixelGaussians;
 
 use crate::error::EvalError;
-use crate::report::{MOTION_HELD, MOTION_INSTANCES, MOTION_VELOCITY};
+use crate::report::{MOTION_HELD, MOTION_INSTANCES, MOTION_LEARNT, MOTION_VELOCITY};
 
 /// Where the predicted 3D motion of a surface point comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
@@ -36,6 +36,8 @@ pub enum MotionSource {
     Velocity,
     /// The objects found among the dynamic pixels, each moving rigidly along its trajectory.
     Instances,
+    /// The flow head's learnt displacements between adjacent inputs.
+    Learnt,
 }
 
 impl MotionSource {
@@ -45,6 +47,7 @@ impl MotionSource {
             Self::Held => MOTION_HELD,
             Self::Velocity => MOTION_VELOCITY,
             Self::Instances => MOTION_INSTANCES,
+            Self::Learnt => MOTION_LEARNT,
         }
     }
 
@@ -54,6 +57,7 @@ impl MotionSource {
             Self::Held => "held",
             Self::Velocity => "velocity",
             Self::Instances => "instances",
+            Self::Learnt => "learnt",
         }
     }
 }
@@ -81,6 +85,7 @@ impl InputFlow {
             MotionSource::Held => None,
             MotionSource::Velocity => pixels.host_velocity().map(<[_]>::to_vec),
             MotionSource::Instances => instance_velocities(pixels),
+            MotionSource::Learnt => pixels.learnt_velocities(),
         };
         let Some(velocity) = velocity else { return Ok(None) };
         let seconds_per_time = frames_per_time * seconds_per_frame.unwrap_or(0.0);

@@ -27,6 +27,11 @@ pub const MOTION_VELOCITY: &str = "predicted velocities: the expected flow (dyna
      lidar cells, in metres by the view's depth scale (least squares, no shift); at views between the inputs the \
      velocities of the assembled Gaussians rasterised and divided by the opacity";
 
+/// The motion source of a reconstruction that moves its dynamic Gaussians along the flow head's learnt flow.
+pub const MOTION_LEARNT: &str = "learnt: each dynamic pixel's displacement to the neighbouring inputs from the flow head, \
+     a fraction of it at a time between them; the expected flow (dynamic probability x its displacement to the next \
+     input over the step's time) of each input pixel at the input views' lidar cells, as for predicted velocities";
+
 /// The motion source of a reconstruction that moves its objects along their trajectories.
 pub const MOTION_INSTANCES: &str = "instances: the dynamic pixels grouped into objects, each moving rigidly along its \
      trajectory through the inputs; the expected flow (dynamic probability x the object's point velocity at the \

@@ -177,6 +177,7 @@ pub fn evaluate(options: &EvalOptions, device: &Device) -> Result<EvalReport, Ev
     let motion = match network.assembly.dynamic_motion {
         DynamicMotion::Instances => MotionSource::Instances,
         DynamicMotion::Velocity if network.config.predicts_motion() => MotionSource::Velocity,
+        DynamicMotion::Learnt => MotionSource::Learnt,
         DynamicMotion::Velocity | DynamicMotion::Held => MotionSource::Held,
     };
     let mut reports = Vec::new();
@@ -501,6 +502,7 @@ fn rendered_flows(forward: &ForwardScene, target: &TargetView) -> Result<Vec<(Mo
         let dynamic_motion = match (source, flow) {
             (MotionSource::Velocity, Some(_)) => DynamicMotion::Velocity,
             (MotionSource::Instances, Some(_)) => DynamicMotion::Instances,
+            (MotionSource::Learnt, Some(_)) => DynamicMotion::Learnt,
             _ => continue,
         };
         let assembly = AssemblySettings { dynamic_motion, ..forward.scene.assembly };
@@ -537,9 +539,15 @@ fn forward_scene(root: &Path, context: &SceneContext<'_>, watch: &mut Stopwatch)
 
     let started = Instant::now();
     let scene_options = SceneOptions { assembly: network.assembly, ..SceneOptions::default() };
-    let scene = prediction
+    let mut scene = prediction
         .scene(&network.model, &batch, views, &timeline, &scene_options)?
         .ok_or_else(|| EvalError::NoGaussianHead { checkpoint: context.options.checkpoint.clone() })?;
+    // The learnt flow is scored side by side even when the renders do not move along it.
+    if let (Some(head), Some(features), None) =
+        (&network.model.flow_head, &prediction.flow_features, scene.pixels.learnt())
+    {
+        scene.pixels = scene.pixels.with_learnt_flow(head, features)?;
+    }
     drop(prediction);
     watch.add(ASSEMBLY, started);
     Ok(ForwardScene { inputs, input_images, size, mapping, timeline, scene, flows: Vec::new() })
@@ -563,6 +571,9 @@ fn motion_flows(
             forward.scene.pixels = pixels.clone().with_instances(&context.network.assembly.instances)?;
         }
         sources.push(MotionSource::Instances);
+    }
+    if forward.scene.pixels.learnt().is_some() {
+        sources.push(MotionSource::Learnt);
     }
     let frames_per_time = forward.timeline.frames_per_time();
     sources

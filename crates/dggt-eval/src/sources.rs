@@ -26,10 +26,12 @@ pub enum ImageSource {
     Velocity,
     /// Moved rigidly along their objects' trajectories (the reconstruction's blend).
     Instances,
+    /// Moved along the flow head's learnt flow (the reconstruction's blend).
+    Learnt,
 }
 
 impl ImageSource {
-    pub const ALL: [Self; 4] = [Self::Held, Self::CrossFade, Self::Velocity, Self::Instances];
+    pub const ALL: [Self; 5] = [Self::Held, Self::CrossFade, Self::Velocity, Self::Instances, Self::Learnt];
 
     /// The name in reports and in the crops' legend.
     pub fn name(self) -> &'static str {
@@ -38,6 +40,7 @@ impl ImageSource {
             Self::CrossFade => "cross-fade",
             Self::Velocity => "velocity",
             Self::Instances => "instances",
+            Self::Learnt => "learnt",
         }
     }
 
@@ -48,6 +51,7 @@ impl ImageSource {
             Self::CrossFade => (DynamicBlend::CrossFade, DynamicMotion::Held),
             Self::Velocity => (base.dynamic_blend, DynamicMotion::Velocity),
             Self::Instances => (base.dynamic_blend, DynamicMotion::Instances),
+            Self::Learnt => (base.dynamic_blend, DynamicMotion::Learnt),
         };
         AssemblySettings { dynamic_blend, dynamic_motion, ..*base }
     }
@@ -64,6 +68,7 @@ impl ImageSource {
                 Self::Held | Self::CrossFade => true,
                 Self::Velocity => pixels.host_velocity().is_some(),
                 Self::Instances => pixels.instances().is_some(),
+                Self::Learnt => pixels.learnt().is_some(),
             })
             .collect()
     }
@@ -194,6 +199,7 @@ mod tests {
                 (DynamicBlend::CrossFade, DynamicMotion::Held),
                 (DynamicBlend::Nearest, DynamicMotion::Velocity),
                 (DynamicBlend::Nearest, DynamicMotion::Instances),
+                (DynamicBlend::Nearest, DynamicMotion::Learnt),
             ]
         );
     }

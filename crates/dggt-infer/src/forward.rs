@@ -37,6 +37,9 @@ pub struct Prediction {
     pub velocity: Option<Tensor<5>>,
     /// Frames whose motion head did not run ([`MotionPath::WhereDynamic`]); their velocities are zeros.
     pub motion_skipped_frames: usize,
+    /// The Gaussian head's maps the flow head reads (`ModelConfig::flow_features`), each `[S, C, h, w]` f32;
+    /// `None` without a flow head.
+    pub flow_features: Option<Vec<Tensor<4>>>,
 }
 
 /// Where the motion head runs.
@@ -99,6 +102,7 @@ pub fn heads_chunked(
     let (start, grid) = (aggregator.patch_start_idx, aggregator.grid);
 
     let (mut depth, mut dynamic, mut gaussian_raw, mut velocity) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut flow_features: Vec<Vec<Tensor<4>>> = Vec::new();
     let mut motion_skipped_frames = 0;
     for first in (0..frames).step_by(chunk) {
         let count = chunk.min(frames - first);
@@ -117,8 +121,12 @@ pub fn heads_chunked(
             dynamic.push(logits);
         }
         if let Some(head) = &model.gs_head {
-            let raw = head.forward(|i| pick(aggregator.output_with_dino_tokens(i)), start, grid, &chunk_images).raw;
-            let raw = model.apply_color_skip(raw, chunk_images.clone());
+            let output = head.forward(|i| pick(aggregator.output_with_dino_tokens(i)), start, grid, &chunk_images);
+            if model.flow_head.is_some() {
+                let maps = output.resized.into_iter().chain([output.head_in]);
+                flow_features.push(maps.map(f32).collect());
+            }
+            let raw = model.apply_color_skip(output.raw, chunk_images.clone());
             gaussian_raw.push(raw.cast(FloatDType::F32));
         }
         if let Some(head) = &model.motion_head {
@@ -146,5 +154,18 @@ pub fn heads_chunked(
         gaussians,
         velocity,
         motion_skipped_frames,
+        flow_features: concatenated_scales(flow_features),
     })
+}
+
+/// Per scale, the chunks' maps joined along the frames; `None` without chunks.
+fn concatenated_scales(chunks: Vec<Vec<Tensor<4>>>) -> Option<Vec<Tensor<4>>> {
+    let scales = chunks.first()?.len();
+    let mut per_scale: Vec<Vec<Tensor<4>>> = vec![Vec::new(); scales];
+    for chunk in chunks {
+        for (scale, map) in chunk.into_iter().enumerate() {
+            per_scale[scale].push(map);
+        }
+    }
+    Some(per_scale.into_iter().map(|maps| Tensor::cat(maps, 0)).collect())
 }

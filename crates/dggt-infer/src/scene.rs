@@ -1,10 +1,13 @@
 //! The 4D scene of one forward pass ([`dggt_scene::Scene4d`]) built from the network's outputs: every input
 //! pixel's Gaussian placed with its view's camera (moving with the predicted velocities when the network
-//! predicts them, or with the objects found among them when the assembly asks) and the sky Gaussians coloured from the input images, as the options choose.
+//! predicts them, or with the objects found among them, or along the flow head's learnt flow, when the assembly
+//! asks) and the sky Gaussians coloured from the input images, as the options choose.
 
 use burn::tensor::Tensor;
 use dggt_model::Dggt;
-use dggt_scene::{AssemblySettings, DynamicMotion, InputView, MeansGradient, PixelGaussians, Scene4d, Timeline};
+use dggt_scene::{
+    AssemblySettings, DynamicMotion, InputView, MeansGradient, PixelGaussians, Scene4d, SceneError, Timeline,
+};
 
 use crate::error::InferError;
 use crate::forward::Prediction;
@@ -54,6 +57,10 @@ impl Prediction {
         };
         let pixels = match options.assembly.dynamic_motion {
             DynamicMotion::Instances => pixels.with_instances(&options.assembly.instances)?,
+            DynamicMotion::Learnt => match (&model.flow_head, &self.flow_features) {
+                (Some(head), Some(features)) => pixels.with_learnt_flow(head, features)?,
+                _ => return Err(SceneError::NoFlowHead.into()),
+            },
             DynamicMotion::Velocity | DynamicMotion::Held => pixels,
         };
         let sky = match (&model.sky_model, options.sky) {

@@ -42,6 +42,10 @@ pub struct ModelSection {
     /// Give every DPT head a convolution of the input pixels (`DptConfig::pixel_skip`; not in the release's
     /// weights, so only for heads that start fresh).
     pub pixel_skip: bool,
+    /// Add the learnt scene-flow head (`ModelConfig::flow_head`, default shape; not in the release's weights,
+    /// so it starts fresh from predicting zero): with `render.dynamic_motion = "learnt"` dynamic Gaussians move
+    /// along its displacements between adjacent inputs.
+    pub flow_head: bool,
 }
 
 impl Default for ModelSection {
@@ -56,13 +60,14 @@ impl Default for ModelSection {
             motion_head: false,
             gaussian_velocity: false,
             pixel_skip: false,
+            flow_head: false,
         }
     }
 }
 
 impl ModelSection {
     /// The network this section describes: the preset with the section's changes (colour skip, unprojection,
-    /// sky resolution, pixel skip, motion head or Gaussian velocity).
+    /// sky resolution, pixel skip, motion head or Gaussian velocity, flow head).
     pub fn architecture(&self) -> ModelConfig {
         let mut config = self.preset.config();
         if let Some(gs) = &mut config.gs_head {
@@ -74,6 +79,7 @@ impl ModelSection {
         }
         config.dpt.pixel_skip = self.pixel_skip;
         let config = if self.motion_head { config.with_motion_head() } else { config };
+        let config = if self.flow_head { config.with_flow_head() } else { config };
         if self.gaussian_velocity { config.with_gaussian_velocity() } else { config }
     }
 }

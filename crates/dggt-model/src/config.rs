@@ -277,6 +277,11 @@ pub struct ModelConfig {
     /// channels and an unused last channel). See [`crate::model::Dggt::motion_head`].
     #[serde(default)]
     pub motion_head: Option<DptHeadConfig>,
+    /// This project's learnt scene-flow head F(ta, tb) (the paper's; the release ships none): each dynamic
+    /// pixel's displacement to the neighbouring input time of its camera, from the Gaussian head's features
+    /// ([`ModelConfig::flow_features`]). See [`crate::model::Dggt::flow_head`].
+    #[serde(default)]
+    pub flow_head: Option<dggt_flow_head::FlowHeadConfig>,
 }
 
 impl ModelConfig {
@@ -347,6 +352,23 @@ impl ModelConfig {
             conf_activation: HeadActivation::Linear,
         });
         self
+    }
+
+    /// Adds the learnt scene-flow head ([`ModelConfig::flow_head`]) with the default shape, reading the Gaussian
+    /// head's features ([`ModelConfig::flow_features`]).
+    pub fn with_flow_head(mut self) -> Self {
+        let feature_widths = self.flow_features();
+        self.flow_head = Some(dggt_flow_head::FlowHeadConfig { feature_widths, ..Default::default() });
+        self
+    }
+
+    /// The channels of the Gaussian head's maps the flow head reads, in order: its four resampled token maps
+    /// (strides 4, 8, 14 and 28 pixels per cell at the patch grid's scale) and its full-resolution features
+    /// (`head_in`, with the pixel skip when the network has one).
+    pub fn flow_features(&self) -> Vec<usize> {
+        let mut widths = self.dpt.out_channels.to_vec();
+        widths.push(self.dpt.features / 2);
+        widths
     }
 
     /// Whether the network predicts velocities: a motion head, or a Gaussian head with velocity channels.
@@ -457,6 +479,7 @@ impl ModelConfig {
             instance_head: None,
             semantic_head: None,
             motion_head: None,
+            flow_head: None,
             sky_model: None,
         }
     }
@@ -522,6 +545,21 @@ impl ModelConfig {
                 gs.output_dim,
                 GAUSSIAN_CHANNELS + 3
             ));
+        }
+        if let Some(flow) = &self.flow_head {
+            if self.gs_head.is_none() || self.instance_head.is_none() {
+                return fail(
+                    "flow_head needs a Gaussian head (its features) and an instance head (its queries)".into(),
+                );
+            }
+            if flow.feature_widths != self.flow_features() {
+                return fail(format!(
+                    "flow_head feature_widths {:?}: the Gaussian head's maps have {:?} channels",
+                    flow.feature_widths,
+                    self.flow_features()
+                ));
+            }
+            flow.validate().map_err(|e| ModelError::Config(format!("flow_head: {e}")))?;
         }
         if !self.dpt.features.is_multiple_of(2) || (self.dpt.pos_embed && !(self.dpt.features / 2).is_multiple_of(4)) {
             return fail(format!("DPT features {} must be a multiple of 8", self.dpt.features));

@@ -10,6 +10,7 @@ use std::path::Path;
 
 use burn::module::Module;
 use burn::tensor::{Device, FloatDType, Tensor};
+use dggt_flow_head::FlowHead;
 use dggt_geom::PixelConvention;
 
 use crate::aggregator::{Aggregator, AggregatorOutput};
@@ -38,6 +39,10 @@ pub struct Dggt {
     /// it (OpenCV: x right, y down, z forward); it moves the dynamic Gaussians to a target time. A fresh head
     /// predicts zero (every Gaussian held in place, as without the head).
     pub motion_head: Option<DptHead>,
+    /// The learnt scene flow F(ta, tb) between adjacent input times of a camera, from the Gaussian head's
+    /// features at the dynamic pixels' Gaussian means (`dggt_scene::PixelGaussians::with_learnt_flow`). A fresh
+    /// head predicts zero (every dynamic Gaussian held, as without the head).
+    pub flow_head: Option<FlowHead>,
     /// See [`GaussianHeadConfig::color_skip`](crate::config::GaussianHeadConfig::color_skip).
     #[module(skip)]
     pub color_skip: bool,
@@ -130,6 +135,12 @@ impl Dggt {
                 .motion_head
                 .as_ref()
                 .map(|head| DptHead::new(&config.dpt, head, device).with_zero_output()),
+            flow_head: config
+                .flow_head
+                .as_ref()
+                .map(|head| head.init(device))
+                .transpose()
+                .map_err(|e| ModelError::Config(format!("flow_head: {e}")))?,
             color_skip: config.gs_head.as_ref().is_some_and(|gs| gs.color_skip),
             unproject_at: config.gs_head.as_ref().map_or(PixelConvention::Integer, |gs| gs.unproject_at),
         })
@@ -139,7 +150,8 @@ impl Dggt {
     ///
     /// Its forward pass then computes in `dtype`: images are cast on entry, constants follow the activations
     /// ([`crate::constant`]), and outputs come out in `dtype` (cast them back before rendering). The sky model
-    /// stays f32: it colours host-projected points from the input images and feeds the f32 rasteriser.
+    /// stays f32: it colours host-projected points from the input images and feeds the f32 rasteriser; so does the
+    /// flow head, which reads f32 features at f32 Gaussian means.
     pub fn with_float_dtype(self, dtype: FloatDType) -> Self {
         let mut cast = CastFloats(dtype);
         let head = |head: Option<DptHead>, cast: &mut CastFloats| head.map(|head| head.map(cast));
@@ -164,6 +176,7 @@ impl Dggt {
             ("semantic_head.", self.semantic_head.is_some()),
             ("sky_model.", self.sky_model.is_some()),
             ("motion_head.", self.motion_head.is_some()),
+            ("flow_head.", self.flow_head.is_some()),
         ];
         ["aggregator.", "camera_head.", "depth_head.", "point_head."]
             .into_iter()

@@ -26,6 +26,7 @@ use dggt_splat::{GaussianTensors, OpacityTensor};
 use rayon::prelude::*;
 
 use crate::error::SceneError;
+use crate::learnt::LearntStep;
 use crate::pixels::PixelGaussians;
 use crate::timeline::{DynamicBlend, TargetView, dynamic_sources};
 
@@ -72,17 +73,22 @@ pub enum DynamicMotion {
     /// ([`PixelGaussians::with_instances`]; means and rotations move, scales and colours do not); as under
     /// `Velocity` otherwise. A target at the view's own time leaves every Gaussian exactly where it was.
     Instances,
+    /// Along the learnt scene flow ([`PixelGaussians::with_learnt_flow`]): its learnt displacement to the
+    /// neighbouring input toward the target, times the fraction of that step the target has reached; held where
+    /// none was learnt and outside the inputs' span. Predicted velocities are not used.
+    Learnt,
 }
 
 impl DynamicMotion {
-    pub const ALL: [DynamicMotion; 3] = [Self::Held, Self::Velocity, Self::Instances];
+    pub const ALL: [DynamicMotion; 4] = [Self::Held, Self::Velocity, Self::Instances, Self::Learnt];
 
-    /// `held`, `velocity` or `instances`, as in configurations.
+    /// `held`, `velocity`, `instances` or `learnt`, as in configurations.
     pub fn name(self) -> &'static str {
         match self {
             Self::Held => "held",
             Self::Velocity => "velocity",
             Self::Instances => "instances",
+            Self::Learnt => "learnt",
         }
     }
 }
@@ -251,7 +257,7 @@ impl Candidates {
         // The dynamic ones of the source views, moved over their `elapsed` scene time and weighted.
         let instances = match settings.dynamic_motion {
             DynamicMotion::Instances => pixels.instances(),
-            DynamicMotion::Velocity | DynamicMotion::Held => None,
+            DynamicMotion::Velocity | DynamicMotion::Held | DynamicMotion::Learnt => None,
         };
         let sources: Vec<DynamicSource> = match &dynamic {
             Some(_) => dynamic_sources(&pixels.views, target.rig_camera, target.time, settings.dynamic_blend)
@@ -263,6 +269,10 @@ impl Candidates {
                         elapsed: (target.time - from) as f32,
                         weight: weight as f32,
                         motion: settings.dynamic_motion,
+                        learnt: match (settings.dynamic_motion, pixels.learnt()) {
+                            (DynamicMotion::Learnt, Some(flow)) => flow.step(view, from, target.time),
+                            _ => None,
+                        },
                         rigid: instances.map_or_else(Vec::new, |found| {
                             (0..found.len()).map(|k| found.motion(k, from, target.time)).collect()
                         }),
@@ -307,6 +317,9 @@ impl Candidates {
                         }
                         RowMotion::Rigid(motion) => {
                             motion.apply(DVec3::from_array(mean.map(f64::from))).to_array().map(|v| v as f32)
+                        }
+                        RowMotion::Learnt(flow, step) => {
+                            std::array::from_fn(|k| mean[k] + flow[index][k] * step.fraction)
                         }
                     }
                 };
@@ -357,6 +370,11 @@ impl Candidates {
                             (run_means + velocity.clone().select(0, index).mul_scalar(source.elapsed), run_quats)
                         }
                         RowMotion::Rigid(motion) => rigidly_moved(run_means, run_quats, motion),
+                        RowMotion::Learnt(_, step) => {
+                            let flow = pixels.learnt().expect("a learnt motion has a learnt flow");
+                            let displacement = flow.tensor(step.towards).clone().select(0, index);
+                            (run_means + displacement.mul_scalar(step.fraction), run_quats)
+                        }
                     };
                     means.push(moved);
                     quats.push(turned);
@@ -448,6 +466,8 @@ struct DynamicSource {
     weight: f32,
     /// Whether the predicted velocities move the rows no instance moves ([`DynamicMotion::Held`] holds them).
     motion: DynamicMotion,
+    /// How far along their learnt displacement the view's rows are; `None` unless the learnt flow moves them.
+    learnt: Option<LearntStep>,
     /// Per instance, its motion from the view's time to the target's; empty unless instances move the
     /// Gaussians.
     rigid: Vec<RigidMotion>,
@@ -459,6 +479,8 @@ enum RowMotion<'a> {
     /// By the host velocities, over the elapsed scene time.
     Velocity(&'a [[f32; 3]], f32),
     Rigid(&'a RigidMotion),
+    /// By a fraction of the host learnt displacements.
+    Learnt(&'a [[f32; 3]], LearntStep),
 }
 
 impl DynamicSource {
@@ -476,7 +498,7 @@ impl DynamicSource {
     /// The host velocities that move the rows no instance moves, unless this source holds them.
     fn host_velocity<'a>(&self, pixels: &'a PixelGaussians) -> Option<&'a [[f32; 3]]> {
         match self.motion {
-            DynamicMotion::Held => None,
+            DynamicMotion::Held | DynamicMotion::Learnt => None,
             DynamicMotion::Velocity | DynamicMotion::Instances => pixels.host_velocity.as_deref(),
         }
     }
@@ -484,7 +506,10 @@ impl DynamicSource {
     /// Row `row`'s world velocity at time `at` under this source's motion (see [`assembled_velocities`]).
     fn velocity(&self, pixels: &PixelGaussians, row: usize, at: f64) -> [f32; 3] {
         match (self.group(pixels, row), pixels.instances()) {
-            (Instances::NONE, _) | (_, None) => self.host_velocity(pixels).map_or([0.0; 3], |velocity| velocity[row]),
+            (Instances::NONE, _) | (_, None) => match self.motion(pixels, row) {
+                RowMotion::Learnt(flow, step) => flow[row].map(|v| v * step.rate),
+                _ => self.host_velocity(pixels).map_or([0.0; 3], |velocity| velocity[row]),
+            },
             (instance, Some(found)) => {
                 let instance = instance as usize;
                 let moved = self.rigid[instance].apply(DVec3::from_array(pixels.host_means[row].map(f64::from)));
@@ -495,8 +520,9 @@ impl DynamicSource {
 
     fn motion<'a>(&'a self, pixels: &'a PixelGaussians, row: usize) -> RowMotion<'a> {
         match self.group(pixels, row) {
-            Instances::NONE => match self.host_velocity(pixels) {
-                Some(velocity) if self.elapsed != 0.0 => RowMotion::Velocity(velocity, self.elapsed),
+            Instances::NONE => match (self.learnt, pixels.learnt(), self.host_velocity(pixels)) {
+                (Some(step), Some(flow), _) => RowMotion::Learnt(flow.host(step.towards), step),
+                (_, _, Some(velocity)) if self.elapsed != 0.0 => RowMotion::Velocity(velocity, self.elapsed),
                 _ => RowMotion::Held,
             },
             instance => match &self.rigid[instance as usize] {

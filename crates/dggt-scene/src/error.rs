@@ -29,6 +29,13 @@ pub enum SceneError {
     /// A saved scene that cannot be written or read back.
     #[error("{}: {detail}", path.display())]
     File { path: std::path::PathBuf, detail: String },
+    #[error("learnt scene flow: {0}")]
+    Flow(#[from] dggt_flow_head::FlowError),
+    #[error("learnt scene flow features: {0}")]
+    FlowFeatures(#[from] dggt_flow_head::SampleError),
+    /// The learnt motion was asked of a scene whose network has no flow head.
+    #[error("render.dynamic_motion = \"learnt\" needs a network with a flow head (model.flow_head)")]
+    NoFlowHead,
     #[error("rendering {what}: {source}")]
     Render { what: String, source: dggt_splat::SplatError },
 }

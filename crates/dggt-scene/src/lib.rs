@@ -3,7 +3,8 @@
 //! The data flow, one module per step:
 //!
 //! 1. [`timeline`]: the input views' rig cameras and scene times; target cameras interpolated from them.
-//! 2. [`pixels`]: the per-pixel Gaussians of every input view, means unprojected from the predicted depth.
+//! 2. [`pixels`]: the per-pixel Gaussians of every input view, means unprojected from the predicted depth;
+//!    [`learnt`]: the flow head's displacements of their dynamic pixels to the neighbouring inputs.
 //! 3. [`assemble`]: the static union faded by the lifespan to the target time, the dynamic Gaussians of the
 //!    view(s) nearest in time, and culling of what the rasteriser would skip.
 //! 4. [`compose`]: rasterising the assembled Gaussians and compositing them over the sky;
@@ -17,6 +18,7 @@
 pub mod assemble;
 pub mod compose;
 mod error;
+pub mod learnt;
 pub mod pixels;
 pub mod saved;
 pub mod scene4d;
@@ -29,6 +31,7 @@ pub use assemble::{
 pub use compose::{ViewRender, camera_tensors, composite, render_assembled, render_flow, render_target, sky_splats};
 pub use dggt_instances::{InstanceSettings, Instances};
 pub use error::SceneError;
+pub use learnt::LearntFlow;
 pub use pixels::{MeansGradient, PixelGaussians};
 pub use saved::{SCENE_FILE, load_scene, save_scene, scene_file};
 pub use scene4d::Scene4d;

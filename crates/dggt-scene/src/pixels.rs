@@ -69,6 +69,9 @@ pub struct PixelGaussians {
     /// The moving objects of the views and their trajectories ([`PixelGaussians::with_instances`]); `None`
     /// until found.
     pub(crate) instances: Option<Arc<Instances>>,
+    /// The learnt displacements to the neighbouring inputs ([`PixelGaussians::with_learnt_flow`]); `None` until
+    /// computed.
+    pub(crate) learnt: Option<Arc<crate::learnt::LearntFlow>>,
     pub(crate) host_means: Vec<[f32; 3]>,
     pub(crate) host_velocity: Option<Vec<[f32; 3]>>,
     pub(crate) host_max_scale: Vec<f32>,
@@ -152,6 +155,7 @@ impl PixelGaussians {
             source_time: Tensor::from_data(TensorData::new(times, [count]), &device),
             velocity: None,
             instances: None,
+            learnt: None,
             host_means,
             host_velocity: None,
             host_max_scale,
@@ -180,6 +184,7 @@ impl PixelGaussians {
             source_time: rows.source_time,
             velocity: rows.velocity,
             instances: None,
+            learnt: None,
             host_means,
             host_velocity,
             host_max_scale,

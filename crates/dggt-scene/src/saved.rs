@@ -5,7 +5,9 @@
 //! - `pixels.means` `[M, 3]`, `pixels.quats_wxyz` `[M, 4]`, `pixels.scales` `[M, 3]` (linear),
 //!   `pixels.colors` `[M, K]` (`K` colour channels, 3 for RGB), `pixels.opacity`, `pixels.lifespan`, `pixels.source_time` `[M]` and, when the
 //!   network predicts them, `pixels.dynamic_logit` `[M]` and `pixels.velocity` `[M, 3]` (world axes per unit of
-//!   scene time): f32, one row per input pixel, view-major as [`PixelGaussians`] holds them;
+//!   scene time), and with a learnt flow `pixels.flow_to_next` and `pixels.flow_to_previous` `[M, 3]` (world
+//!   displacements to the neighbouring inputs, [`crate::LearntFlow`]): f32, one row per input pixel, view-major as
+//!   [`PixelGaussians`] holds them;
 //! - `instances.labels` `[S, H·W]` u32 (position in the instance list, `u32::MAX` for none), when found;
 //! - `sky.means`, `sky.quats_wxyz`, `sky.scales`, `sky.colors` `[V, ..]`, `sky.opacities` `[V]`: f32, the sky's
 //!   Gaussians as rendered (the colour field that made them is not kept), when the network has a sky model.
@@ -176,6 +178,10 @@ pub fn save_scene(scene: &Scene4d, path: &Path) -> Result<(), SceneError> {
     if let Some(velocity) = &pixels.velocity {
         push_f32("pixels.velocity", velocity.clone())?;
     }
+    if let Some(flow) = pixels.learnt() {
+        push_f32("pixels.flow_to_next", flow.to_next.clone())?;
+        push_f32("pixels.flow_to_previous", flow.to_previous.clone())?;
+    }
     if let Some(sky) = &scene.sky {
         push_f32("sky.means", sky.means.clone())?;
         push_f32("sky.quats_wxyz", sky.quats.clone())?;
@@ -328,6 +334,13 @@ impl<'a> Reader<'a> {
         let pixels = match self.instances(pixels.views.len(), size.area())? {
             Some(instances) => pixels.with_known_instances(Arc::new(instances))?,
             None => pixels,
+        };
+        let pixels = match (optional("pixels.flow_to_next", 3)?, optional("pixels.flow_to_previous", 3)?) {
+            (Some(to_next), Some(to_previous)) => pixels.with_known_learnt_flow(to_next, to_previous)?,
+            (None, None) => pixels,
+            _ => {
+                return Err(self.error("holds one of `pixels.flow_to_next` and `pixels.flow_to_previous` alone".into()));
+            }
         };
         let record = &self.record.assembly;
         let assembly = AssemblySettings {

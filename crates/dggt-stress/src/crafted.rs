@@ -128,7 +128,7 @@ pub fn run(
     let assembly = AssemblySettings { dynamic_motion: prediction.motion, ..objective.render.assembly() };
     let pixels = match prediction.motion {
         DynamicMotion::Instances => pixels.with_instances(&assembly.instances)?,
-        DynamicMotion::Velocity | DynamicMotion::Held => pixels,
+        DynamicMotion::Velocity | DynamicMotion::Held | DynamicMotion::Learnt => pixels,
     };
     let cameras: Vec<_> =
         batch.inputs.iter().map(|v| (v.camera.world_from_camera.inverse(), v.camera.intrinsics)).collect();

@@ -9,6 +9,7 @@ use dggt_objective::LossTerm;
 pub use dggt_objective::LossWeights;
 pub use dggt_run::OptimSection;
 use dggt_run::divergence;
+use dggt_scene::DynamicMotion;
 use serde::{Deserialize, Serialize};
 
 use crate::error::TrainError;
@@ -235,7 +236,18 @@ impl TrainConfig {
                 "both predict the velocities: choose one",
             ));
         }
-        Ok(())
+        let learnt = self.render.dynamic_motion == DynamicMotion::Learnt;
+        match (self.model.flow_head, learnt) {
+            (false, true) => Err(setting(
+                "render.dynamic_motion",
+                "\"learnt\" moves the dynamic Gaussians along the flow head's flow: it needs model.flow_head = true",
+            )),
+            (true, false) => Err(setting(
+                "model.flow_head",
+                "the flow head learns from renders along its flow: it needs render.dynamic_motion = \"learnt\"",
+            )),
+            _ => Ok(()),
+        }
     }
 
     fn validate_loss(&self) -> Result<(), TrainError> {

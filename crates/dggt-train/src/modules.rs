@@ -11,7 +11,7 @@ use dggt_run::{OptimSection, Optimizer};
 use crate::error::TrainError;
 
 /// The network's top-level modules, which `optim.frozen` and `optim.groups` name.
-pub const MODULES: [&str; 9] = [
+pub const MODULES: [&str; 10] = [
     "aggregator",
     "camera_head",
     "depth_head",
@@ -21,6 +21,7 @@ pub const MODULES: [&str; 9] = [
     "semantic_head",
     "sky_model",
     "motion_head",
+    "flow_head",
 ];
 
 /// Freezes the named top-level modules: their parameters get no gradient and are never updated.
@@ -36,6 +37,7 @@ pub fn freeze(mut model: Dggt, names: &[String]) -> Result<Dggt, TrainError> {
             "semantic_head" => model.semantic_head = model.semantic_head.map(|m| m.no_grad()),
             "sky_model" => model.sky_model = model.sky_model.map(|m| m.no_grad()),
             "motion_head" => model.motion_head = model.motion_head.map(|m| m.no_grad()),
+            "flow_head" => model.flow_head = model.flow_head.map(|m| m.no_grad()),
             other => {
                 return Err(TrainError::Setting {
                     setting: "optim.frozen",
@@ -71,6 +73,7 @@ fn module_ids(model: &Dggt, name: &str) -> Vec<ParamId> {
         "semantic_head" => model.semantic_head.visit(&mut ids),
         "sky_model" => model.sky_model.visit(&mut ids),
         "motion_head" => model.motion_head.visit(&mut ids),
+        "flow_head" => model.flow_head.visit(&mut ids),
         _ => {}
     }
     ids.0

@@ -1,0 +1,225 @@
+//! The learnt scene flow carried by the per-pixel Gaussians: for every rig camera and every pair of its adjacent
+//! input views `a` (time `ta`) and `b` (time `tb > ta`), the flow head's displacement `F(ta, tb)` of each dynamic
+//! pixel of `a` to time `tb`, and `F(tb, ta)` of each dynamic pixel of `b` back to `ta`.
+//!
+//! Between the inputs a dynamic Gaussian of view `a` is drawn at `mu + w F(ta, tb)`, `w = (t - ta) / (tb - ta)`,
+//! one of view `b` at `mu + w' F(tb, ta)`, `w' = (tb - t) / (tb - ta)`: at an input's own time `w = 0` and the
+//! Gaussians are the input's exactly. Outside the span of a camera's inputs nothing moves (there is no flow to
+//! extrapolate from). Displacements are world vectors in the reconstruction's units.
+//!
+//! Queries are the pixels whose dynamic probability is at least one half, their points the Gaussian means (the
+//! head sees the scene the renders see) and their features the Gaussian head's maps at the pixels; a pair in
+//! which either view has no dynamic pixel does not run the head (its rows keep zero flow).
+
+use burn::tensor::{IndexingUpdateOp, Int, Tensor, TensorData};
+use dggt_flow_head::{FlowHead, FrameCloud, PixelIndex, sample_features};
+use dggt_model::host::host_f32;
+
+use crate::error::SceneError;
+use crate::pixels::PixelGaussians;
+
+/// The dynamic logit from which a pixel is a query of the flow head (probability one half).
+pub const QUERY_LOGIT: f32 = 0.0;
+
+/// Every row's displacement to the neighbouring input times of its rig camera.
+#[derive(Debug, Clone)]
+pub struct LearntFlow {
+    /// `[M, 3]`: to the next input time of the row's camera (zero for rows that were not queries and for a
+    /// camera's last input).
+    pub to_next: Tensor<2>,
+    /// `[M, 3]`: to the previous input time (zero likewise, and for a camera's first input).
+    pub to_previous: Tensor<2>,
+    pub(crate) host_next: Vec<[f32; 3]>,
+    pub(crate) host_previous: Vec<[f32; 3]>,
+    /// Per view, the times of the previous and the next input of its camera, when there are.
+    pub(crate) neighbours: Vec<(Option<f64>, Option<f64>)>,
+}
+
+/// Which way a displacement goes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Towards {
+    Next,
+    Previous,
+}
+
+/// How far along its learnt displacement a view's rows are at a target time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct LearntStep {
+    pub towards: Towards,
+    /// `w` in `mu + w F`.
+    pub fraction: f32,
+    /// `dw / dt` per unit of scene time (negative towards the previous input): the rows' velocity is `F` times it.
+    pub rate: f32,
+}
+
+impl LearntFlow {
+    /// How view `view` (at `view_time`) moves its rows to `time`: the direction and the fraction `w` of the
+    /// step, or `None` where they do not move (the view's own time, or outside its camera's inputs).
+    pub(crate) fn step(&self, view: usize, view_time: f64, time: f64) -> Option<LearntStep> {
+        let step = |towards, span: f64, elapsed: f64, sign: f64| LearntStep {
+            towards,
+            fraction: (elapsed / span) as f32,
+            rate: (sign / span) as f32,
+        };
+        match self.neighbours[view] {
+            (_, Some(next)) if time > view_time => Some(step(Towards::Next, next - view_time, time - view_time, 1.0)),
+            (Some(previous), _) if time < view_time => {
+                Some(step(Towards::Previous, view_time - previous, view_time - time, -1.0))
+            }
+            _ => None,
+        }
+    }
+
+    pub(crate) fn host(&self, towards: Towards) -> &[[f32; 3]] {
+        match towards {
+            Towards::Next => &self.host_next,
+            Towards::Previous => &self.host_previous,
+        }
+    }
+
+    pub(crate) fn tensor(&self, towards: Towards) -> &Tensor<2> {
+        match towards {
+            Towards::Next => &self.to_next,
+            Towards::Previous => &self.to_previous,
+        }
+    }
+}
+
+impl PixelGaussians {
+    /// Runs the flow head on every pair of adjacent input views of each rig camera (`features`: the Gaussian
+    /// head's maps, `[S, C, h, w]` per scale, frames in the views' order) and keeps the displacements
+    /// ([`LearntFlow`]). Without a dynamic head nothing is queried and every row keeps zero flow.
+    pub fn with_learnt_flow(self, head: &FlowHead, features: &[Tensor<4>]) -> Result<Self, SceneError> {
+        let per_view = self.per_view();
+        let queries: Vec<Vec<PixelIndex>> = match &self.dynamic_logit {
+            Some(logit) => {
+                let logits = host_f32(logit.clone(), "dynamic logit")?;
+                logits.chunks(per_view).map(|view| query_pixels(view, self.size.width as usize)).collect()
+            }
+            None => vec![Vec::new(); self.views.len()],
+        };
+        let mut next_parts = Vec::new();
+        let mut previous_parts = Vec::new();
+        for (a, b) in adjacent_views(&self.views) {
+            if queries[a].is_empty() || queries[b].is_empty() {
+                continue;
+            }
+            let (cloud_a, rows_a) = self.cloud(a, &queries[a], features)?;
+            let (cloud_b, rows_b) = self.cloud(b, &queries[b], features)?;
+            next_parts.push((rows_a, head.forward(&cloud_a, &cloud_b)?));
+            previous_parts.push((rows_b, head.forward(&cloud_b, &cloud_a)?));
+        }
+        let (to_next, to_previous) = (self.scattered(next_parts), self.scattered(previous_parts));
+        self.with_known_learnt_flow(to_next, to_previous)
+    }
+
+    /// Keeps `to_next` and `to_previous` (`[M, 3]`, as [`LearntFlow`] holds them) as the learnt flow: the flow
+    /// head's, or a saved scene's. Non-finite displacements are an error naming the view and pixel.
+    pub(crate) fn with_known_learnt_flow(
+        mut self,
+        to_next: Tensor<2>,
+        to_previous: Tensor<2>,
+    ) -> Result<Self, SceneError> {
+        let host_next = self.checked_rows(&to_next, "learnt flow to the next input")?;
+        let host_previous = self.checked_rows(&to_previous, "learnt flow to the previous input")?;
+        let mut neighbours = vec![(None, None); self.views.len()];
+        for (a, b) in adjacent_views(&self.views) {
+            neighbours[a].1 = Some(self.views[b].time);
+            neighbours[b].0 = Some(self.views[a].time);
+        }
+        let flow = LearntFlow { to_next, to_previous, host_next, host_previous, neighbours };
+        self.learnt = Some(std::sync::Arc::new(flow));
+        Ok(self)
+    }
+
+    /// The flow found by [`PixelGaussians::with_learnt_flow`].
+    pub fn learnt(&self) -> Option<&LearntFlow> {
+        self.learnt.as_deref()
+    }
+
+    /// Every row's velocity at its own view's time under the learnt flow (world units per unit of scene time):
+    /// its displacement to the next input over the step's time, else (a camera's last input) the displacement
+    /// from the previous input; zero without either. `None` without a learnt flow.
+    pub fn learnt_velocities(&self) -> Option<Vec<[f32; 3]>> {
+        let flow = self.learnt()?;
+        let per_view = self.per_view();
+        let velocity = |row: usize| -> [f32; 3] {
+            let view = row / per_view;
+            let time = self.views[view].time;
+            match flow.neighbours[view] {
+                (_, Some(next)) => flow.host_next[row].map(|v| v / (next - time) as f32),
+                (Some(previous), None) => flow.host_previous[row].map(|v| -v / (time - previous) as f32),
+                (None, None) => [0.0; 3],
+            }
+        };
+        Some((0..self.len()).map(velocity).collect())
+    }
+
+    /// View `view`'s query pixels as a cloud (means and features) and their rows.
+    fn cloud(
+        &self,
+        view: usize,
+        pixels: &[PixelIndex],
+        features: &[Tensor<4>],
+    ) -> Result<(FrameCloud, Tensor<1, Int>), SceneError> {
+        let width = self.size.width as usize;
+        let rows: Vec<i64> = pixels.iter().map(|p| (view * self.per_view() + p.row * width + p.col) as i64).collect();
+        let rows = Tensor::<1, Int>::from_data(TensorData::new(rows, [pixels.len()]), &self.means.device());
+        let points = self.means.clone().select(0, rows.clone());
+        let features = sample_features(features, view, self.size, pixels)?;
+        Ok((FrameCloud::new(points, features), rows))
+    }
+
+    /// `[M, 3]` with each part's displacements at its rows and zeros elsewhere.
+    fn scattered(&self, parts: Vec<(Tensor<1, Int>, Tensor<2>)>) -> Tensor<2> {
+        let zeros = Tensor::<2>::zeros([self.len(), 3], &self.means.device());
+        if parts.is_empty() {
+            return zeros;
+        }
+        let (rows, values): (Vec<_>, Vec<_>) = parts.into_iter().unzip();
+        zeros.select_assign(0, Tensor::cat(rows, 0), Tensor::cat(values, 0), IndexingUpdateOp::Add)
+    }
+
+    /// The host copy of `[M, 3]` rows, checked to be of this scene's size and finite.
+    fn checked_rows(&self, flow: &Tensor<2>, what: &'static str) -> Result<Vec<[f32; 3]>, SceneError> {
+        if flow.dims() != [self.len(), 3] {
+            let expected = format!("[{}, 3]", self.len());
+            return Err(SceneError::Shape { tensor: what, expected, actual: flow.dims().to_vec() });
+        }
+        let host = host_f32(flow.clone(), what)?;
+        if let Some(i) = host.iter().position(|v| !v.is_finite()) {
+            let per_view = self.per_view();
+            return Err(SceneError::NonFinite {
+                tensor: what,
+                value: host[i],
+                view: i / 3 / per_view,
+                pixel: i / 3 % per_view,
+            });
+        }
+        Ok(host.chunks_exact(3).map(|v| [v[0], v[1], v[2]]).collect())
+    }
+}
+
+/// The pixels of one view's logits (row-major, `width` wide) that the flow head queries.
+fn query_pixels(logits: &[f32], width: usize) -> Vec<PixelIndex> {
+    logits
+        .iter()
+        .enumerate()
+        .filter(|&(_, &logit)| logit >= QUERY_LOGIT)
+        .map(|(i, _)| PixelIndex { row: i / width, col: i % width })
+        .collect()
+}
+
+/// Each rig camera's views in time order, as pairs of adjacent views `(earlier, later)` (indices into `views`).
+fn adjacent_views(views: &[crate::timeline::InputView]) -> Vec<(usize, usize)> {
+    let mut cameras: Vec<usize> = views.iter().map(|v| v.rig_camera).collect();
+    cameras.sort_unstable();
+    cameras.dedup();
+    let mut pairs = Vec::new();
+    for camera in cameras {
+        let mut of_camera: Vec<usize> = (0..views.len()).filter(|&v| views[v].rig_camera == camera).collect();
+        of_camera.sort_by(|&a, &b| views[a].time.total_cmp(&views[b].time));
+        pairs.extend(of_camera.windows(2).filter(|w| views[w[0]].time < views[w[1]].time).map(|w| (w[0], w[1])));
+    }
+    pairs
+}
