@@ -7,19 +7,24 @@
 //! Gaussians are the input's exactly. Outside the span of a camera's inputs nothing moves (there is no flow to
 //! extrapolate from). Displacements are world vectors in the reconstruction's units.
 //!
-//! Queries are the pixels whose dynamic probability is at least one half, their points the Gaussian means (the
-//! head sees the scene the renders see) and their features the Gaussian head's maps at the pixels; a pair in
+//! Queries are the pixels whose dynamic Gaussian can be drawn at all (dynamic probability at least the
+//! rasteriser's alpha threshold, as the motion head's skip rule; a fresh network's pixels all are, so the head
+//! learns from the first step), their points the Gaussian means (the head sees the scene the renders see) and their features the Gaussian head's maps at the pixels; a pair in
 //! which either view has no dynamic pixel does not run the head (its rows keep zero flow).
 
 use burn::tensor::{IndexingUpdateOp, Int, Tensor, TensorData};
 use dggt_flow_head::{FlowHead, FrameCloud, PixelIndex, sample_features};
 use dggt_model::host::host_f32;
+use dggt_splat::constants::ALPHA_THRESHOLD;
 
 use crate::error::SceneError;
 use crate::pixels::PixelGaussians;
 
-/// The dynamic logit from which a pixel is a query of the flow head (probability one half).
-pub const QUERY_LOGIT: f32 = 0.0;
+/// Whether a pixel of dynamic logit `logit` is a query of the flow head: its dynamic opacity can reach the
+/// rasteriser's alpha threshold.
+pub fn is_query(logit: f32) -> bool {
+    1.0 / (1.0 + (-logit).exp()) >= ALPHA_THRESHOLD
+}
 
 /// Every row's displacement to the neighbouring input times of its rig camera.
 #[derive(Debug, Clone)]
@@ -205,7 +210,7 @@ fn query_pixels(logits: &[f32], width: usize) -> Vec<PixelIndex> {
     logits
         .iter()
         .enumerate()
-        .filter(|&(_, &logit)| logit >= QUERY_LOGIT)
+        .filter(|&(_, &logit)| is_query(logit))
         .map(|(i, _)| PixelIndex { row: i / width, col: i % width })
         .collect()
 }

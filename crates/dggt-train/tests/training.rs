@@ -187,6 +187,33 @@ fn the_motion_head_starts_at_zero_and_is_trained_by_the_renders() {
 }
 
 #[test]
+fn the_flow_head_starts_holding_and_is_trained_by_the_renders_along_its_flow() {
+    let out = tempfile::tempdir().unwrap();
+    let mut config = small_config(out.path(), 3);
+    config.model.flow_head = true;
+    config.render.dynamic_motion = dggt_scene::DynamicMotion::Learnt;
+    let mut trainer = Trainer::new(config.clone(), vec![Device::flex()], Start::Fresh).unwrap();
+    let output_layer = |trainer: &Trainer| -> Vec<f32> {
+        let head = trainer.model().flow_head.as_ref().expect("a flow head");
+        head.update.fc2.weight.val().into_data().convert::<f32>().try_into_vec::<f32>().unwrap()
+    };
+    assert!(output_layer(&trainer).iter().all(|w| *w == 0.0), "a fresh flow head predicts zero");
+    trainer.run(RunOptions::default()).unwrap();
+    let trained = output_layer(&trainer);
+    assert!(trained.iter().all(|w| w.is_finite()) && trained.iter().any(|w| *w != 0.0), "the flow head trained");
+
+    // Each without the other is refused, naming the setting.
+    let mut without_motion = config.clone();
+    without_motion.render.dynamic_motion = dggt_scene::DynamicMotion::Velocity;
+    let error = without_motion.validate().unwrap_err().to_string();
+    assert!(error.contains("model.flow_head") && error.contains("learnt"), "{error}");
+    let mut without_head = config;
+    without_head.model.flow_head = false;
+    let error = without_head.validate().unwrap_err().to_string();
+    assert!(error.contains("render.dynamic_motion") && error.contains("model.flow_head"), "{error}");
+}
+
+#[test]
 fn the_flow_loss_teaches_the_gaussian_head_the_scene_flow() {
     let out = tempfile::tempdir().unwrap();
     // The velocity rows start at zero, so the shared features only start to separate moving from still cells
