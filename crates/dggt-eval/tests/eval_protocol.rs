@@ -8,7 +8,8 @@ use std::path::{Path, PathBuf};
 
 use burn::tensor::Device;
 use dggt_eval::{
-    CropImages, EvalOptions, LpipsWeights, MOTION_HELD, MOTION_INSTANCES, MOTION_VELOCITY, Protocol, evaluate,
+    CropImages, EvalOptions, LpipsWeights, MOTION_HELD, MOTION_INSTANCES, MOTION_LEARNT, MOTION_VELOCITY, Protocol,
+    evaluate,
 };
 use dggt_infer::Architecture;
 use dggt_refine::{Latent, Prompt, ReferenceView, RefinerSpec};
@@ -35,6 +36,8 @@ enum Motion {
     GaussianVelocity,
     /// No velocities; the objects found among the dynamic pixels move along their trajectories.
     Instances,
+    /// A flow head; the dynamic Gaussians move along its learnt flow.
+    Learnt,
 }
 
 /// A tiny network after one training step on the fixture, saved as the trainer saves checkpoints.
@@ -46,8 +49,13 @@ fn tiny_checkpoint(run: &Path) {
 fn tiny_checkpoint_with(run: &Path, motion: Motion) -> TrainConfig {
     let mut config = TrainConfig::load(&repo().join("configs/tiny-overfit.toml")).expect("tiny-overfit.toml loads");
     config.model.gaussian_velocity = motion == Motion::GaussianVelocity;
-    if motion == Motion::Instances {
-        config.render.dynamic_motion = DynamicMotion::Instances;
+    match motion {
+        Motion::Instances => config.render.dynamic_motion = DynamicMotion::Instances,
+        Motion::Learnt => {
+            config.model.flow_head = true;
+            config.render.dynamic_motion = DynamicMotion::Learnt;
+        }
+        Motion::Held | Motion::GaussianVelocity => {}
     }
     config.data.scene = fixture();
     config.data.frames = None;
@@ -353,6 +361,26 @@ fn instance_trajectories_are_rendered_and_scored_beside_held() {
     assert_eq!(names, ["held", "instances"]);
     let markdown = std::fs::read_to_string(out.path().join("eval.md")).unwrap();
     assert!(markdown.contains("### motion by source") && markdown.contains("| instances |"), "{markdown}");
+}
+
+#[test]
+fn the_learnt_flow_is_rendered_and_scored_beside_the_other_sources() {
+    let run_dir = tempfile::tempdir().unwrap();
+    let config = tiny_checkpoint_with(run_dir.path(), Motion::Learnt);
+    let config_path = run_dir.path().join("train.toml");
+    std::fs::write(&config_path, toml::to_string(&config).unwrap()).unwrap();
+    let out = tempfile::tempdir().unwrap();
+    let mut options = EvalOptions::new(vec![fixture()], run_dir.path(), out.path());
+    options.width = Some(84);
+    options.architecture = Some(Architecture::Config(config_path));
+    let evaluated = evaluate(&options, &Device::flex()).unwrap();
+    let report: Value = serde_json::from_slice(&std::fs::read(out.path().join("eval.json")).unwrap()).unwrap();
+    assert_eq!(report["motion_source"], MOTION_LEARNT);
+    let views = report["scenes"][0]["views"].as_array().unwrap();
+    assert_sources_side_by_side(views, &["held", "instances", "learnt"], "learnt");
+    let overall = evaluated.overall.iter().find(|s| !s.dynamic_psnr_by_source.is_empty()).expect("in-between views");
+    let names: Vec<&str> = overall.dynamic_psnr_by_source.iter().map(|s| s.source.as_str()).collect();
+    assert_eq!(names, ["held", "cross-fade", "instances", "learnt"]);
 }
 
 #[test]
