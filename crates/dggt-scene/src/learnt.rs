@@ -7,24 +7,20 @@
 //! Gaussians are the input's exactly. Outside the span of a camera's inputs nothing moves (there is no flow to
 //! extrapolate from). Displacements are world vectors in the reconstruction's units.
 //!
-//! Queries are the pixels whose dynamic Gaussian can be drawn at all (dynamic probability at least the
-//! rasteriser's alpha threshold, as the motion head's skip rule; a fresh network's pixels all are, so the head
-//! learns from the first step), their points the Gaussian means (the head sees the scene the renders see) and their features the Gaussian head's maps at the pixels; a pair in
+//! Queries are the dynamic pixels (probability at least one half, as for the instances), their points the
+//! Gaussian means (the head sees the scene the renders see) and their features the Gaussian head's maps at the pixels; a pair in
 //! which either view has no dynamic pixel does not run the head (its rows keep zero flow).
 
 use burn::tensor::{IndexingUpdateOp, Int, Tensor, TensorData};
 use dggt_flow_head::{FlowHead, FrameCloud, PixelIndex, sample_features};
 use dggt_model::host::host_f32;
-use dggt_splat::constants::ALPHA_THRESHOLD;
 
 use crate::error::SceneError;
 use crate::pixels::PixelGaussians;
 
-/// Whether a pixel of dynamic logit `logit` is a query of the flow head: its dynamic opacity can reach the
-/// rasteriser's alpha threshold.
-pub fn is_query(logit: f32) -> bool {
-    1.0 / (1.0 + (-logit).exp()) >= ALPHA_THRESHOLD
-}
+/// The dynamic logit from which a pixel is a query of the flow head (probability one half). A fresh network's
+/// dynamic head marks no pixel: the head learns once the dynamic head has found the moving objects.
+pub const QUERY_LOGIT: f32 = 0.0;
 
 /// Every row's displacement to the neighbouring input times of its rig camera.
 #[derive(Debug, Clone)]
@@ -103,6 +99,7 @@ impl PixelGaussians {
             }
             None => vec![Vec::new(); self.views.len()],
         };
+        tracing::debug!(queries = ?queries.iter().map(Vec::len).collect::<Vec<_>>(), "learnt flow");
         let mut next_parts = Vec::new();
         let mut previous_parts = Vec::new();
         for (a, b) in adjacent_views(&self.views) {
@@ -210,7 +207,7 @@ fn query_pixels(logits: &[f32], width: usize) -> Vec<PixelIndex> {
     logits
         .iter()
         .enumerate()
-        .filter(|&(_, &logit)| is_query(logit))
+        .filter(|&(_, &logit)| logit >= QUERY_LOGIT)
         .map(|(i, _)| PixelIndex { row: i / width, col: i % width })
         .collect()
 }
