@@ -197,7 +197,7 @@ fn train_dry_run_refuses_a_window_shorter_than_its_inputs() {
     std::fs::write(&file, text).unwrap();
     let out = dir.path().join("run");
     let stderr = refused(&["train", "--config", file.to_str().unwrap(), "--dry-run", "--out", out.to_str().unwrap()]);
-    assert!(stderr.contains("short-window.toml") && stderr.contains("a window of 3 frames cannot hold max_inputs = 6"));
+    assert!(stderr.contains("short-window.toml") && stderr.contains("a window of 3 frames cannot hold max_inputs = 8"));
 }
 
 #[test]

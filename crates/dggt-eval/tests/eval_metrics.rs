@@ -3,7 +3,7 @@
 
 use dggt_data::Preprocess;
 use dggt_eval::grid::{CellMapping, cell_has_sky};
-use dggt_eval::report::{SourceFlowMetrics, ViewRecord, summarise_views};
+use dggt_eval::report::{SourceFlowMetrics, SourcePsnr, ViewRecord, summarise_views};
 use dggt_eval::{Protocol, ProtocolKind, TargetKind};
 use dggt_geom::ImageSize;
 use dggt_metrics::FlowMetrics;
@@ -110,6 +110,7 @@ fn record(split: TargetKind, psnr: f64, d_rmse: Option<f64>) -> ViewRecord {
         depth_note: None,
         motion: None,
         motion_by_source: Vec::new(),
+        dynamic_psnr_by_source: Vec::new(),
         refined: None,
     }
 }
@@ -143,6 +144,23 @@ fn motion_sources_are_averaged_side_by_side() {
     assert!(
         serde_json::to_value(record(TargetKind::Reconstruction, 1.0, None)).unwrap().get("motion_by_source").is_none()
     );
+}
+
+#[test]
+fn image_sources_are_averaged_side_by_side_over_the_views_that_have_them() {
+    let drawn = |sources: &[(&str, f64)]| {
+        let mut view = record(TargetKind::NovelView, 20.0, None);
+        view.dynamic_psnr_by_source =
+            sources.iter().map(|&(s, psnr)| SourcePsnr { source: s.into(), dynamic_psnr: psnr, count: 1 }).collect();
+        view
+    };
+    let views =
+        [drawn(&[("held", 18.0), ("cross-fade", 20.0)]), drawn(&[]), drawn(&[("held", 22.0), ("cross-fade", 23.0)])];
+    let s = summarise_views(&views, TargetKind::NovelView);
+    let means: Vec<(&str, f64, usize)> =
+        s.dynamic_psnr_by_source.iter().map(|m| (m.source.as_str(), m.dynamic_psnr, m.count)).collect();
+    assert_eq!(means, [("held", 20.0, 2), ("cross-fade", 21.5, 2)]);
+    assert!(summarise_views(&views, TargetKind::Reconstruction).dynamic_psnr_by_source.is_empty());
 }
 
 #[test]

@@ -107,11 +107,11 @@ fn shipped_configurations_parse_and_validate() {
     // An empty input range is a configuration error, not a failure of every sample.
     let inverted: String = overfit
         .lines()
-        .map(|l| if l.starts_with("min_inputs = ") { "min_inputs = 7\n".into() } else { format!("{l}\n") })
+        .map(|l| if l.starts_with("min_inputs = ") { "min_inputs = 9\n".into() } else { format!("{l}\n") })
         .collect();
     std::fs::write(bad.path(), inverted).unwrap();
     let error = TrainConfig::load(bad.path()).unwrap_err().to_string();
-    assert!(error.contains("min_inputs (7) exceeds max_inputs (6)"), "{error}");
+    assert!(error.contains("min_inputs (9) exceeds max_inputs (8)"), "{error}");
 }
 
 #[test]
