@@ -102,14 +102,22 @@ impl PixelGaussians {
         tracing::debug!(queries = ?queries.iter().map(Vec::len).collect::<Vec<_>>(), "learnt flow");
         let mut next_parts = Vec::new();
         let mut previous_parts = Vec::new();
-        for (a, b) in adjacent_views(&self.views) {
-            if queries[a].is_empty() || queries[b].is_empty() {
-                continue;
+        let pairs: Vec<(usize, usize)> = adjacent_views(&self.views)
+            .into_iter()
+            .filter(|&(a, b)| !queries[a].is_empty() && !queries[b].is_empty())
+            .collect();
+        // Each view's cloud is built once, for both of its pairs.
+        let mut clouds: Vec<Option<(FrameCloud, Tensor<1, Int>)>> = (0..self.views.len()).map(|_| None).collect();
+        for view in pairs.iter().flat_map(|&(a, b)| [a, b]) {
+            if clouds[view].is_none() {
+                clouds[view] = Some(self.cloud(view, &queries[view], features)?);
             }
-            let (cloud_a, rows_a) = self.cloud(a, &queries[a], features)?;
-            let (cloud_b, rows_b) = self.cloud(b, &queries[b], features)?;
-            next_parts.push((rows_a, head.forward(&cloud_a, &cloud_b)?));
-            previous_parts.push((rows_b, head.forward(&cloud_b, &cloud_a)?));
+        }
+        for (a, b) in pairs {
+            if let (Some((cloud_a, rows_a)), Some((cloud_b, rows_b))) = (&clouds[a], &clouds[b]) {
+                next_parts.push((rows_a.clone(), head.forward(cloud_a, cloud_b)?));
+                previous_parts.push((rows_b.clone(), head.forward(cloud_b, cloud_a)?));
+            }
         }
         let (to_next, to_previous) = (self.scattered(next_parts), self.scattered(previous_parts));
         self.with_known_learnt_flow(to_next, to_previous)
