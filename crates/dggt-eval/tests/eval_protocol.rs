@@ -341,11 +341,11 @@ fn assert_sources_side_by_side(views: &[Value], sources: &[&str], rendered: &str
     assert!(inputs > 0 && moving > 0, "{inputs} input views scored side by side, {moving} with moving cells");
 }
 
-#[test]
-fn instance_trajectories_are_rendered_and_scored_beside_held() {
+/// Trains the tiny network one step with `motion`, evaluates it with its training configuration (`--config`: the
+/// render settings come from it) and returns the report, its `eval.json` and its `eval.md`.
+fn evaluate_trained(motion: Motion) -> (dggt_eval::EvalReport, Value, String) {
     let run_dir = tempfile::tempdir().unwrap();
-    let config = tiny_checkpoint_with(run_dir.path(), Motion::Instances);
-    // The render settings come from the training configuration given with the checkpoint (`--config`).
+    let config = tiny_checkpoint_with(run_dir.path(), motion);
     let config_path = run_dir.path().join("train.toml");
     std::fs::write(&config_path, toml::to_string(&config).unwrap()).unwrap();
     let out = tempfile::tempdir().unwrap();
@@ -354,33 +354,31 @@ fn instance_trajectories_are_rendered_and_scored_beside_held() {
     options.architecture = Some(Architecture::Config(config_path));
     let evaluated = evaluate(&options, &Device::flex()).unwrap();
     let report: Value = serde_json::from_slice(&std::fs::read(out.path().join("eval.json")).unwrap()).unwrap();
+    let markdown = std::fs::read_to_string(out.path().join("eval.md")).unwrap();
+    (evaluated, report, markdown)
+}
+
+#[test]
+fn instance_trajectories_are_rendered_and_scored_beside_held() {
+    let (evaluated, report, markdown) = evaluate_trained(Motion::Instances);
     assert_eq!(report["motion_source"], MOTION_INSTANCES);
     assert_sources_side_by_side(report["scenes"][0]["views"].as_array().unwrap(), &["held", "instances"], "instances");
     let overall = &evaluated.overall[0];
     let names: Vec<&str> = overall.motion_by_source.iter().map(|m| m.source.as_str()).collect();
     assert_eq!(names, ["held", "instances"]);
-    let markdown = std::fs::read_to_string(out.path().join("eval.md")).unwrap();
     assert!(markdown.contains("### motion by source") && markdown.contains("| instances |"), "{markdown}");
 }
 
 #[test]
 fn the_learnt_flow_is_rendered_and_scored_beside_the_other_sources() {
-    let run_dir = tempfile::tempdir().unwrap();
-    let config = tiny_checkpoint_with(run_dir.path(), Motion::Learnt);
-    let config_path = run_dir.path().join("train.toml");
-    std::fs::write(&config_path, toml::to_string(&config).unwrap()).unwrap();
-    let out = tempfile::tempdir().unwrap();
-    let mut options = EvalOptions::new(vec![fixture()], run_dir.path(), out.path());
-    options.width = Some(84);
-    options.architecture = Some(Architecture::Config(config_path));
-    let evaluated = evaluate(&options, &Device::flex()).unwrap();
-    let report: Value = serde_json::from_slice(&std::fs::read(out.path().join("eval.json")).unwrap()).unwrap();
+    let (evaluated, report, markdown) = evaluate_trained(Motion::Learnt);
     assert_eq!(report["motion_source"], MOTION_LEARNT);
     let views = report["scenes"][0]["views"].as_array().unwrap();
     assert_sources_side_by_side(views, &["held", "instances", "learnt"], "learnt");
     let overall = evaluated.overall.iter().find(|s| !s.dynamic_psnr_by_source.is_empty()).expect("in-between views");
     let names: Vec<&str> = overall.dynamic_psnr_by_source.iter().map(|s| s.source.as_str()).collect();
     assert_eq!(names, ["held", "cross-fade", "instances", "learnt"]);
+    assert!(markdown.contains("### moving objects between the inputs by source") && markdown.contains("| learnt |"));
 }
 
 #[test]
