@@ -76,13 +76,20 @@ fn train_refuses_zero_steps_naming_where_the_zero_comes_from() {
     assert!(stderr.contains("--steps") && stderr.contains("'0'") && !stderr.contains("tiny-overfit.toml"), "{stderr}");
     assert!(!out.exists(), "a refused run wrote {}", out.display());
 
-    let text = std::fs::read_to_string(&config).unwrap().replace("steps = 700", "steps = 0");
+    let text = with_setting(&std::fs::read_to_string(&config).unwrap(), "steps", "0");
     let file = dir.path().join("zero.toml");
     std::fs::write(&file, text).unwrap();
     let zero = dggt(&["train", "--config", file.to_str().unwrap(), "--out", out.to_str().unwrap()]);
     let stderr = String::from_utf8_lossy(&zero.stderr);
     assert!(!zero.status.success());
     assert!(stderr.contains("zero.toml") && stderr.contains("run.steps: must be at least 1"), "{stderr}");
+}
+
+/// `text` (a TOML file) with the one line setting `key` set to `value` instead.
+fn with_setting(text: &str, key: &str, value: &str) -> String {
+    let prefix = format!("{key} = ");
+    assert_eq!(text.lines().filter(|l| l.starts_with(&prefix)).count(), 1, "one line sets {key}");
+    text.lines().map(|l| if l.starts_with(&prefix) { format!("{prefix}{value}\n") } else { format!("{l}\n") }).collect()
 }
 
 /// The stderr of a run of `dggt args` that must fail.
@@ -192,7 +199,7 @@ fn single_file_outputs_are_not_replaced_without_overwrite() {
 fn train_dry_run_refuses_a_window_shorter_than_its_inputs() {
     let config = format!("{}/configs/tiny-overfit.toml", env!("CARGO_MANIFEST_DIR"));
     let dir = tempfile::tempdir().unwrap();
-    let text = std::fs::read_to_string(&config).unwrap().replace("window = 13", "window = 3");
+    let text = with_setting(&std::fs::read_to_string(&config).unwrap(), "window", "3");
     let file = dir.path().join("short-window.toml");
     std::fs::write(&file, text).unwrap();
     let out = dir.path().join("run");
