@@ -22,7 +22,10 @@ use refine_common::{device, tiny_config};
 
 fn reconstruction_run(out: &Path) -> Trainer {
     let repo = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let config = TrainConfig::load(&repo.join("configs/tiny-overfit.toml")).expect("tiny-overfit.toml loads");
+    let mut config = TrainConfig::load(&repo.join("configs/tiny-overfit.toml")).expect("tiny-overfit.toml loads");
+    // 5-6 inputs and one target per input: every target lies between the inputs.
+    (config.sampler.min_inputs, config.sampler.max_inputs) = (5, 6);
+    (config.sampler.targets_per_input, config.sampler.target_margin) = (1, 0);
     Trainer::new(config.unattended(out), vec![Device::flex()], Start::Fresh).expect("the run builds")
 }
 

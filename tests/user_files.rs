@@ -201,7 +201,7 @@ fn resume_refuses_another_architecture_and_reports_changed_optimiser_settings() 
     let lower = write_config(dir.path(), "lower-lr.toml", |c| c.optim.lr = 1e-3);
     let resumed = succeeded(train(&lower, &run, &["--resume", "--steps", "3"]));
     assert!(resumed.contains("trained steps 2..3"), "{resumed}");
-    assert!(resumed.contains("optim.lr is 0.004 in the checkpoint, 0.001 in the configuration"), "{resumed}");
+    assert!(resumed.contains("optim.lr is 0.006 in the checkpoint, 0.001 in the configuration"), "{resumed}");
 }
 
 /// `reconstruct` and `eval` of a trainer run default to the width it trained at (56 here), an explicit
