@@ -70,7 +70,7 @@ fn opacities_parse_as_fractions_and_decimals() {
     assert_eq!(Skips::parse("Motion").unwrap(), Skips::StillMotion);
     assert!(Skips::parse("everything").is_err());
     assert_eq!(parse_motion("Instances").unwrap(), DynamicMotion::Instances);
-    assert!(parse_motion("tracker").unwrap_err().to_string().contains("velocity or instances"));
+    assert!(parse_motion("tracker").unwrap_err().to_string().contains("velocity, instances or learnt"));
     assert!(Precision::parse("f8").is_err());
 }
 
