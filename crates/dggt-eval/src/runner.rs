@@ -50,7 +50,7 @@ use crate::report::{
     EvalReport, ImageScores, SceneReport, SourceFlowMetrics, SourcePsnr, StageTime, ViewRecord, summarise_scenes,
     summarise_views,
 };
-use crate::sources::{CropImages, ImageSource, crop_box, render_sources, write_crop_strip};
+use crate::sources::{CropImages, ImageSource, clamped_colours, crop_box, render_sources, write_crop_strip};
 use dggt_metrics::{
     FlowMetrics, ImageShape, MetricError, aligned_depth_rmse, masked_psnr, psnr, scene_flow_metrics, ssim,
 };
@@ -418,7 +418,7 @@ fn evaluate_scene(root: &Path, scene: &Scene, context: &SceneContext<'_>) -> Res
             let started = Instant::now();
             let target = target_view(&forward, frame, camera_position)?;
             let render = forward.scene.render(&target)?;
-            let rgb: Vec<f32> = host(render.rgb, "rendered colours")?.into_iter().map(|v| v.clamp(0.0, 1.0)).collect();
+            let rgb = clamped_colours(render.rgb)?;
             let depth = host(render.depth, "rendered depth")?;
             let refined = match context.refiner {
                 Some(refiner) => {
@@ -430,7 +430,7 @@ fn evaluate_scene(root: &Path, scene: &Scene, context: &SceneContext<'_>) -> Res
             let rendered_flows = rendered_flows(&forward, &target)?;
             let has_mask = scene.view(frame_position, camera_position).files.dynamic_mask.is_some();
             let source_renders = match has_mask && !forward.at_input(&target) {
-                true => render_sources(&forward.scene, &target, &image_sources)?,
+                true => render_sources(&forward.scene, &target, &image_sources, &rgb)?,
                 false => Vec::new(),
             };
             watch.add(RENDER, started);

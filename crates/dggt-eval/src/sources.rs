@@ -83,21 +83,31 @@ pub enum CropImages {
     Write,
 }
 
-/// `target` rendered under each of `sources`, colours interleaved `[H, W, 3]` and clamped to `[0, 1]`.
+/// `target` rendered under each of `sources`, colours interleaved `[H, W, 3]` and clamped to `[0, 1]`; the
+/// source that draws as the scene's own assembly takes `own` (the view's render already made) instead.
 pub(crate) fn render_sources(
     scene: &Scene4d,
     target: &TargetView,
     sources: &[ImageSource],
+    own: &[f32],
 ) -> Result<Vec<(ImageSource, Vec<f32>)>, EvalError> {
     sources
         .iter()
         .map(|&source| {
             let assembly = source.assembly(&scene.assembly);
+            if assembly == scene.assembly {
+                return Ok((source, own.to_vec()));
+            }
             let render = render_target(&scene.pixels, scene.sky.as_ref(), target, &assembly)?;
-            let rgb = dggt_model::host::host_f32(render.rgb, "rendered colours")?;
-            Ok((source, rgb.into_iter().map(|v| v.clamp(0.0, 1.0)).collect()))
+            Ok((source, clamped_colours(render.rgb)?))
         })
         .collect()
+}
+
+/// A render's colours read back, interleaved `[H, W, 3]`, clamped to `[0, 1]`.
+pub(crate) fn clamped_colours(rgb: burn::tensor::Tensor<3>) -> Result<Vec<f32>, EvalError> {
+    let rgb = dggt_model::host::host_f32(rgb, "rendered colours")?;
+    Ok(rgb.into_iter().map(|v| v.clamp(0.0, 1.0)).collect())
 }
 
 /// A pixel rectangle, ends exclusive.
