@@ -6,13 +6,55 @@ use serde::{Deserialize, Serialize};
 
 use crate::head::FlowHead;
 
-/// Widths, neighbourhood and iteration counts of a [`FlowHead`].
+/// Widths, neighbourhood and iteration counts of a [`FlowHead`]. Stored flat (the widths beside the shape's
+/// fields, unknown keys refused), as configurations and checkpoints have always written it.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(from = "FlatConfig", into = "FlatConfig")]
+pub struct FlowHeadConfig {
+    /// Channels of each input feature scale, in the order [`crate::sample_features`] concatenates them (fixed by
+    /// the network the head reads). Default: four scales of 256 channels, the width of the DPT head's fused maps.
+    pub feature_widths: Vec<usize>,
+    /// Everything else: the head's own choices.
+    pub shape: FlowHeadShape,
+}
+
+/// The stored form of a [`FlowHeadConfig`].
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct FlatConfig {
+    feature_widths: Vec<usize>,
+    hidden: usize,
+    heads: usize,
+    neighbours: usize,
+    iterations: usize,
+    chunk: usize,
+    inputs: HeadInputs,
+}
+
+impl Default for FlatConfig {
+    fn default() -> Self {
+        FlowHeadConfig::default().into()
+    }
+}
+
+impl From<FlatConfig> for FlowHeadConfig {
+    fn from(flat: FlatConfig) -> Self {
+        let FlatConfig { feature_widths, hidden, heads, neighbours, iterations, chunk, inputs } = flat;
+        Self { feature_widths, shape: FlowHeadShape { hidden, heads, neighbours, iterations, chunk, inputs } }
+    }
+}
+
+impl From<FlowHeadConfig> for FlatConfig {
+    fn from(config: FlowHeadConfig) -> Self {
+        let FlowHeadShape { hidden, heads, neighbours, iterations, chunk, inputs } = config.shape;
+        Self { feature_widths: config.feature_widths, hidden, heads, neighbours, iterations, chunk, inputs }
+    }
+}
+
+/// A [`FlowHead`]'s own choices, whatever features it reads (a training configuration's `[model.flow]`).
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
-pub struct FlowHeadConfig {
-    /// Channels of each input feature scale, in the order [`crate::sample_features`] concatenates them. Default:
-    /// four scales of 256 channels, the width of the DPT head's fused maps.
-    pub feature_widths: Vec<usize>,
+pub struct FlowHeadShape {
     /// Width of the head's tokens.
     pub hidden: usize,
     /// Attention heads; each attends over `hidden / heads` channels.
@@ -23,11 +65,30 @@ pub struct FlowHeadConfig {
     pub iterations: usize,
     /// Queries processed together: memory grows with `chunk x neighbours x hidden`.
     pub chunk: usize,
+    /// What the tokens are made of (the image features can be left out, to measure what they buy).
+    pub inputs: HeadInputs,
+}
+
+/// What a [`FlowHead`]'s tokens carry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HeadInputs {
+    /// Each point's image features, and each neighbour's offset from the query (the paper's head).
+    #[default]
+    FeaturesAndOffsets,
+    /// The offsets alone: the head matches geometry only (its feature projection sees zeros).
+    OffsetsOnly,
+}
+
+impl Default for FlowHeadShape {
+    fn default() -> Self {
+        Self { hidden: 64, heads: 4, neighbours: 16, iterations: 3, chunk: 8192, inputs: HeadInputs::FeaturesAndOffsets }
+    }
 }
 
 impl Default for FlowHeadConfig {
     fn default() -> Self {
-        Self { feature_widths: vec![256; 4], hidden: 64, heads: 4, neighbours: 16, iterations: 3, chunk: 8192 }
+        Self { feature_widths: vec![256; 4], shape: FlowHeadShape::default() }
     }
 }
 
@@ -53,18 +114,19 @@ impl FlowHeadConfig {
         if let Some(index) = self.feature_widths.iter().position(|&w| w == 0) {
             return Err(ConfigError::EmptyFeatureScale { index });
         }
+        let shape = &self.shape;
         let counts = [
-            ("hidden", self.hidden),
-            ("heads", self.heads),
-            ("neighbours", self.neighbours),
-            ("iterations", self.iterations),
-            ("chunk", self.chunk),
+            ("hidden", shape.hidden),
+            ("heads", shape.heads),
+            ("neighbours", shape.neighbours),
+            ("iterations", shape.iterations),
+            ("chunk", shape.chunk),
         ];
         if let Some((field, _)) = counts.iter().find(|(_, value)| *value == 0) {
             return Err(ConfigError::Zero { field });
         }
-        if !self.hidden.is_multiple_of(self.heads) {
-            return Err(ConfigError::HeadsDoNotDivideHidden { hidden: self.hidden, heads: self.heads });
+        if !shape.hidden.is_multiple_of(shape.heads) {
+            return Err(ConfigError::HeadsDoNotDivideHidden { hidden: shape.hidden, heads: shape.heads });
         }
         Ok(())
     }
@@ -88,8 +150,9 @@ mod tests {
 
     #[test]
     fn the_default_is_valid_and_missing_keys_take_it() {
-        let config: FlowHeadConfig = serde_json::from_str(r#"{"hidden": 32}"#).unwrap();
-        assert_eq!(config, FlowHeadConfig { hidden: 32, ..FlowHeadConfig::default() });
+        let config: FlowHeadConfig = serde_json::from_str(r#"{"hidden": 32, "inputs": "offsets_only"}"#).unwrap();
+        let shape = FlowHeadShape { hidden: 32, inputs: HeadInputs::OffsetsOnly, ..FlowHeadShape::default() };
+        assert_eq!(config, FlowHeadConfig { shape, ..FlowHeadConfig::default() });
         assert_eq!(FlowHeadConfig::default().validate(), Ok(()));
         assert_eq!(FlowHeadConfig::default().feature_width(), 1024);
     }
@@ -98,6 +161,15 @@ mod tests {
     fn unknown_keys_are_refused() {
         let error = serde_json::from_str::<FlowHeadConfig>(r#"{"hiden": 32}"#).unwrap_err();
         assert!(error.to_string().contains("hiden"), "{error}");
+        let error = serde_json::from_str::<FlowHeadShape>(r#"{"iteration": 2}"#).unwrap_err();
+        assert!(error.to_string().contains("iteration"), "{error}");
+        // A checkpoint's stored form, written before `inputs` existed, reads back; the stored form is flat.
+        let stored = r#"{"feature_widths": [16, 32], "hidden": 64, "heads": 4, "neighbours": 16, "iterations": 3, "chunk": 8192}"#;
+        let config: FlowHeadConfig = serde_json::from_str(stored).unwrap();
+        assert_eq!(config, FlowHeadConfig { feature_widths: vec![16, 32], ..FlowHeadConfig::default() });
+        let written = serde_json::to_value(&config).unwrap();
+        assert_eq!(written["iterations"], 3);
+        assert_eq!(written["inputs"], "features_and_offsets");
     }
 
     #[test]
@@ -109,11 +181,12 @@ mod tests {
         };
         assert_eq!(bad(|c| c.feature_widths.clear()), ConfigError::NoFeatureScales);
         assert_eq!(bad(|c| c.feature_widths[2] = 0), ConfigError::EmptyFeatureScale { index: 2 });
-        assert_eq!(bad(|c| c.neighbours = 0), ConfigError::Zero { field: "neighbours" });
-        assert_eq!(bad(|c| c.iterations = 0), ConfigError::Zero { field: "iterations" });
-        assert_eq!(bad(|c| c.chunk = 0), ConfigError::Zero { field: "chunk" });
-        assert_eq!(bad(|c| c.heads = 0), ConfigError::Zero { field: "heads" });
-        assert_eq!(bad(|c| c.heads = 5), ConfigError::HeadsDoNotDivideHidden { hidden: 64, heads: 5 });
-        assert!(FlowHeadConfig { heads: 5, ..FlowHeadConfig::default() }.init(&Device::flex()).is_err());
+        assert_eq!(bad(|c| c.shape.neighbours = 0), ConfigError::Zero { field: "neighbours" });
+        assert_eq!(bad(|c| c.shape.iterations = 0), ConfigError::Zero { field: "iterations" });
+        assert_eq!(bad(|c| c.shape.chunk = 0), ConfigError::Zero { field: "chunk" });
+        assert_eq!(bad(|c| c.shape.heads = 0), ConfigError::Zero { field: "heads" });
+        assert_eq!(bad(|c| c.shape.heads = 5), ConfigError::HeadsDoNotDivideHidden { hidden: 64, heads: 5 });
+        let shape = FlowHeadShape { heads: 5, ..FlowHeadShape::default() };
+        assert!(FlowHeadConfig { shape, ..FlowHeadConfig::default() }.init(&Device::flex()).is_err());
     }
 }

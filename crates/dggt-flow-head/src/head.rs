@@ -15,7 +15,8 @@
 //!
 //! The update's last layer starts at zero, so a fresh head predicts exactly zero displacement. Offsets in, steps
 //! out, are in units of `s`, so scaling both clouds' points scales the displacement by the same factor.
-//! Queries are processed in chunks of [`FlowHeadConfig::chunk`] rows; the result does not depend on the chunking.
+//! Queries are processed in chunks of `chunk` rows ([`crate::FlowHeadShape`]); the result does not depend on the
+//! chunking.
 
 use burn::module::Module;
 use burn::nn::{Linear, LinearConfig};
@@ -23,7 +24,7 @@ use burn::tensor::activation::softmax;
 use burn::tensor::{Device, Int, Tensor, TensorData};
 
 use crate::cloud::{CloudRole, FlowError, FrameCloud, read_rows};
-use crate::config::FlowHeadConfig;
+use crate::config::{FlowHeadConfig, HeadInputs};
 use crate::mlp::{Mlp, OutputInit};
 use crate::neighbours::NeighbourSearch;
 use crate::scale::ScaleSource;
@@ -50,6 +51,8 @@ pub struct FlowHead {
     neighbours: usize,
     iterations: usize,
     chunk: usize,
+    #[module(skip)]
+    inputs: HeadInputs,
 }
 
 /// What every query chunk reads of the target cloud.
@@ -76,7 +79,8 @@ struct Queries {
 
 impl FlowHead {
     pub(crate) fn new(config: &FlowHeadConfig, device: &Device) -> Self {
-        let hidden = config.hidden;
+        let shape = &config.shape;
+        let hidden = shape.hidden;
         let linear = |input: usize, output: usize| LinearConfig::new(input, output).init(device);
         Self {
             feature_in: linear(config.feature_width(), hidden),
@@ -86,13 +90,14 @@ impl FlowHead {
             // A key bias would shift all of a query's scores alike, which the softmax ignores.
             key: LinearConfig::new(hidden, hidden).with_bias(false).init(device),
             value: linear(hidden, hidden),
-            merge: linear(hidden + 3 * config.heads, hidden),
+            merge: linear(hidden + 3 * shape.heads, hidden),
             update: Mlp::new(hidden, hidden, 3, OutputInit::Zero, device),
             feature_width: config.feature_width(),
-            heads: config.heads,
-            neighbours: config.neighbours,
-            iterations: config.iterations,
-            chunk: config.chunk,
+            heads: shape.heads,
+            neighbours: shape.neighbours,
+            iterations: shape.iterations,
+            chunk: shape.chunk,
+            inputs: shape.inputs,
         }
     }
 
@@ -127,10 +132,19 @@ impl FlowHead {
         let scale = ScaleSource::of_target(host_points, &search).length(query, target);
         Target {
             points: target.points.clone(),
-            tokens: self.feature_in.forward(target.features.clone()),
+            tokens: self.feature_tokens(target.features.clone()),
             scale,
             k: self.neighbours.min(search.len()),
             search,
+        }
+    }
+
+    /// `[N, hidden]`: the points' projected features (`features` `[N, C]`), or the projection's bias alone when
+    /// the head ignores them.
+    fn feature_tokens(&self, features: Tensor<2>) -> Tensor<2> {
+        match self.inputs {
+            HeadInputs::FeaturesAndOffsets => self.feature_in.forward(features),
+            HeadInputs::OffsetsOnly => self.feature_in.forward(features.zeros_like()),
         }
     }
 
@@ -138,7 +152,7 @@ impl FlowHead {
     fn start(&self, cloud: FrameCloud, host_points: Vec<[f32; 3]>, first_row: usize) -> Queries {
         Queries {
             displacement: cloud.points.zeros_like(),
-            state: self.feature_in.forward(cloud.features),
+            state: self.feature_tokens(cloud.features),
             points: cloud.points,
             host_points,
             first_row,

@@ -25,7 +25,7 @@ pub mod sample;
 pub mod scale;
 
 pub use cloud::{CloudRole, FlowError, FrameCloud};
-pub use config::{ConfigError, FlowHeadConfig};
+pub use config::{ConfigError, FlowHeadConfig, FlowHeadShape, HeadInputs};
 pub use dggt_geom::ImageSize;
 pub use head::FlowHead;
 pub use sample::{PixelIndex, SampleError, sample_features};

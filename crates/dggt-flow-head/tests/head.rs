@@ -9,7 +9,7 @@ use burn::module::Module;
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::tensor::{Device, Tensor};
 use common::{Host, HostCloud, Rng, randomised, small_config, values};
-use dggt_flow_head::{CloudRole, FlowError, FlowHeadConfig, FrameCloud};
+use dggt_flow_head::{CloudRole, FlowError, FlowHeadConfig, FlowHeadShape, FrameCloud};
 
 /// `n` points uniform in `[0, extent)^3` with standard normal features.
 fn random_cloud(n: usize, extent: f64, widths: usize, rng: &mut Rng) -> HostCloud {
@@ -77,7 +77,8 @@ fn scaling_both_clouds_scales_the_displacement() {
 fn chunking_does_not_change_the_result() {
     let device = Device::flex();
     let small_chunks = small_config();
-    let one_chunk = FlowHeadConfig { chunk: 8192, ..small_config() };
+    let mut one_chunk = small_config();
+    one_chunk.shape.chunk = 8192;
     let (query, target) = clouds(&small_chunks, 23, 40, 6);
     let run = |config: &FlowHeadConfig| {
         let head = randomised(config, 7, &device);
@@ -148,7 +149,10 @@ fn a_non_finite_displacement_stops_the_search() {
 fn overfits_a_translation() {
     let device = Device::flex().autodiff();
     let config =
-        FlowHeadConfig { feature_widths: vec![8], hidden: 32, heads: 4, neighbours: 8, iterations: 2, chunk: 8192 };
+        FlowHeadConfig {
+            feature_widths: vec![8],
+            shape: FlowHeadShape { hidden: 32, heads: 4, neighbours: 8, iterations: 2, ..FlowHeadShape::default() },
+        };
     let mut rng = Rng::new(10);
     let query = random_cloud(48, 4.0, 8, &mut rng);
     let shift = [0.3, -0.2, 0.25];

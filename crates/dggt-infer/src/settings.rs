@@ -5,6 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use dggt_data::Preprocess;
+use dggt_flow_head::FlowHeadShape;
 use dggt_geom::PixelConvention;
 use dggt_model::{ModelConfig, Preset};
 use dggt_scene::{AssemblySettings, DynamicBlend, DynamicMotion, InstanceSettings, MeansGradient};
@@ -42,10 +43,13 @@ pub struct ModelSection {
     /// Give every DPT head a convolution of the input pixels (`DptConfig::pixel_skip`; not in the release's
     /// weights, so only for heads that start fresh).
     pub pixel_skip: bool,
-    /// Add the learnt scene-flow head (`ModelConfig::flow_head`, default shape; not in the release's weights,
-    /// so it starts fresh from predicting zero): with `render.dynamic_motion = "learnt"` dynamic Gaussians move
-    /// along its displacements between adjacent inputs.
+    /// Add the learnt scene-flow head (`ModelConfig::flow_head`; not in the release's weights, so it starts
+    /// fresh from predicting zero): with `render.dynamic_motion = "learnt"` dynamic Gaussians move along its
+    /// displacements between adjacent inputs.
     pub flow_head: bool,
+    /// The flow head's shape (`[model.flow]`: hidden width, heads, neighbours, iterations, chunk, inputs); its
+    /// feature widths are the network's.
+    pub flow: FlowHeadShape,
 }
 
 impl Default for ModelSection {
@@ -61,6 +65,7 @@ impl Default for ModelSection {
             gaussian_velocity: false,
             pixel_skip: false,
             flow_head: false,
+            flow: FlowHeadShape::default(),
         }
     }
 }
@@ -79,7 +84,7 @@ impl ModelSection {
         }
         config.dpt.pixel_skip = self.pixel_skip;
         let config = if self.motion_head { config.with_motion_head() } else { config };
-        let config = if self.flow_head { config.with_flow_head() } else { config };
+        let config = if self.flow_head { config.with_flow_head(self.flow.clone()) } else { config };
         if self.gaussian_velocity { config.with_gaussian_velocity() } else { config }
     }
 }

@@ -354,11 +354,11 @@ impl ModelConfig {
         self
     }
 
-    /// Adds the learnt scene-flow head ([`ModelConfig::flow_head`]) with the default shape, reading the Gaussian
+    /// Adds the learnt scene-flow head ([`ModelConfig::flow_head`]) of `shape`, reading the Gaussian
     /// head's features ([`ModelConfig::flow_features`]).
-    pub fn with_flow_head(mut self) -> Self {
+    pub fn with_flow_head(mut self, shape: dggt_flow_head::FlowHeadShape) -> Self {
         let feature_widths = self.flow_features();
-        self.flow_head = Some(dggt_flow_head::FlowHeadConfig { feature_widths, ..Default::default() });
+        self.flow_head = Some(dggt_flow_head::FlowHeadConfig { feature_widths, shape });
         self
     }
 

@@ -11,7 +11,8 @@
 //! - `camera`: L1 of every camera-head iteration's encoding against the ground truth (relative to input 0);
 //! - `depth`: L1 of log depth against the export's depth;
 //! - `flow`: L1 of the predicted velocities against the export's scene flow, moving and still cells weighed
-//!   equally.
+//!   equally;
+//! - `learnt_flow`: the same of the flow head's learnt velocities, at the query pixels it moved.
 
 use std::collections::BTreeMap;
 
@@ -25,7 +26,7 @@ use dggt_losses::{GramLoss, Lpips, bce_with_logits, l2, lifespan_l1, opacity_los
 use dggt_metrics::psnr;
 use dggt_model::Dggt;
 use dggt_model::host::host_f32;
-use dggt_scene::{AssemblyCounts, PixelGaussians, Scene4d, TargetView};
+use dggt_scene::{AssemblyCounts, Axes, PixelGaussians, Scene4d, TargetView};
 
 use crate::batch::{DepthFlowSamples, StepBatch, ViewTruth};
 use crate::error::ObjectiveError;
@@ -245,6 +246,11 @@ impl Objective {
         {
             add(LossTerm::Flow, loss, &mut terms)?;
         }
+        if w.learnt_flow > 0.0
+            && let Some(loss) = learnt_flow_loss(forward.pixels(), batch)?
+        {
+            add(LossTerm::LearntFlow, loss, &mut terms)?;
+        }
 
         let mut psnrs = Vec::new();
         let mut counts = AssemblyCounts::default();
@@ -363,32 +369,76 @@ fn depth_loss(depth: &Tensor<4>, batch: &StepBatch) -> Result<Option<Tensor<1>>,
 /// over moving cells plus the mean over still ones, so that the few moving cells of a street weigh as much as
 /// its static surfaces (which must not move); `None` when no input view has flow.
 fn flow_loss(velocity: &Tensor<5>, batch: &StepBatch) -> Result<Option<Tensor<1>>, ObjectiveError> {
-    let device = velocity.device();
     let [_, frames, h, w, channels] = velocity.dims();
-    let (mut index, mut values, mut moving) = (Vec::new(), Vec::<f32>::new(), Vec::new());
-    for (frame, view) in batch.inputs.iter().enumerate().take(frames) {
-        if let Some(samples @ DepthFlowSamples { velocities: Some(velocities), .. }) = &view.depth_flow {
-            index.extend(samples.pixels.iter().map(|&p| p + (frame * h * w) as i64));
-            values.extend(velocities.iter().flatten());
-            moving.extend(&samples.moving);
-        }
-    }
-    if index.is_empty() {
+    let cells = FlowCells::of(batch, frames, h * w, |_| true);
+    Ok(cells.l1(velocity.clone().reshape([frames * h * w, channels])))
+}
+
+/// [`flow_loss`] of the flow head's learnt velocities, at the cells whose pixel the head moved. The learnt
+/// velocities (world axes, per unit of scene time) are compared in the flow's units: the view's camera axes
+/// (`v_camera = R^T v_world`, `R` = world-from-camera) per log frame. `None` without a learnt flow, without
+/// flow at a moved pixel, or for a single-frame timeline.
+fn learnt_flow_loss(pixels: &PixelGaussians, batch: &StepBatch) -> Result<Option<Tensor<1>>, ObjectiveError> {
+    let frames_per_time = batch.timeline.frames_per_time();
+    let Some(learnt) = pixels.learnt_velocity() else { return Ok(None) };
+    if frames_per_time <= 0.0 {
         return Ok(None);
     }
-    let count = index.len();
-    let moving_count = moving.iter().filter(|&&m| m).count();
-    // Each cell's share of the loss, per velocity component.
-    let share = |m: bool| {
-        let group = if m { moving_count } else { count - moving_count };
-        1.0 / (group * channels) as f32
-    };
-    let shares: Vec<f32> = moving.iter().map(|&m| share(m)).collect();
-    let rows = velocity.clone().reshape([frames * h * w, channels]);
-    let picked = rows.select(0, Tensor::<1, Int>::from_data(TensorData::new(index, [count]), &device));
-    let truth = Tensor::<2>::from_data(TensorData::new(values, [count, channels]), &device);
-    let shares = Tensor::<2>::from_data(TensorData::new(shares, [count, 1]), &device);
-    Ok(Some(((picked - truth).abs() * shares).sum()))
+    let (frames, per_view) = (pixels.views.len(), pixels.size.area());
+    let camera = pixels.rotate_rows(learnt.velocity, Axes::WorldToCamera).div_scalar(frames_per_time as f32);
+    let cells = FlowCells::of(batch, frames, per_view, |row| learnt.measured[row]);
+    Ok(cells.l1(camera))
+}
+
+/// The export's scene-flow cells of a batch's input views that a flow loss compares.
+struct FlowCells {
+    /// Row in `[frames x pixels]`.
+    rows: Vec<i64>,
+    /// Camera axes, world units per log frame.
+    velocities: Vec<[f32; 3]>,
+    moving: Vec<bool>,
+}
+
+impl FlowCells {
+    /// The cells of the first `frames` inputs (`per_view` pixels each) at the rows `keep` accepts.
+    fn of(batch: &StepBatch, frames: usize, per_view: usize, keep: impl Fn(usize) -> bool) -> Self {
+        let mut cells = Self { rows: Vec::new(), velocities: Vec::new(), moving: Vec::new() };
+        for (frame, view) in batch.inputs.iter().enumerate().take(frames) {
+            if let Some(samples @ DepthFlowSamples { velocities: Some(velocities), .. }) = &view.depth_flow {
+                for ((&pixel, velocity), &moving) in samples.pixels.iter().zip(velocities).zip(&samples.moving) {
+                    let row = pixel + (frame * per_view) as i64;
+                    if keep(row as usize) {
+                        cells.rows.push(row);
+                        cells.velocities.push(*velocity);
+                        cells.moving.push(moving);
+                    }
+                }
+            }
+        }
+        cells
+    }
+
+    /// The mean L1 over moving cells plus the one over still cells of `rows` (`[frames x pixels, 3]`) against
+    /// the cells' velocities; `None` without cells.
+    fn l1(self, rows: Tensor<2>) -> Option<Tensor<1>> {
+        if self.rows.is_empty() {
+            return None;
+        }
+        let device = rows.device();
+        let count = self.rows.len();
+        let moving_count = self.moving.iter().filter(|&&m| m).count();
+        // Each cell's share of the loss, per velocity component.
+        let share = |m: bool| {
+            let group = if m { moving_count } else { count - moving_count };
+            1.0 / (group * 3) as f32
+        };
+        let shares: Vec<f32> = self.moving.iter().map(|&m| share(m)).collect();
+        let picked = rows.select(0, Tensor::<1, Int>::from_data(TensorData::new(self.rows, [count]), &device));
+        let values: Vec<f32> = self.velocities.into_iter().flatten().collect();
+        let truth = Tensor::<2>::from_data(TensorData::new(values, [count, 3]), &device);
+        let shares = Tensor::<2>::from_data(TensorData::new(shares, [count, 1]), &device);
+        Some(((picked - truth).abs() * shares).sum())
+    }
 }
 
 /// A loss value on the host; a failure of the device (out of memory, a lost device) is an error here, where the
@@ -400,8 +450,10 @@ fn scalar(tensor: &Tensor<1>) -> Result<f64, ObjectiveError> {
 #[cfg(test)]
 mod tests {
     use burn::tensor::Device;
-    use dggt_geom::{ImageSize, PinholeIntrinsics, PosedCamera, WorldFromCamera};
-    use dggt_scene::Timeline;
+    use dggt_geom::glam::{DQuat, DVec3};
+    use dggt_geom::{ImageSize, PinholeIntrinsics, PixelConvention, PosedCamera, WorldFromCamera};
+    use dggt_model::gaussian_maps::GaussianMaps;
+    use dggt_scene::{InputView, MeansGradient, Timeline};
 
     use super::*;
 
@@ -458,5 +510,83 @@ mod tests {
         let without = StepBatch { inputs: vec![ViewTruth { depth_flow: None, ..batch.inputs[0].clone() }], ..batch };
         let velocity = Tensor::<5>::zeros([1, 1, 2, 2, 3], &device);
         assert!(flow_loss(&velocity, &without).unwrap().is_none(), "no flow, no term");
+    }
+
+    /// Two 2x2 views of one camera at log frames 0 and 4, the first turned a quarter about y.
+    fn two_views() -> Vec<(PosedCamera, f64)> {
+        let turned = DQuat::from_rotation_y(std::f64::consts::FRAC_PI_2);
+        let timeline = Timeline::new(&[0, 4]).unwrap();
+        [(turned, 0), (DQuat::IDENTITY, 4)]
+            .map(|(rotation, frame)| {
+                let world_from_camera = WorldFromCamera::from_rotation_translation(rotation, DVec3::ZERO).unwrap();
+                let intrinsics = PinholeIntrinsics::new(2.0, 2.0, 1.0, 1.0).unwrap();
+                (PosedCamera { world_from_camera, intrinsics }, timeline.time(frame as f64))
+            })
+            .to_vec()
+    }
+
+    #[test]
+    fn the_learnt_flow_loss_compares_in_camera_axes_per_log_frame_at_the_moved_rows() {
+        let device = Device::flex();
+        let views = two_views();
+        let inputs: Vec<InputView> =
+            views.iter().map(|&(camera, time)| InputView { rig_camera: 0, time, camera }).collect();
+        let maps = GaussianMaps::from_raw(Tensor::zeros([1, 2, 2, 2, 12], &device));
+        let depth = Tensor::ones([1, 2, 2, 2], &device);
+        let pixels =
+            PixelGaussians::new(&maps, depth, None, inputs, MeansGradient::Detached, PixelConvention::Centred).unwrap();
+        // View 0 moves rows 0-2 to the next input (row 3 not); view 1 every row back to the previous one.
+        let next = [[1.0, 2.0, 3.0], [0.5, 0.0, -1.0], [0.0, 4.0, 0.0], [0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3]];
+        let previous = [[0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3], [2.0, 0.0, 0.0], [0.0, -1.0, 0.0], [1.0; 3], [0.0, 0.0, 3.0]];
+        let rows = |values: [[f32; 3]; 8]| {
+            Tensor::<2>::from_data(TensorData::new(values.concat(), [8, 3]), &device)
+        };
+        let pixels = pixels.with_known_learnt_flow(rows(next), rows(previous), None).unwrap();
+        // Log frames per unit of scene time, and the step's span in scene time.
+        let timeline = Timeline::new(&[0, 4]).unwrap();
+        let (frames_per_time, span) = (timeline.frames_per_time(), views[1].1 - views[0].1);
+        // By hand: view 0 (turned by R about y, R^T (x, y, z) = (-z, y, x)) from its displacement to the next input,
+        // view 1 (the last) from minus its displacement from the previous one; per log frame.
+        let per_frame = |v: [f32; 3]| v.map(|c| c / (span * frames_per_time) as f32);
+        let expected: Vec<[f32; 3]> = (0..8)
+            .map(|row| match row {
+                0..4 => per_frame([-next[row][2], next[row][1], next[row][0]]),
+                _ => per_frame(previous[row].map(|c| -c)),
+            })
+            .collect();
+        let batch_with = |truth: &dyn Fn(usize) -> [f32; 3]| StepBatch {
+            step: 0,
+            images: Tensor::zeros([1, 2, 3, 2, 2], &device),
+            size: ImageSize::new(2, 2).unwrap(),
+            timeline: timeline.clone(),
+            inputs: views
+                .iter()
+                .enumerate()
+                .map(|(frame, &(camera, time))| ViewTruth {
+                    frame: 4 * frame,
+                    rig_camera: 0,
+                    time,
+                    camera,
+                    image: Tensor::zeros([2, 2, 3], &device),
+                    sky: None,
+                    dynamic: None,
+                    depth_flow: Some(DepthFlowSamples {
+                        pixels: (0..4).collect(),
+                        depths: vec![1.0; 4],
+                        velocities: Some((0..4).map(|p| truth(4 * frame + p as usize)).collect()),
+                        moving: vec![true; 4],
+                    }),
+                })
+                .collect(),
+            targets: Vec::new(),
+        };
+        let loss = |batch: &StepBatch| scalar(&learnt_flow_loss(&pixels, batch).unwrap().expect("cells")).unwrap();
+        // The exact flow costs nothing; row 3, which the flow did not move, is not compared.
+        let exact = batch_with(&|row| if row == 3 { [5.0; 3] } else { expected[row] });
+        assert!(loss(&exact).abs() < 1e-6, "{}", loss(&exact));
+        // Against no motion: the mean absolute component over the seven moved rows.
+        let mean = expected.iter().enumerate().filter(|&(r, _)| r != 3).flat_map(|(_, v)| v.map(f32::abs)).sum::<f32>()
+            / 21.0;
+        assert!((loss(&batch_with(&|_| [0.0; 3])) - f64::from(mean)).abs() < 1e-6);
     }
 }

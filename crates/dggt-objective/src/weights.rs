@@ -20,6 +20,8 @@ pub enum LossTerm {
     Flow,
     /// Gram-matrix loss of VGG-16 features.
     Gram,
+    /// L1 of the flow head's learnt velocities against the export's scene flow.
+    LearntFlow,
     /// Mean `1 / lifespan` over Gaussians predicted static.
     LifespanL1,
     /// LPIPS on the renders.
@@ -31,12 +33,13 @@ pub enum LossTerm {
 }
 
 impl LossTerm {
-    pub const ALL: [Self; 9] = [
+    pub const ALL: [Self; 10] = [
         Self::Camera,
         Self::Depth,
         Self::DynamicBce,
         Self::Flow,
         Self::Gram,
+        Self::LearntFlow,
         Self::LifespanL1,
         Self::Lpips,
         Self::OpacityBce,
@@ -51,6 +54,7 @@ impl LossTerm {
             Self::DynamicBce => "dynamic_bce",
             Self::Flow => "flow",
             Self::Gram => "gram",
+            Self::LearntFlow => "learnt_flow",
             Self::LifespanL1 => "lifespan_l1",
             Self::Lpips => "lpips",
             Self::OpacityBce => "opacity_bce",
@@ -66,6 +70,7 @@ impl LossTerm {
             Self::DynamicBce => weights.dynamic_bce,
             Self::Flow => weights.flow,
             Self::Gram => weights.gram,
+            Self::LearntFlow => weights.learnt_flow,
             Self::LifespanL1 => weights.lifespan_l1,
             Self::Lpips => weights.lpips,
             Self::OpacityBce => weights.opacity_bce,
@@ -119,6 +124,11 @@ pub struct LossWeights {
     /// camera's axes and world units per log frame, the mean over moving cells plus the mean over still ones;
     /// needs `model.motion_head` or `model.gaussian_velocity`.
     pub flow: f64,
+    /// L1 of the flow head's learnt velocities (its displacement to the next input over the time between them)
+    /// against the export's scene flow, compared as `flow` is, at the query pixels the head moved (the export's
+    /// box flow as optional supervision of the head, which otherwise learns from the renders alone); needs
+    /// `model.flow_head`.
+    pub learnt_flow: f64,
 }
 
 impl Default for LossWeights {
@@ -137,6 +147,7 @@ impl Default for LossWeights {
             camera: 0.0,
             depth: 0.0,
             flow: 0.0,
+            learnt_flow: 0.0,
         }
     }
 }

@@ -32,6 +32,10 @@ pub struct LearntFlow {
     pub to_previous: Tensor<2>,
     pub(crate) host_next: Vec<[f32; 3]>,
     pub(crate) host_previous: Vec<[f32; 3]>,
+    /// Per row, whether the head moved it to the next input (it was a query of a pair that ran).
+    pub(crate) moved_next: Vec<bool>,
+    /// Per row, whether the head moved it to the previous input.
+    pub(crate) moved_previous: Vec<bool>,
     /// Per view, the times of the previous and the next input of its camera, when there are.
     pub(crate) neighbours: Vec<(Option<f64>, Option<f64>)>,
 }
@@ -84,6 +88,35 @@ impl LearntFlow {
             Towards::Previous => &self.to_previous,
         }
     }
+
+    /// How view `view` (at `time`) reads its rows' velocity off the flow: `v = c_next F_next + c_previous
+    /// F_previous` per unit of scene time, from the displacement to the next input, else (a camera's last input)
+    /// from the one from the previous input; `None` for a camera with one input.
+    fn velocity_rule(&self, view: usize, time: f64) -> Option<(Towards, [f32; 2])> {
+        match self.neighbours[view] {
+            (_, Some(next)) => Some((Towards::Next, [(1.0 / (next - time)) as f32, 0.0])),
+            (Some(previous), None) => Some((Towards::Previous, [0.0, (-1.0 / (time - previous)) as f32])),
+            (None, None) => None,
+        }
+    }
+
+    fn moved(&self, towards: Towards) -> &[bool] {
+        match towards {
+            Towards::Next => &self.moved_next,
+            Towards::Previous => &self.moved_previous,
+        }
+    }
+}
+
+/// Every row's velocity under the learnt flow as a tensor gradients flow through
+/// ([`PixelGaussians::learnt_velocity`]).
+#[derive(Debug, Clone)]
+pub struct LearntVelocity {
+    /// `[M, 3]` world units per unit of scene time (zero where the head did not move the row).
+    pub velocity: Tensor<2>,
+    /// Per row, whether the head gave it the displacement its velocity is read from: only these rows say
+    /// anything about the head.
+    pub measured: Vec<bool>,
 }
 
 impl PixelGaussians {
@@ -113,31 +146,41 @@ impl PixelGaussians {
                 clouds[view] = Some(self.cloud(view, &queries[view], features)?);
             }
         }
+        let mut moved_rows = [vec![false; self.len()], vec![false; self.len()]];
         for (a, b) in pairs {
             if let (Some((cloud_a, rows_a)), Some((cloud_b, rows_b))) = (&clouds[a], &clouds[b]) {
                 next_parts.push((rows_a.clone(), head.forward(cloud_a, cloud_b)?));
                 previous_parts.push((rows_b.clone(), head.forward(cloud_b, cloud_a)?));
+                for (moved, view) in moved_rows.iter_mut().zip([a, b]) {
+                    queries[view].iter().for_each(|p| moved[self.row(view, *p)] = true);
+                }
             }
         }
         let (to_next, to_previous) = (self.scattered(next_parts), self.scattered(previous_parts));
-        self.with_known_learnt_flow(to_next, to_previous)
+        self.with_known_learnt_flow(to_next, to_previous, Some(moved_rows))
     }
 
     /// Keeps `to_next` and `to_previous` (`[M, 3]`, as [`LearntFlow`] holds them) as the learnt flow: the flow
-    /// head's, or a saved scene's. Non-finite displacements are an error naming the view and pixel.
-    pub(crate) fn with_known_learnt_flow(
+    /// head's, a saved scene's, or displacements known otherwise. `moved`: the rows the head moved to the next and the previous input; a saved
+    /// scene (`None`) counts the rows with a non-zero displacement. Non-finite displacements are an error naming
+    /// the view and pixel.
+    pub fn with_known_learnt_flow(
         mut self,
         to_next: Tensor<2>,
         to_previous: Tensor<2>,
+        moved: Option<[Vec<bool>; 2]>,
     ) -> Result<Self, SceneError> {
         let host_next = self.checked_rows(&to_next, "learnt flow to the next input")?;
         let host_previous = self.checked_rows(&to_previous, "learnt flow to the previous input")?;
+        let nonzero = |rows: &[[f32; 3]]| rows.iter().map(|d| d.iter().any(|&v| v != 0.0)).collect();
+        let [moved_next, moved_previous] = moved.unwrap_or_else(|| [nonzero(&host_next), nonzero(&host_previous)]);
         let mut neighbours = vec![(None, None); self.views.len()];
         for (a, b) in adjacent_views(&self.views) {
             neighbours[a].1 = Some(self.views[b].time);
             neighbours[b].0 = Some(self.views[a].time);
         }
-        let flow = LearntFlow { to_next, to_previous, host_next, host_previous, neighbours };
+        let flow =
+            LearntFlow { to_next, to_previous, host_next, host_previous, moved_next, moved_previous, neighbours };
         self.learnt = Some(std::sync::Arc::new(flow));
         Ok(self)
     }
@@ -155,14 +198,35 @@ impl PixelGaussians {
         let per_view = self.per_view();
         let velocity = |row: usize| -> [f32; 3] {
             let view = row / per_view;
-            let time = self.views[view].time;
-            match flow.neighbours[view] {
-                (_, Some(next)) => flow.host_next[row].map(|v| v / (next - time) as f32),
-                (Some(previous), None) => flow.host_previous[row].map(|v| -v / (time - previous) as f32),
-                (None, None) => [0.0; 3],
+            match flow.velocity_rule(view, self.views[view].time) {
+                Some((_, [c_next, c_previous])) => {
+                    std::array::from_fn(|i| c_next * flow.host_next[row][i] + c_previous * flow.host_previous[row][i])
+                }
+                None => [0.0; 3],
             }
         };
         Some((0..self.len()).map(velocity).collect())
+    }
+
+    /// The velocities of [`Self::learnt_velocities`] as a tensor the gradient flows through, with the rows the
+    /// head measured (what a supervision of the head compares); `None` without a learnt flow.
+    pub fn learnt_velocity(&self) -> Option<LearntVelocity> {
+        let flow = self.learnt()?;
+        let per_view = self.per_view();
+        let mut coefficients = Vec::with_capacity(2 * self.len());
+        let mut measured = Vec::with_capacity(self.len());
+        for (view, input) in self.views.iter().enumerate() {
+            let rule = flow.velocity_rule(view, input.time);
+            let [c_next, c_previous] = rule.map_or([0.0; 2], |(_, c)| c);
+            for row in view * per_view..(view + 1) * per_view {
+                coefficients.extend([c_next, c_previous]);
+                measured.push(rule.is_some_and(|(towards, _)| flow.moved(towards)[row]));
+            }
+        }
+        let coefficients = Tensor::<2>::from_data(TensorData::new(coefficients, [self.len(), 2]), &self.means.device());
+        let [c_next, c_previous] = [0, 1].map(|i| coefficients.clone().slice([0..self.len(), i..i + 1]));
+        let velocity = flow.to_next.clone() * c_next + flow.to_previous.clone() * c_previous;
+        Some(LearntVelocity { velocity, measured })
     }
 
     /// View `view`'s query pixels as a cloud (means and features) and their rows.
@@ -172,12 +236,16 @@ impl PixelGaussians {
         pixels: &[PixelIndex],
         features: &[Tensor<4>],
     ) -> Result<(FrameCloud, Tensor<1, Int>), SceneError> {
-        let width = self.size.width as usize;
-        let rows: Vec<i64> = pixels.iter().map(|p| (view * self.per_view() + p.row * width + p.col) as i64).collect();
+        let rows: Vec<i64> = pixels.iter().map(|p| self.row(view, *p) as i64).collect();
         let rows = Tensor::<1, Int>::from_data(TensorData::new(rows, [pixels.len()]), &self.means.device());
         let points = self.means.clone().select(0, rows.clone());
         let features = sample_features(features, view, self.size, pixels)?;
         Ok((FrameCloud::new(points, features), rows))
+    }
+
+    /// The row of `view`'s pixel `pixel`.
+    fn row(&self, view: usize, pixel: PixelIndex) -> usize {
+        view * self.per_view() + pixel.row * self.size.width as usize + pixel.col
     }
 
     /// `[M, 3]` with each part's displacements at its rows and zeros elsewhere.

@@ -31,8 +31,8 @@ pub use assemble::{
 pub use compose::{ViewRender, camera_tensors, composite, render_assembled, render_flow, render_target, sky_splats};
 pub use dggt_instances::{InstanceSettings, Instances};
 pub use error::SceneError;
-pub use learnt::LearntFlow;
-pub use pixels::{MeansGradient, PixelGaussians};
+pub use learnt::{LearntFlow, LearntVelocity};
+pub use pixels::{Axes, MeansGradient, PixelGaussians};
 pub use saved::{SCENE_FILE, load_scene, save_scene, scene_file};
 pub use scene4d::Scene4d;
 pub use timeline::{

@@ -42,6 +42,13 @@ pub(crate) struct SavedRows {
     pub velocity: Option<Tensor<2>>,
 }
 
+/// Which way [`PixelGaussians::rotate_rows`] turns vectors.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Axes {
+    CameraToWorld,
+    WorldToCamera,
+}
+
 /// `M = S · H · W` Gaussians, one per input pixel.
 #[derive(Debug, Clone)]
 pub struct PixelGaussians {
@@ -211,20 +218,9 @@ impl PixelGaussians {
                 value: frames_per_time,
             });
         }
-        let device = velocity.device();
         let per_view = height * width;
-        // Row vectors times R^T (element (row, column) = R(column, row)): v_world = R_world_from_camera v_camera.
-        let rotations: Vec<f32> = self
-            .views
-            .iter()
-            .flat_map(|v| {
-                let r = v.camera.world_from_camera.rotation_matrix();
-                (0..3).flat_map(move |row| (0..3).map(move |column| r.col(row)[column] as f32))
-            })
-            .collect();
-        let rotations = Tensor::<3>::from_data(TensorData::new(rotations, [frames, 3, 3]), &device);
-        let world = velocity.reshape([frames, per_view, channels]).matmul(rotations).mul_scalar(frames_per_time as f32);
-        let world = world.reshape([frames * per_view, 3]);
+        let camera = velocity.reshape([frames * per_view, channels]);
+        let world = self.rotate_rows(camera, Axes::CameraToWorld).mul_scalar(frames_per_time as f32);
         let host = host_f32(world.clone(), "velocity")?;
         if let Some(i) = host.iter().position(|v| !v.is_finite()) {
             return Err(SceneError::NonFinite {
@@ -237,6 +233,28 @@ impl PixelGaussians {
         self.host_velocity = Some(host.chunks_exact(3).map(|v| [v[0], v[1], v[2]]).collect());
         self.velocity = Some(world);
         Ok(self)
+    }
+
+    /// Turns vectors `[M, 3]`, one per row, between the world's axes and those of each row's view camera
+    /// (OpenCV), with that view's rotation `R` (world-from-camera): `R v` to the world, `R^T v` to the camera.
+    pub fn rotate_rows(&self, rows: Tensor<2>, to: Axes) -> Tensor<2> {
+        let frames = self.views.len();
+        // Row vectors times M: M = R^T to the world, M = R to the camera.
+        let rotations: Vec<f32> = self
+            .views
+            .iter()
+            .flat_map(|v| {
+                let r = v.camera.world_from_camera.rotation_matrix();
+                (0..3).flat_map(move |i| {
+                    (0..3).map(move |j| match to {
+                        Axes::CameraToWorld => r.col(i)[j] as f32,
+                        Axes::WorldToCamera => r.col(j)[i] as f32,
+                    })
+                })
+            })
+            .collect();
+        let rotations = Tensor::<3>::from_data(TensorData::new(rotations, [frames, 3, 3]), &rows.device());
+        rows.reshape([frames, self.per_view(), 3]).matmul(rotations).reshape([frames * self.per_view(), 3])
     }
 
     /// Finds the moving objects of the views (`dggt_instances`: dynamic pixels clustered, followed through the

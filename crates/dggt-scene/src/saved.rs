@@ -336,7 +336,7 @@ impl<'a> Reader<'a> {
             None => pixels,
         };
         let pixels = match (optional("pixels.flow_to_next", 3)?, optional("pixels.flow_to_previous", 3)?) {
-            (Some(to_next), Some(to_previous)) => pixels.with_known_learnt_flow(to_next, to_previous)?,
+            (Some(to_next), Some(to_previous)) => pixels.with_known_learnt_flow(to_next, to_previous, None)?,
             (None, None) => pixels,
             _ => {
                 return Err(self.error("holds one of `pixels.flow_to_next` and `pixels.flow_to_previous` alone".into()));

@@ -6,7 +6,7 @@
 use burn::module::Module;
 use burn::nn::LinearConfig;
 use burn::tensor::{Device, Tensor, TensorData};
-use dggt_flow_head::{FlowHead, FlowHeadConfig};
+use dggt_flow_head::{FlowHead, FlowHeadConfig, FlowHeadShape};
 use dggt_scene::{
     AssemblySettings, DynamicBlend, DynamicMotion, PixelGaussians, TargetView, assemble, assembled_velocities,
     interpolate_camera, render_target,
@@ -19,7 +19,10 @@ use common::{H, S, W, in_patch, pixels};
 const WIDTHS: [usize; 2] = [4, 3];
 
 fn config() -> FlowHeadConfig {
-    FlowHeadConfig { feature_widths: WIDTHS.to_vec(), hidden: 16, heads: 2, neighbours: 6, iterations: 2, chunk: 64 }
+    FlowHeadConfig {
+        feature_widths: WIDTHS.to_vec(),
+        shape: FlowHeadShape { hidden: 16, heads: 2, neighbours: 6, iterations: 2, chunk: 64, ..FlowHeadShape::default() },
+    }
 }
 
 /// A head whose last layer is no longer zero, so that it predicts a displacement.
@@ -118,6 +121,34 @@ fn the_learnt_flow_moves_a_fraction_of_each_step_and_leaves_the_inputs_exact() {
     for axis in 0..3 {
         assert!((inputs[last][axis] + previous[3 * last + axis] / 0.5).abs() < 1e-5, "the last input looks back");
     }
+}
+
+#[test]
+fn the_learnt_velocity_tensor_is_the_host_velocities_and_marks_the_rows_the_head_moved() {
+    let device = Device::flex().autodiff();
+    let head = moving_head(&device);
+    let pixels = pixels(&device).with_learnt_flow(&head, &features(&device)).unwrap();
+    let learnt = pixels.learnt_velocity().expect("a learnt flow has velocities");
+    let expected: Vec<f32> = pixels.learnt_velocities().unwrap().into_iter().flatten().collect();
+    let values = host(learnt.velocity.clone());
+    assert!(values.iter().zip(&expected).all(|(a, b)| (a - b).abs() < 1e-6));
+    // Views 0 and 1 read their velocity off the step to the next input, view 2 (the last) off the one back:
+    // every patch row was a query of the pair it reads, and only those.
+    for (row, &measured) in learnt.measured.iter().enumerate() {
+        let (view, pixel) = (row / (H * W), row % (H * W));
+        assert_eq!(measured, in_patch(view, pixel % W, pixel / W), "row {row}");
+    }
+    let grads = learnt.velocity.abs().sum().backward();
+    let weight = head.update.fc2.weight.val().grad(&grads).expect("the velocities reach the head");
+    assert!(host(weight).iter().any(|&v| v != 0.0));
+
+    // Without dynamic pixels in view 1 neither of its pairs runs: no row is measured.
+    let mut still = pixels.clone();
+    let mut logits = host(still.dynamic_logit.clone().unwrap());
+    logits[H * W..2 * H * W].fill(-8.0);
+    still.dynamic_logit = Some(Tensor::from_data(TensorData::new(logits, [S * H * W]), &device));
+    let still = still.with_learnt_flow(&head, &features(&device)).unwrap();
+    assert!(!still.learnt_velocity().unwrap().measured.contains(&true));
 }
 
 #[test]

@@ -1,8 +1,8 @@
 //! Stress cases that bypass the network: hand-made head outputs at the extremes the activations and the
 //! renderer must survive (opacities at 0 and 1, lifespans near 0 and huge, degenerate, huge and anisotropic
 //! scales, zero quaternions, saturated colours, depths at 0 and 1e6, empty and all-dynamic frames, all-sky and
-//! no-sky views, moderate, huge and non-finite motion-head velocities, and objects moved along their
-//! trajectories among all of these), pushed through the Gaussian
+//! no-sky views, moderate, huge and non-finite motion-head velocities, objects moved along their trajectories
+//! and dynamic Gaussians moved along a flow head's learnt flow among all of these), pushed through the Gaussian
 //! activations, placement, rendering, every loss and the backward pass to the hand-made outputs.
 //!
 //! The raw head output is `[1, S, H, W, 12]`: RGB logits (0-2), opacity logit (3), scale pre-softplus (4-6),
@@ -11,7 +11,10 @@
 use std::ops::Range;
 
 use burn::tensor::{Device, Tensor, TensorData};
+use burn::nn::{Linear, LinearConfig};
+use dggt_flow_head::{FlowHead, FlowHeadConfig, FlowHeadShape};
 use dggt_geom::PixelConvention;
+use dggt_model::seeded::with_seed;
 use dggt_model::gaussian_maps::GaussianMaps;
 use dggt_model::sky::SkyModel;
 use dggt_objective::{Forward, Objective};
@@ -43,9 +46,23 @@ pub struct Prediction {
     /// `[S, H, W, 3]` motion-head velocities (world units per log frame, camera axes); `None`: no motion head.
     pub velocity: Option<Vec<f32>>,
     /// How the dynamic Gaussians reach the targets' times (with `Instances`, the objects among them are found
-    /// and moved along their trajectories).
+    /// and moved along their trajectories; with `Learnt`, a flow head runs on [`Self::flow`]).
     pub motion: DynamicMotion,
+    /// What the flow head of a `Learnt` motion reads and how far it moves the Gaussians.
+    pub flow: LearntFlowInput,
 }
+
+/// A flow head's input for the learnt motion: full-resolution features and the gain of its last layer.
+#[derive(Debug, Clone)]
+pub struct LearntFlowInput {
+    /// `[S, FLOW_CHANNELS, H, W]` the features the head reads at the query and target pixels.
+    pub features: Vec<f32>,
+    /// The head's last layer is a random one times this (a fresh head's is zero and would move nothing).
+    pub gain: f32,
+}
+
+/// Channels of the crafted flow features.
+pub const FLOW_CHANNELS: usize = 4;
 
 impl Prediction {
     /// Moderate random values: what a network might output.
@@ -60,7 +77,9 @@ impl Prediction {
             .collect();
         let depth = (0..pixels).map(|_| random.range(2.0, 30.0)).collect();
         let dynamic_logit = (0..pixels).map(|_| random.range(-4.0, 4.0)).collect();
-        Self { raw, depth, dynamic_logit, velocity: None, motion: DynamicMotion::Velocity }
+        let features = (0..pixels * FLOW_CHANNELS).map(|_| random.range(-1.0, 1.0)).collect();
+        let flow = LearntFlowInput { features, gain: 1.0 };
+        Self { raw, depth, dynamic_logit, velocity: None, motion: DynamicMotion::Velocity, flow }
     }
 
     /// Gives the prediction motion-head velocities of `magnitude` in random directions.
@@ -126,9 +145,15 @@ pub fn run(
         None => pixels,
     };
     let assembly = AssemblySettings { dynamic_motion: prediction.motion, ..objective.render.assembly() };
+    let features = Tensor::<4>::from_data(
+        TensorData::new(prediction.flow.features.clone(), [frames, FLOW_CHANNELS, height, width]),
+        device,
+    )
+    .require_grad();
     let pixels = match prediction.motion {
         DynamicMotion::Instances => pixels.with_instances(&assembly.instances)?,
-        DynamicMotion::Velocity | DynamicMotion::Held | DynamicMotion::Learnt => pixels,
+        DynamicMotion::Learnt => pixels.with_learnt_flow(&flow_head(prediction.flow.gain, device), &[features.clone()])?,
+        DynamicMotion::Velocity | DynamicMotion::Held => pixels,
     };
     let cameras: Vec<_> =
         batch.inputs.iter().map(|v| (v.camera.world_from_camera.inverse(), v.camera.intrinsics)).collect();
@@ -151,5 +176,19 @@ pub fn run(
     if let Some(grad) = velocity.as_ref().and_then(|velocity| velocity.grad(&grads)) {
         probe.tensor(Stage::Gradients, "grad velocities", &grad);
     }
+    if let Some(grad) = features.grad(&grads) {
+        probe.tensor(Stage::Gradients, "grad flow features", &grad);
+    }
     Ok(())
+}
+
+/// A small flow head reading [`FLOW_CHANNELS`] features, the same for every case, whose last layer is a random
+/// one times `gain`.
+fn flow_head(gain: f32, device: &Device) -> FlowHead {
+    let shape = FlowHeadShape { hidden: 16, heads: 2, neighbours: 8, iterations: 2, ..FlowHeadShape::default() };
+    let config = FlowHeadConfig { feature_widths: vec![FLOW_CHANNELS], shape };
+    let mut head = with_seed(device, 7, || config.init(device)).expect("a valid flow head configuration");
+    let last = with_seed(device, 8, || LinearConfig::new(16, 3).init(device));
+    head.update.fc2 = Linear { weight: last.weight.map(|w| w.mul_scalar(gain)), bias: last.bias };
+    head
 }

@@ -105,7 +105,9 @@ impl Scenario {
     }
 
     /// The scenario as a training batch: depths measured at every 7th pixel below the sky (10 m, but 1e-4 m
-    /// and 1e4 m at the first two of them, so the log-depth loss sees both ends).
+    /// and 1e4 m at the first two of them, so the log-depth loss sees both ends), and scene flow there (every
+    /// third of those cells moving at `(1, 0, 0.5)` m per log frame, so the flow losses see moving and still
+    /// cells).
     pub fn batch(&self, device: &Device) -> StepBatch {
         let timeline = Timeline::new(&self.input_frames).expect("input frames");
         let (width, height) = (self.size.width as usize, self.size.height as usize);
@@ -113,7 +115,8 @@ impl Scenario {
             let pixels: Vec<i64> =
                 (0..width * height).filter(|&p| p % 7 == 0 && view.sky[p] < 0.5).map(|p| p as i64).collect();
             let depths: Vec<f32> = (0..pixels.len()).map(|i| [1e-4, 1e4].get(i).copied().unwrap_or(10.0)).collect();
-            let moving = vec![false; pixels.len()];
+            let moving: Vec<bool> = (0..pixels.len()).map(|i| i % 3 == 0).collect();
+            let velocities = moving.iter().map(|&m| if m { [1.0, 0.0, 0.5] } else { [0.0; 3] }).collect();
             ViewTruth {
                 frame,
                 rig_camera: 0,
@@ -125,7 +128,7 @@ impl Scenario {
                 depth_flow: (with_depth && !pixels.is_empty()).then_some(DepthFlowSamples {
                     pixels,
                     depths,
-                    velocities: None,
+                    velocities: Some(velocities),
                     moving,
                 }),
             }

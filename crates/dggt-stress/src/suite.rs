@@ -334,6 +334,39 @@ fn crafted_extremes() -> Vec<(&'static str, Expect, Edit)> {
             p.dynamic_logit.iter_mut().for_each(|l| *l = r.pick(&[-30.0, 30.0]));
             p.depth.iter_mut().for_each(|d| *d = r.pick(&[0.0, 1e-8, 1.0, 1e6]));
         }),
+        ("learnt flow, moderate values", Expect::Finite, |_, p, _| p.motion = DynamicMotion::Learnt),
+        // A flat wall of dynamic pixels: every pixel a query, neighbours at equal distances.
+        ("learnt flow, all pixels dynamic", Expect::Finite, |s, p, _| {
+            p.motion = DynamicMotion::Learnt;
+            p.depth.fill(10.0);
+            p.dynamic_logit.fill(1e4);
+            s.fill_dynamic(1.0);
+        }),
+        ("learnt flow, huge displacements (x1e6)", Expect::Finite, |s, p, _| {
+            p.motion = DynamicMotion::Learnt;
+            p.flow.gain = 1e6;
+            p.dynamic_logit.fill(1e4);
+            s.fill_dynamic(1.0);
+        }),
+        // Every point of a view at its camera centre: no spacing within a cloud.
+        ("learnt flow, depth 0", Expect::Finite, |_, p, _| {
+            p.motion = DynamicMotion::Learnt;
+            p.depth.fill(0.0);
+        }),
+        ("learnt flow, depth mixed 0 .. 1e6", Expect::Finite, |_, p, r| {
+            p.motion = DynamicMotion::Learnt;
+            p.dynamic_logit.iter_mut().for_each(|l| *l = r.pick(&[-30.0, 30.0]));
+            p.depth.iter_mut().for_each(|d| *d = r.pick(&[0.0, 1e-8, 1.0, 1e6]));
+        }),
+        ("learnt flow, huge features (1e4)", Expect::Finite, |_, p, r| {
+            p.motion = DynamicMotion::Learnt;
+            p.flow.features.iter_mut().for_each(|f| *f = r.pick(&[-1e4, 1e4]));
+        }),
+        ("learnt flow, NaN feature", Expect::Rejected, |_, p, _| {
+            p.motion = DynamicMotion::Learnt;
+            p.dynamic_logit.fill(1e4);
+            p.flow.features[3] = f32::NAN;
+        }),
         ("NaN velocity", Expect::Rejected, |_, p, r| {
             p.set_velocity(1.0, r);
             p.velocity.as_mut().unwrap()[4] = f32::NAN;
@@ -357,7 +390,8 @@ fn mixed_extremes(scenario: &mut Scenario, prediction: &mut Prediction, random: 
 }
 
 fn loss_weights(options: &StressOptions, camera: f64) -> LossWeights {
-    let mut weights = LossWeights { camera, depth: 0.1, gram: 0.01, ..LossWeights::default() };
+    let mut weights =
+        LossWeights { camera, depth: 0.1, gram: 0.01, flow: 0.1, learnt_flow: 0.1, ..LossWeights::default() };
     if let Some(dir) = &options.loss_weights {
         let lpips = dir.join("lpips_alex.safetensors");
         weights.lpips_weights = Some(lpips.clone());

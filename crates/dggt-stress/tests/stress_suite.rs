@@ -31,6 +31,8 @@ fn the_bounded_suite_finds_nothing_non_finite() {
         assert!(report.cases.iter().filter(|c| c.group == group).count() >= 5, "too few {group} cases");
     }
     assert!(report.cases.iter().any(|c| c.expect == Expect::Rejected), "no invalid input is exercised");
+    let learnt = report.cases.iter().filter(|c| c.name.starts_with("learnt flow")).count();
+    assert!(learnt >= 6, "the learnt flow's extremes: {learnt} cases");
     // flex computes in f16 and bf16: the reduced-precision network cases run, none is skipped.
     assert_eq!(report.skipped().count(), 0, "{}", report.table());
     for precision in [", f16)", ", bf16)"] {

@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use dggt_data::{DatasetSpec, Preprocess, SamplerConfig};
+use dggt_flow_head::FlowHeadShape;
 pub use dggt_infer::{CameraSource, ModelSection, RenderSection};
 use dggt_objective::LossTerm;
 pub use dggt_objective::LossWeights;
@@ -236,6 +237,9 @@ impl TrainConfig {
                 "both predict the velocities: choose one",
             ));
         }
+        if !self.model.flow_head && self.model.flow != FlowHeadShape::default() {
+            return Err(setting("model.flow", "shapes the flow head: it needs model.flow_head = true"));
+        }
         let learnt = self.render.dynamic_motion == DynamicMotion::Learnt;
         match (self.model.flow_head, learnt) {
             (false, true) => Err(setting(
@@ -273,6 +277,9 @@ impl TrainConfig {
                 "loss.flow",
                 "supervises predicted velocities: it needs model.motion_head or model.gaussian_velocity",
             ));
+        }
+        if l.learnt_flow > 0.0 && !self.model.flow_head {
+            return Err(setting("loss.learnt_flow", "supervises the flow head's learnt flow: it needs model.flow_head"));
         }
         if l.gram > 0.0 && l.gram_backbone.is_none() {
             return Err(setting("loss.gram", "> 0 needs loss.gram_backbone"));

@@ -318,7 +318,8 @@ impl Trainer {
             elapsed_s: elapsed_before,
             checkpoint: None,
         };
-        let maps = if self.config.loss.depth > 0.0 || self.config.loss.flow > 0.0 {
+        let loss = &self.config.loss;
+        let maps = if loss.depth > 0.0 || loss.flow > 0.0 || loss.learnt_flow > 0.0 {
             DepthFlowMaps::Read
         } else {
             DepthFlowMaps::Skip

@@ -211,10 +211,26 @@ fn the_flow_head_starts_holding_and_waits_for_the_dynamic_head() {
     without_motion.render.dynamic_motion = dggt_scene::DynamicMotion::Velocity;
     let error = without_motion.validate().unwrap_err().to_string();
     assert!(error.contains("model.flow_head") && error.contains("learnt"), "{error}");
-    let mut without_head = config;
+    let mut without_head = config.clone();
     without_head.model.flow_head = false;
     let error = without_head.validate().unwrap_err().to_string();
     assert!(error.contains("render.dynamic_motion") && error.contains("model.flow_head"), "{error}");
+    // So are the head's supervision and its shape without a head.
+    let mut supervised = without_head.clone();
+    supervised.render.dynamic_motion = dggt_scene::DynamicMotion::Velocity;
+    supervised.loss.learnt_flow = 0.1;
+    let error = supervised.validate().unwrap_err().to_string();
+    assert!(error.contains("loss.learnt_flow") && error.contains("model.flow_head"), "{error}");
+    let mut shaped = supervised;
+    shaped.loss.learnt_flow = 0.0;
+    shaped.model.flow.iterations = 1;
+    let error = shaped.validate().unwrap_err().to_string();
+    assert!(error.contains("model.flow") && error.contains("model.flow_head"), "{error}");
+    // The shape reaches the network the trainer builds.
+    let mut one_step = config;
+    one_step.model.flow.iterations = 1;
+    let head = one_step.model.architecture().flow_head.expect("a flow head");
+    assert_eq!(head.shape.iterations, 1);
 }
 
 #[test]

@@ -6,7 +6,7 @@
 
 use burn::module::{Module, ModuleMapper, ModuleVisitor, Param, ParamId};
 use burn::tensor::{Device, Tensor, TensorData};
-use dggt_flow_head::{FlowHead, FlowHeadConfig, FrameCloud};
+use dggt_flow_head::{FlowHead, FlowHeadConfig, FlowHeadShape, FrameCloud};
 
 /// A small deterministic generator (splitmix64).
 pub struct Rng(u64);
@@ -152,7 +152,10 @@ impl ModuleVisitor for ParamGrads<'_> {
 /// The small head of the gradient checks: two feature scales, two heads, four neighbours, two iterations, and
 /// chunks of five queries (12 queries: three chunks).
 pub fn small_config() -> FlowHeadConfig {
-    FlowHeadConfig { feature_widths: vec![3, 2], hidden: 8, heads: 2, neighbours: 4, iterations: 2, chunk: 5 }
+    FlowHeadConfig {
+        feature_widths: vec![3, 2],
+        shape: FlowHeadShape { hidden: 8, heads: 2, neighbours: 4, iterations: 2, chunk: 5, ..FlowHeadShape::default() },
+    }
 }
 
 /// 12 queries on a lattice 10 units apart, each with a cluster of 4 target points within 0.6 of it: the 4

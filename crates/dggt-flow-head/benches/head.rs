@@ -1,0 +1,91 @@
+//! What the flow head costs on the CPU (`flex`, the default thread pool): every pair of adjacent input views of
+//! one camera, both ways, as `dggt_scene` runs it.
+//!
+//! `cargo bench -p dggt-flow-head --bench head`:
+//! - **fixture**: 8 input views (the main job's largest draw: 7 pairs, 14 ways) of 300 dynamic pixels each, the
+//!   tiny network's feature widths; the forward pass, and forward and backward (a training step's share);
+//! - **release**: 4 input views of 518 x 350 with a tenth of their pixels dynamic (18 130 each: 3 pairs, 6 ways),
+//!   the released network's widths (its DPT maps 256 + 512 + 1024 + 1024 and 128 full-resolution channels); the
+//!   forward pass (inference), then forward and backward of one way, with the process's peak resident memory
+//!   before and after it (the backward holds every neighbourhood tensor of every iteration).
+//!
+//! The clouds are random points in a 20 m box with standard normal features, and the head's last layer is random
+//! (a fresh head's is zero), so every query moves. Medians after a warm-up.
+
+use burn::nn::LinearConfig;
+use burn::tensor::{Device, Distribution, Tensor};
+use dggt_flow_head::{FlowHead, FlowHeadConfig, FrameCloud};
+use dggt_test_data::median_ms;
+
+/// Which passes are timed.
+#[derive(Clone, Copy)]
+enum Passes {
+    Forward,
+    ForwardBackward,
+}
+
+/// One view's dynamic pixels as a cloud.
+fn cloud(points: usize, width: usize, device: &Device) -> FrameCloud {
+    FrameCloud::new(
+        Tensor::random([points, 3], Distribution::Uniform(0.0, 20.0), device),
+        Tensor::random([points, width], Distribution::Normal(0.0, 1.0), device).require_grad(),
+    )
+}
+
+/// A head of the default shape reading `widths`, whose last layer moves the points.
+fn moving_head(widths: &[usize], device: &Device) -> FlowHead {
+    let config = FlowHeadConfig { feature_widths: widths.to_vec(), ..FlowHeadConfig::default() };
+    let mut head = config.init(device).expect("a valid configuration");
+    head.update.fc2 = LinearConfig::new(config.shape.hidden, 3).init(device);
+    head
+}
+
+/// The head on `ways` (query, target) of `clouds`.
+fn run(head: &FlowHead, clouds: &[FrameCloud], ways: &[(usize, usize)], passes: Passes) {
+    let flows: Vec<Tensor<2>> =
+        ways.iter().map(|&(q, t)| head.forward(&clouds[q], &clouds[t]).expect("valid clouds")).collect();
+    let total = Tensor::cat(flows, 0).abs().sum();
+    match passes {
+        Passes::Forward => drop(std::hint::black_box(total.into_scalar::<f32>())),
+        Passes::ForwardBackward => drop(std::hint::black_box(total.backward())),
+    }
+}
+
+/// Both ways of every pair of adjacent views.
+fn adjacent_ways(views: usize) -> Vec<(usize, usize)> {
+    (1..views).flat_map(|b| [(b - 1, b), (b, b - 1)]).collect()
+}
+
+fn measure(name: &str, widths: &[usize], views: usize, points: usize, ways: &[(usize, usize)], passes: Passes) {
+    let device = match passes {
+        Passes::Forward => Device::flex(),
+        Passes::ForwardBackward => Device::flex().autodiff(),
+    };
+    let head = moving_head(widths, &device);
+    let clouds: Vec<FrameCloud> = (0..views).map(|_| cloud(points, widths.iter().sum(), &device)).collect();
+    let pass = match passes {
+        Passes::Forward => "forward",
+        Passes::ForwardBackward => "forward+backward",
+    };
+    let runs = if points > 1000 { 3 } else { 9 };
+    let ms = median_ms(runs, || run(&head, &clouds, ways, passes));
+    println!("{name}/{pass}: {} ways of {points} queries: {ms:.1} ms", ways.len());
+}
+
+/// The process's peak resident memory, in MiB (Linux; `NaN` elsewhere).
+fn peak_mib() -> f64 {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+    let line = status.lines().find(|l| l.starts_with("VmHWM:")).unwrap_or("");
+    line.split_whitespace().nth(1).and_then(|kb| kb.parse::<f64>().ok()).map_or(f64::NAN, |kb| kb / 1024.0)
+}
+
+fn main() {
+    let tiny = [16, 32, 64, 64, 16];
+    measure("fixture", &tiny, 8, 300, &adjacent_ways(8), Passes::Forward);
+    measure("fixture", &tiny, 8, 300, &adjacent_ways(8), Passes::ForwardBackward);
+    let release = [256, 512, 1024, 1024, 128];
+    measure("release", &release, 4, 18_130, &adjacent_ways(4), Passes::Forward);
+    let before = peak_mib();
+    measure("release", &release, 2, 18_130, &[(0, 1)], Passes::ForwardBackward);
+    println!("peak resident memory: {before:.0} MiB before the backward case, {:.0} MiB after", peak_mib());
+}
