@@ -12,5 +12,5 @@ pub mod weights;
 
 pub use batch::{DepthFlowMaps, DepthFlowSamples, MOVING_SPEED, StepBatch, ViewTruth, depth_flow_samples};
 pub use error::ObjectiveError;
-pub use objective::{Forward, Objective, RenderedView, SampleLoss, ViewsToRender};
+pub use objective::{Forward, Objective, RenderedView, SampleLoss, ViewsToRender, learnt_flow_loss};
 pub use weights::{LossTerm, LossWeights};

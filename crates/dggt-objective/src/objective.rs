@@ -378,7 +378,7 @@ fn flow_loss(velocity: &Tensor<5>, batch: &StepBatch) -> Result<Option<Tensor<1>
 /// velocities (world axes, per unit of scene time) are compared in the flow's units: the view's camera axes
 /// (`v_camera = R^T v_world`, `R` = world-from-camera) per log frame. `None` without a learnt flow, without
 /// flow at a moved pixel, or for a single-frame timeline.
-fn learnt_flow_loss(pixels: &PixelGaussians, batch: &StepBatch) -> Result<Option<Tensor<1>>, ObjectiveError> {
+pub fn learnt_flow_loss(pixels: &PixelGaussians, batch: &StepBatch) -> Result<Option<Tensor<1>>, ObjectiveError> {
     let frames_per_time = batch.timeline.frames_per_time();
     let Some(learnt) = pixels.learnt_velocity() else { return Ok(None) };
     if frames_per_time <= 0.0 {

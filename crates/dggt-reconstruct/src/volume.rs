@@ -23,9 +23,10 @@ const PLY_VERTEX_BYTES: u64 = INRIA_PROPERTIES.len() as u64 * 4;
 /// Bytes per pixel of an input view's files at most: the image (RGB), depth as `.npy` (float32) and 16-bit
 /// PNG, the dynamic and sky masks.
 const MAP_BYTES_PER_PIXEL: u64 = 3 + 4 + 2 + 1 + 1;
-/// Bytes per input pixel of the saved scene (`scene.safetensors`): twenty float32 values of its Gaussian
-/// (mean, rotation, scale, colour, opacity, lifespan, time, dynamic logit, velocity) and its instance label.
-const SCENE_BYTES_PER_PIXEL: u64 = 20 * 4 + 4;
+/// Bytes per input pixel of the saved scene (`scene.safetensors`) at most: twenty-six float32 values of its
+/// Gaussian (mean, rotation, scale, colour, opacity, lifespan, time, dynamic logit, velocity, and the learnt
+/// flow to the next and the previous input) and its instance label.
+const SCENE_BYTES_PER_PIXEL: u64 = 26 * 4 + 4;
 /// Bytes per pixel of a render at most (raw RGB; PNG compresses it).
 const RENDER_BYTES_PER_PIXEL: u64 = 3;
 
