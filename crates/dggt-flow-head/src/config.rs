@@ -82,7 +82,14 @@ pub enum HeadInputs {
 
 impl Default for FlowHeadShape {
     fn default() -> Self {
-        Self { hidden: 64, heads: 4, neighbours: 16, iterations: 3, chunk: 8192, inputs: HeadInputs::FeaturesAndOffsets }
+        Self {
+            hidden: 64,
+            heads: 4,
+            neighbours: 16,
+            iterations: 3,
+            chunk: 8192,
+            inputs: HeadInputs::FeaturesAndOffsets,
+        }
     }
 }
 

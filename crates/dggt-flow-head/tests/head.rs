@@ -148,11 +148,10 @@ fn a_non_finite_displacement_stops_the_search() {
 #[test]
 fn overfits_a_translation() {
     let device = Device::flex().autodiff();
-    let config =
-        FlowHeadConfig {
-            feature_widths: vec![8],
-            shape: FlowHeadShape { hidden: 32, heads: 4, neighbours: 8, iterations: 2, ..FlowHeadShape::default() },
-        };
+    let config = FlowHeadConfig {
+        feature_widths: vec![8],
+        shape: FlowHeadShape { hidden: 32, heads: 4, neighbours: 8, iterations: 2, ..FlowHeadShape::default() },
+    };
     let mut rng = Rng::new(10);
     let query = random_cloud(48, 4.0, 8, &mut rng);
     let shift = [0.3, -0.2, 0.25];

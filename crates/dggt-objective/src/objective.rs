@@ -536,11 +536,11 @@ mod tests {
         let pixels =
             PixelGaussians::new(&maps, depth, None, inputs, MeansGradient::Detached, PixelConvention::Centred).unwrap();
         // View 0 moves rows 0-2 to the next input (row 3 not); view 1 every row back to the previous one.
-        let next = [[1.0, 2.0, 3.0], [0.5, 0.0, -1.0], [0.0, 4.0, 0.0], [0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3]];
-        let previous = [[0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3], [2.0, 0.0, 0.0], [0.0, -1.0, 0.0], [1.0; 3], [0.0, 0.0, 3.0]];
-        let rows = |values: [[f32; 3]; 8]| {
-            Tensor::<2>::from_data(TensorData::new(values.concat(), [8, 3]), &device)
-        };
+        let next =
+            [[1.0, 2.0, 3.0], [0.5, 0.0, -1.0], [0.0, 4.0, 0.0], [0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3]];
+        let previous =
+            [[0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3], [2.0, 0.0, 0.0], [0.0, -1.0, 0.0], [1.0; 3], [0.0, 0.0, 3.0]];
+        let rows = |values: [[f32; 3]; 8]| Tensor::<2>::from_data(TensorData::new(values.concat(), [8, 3]), &device);
         let pixels = pixels.with_known_learnt_flow(rows(next), rows(previous), None).unwrap();
         // Log frames per unit of scene time, and the step's span in scene time.
         let timeline = Timeline::new(&[0, 4]).unwrap();
@@ -558,7 +558,7 @@ mod tests {
             step: 0,
             images: Tensor::zeros([1, 2, 3, 2, 2], &device),
             size: ImageSize::new(2, 2).unwrap(),
-            timeline: timeline.clone(),
+            timeline,
             inputs: views
                 .iter()
                 .enumerate()
@@ -585,8 +585,8 @@ mod tests {
         let exact = batch_with(&|row| if row == 3 { [5.0; 3] } else { expected[row] });
         assert!(loss(&exact).abs() < 1e-6, "{}", loss(&exact));
         // Against no motion: the mean absolute component over the seven moved rows.
-        let mean = expected.iter().enumerate().filter(|&(r, _)| r != 3).flat_map(|(_, v)| v.map(f32::abs)).sum::<f32>()
-            / 21.0;
+        let mean =
+            expected.iter().enumerate().filter(|&(r, _)| r != 3).flat_map(|(_, v)| v.map(f32::abs)).sum::<f32>() / 21.0;
         assert!((loss(&batch_with(&|_| [0.0; 3])) - f64::from(mean)).abs() < 1e-6);
     }
 }

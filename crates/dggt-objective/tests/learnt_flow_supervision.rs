@@ -48,9 +48,8 @@ fn pixels(timeline: &Timeline, device: &Device) -> PixelGaussians {
     let maps = GaussianMaps::from_raw(Tensor::zeros([1, 2, H, W, 12], device));
     let depth = Tensor::from_data(TensorData::new(depth, [1, 2, H, W]), device);
     let logit = Tensor::from_data(TensorData::new(logit, [1, 2, H, W]), device);
-    let views = [0.0, 4.0]
-        .map(|frame| InputView { rig_camera: 0, time: timeline.time(frame), camera: camera() })
-        .to_vec();
+    let views =
+        [0.0, 4.0].map(|frame| InputView { rig_camera: 0, time: timeline.time(frame), camera: camera() }).to_vec();
     PixelGaussians::new(&maps, depth, Some(logit), views, MeansGradient::Detached, PixelConvention::Centred).unwrap()
 }
 
@@ -90,14 +89,19 @@ fn batch(timeline: &Timeline, device: &Device) -> StepBatch {
             image: Tensor::zeros([H, W, 3], device),
             sky: None,
             dynamic: None,
-            depth_flow: Some(DepthFlowSamples { pixels, depths: vec![DEPTH; H * W], velocities: Some(velocities), moving }),
+            depth_flow: Some(DepthFlowSamples {
+                pixels,
+                depths: vec![DEPTH; H * W],
+                velocities: Some(velocities),
+                moving,
+            }),
         }
     };
     StepBatch {
         step: 0,
         images: Tensor::zeros([1, 2, 3, H, W], device),
         size: ImageSize::new(W as u32, H as u32).unwrap(),
-        timeline: timeline.clone(),
+        timeline: *timeline,
         inputs: vec![view(0), view(1)],
         targets: Vec::new(),
     }
@@ -134,7 +138,8 @@ fn scene_flow_alone_teaches_the_flow_head() {
     // Forward from view 0 and back from view 1, the head's velocities meet the patch's in the camera's axes.
     let moved = pixels.with_learnt_flow(&head, &features(&device)).unwrap();
     let learnt = moved.learnt_velocity().unwrap();
-    let per_frame = moved.rotate_rows(learnt.velocity, Axes::WorldToCamera).div_scalar(timeline.frames_per_time() as f32);
+    let per_frame =
+        moved.rotate_rows(learnt.velocity, Axes::WorldToCamera).div_scalar(timeline.frames_per_time() as f32);
     let rows = per_frame.into_data().try_into_vec::<f32>().unwrap();
     let truth = patch_velocity();
     for (row, velocity) in rows.chunks_exact(3).enumerate().filter(|&(row, _)| learnt.measured[row]) {

@@ -21,7 +21,14 @@ const WIDTHS: [usize; 2] = [4, 3];
 fn config() -> FlowHeadConfig {
     FlowHeadConfig {
         feature_widths: WIDTHS.to_vec(),
-        shape: FlowHeadShape { hidden: 16, heads: 2, neighbours: 6, iterations: 2, chunk: 64, ..FlowHeadShape::default() },
+        shape: FlowHeadShape {
+            hidden: 16,
+            heads: 2,
+            neighbours: 6,
+            iterations: 2,
+            chunk: 64,
+            ..FlowHeadShape::default()
+        },
     }
 }
 

@@ -10,12 +10,12 @@
 
 use std::ops::Range;
 
-use burn::tensor::{Device, Tensor, TensorData};
 use burn::nn::{Linear, LinearConfig};
+use burn::tensor::{Device, Tensor, TensorData};
 use dggt_flow_head::{FlowHead, FlowHeadConfig, FlowHeadShape};
 use dggt_geom::PixelConvention;
-use dggt_model::seeded::with_seed;
 use dggt_model::gaussian_maps::GaussianMaps;
+use dggt_model::seeded::with_seed;
 use dggt_model::sky::SkyModel;
 use dggt_objective::{Forward, Objective};
 use dggt_scene::{AssemblySettings, DynamicMotion, InputView, MeansGradient, PixelGaussians, Scene4d};
@@ -152,7 +152,9 @@ pub fn run(
     .require_grad();
     let pixels = match prediction.motion {
         DynamicMotion::Instances => pixels.with_instances(&assembly.instances)?,
-        DynamicMotion::Learnt => pixels.with_learnt_flow(&flow_head(prediction.flow.gain, device), &[features.clone()])?,
+        DynamicMotion::Learnt => {
+            pixels.with_learnt_flow(&flow_head(prediction.flow.gain, device), std::slice::from_ref(&features))?
+        }
         DynamicMotion::Velocity | DynamicMotion::Held => pixels,
     };
     let cameras: Vec<_> =

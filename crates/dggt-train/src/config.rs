@@ -279,7 +279,10 @@ impl TrainConfig {
             ));
         }
         if l.learnt_flow > 0.0 && !self.model.flow_head {
-            return Err(setting("loss.learnt_flow", "supervises the flow head's learnt flow: it needs model.flow_head"));
+            return Err(setting(
+                "loss.learnt_flow",
+                "supervises the flow head's learnt flow: it needs model.flow_head",
+            ));
         }
         if l.gram > 0.0 && l.gram_backbone.is_none() {
             return Err(setting("loss.gram", "> 0 needs loss.gram_backbone"));

@@ -154,7 +154,14 @@ impl ModuleVisitor for ParamGrads<'_> {
 pub fn small_config() -> FlowHeadConfig {
     FlowHeadConfig {
         feature_widths: vec![3, 2],
-        shape: FlowHeadShape { hidden: 8, heads: 2, neighbours: 4, iterations: 2, chunk: 5, ..FlowHeadShape::default() },
+        shape: FlowHeadShape {
+            hidden: 8,
+            heads: 2,
+            neighbours: 4,
+            iterations: 2,
+            chunk: 5,
+            ..FlowHeadShape::default()
+        },
     }
 }
 
