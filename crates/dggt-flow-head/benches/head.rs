@@ -3,7 +3,8 @@
 //!
 //! `cargo bench -p dggt-flow-head --bench head`:
 //! - **fixture**: 8 input views (the main job's largest draw: 7 pairs, 14 ways) of 300 dynamic pixels each, the
-//!   tiny network's feature widths; the forward pass, and forward and backward (a training step's share);
+//!   tiny network's feature widths; the forward pass, and forward and backward (a training step's share), for
+//!   the default head and the ablation's variants (one iteration; offsets only);
 //! - **release**: 4 input views of 518 x 350 with a tenth of their pixels dynamic (18 130 each: 3 pairs, 6 ways),
 //!   the released network's widths (its DPT maps 256 + 512 + 1024 + 1024 and 128 full-resolution channels); the
 //!   forward pass (inference), then forward and backward of one way, with the process's peak resident memory
@@ -14,7 +15,7 @@
 
 use burn::nn::LinearConfig;
 use burn::tensor::{Device, Distribution, Tensor};
-use dggt_flow_head::{FlowHead, FlowHeadConfig, FrameCloud};
+use dggt_flow_head::{FlowHead, FlowHeadConfig, FlowHeadShape, FrameCloud, HeadInputs};
 use dggt_test_data::median_ms;
 
 /// Which passes are timed.
@@ -32,9 +33,9 @@ fn cloud(points: usize, width: usize, device: &Device) -> FrameCloud {
     )
 }
 
-/// A head of the default shape reading `widths`, whose last layer moves the points.
-fn moving_head(widths: &[usize], device: &Device) -> FlowHead {
-    let config = FlowHeadConfig { feature_widths: widths.to_vec(), ..FlowHeadConfig::default() };
+/// A head of `shape` reading `widths`, whose last layer moves the points.
+fn moving_head(widths: &[usize], shape: &FlowHeadShape, device: &Device) -> FlowHead {
+    let config = FlowHeadConfig { feature_widths: widths.to_vec(), shape: shape.clone() };
     let mut head = config.init(device).expect("a valid configuration");
     head.update.fc2 = LinearConfig::new(config.shape.hidden, 3).init(device);
     head
@@ -56,12 +57,23 @@ fn adjacent_ways(views: usize) -> Vec<(usize, usize)> {
     (1..views).flat_map(|b| [(b - 1, b), (b, b - 1)]).collect()
 }
 
-fn measure(name: &str, widths: &[usize], views: usize, points: usize, ways: &[(usize, usize)], passes: Passes) {
+/// One workload: the views' widths, how many, their dynamic pixels, which ways the head runs.
+struct Workload<'a> {
+    name: &'a str,
+    widths: &'a [usize],
+    views: usize,
+    points: usize,
+    ways: Vec<(usize, usize)>,
+}
+
+fn measure(workload: &Workload, shape: &FlowHeadShape, passes: Passes) {
+    let Workload { name, widths, views, points, ways } = workload;
+    let (views, points) = (*views, *points);
     let device = match passes {
         Passes::Forward => Device::flex(),
         Passes::ForwardBackward => Device::flex().autodiff(),
     };
-    let head = moving_head(widths, &device);
+    let head = moving_head(widths, shape, &device);
     let clouds: Vec<FrameCloud> = (0..views).map(|_| cloud(points, widths.iter().sum(), &device)).collect();
     let pass = match passes {
         Passes::Forward => "forward",
@@ -69,7 +81,12 @@ fn measure(name: &str, widths: &[usize], views: usize, points: usize, ways: &[(u
     };
     let runs = if points > 1000 { 3 } else { 9 };
     let ms = median_ms(runs, || run(&head, &clouds, ways, passes));
-    println!("{name}/{pass}: {} ways of {points} queries: {ms:.1} ms", ways.len());
+    let variant = match (shape.iterations, shape.inputs) {
+        (3, HeadInputs::FeaturesAndOffsets) => String::new(),
+        (iterations, HeadInputs::FeaturesAndOffsets) => format!(" ({iterations} iteration(s))"),
+        (_, HeadInputs::OffsetsOnly) => " (offsets only)".into(),
+    };
+    println!("{name}/{pass}{variant}: {} ways of {points} queries: {ms:.1} ms", ways.len());
 }
 
 /// The process's peak resident memory, in MiB (Linux; `NaN` elsewhere).
@@ -80,12 +97,22 @@ fn peak_mib() -> f64 {
 }
 
 fn main() {
-    let tiny = [16, 32, 64, 64, 16];
-    measure("fixture", &tiny, 8, 300, &adjacent_ways(8), Passes::Forward);
-    measure("fixture", &tiny, 8, 300, &adjacent_ways(8), Passes::ForwardBackward);
+    let fixture =
+        Workload { name: "fixture", widths: &[16, 32, 64, 64, 16], views: 8, points: 300, ways: adjacent_ways(8) };
+    let default = FlowHeadShape::default();
+    measure(&fixture, &default, Passes::Forward);
+    for shape in [
+        default.clone(),
+        FlowHeadShape { iterations: 1, ..default.clone() },
+        FlowHeadShape { inputs: HeadInputs::OffsetsOnly, ..default.clone() },
+    ] {
+        measure(&fixture, &shape, Passes::ForwardBackward);
+    }
     let release = [256, 512, 1024, 1024, 128];
-    measure("release", &release, 4, 18_130, &adjacent_ways(4), Passes::Forward);
+    let inference = Workload { name: "release", widths: &release, views: 4, points: 18_130, ways: adjacent_ways(4) };
+    measure(&inference, &default, Passes::Forward);
     let before = peak_mib();
-    measure("release", &release, 2, 18_130, &[(0, 1)], Passes::ForwardBackward);
+    let one_way = Workload { views: 2, ways: vec![(0, 1)], ..inference };
+    measure(&one_way, &default, Passes::ForwardBackward);
     println!("peak resident memory: {before:.0} MiB before the backward case, {:.0} MiB after", peak_mib());
 }

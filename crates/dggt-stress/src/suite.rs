@@ -301,8 +301,7 @@ fn crafted_extremes() -> Vec<(&'static str, Expect, Edit)> {
             s.fill_dynamic(0.0);
         }),
         ("all pixels dynamic", Expect::Finite, |s, p, _| {
-            p.dynamic_logit.fill(1e4);
-            s.fill_dynamic(1.0);
+            all_dynamic(s, p);
         }),
         ("black images, all sky", Expect::Finite, |s, _, _| {
             s.fill_images(0.0);
@@ -312,22 +311,17 @@ fn crafted_extremes() -> Vec<(&'static str, Expect, Edit)> {
         ("huge velocities (1e6 per frame)", Expect::Finite, |_, p, r| p.set_velocity(1e6, r)),
         ("huge velocities, all dynamic", Expect::Finite, |s, p, r| {
             p.set_velocity(1e6, r);
-            p.dynamic_logit.fill(1e4);
-            s.fill_dynamic(1.0);
+            all_dynamic(s, p);
         }),
         // A flat wall of dynamic pixels: each view one object, followed through every input.
         ("instances, all pixels dynamic", Expect::Finite, |s, p, _| {
             p.motion = DynamicMotion::Instances;
-            p.depth.fill(10.0);
-            p.dynamic_logit.fill(1e4);
-            s.fill_dynamic(1.0);
+            flat_dynamic_wall(s, p);
         }),
         ("instances, huge velocities, all dynamic", Expect::Finite, |s, p, r| {
             p.motion = DynamicMotion::Instances;
-            p.depth.fill(10.0);
             p.set_velocity(1e6, r);
-            p.dynamic_logit.fill(1e4);
-            s.fill_dynamic(1.0);
+            flat_dynamic_wall(s, p);
         }),
         ("instances, depth mixed 0 .. 1e6", Expect::Finite, |_, p, r| {
             p.motion = DynamicMotion::Instances;
@@ -338,15 +332,12 @@ fn crafted_extremes() -> Vec<(&'static str, Expect, Edit)> {
         // A flat wall of dynamic pixels: every pixel a query, neighbours at equal distances.
         ("learnt flow, all pixels dynamic", Expect::Finite, |s, p, _| {
             p.motion = DynamicMotion::Learnt;
-            p.depth.fill(10.0);
-            p.dynamic_logit.fill(1e4);
-            s.fill_dynamic(1.0);
+            flat_dynamic_wall(s, p);
         }),
         ("learnt flow, huge displacements (x1e6)", Expect::Finite, |s, p, _| {
             p.motion = DynamicMotion::Learnt;
             p.flow.gain = 1e6;
-            p.dynamic_logit.fill(1e4);
-            s.fill_dynamic(1.0);
+            all_dynamic(s, p);
         }),
         // Every point of a view at its camera centre: no spacing within a cloud.
         ("learnt flow, depth 0", Expect::Finite, |_, p, _| {
@@ -374,6 +365,18 @@ fn crafted_extremes() -> Vec<(&'static str, Expect, Edit)> {
         ("NaN depth", Expect::Rejected, |_, p, _| p.depth[5] = f32::NAN),
         ("infinite depth", Expect::Rejected, |_, p, _| p.depth[0] = f32::INFINITY),
     ]
+}
+
+/// Every pixel predicted and masked dynamic.
+fn all_dynamic(scenario: &mut Scenario, prediction: &mut Prediction) {
+    prediction.dynamic_logit.fill(1e4);
+    scenario.fill_dynamic(1.0);
+}
+
+/// A flat wall of dynamic pixels 10 m away: each view one object, every pixel's neighbours at equal distances.
+fn flat_dynamic_wall(scenario: &mut Scenario, prediction: &mut Prediction) {
+    prediction.depth.fill(10.0);
+    all_dynamic(scenario, prediction);
 }
 
 /// Every channel, depth, logit and mask drawn from extremes at random.
