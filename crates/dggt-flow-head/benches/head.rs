@@ -25,11 +25,15 @@ enum Passes {
     ForwardBackward,
 }
 
-/// One view's dynamic pixels as a cloud.
-fn cloud(points: usize, width: usize, device: &Device) -> FrameCloud {
+/// One view's dynamic pixels as a cloud; with `passes` including the backward, its features need a gradient.
+fn cloud(points: usize, width: usize, passes: Passes, device: &Device) -> FrameCloud {
+    let features = Tensor::random([points, width], Distribution::Normal(0.0, 1.0), device);
     FrameCloud::new(
         Tensor::random([points, 3], Distribution::Uniform(0.0, 20.0), device),
-        Tensor::random([points, width], Distribution::Normal(0.0, 1.0), device).require_grad(),
+        match passes {
+            Passes::Forward => features,
+            Passes::ForwardBackward => features.require_grad(),
+        },
     )
 }
 
@@ -74,7 +78,7 @@ fn measure(workload: &Workload, shape: &FlowHeadShape, passes: Passes) {
         Passes::ForwardBackward => Device::flex().autodiff(),
     };
     let head = moving_head(widths, shape, &device);
-    let clouds: Vec<FrameCloud> = (0..views).map(|_| cloud(points, widths.iter().sum(), &device)).collect();
+    let clouds: Vec<FrameCloud> = (0..views).map(|_| cloud(points, widths.iter().sum(), passes, &device)).collect();
     let pass = match passes {
         Passes::Forward => "forward",
         Passes::ForwardBackward => "forward+backward",
