@@ -4,7 +4,7 @@
 //! `cargo bench -p dggt-flow-head --bench head`:
 //! - **fixture**: 8 input views (the main job's largest draw: 7 pairs, 14 ways) of 300 dynamic pixels each, the
 //!   tiny network's feature widths; the forward pass, and forward and backward (a training step's share), for
-//!   the default head and the ablation's variants (one iteration; offsets only);
+//!   the default head and the ablation's variants (one iteration; 4 neighbours; offsets only);
 //! - **release**: 4 input views of 518 x 350 with a tenth of their pixels dynamic (18 130 each: 3 pairs, 6 ways),
 //!   the released network's widths (its DPT maps 256 + 512 + 1024 + 1024 and 128 full-resolution channels); the
 //!   forward pass (inference), then forward and backward of one way, with the process's peak resident memory
@@ -85,10 +85,11 @@ fn measure(workload: &Workload, shape: &FlowHeadShape, passes: Passes) {
     };
     let runs = if points > 1000 { 3 } else { 9 };
     let ms = median_ms(runs, || run(&head, &clouds, ways, passes));
-    let variant = match (shape.iterations, shape.inputs) {
-        (3, HeadInputs::FeaturesAndOffsets) => String::new(),
-        (iterations, HeadInputs::FeaturesAndOffsets) => format!(" ({iterations} iteration(s))"),
-        (_, HeadInputs::OffsetsOnly) => " (offsets only)".into(),
+    let variant = match (shape.iterations, shape.neighbours, shape.inputs) {
+        (3, 16, HeadInputs::FeaturesAndOffsets) => String::new(),
+        (iterations, 16, HeadInputs::FeaturesAndOffsets) => format!(" ({iterations} iteration(s))"),
+        (_, neighbours, HeadInputs::FeaturesAndOffsets) => format!(" ({neighbours} neighbours)"),
+        (_, _, HeadInputs::OffsetsOnly) => " (offsets only)".into(),
     };
     println!("{name}/{pass}{variant}: {} ways of {points} queries: {ms:.1} ms", ways.len());
 }
@@ -108,6 +109,7 @@ fn main() {
     for shape in [
         default.clone(),
         FlowHeadShape { iterations: 1, ..default.clone() },
+        FlowHeadShape { neighbours: 4, ..default.clone() },
         FlowHeadShape { inputs: HeadInputs::OffsetsOnly, ..default.clone() },
     ] {
         measure(&fixture, &shape, Passes::ForwardBackward);
