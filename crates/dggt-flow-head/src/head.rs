@@ -13,7 +13,9 @@
 //! 4. the state takes the attended vector as a residual (`state += merge(attended)`), and the update perceptron
 //!    turns the state into a step of the displacement, `d_q += s * update(state)`.
 //!
-//! The update's last layer starts at zero, so a fresh head predicts exactly zero displacement. Offsets in, steps
+//! After each iteration a displacement longer than the diagonal of the box holding both clouds is shortened to it
+//! along its direction (no match lies further; a head gone wrong stays within the scene), and left as it is
+//! otherwise. The update's last layer starts at zero, so a fresh head predicts exactly zero displacement. Offsets in, steps
 //! out, are in units of `s`, so scaling both clouds' points scales the displacement by the same factor.
 //! Queries are processed in chunks of `chunk` rows ([`crate::FlowHeadShape`]); the result does not depend on the
 //! chunking.
@@ -65,6 +67,8 @@ struct Target {
     scale: Tensor<1>,
     /// Neighbours per query: the configured count, or every target point when there are fewer.
     k: usize,
+    /// The longest displacement allowed: the diagonal of the box holding both clouds' points.
+    extent: f32,
 }
 
 /// One chunk of queries during refinement.
@@ -115,7 +119,7 @@ impl FlowHead {
         if target.is_empty() {
             return Ok(held);
         }
-        let target = self.prepare_target(query, target, &target_points);
+        let target = self.prepare_target(query, target, &target_points, extent(&query_points, &target_points));
         let chunks = (0..query.len())
             .step_by(self.chunk)
             .map(|start| {
@@ -127,7 +131,7 @@ impl FlowHead {
         Ok(Tensor::cat(chunks, 0))
     }
 
-    fn prepare_target(&self, query: &FrameCloud, target: &FrameCloud, host_points: &[[f32; 3]]) -> Target {
+    fn prepare_target(&self, query: &FrameCloud, target: &FrameCloud, host_points: &[[f32; 3]], extent: f32) -> Target {
         let search = NeighbourSearch::new(host_points);
         let scale = ScaleSource::of_target(host_points, &search).length(query, target);
         Target {
@@ -136,6 +140,7 @@ impl FlowHead {
             scale,
             k: self.neighbours.min(search.len()),
             search,
+            extent,
         }
     }
 
@@ -180,7 +185,7 @@ impl FlowHead {
         let query = queries.state.clone() + self.state_in.forward(queries.displacement.clone() / scale.clone());
         let attended = self.attend(query, tokens, offsets);
         let state = queries.state + self.merge.forward(attended);
-        let displacement = queries.displacement + self.update.forward(state.clone()) * scale;
+        let displacement = capped(queries.displacement + self.update.forward(state.clone()) * scale, target.extent);
         Queries { state, displacement, ..queries }
     }
 
@@ -217,6 +222,29 @@ impl FlowHead {
         let matched = weights.matmul(offsets.unsqueeze_dim::<4>(1).expand([n, heads, k, 3])).reshape([n, 3 * heads]);
         Tensor::cat(vec![attended, matched], 1)
     }
+}
+
+/// `displacement` `[N, 3]` with each row no longer than `limit`: rows within it unchanged (and their gradient), longer
+/// ones shortened to it along their direction.
+fn capped(displacement: Tensor<2>, limit: f32) -> Tensor<2> {
+    // `1 / sqrt(max(|d|^2 / limit^2, 1))`: exactly 1 within the limit, where the maximum passes no gradient (and
+    // no square root of zero is differentiated).
+    let relative = displacement.clone().powi_scalar(2).sum_dim(1).div_scalar(limit * limit);
+    displacement * relative.clamp_min(1.0).sqrt().recip()
+}
+
+/// The diagonal of the axis-aligned box holding every point of both clouds; at least 1e-18 (coincident points),
+/// so that its square is a normal float.
+fn extent(query: &[[f32; 3]], target: &[[f32; 3]]) -> f32 {
+    let (mut low, mut high) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+    for point in query.iter().chain(target) {
+        for axis in 0..3 {
+            low[axis] = low[axis].min(point[axis]);
+            high[axis] = high[axis].max(point[axis]);
+        }
+    }
+    let diagonal = (0..3).map(|axis| (high[axis] - low[axis]).powi(2)).sum::<f32>().sqrt();
+    diagonal.max(1e-18)
 }
 
 /// The chunk's current positions `p_q + d_q` on the host, refused if a displacement is not finite.

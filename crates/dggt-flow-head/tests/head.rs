@@ -90,6 +90,56 @@ fn chunking_does_not_change_the_result() {
     }
 }
 
+/// However large its update, the head moves no query further than the diagonal of the box holding both clouds.
+#[test]
+fn displacements_stay_within_the_clouds_extent() {
+    let device = Device::flex();
+    let config = small_config();
+    let mut head = randomised(&config, 12, &device);
+    let (query, target) = clouds(&config, 20, 30, 13);
+    let diagonal = {
+        let points: Vec<f64> = query.points.values.iter().chain(&target.points.values).copied().collect();
+        let span = |axis: usize| {
+            let values = points.iter().skip(axis).step_by(3);
+            values.clone().fold(f64::MIN, |m, v| m.max(*v)) - values.fold(f64::MAX, |m, v| m.min(*v))
+        };
+        (0..3).map(|axis| span(axis).powi(2)).sum::<f64>().sqrt()
+    };
+    let (query, target) = (query.upload(&device), target.upload(&device));
+    let lengths = |head: &dggt_flow_head::FlowHead| -> Vec<f64> {
+        let flow = values(head.forward(&query, &target).unwrap());
+        flow.chunks_exact(3).map(|d| d.iter().map(|v| v * v).sum::<f64>().sqrt()).collect()
+    };
+    let moderate = lengths(&head);
+    assert!(moderate.iter().all(|&l| l < 0.5 * diagonal), "a moderate head is not capped: {moderate:?}");
+    head.update.fc2 = head.update.fc2.clone().map(&mut Scaled(1e6));
+    let huge = lengths(&head);
+    assert!(huge.iter().all(|&l| l <= diagonal * (1.0 + 1e-5)), "{huge:?} vs {diagonal}");
+    assert!(huge.iter().any(|&l| l > 0.99 * diagonal), "the update was large enough to reach the cap: {huge:?}");
+    // Both clouds at one point: no extent, no motion, nothing non-finite.
+    let point = |n: usize| {
+        let cloud = HostCloud { points: Host::new(n, 3, vec![2.0; 3 * n]), features: query_features(n, &config) };
+        cloud.upload(&device)
+    };
+    let flow = values(head.forward(&point(5), &point(7)).unwrap());
+    assert!(flow.iter().all(|v| v.is_finite() && v.abs() < 1e-12), "{flow:?}");
+}
+
+/// `n` rows of standard normal features of the configuration's width.
+fn query_features(n: usize, config: &FlowHeadConfig) -> Host {
+    Host::new(n, config.feature_width(), Rng::new(14).normals(n * config.feature_width(), 1.0))
+}
+
+/// Multiplies every parameter by a factor.
+struct Scaled(f32);
+
+impl burn::module::ModuleMapper for Scaled {
+    fn map_float<const D: usize>(&mut self, param: burn::module::Param<Tensor<D>>) -> burn::module::Param<Tensor<D>> {
+        let factor = self.0;
+        param.map(|old| old.mul_scalar(factor))
+    }
+}
+
 #[test]
 fn bad_input_is_named() {
     let device = Device::flex();
