@@ -15,8 +15,8 @@
 //!
 //! After each iteration a displacement longer than the diagonal of the box holding both clouds is shortened to it
 //! along its direction (no match lies further; a head gone wrong stays within the scene), and left as it is
-//! otherwise. The update's last layer starts at zero, so a fresh head predicts exactly zero displacement. Offsets in, steps
-//! out, are in units of `s`, so scaling both clouds' points scales the displacement by the same factor.
+//! otherwise. The update's last layer starts at zero, so a fresh head predicts exactly zero displacement. Offsets
+//! in, steps out, are in units of `s`, so scaling both clouds' points scales the displacement by the same factor.
 //! Queries are processed in chunks of `chunk` rows ([`crate::FlowHeadShape`]); the result does not depend on the
 //! chunking.
 

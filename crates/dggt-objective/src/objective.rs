@@ -380,10 +380,10 @@ fn flow_loss(velocity: &Tensor<5>, batch: &StepBatch) -> Result<Option<Tensor<1>
 /// flow at a moved pixel, or for a single-frame timeline.
 pub fn learnt_flow_loss(pixels: &PixelGaussians, batch: &StepBatch) -> Result<Option<Tensor<1>>, ObjectiveError> {
     let frames_per_time = batch.timeline.frames_per_time();
-    let Some(learnt) = pixels.learnt_velocity() else { return Ok(None) };
     if frames_per_time <= 0.0 {
         return Ok(None);
     }
+    let Some(learnt) = pixels.learnt_velocity() else { return Ok(None) };
     let (frames, per_view) = (pixels.views.len(), pixels.size.area());
     let camera = pixels.rotate_rows(learnt.velocity, Axes::WorldToCamera).div_scalar(frames_per_time as f32);
     let cells = FlowCells::of(batch, frames, per_view, |row| learnt.measured[row]);

@@ -161,9 +161,9 @@ impl PixelGaussians {
     }
 
     /// Keeps `to_next` and `to_previous` (`[M, 3]`, as [`LearntFlow`] holds them) as the learnt flow: the flow
-    /// head's, a saved scene's, or displacements known otherwise. `moved`: the rows the head moved to the next and the previous input; a saved
-    /// scene (`None`) counts the rows with a non-zero displacement. Non-finite displacements are an error naming
-    /// the view and pixel.
+    /// head's, a saved scene's, or displacements known otherwise. `moved`: the rows the head moved to the next
+    /// and to the previous input; without it (a saved scene) the rows with a non-zero displacement count.
+    /// Non-finite displacements are an error naming the view and pixel.
     pub fn with_known_learnt_flow(
         mut self,
         to_next: Tensor<2>,
