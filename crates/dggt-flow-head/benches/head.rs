@@ -86,6 +86,7 @@ fn measure(workload: &Workload, shape: &FlowHeadShape, passes: Passes) {
     let runs = if points > 1000 { 3 } else { 9 };
     let ms = median_ms(runs, || run(&head, &clouds, ways, passes));
     let variant = match (shape.iterations, shape.neighbours, shape.inputs) {
+        _ if shape.chunk != FlowHeadShape::default().chunk => format!(" (chunks of {})", shape.chunk),
         (3, 16, HeadInputs::FeaturesAndOffsets) => String::new(),
         (iterations, 16, HeadInputs::FeaturesAndOffsets) => format!(" ({iterations} iteration(s))"),
         (_, neighbours, HeadInputs::FeaturesAndOffsets) => format!(" ({neighbours} neighbours)"),
@@ -102,10 +103,26 @@ fn peak_mib() -> f64 {
 }
 
 fn main() {
+    // `cargo bench -p dggt-flow-head --bench head -- CHUNK`: the release cases with queries in chunks of CHUNK.
+    let chunk = std::env::args().skip(1).find_map(|a| a.parse::<usize>().ok());
+    let default = FlowHeadShape::default();
+    let release_shape = FlowHeadShape { chunk: chunk.unwrap_or(default.chunk), ..default.clone() };
+    if chunk.is_none() {
+        fixture_cases(&default);
+    }
+    let release = [256, 512, 1024, 1024, 128];
+    let inference = Workload { name: "release", widths: &release, views: 4, points: 18_130, ways: adjacent_ways(4) };
+    measure(&inference, &release_shape, Passes::Forward);
+    let before = peak_mib();
+    let one_way = Workload { views: 2, ways: vec![(0, 1)], ..inference };
+    measure(&one_way, &release_shape, Passes::ForwardBackward);
+    println!("peak resident memory: {before:.0} MiB before the backward case, {:.0} MiB after", peak_mib());
+}
+
+fn fixture_cases(default: &FlowHeadShape) {
     let fixture =
         Workload { name: "fixture", widths: &[16, 32, 64, 64, 16], views: 8, points: 300, ways: adjacent_ways(8) };
-    let default = FlowHeadShape::default();
-    measure(&fixture, &default, Passes::Forward);
+    measure(&fixture, default, Passes::Forward);
     for shape in [
         default.clone(),
         FlowHeadShape { iterations: 1, ..default.clone() },
@@ -114,11 +131,4 @@ fn main() {
     ] {
         measure(&fixture, &shape, Passes::ForwardBackward);
     }
-    let release = [256, 512, 1024, 1024, 128];
-    let inference = Workload { name: "release", widths: &release, views: 4, points: 18_130, ways: adjacent_ways(4) };
-    measure(&inference, &default, Passes::Forward);
-    let before = peak_mib();
-    let one_way = Workload { views: 2, ways: vec![(0, 1)], ..inference };
-    measure(&one_way, &default, Passes::ForwardBackward);
-    println!("peak resident memory: {before:.0} MiB before the backward case, {:.0} MiB after", peak_mib());
 }

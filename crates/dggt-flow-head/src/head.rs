@@ -13,6 +13,16 @@
 //! 4. the state takes the attended vector as a residual (`state += merge(attended)`), and the update perceptron
 //!    turns the state into a step of the displacement, `d_q += s * update(state)`.
 //!
+//! The attention is evaluated factored, which is the same arithmetic rearranged (every product is linear): the
+//! features' keys and values `proj(f_j) W_k`, `proj(f_j) W_v` are projected once per target point rather than once
+//! per neighbour and iteration; the offset encoding's last layer `fc2` is folded into the key and value matrices
+//! (`W_2 W_k`, `W_2 W_v`, once per pass), so a neighbour's offset enters as its hidden encoding `g_j = GELU(fc1
+//! o_j)` alone. A query's score of `g_j` is `g_j . (W_2 W_k)_h q_h` (the query turned back through the folded
+//! matrix once per query and head), and its value share `(sum_j a_j g_j) (W_2 W_v)_h` (the weighted encodings
+//! pooled first); the constant `b_2 W_k` of the keys cancels in the softmax and `b_2 W_v` adds to the values'
+//! bias. Per neighbour this costs the encoding's first layer and a few dot products of `hidden` channels instead
+//! of three `hidden x hidden` products. `tests/attention.rs` checks it against the formulas above written out.
+//!
 //! After each iteration a displacement longer than the diagonal of the box holding both clouds is shortened to it
 //! along its direction (no match lies further; a head gone wrong stays within the scene), and left as it is
 //! otherwise. The update's last layer starts at zero, so a fresh head predicts exactly zero displacement. Offsets
@@ -22,9 +32,9 @@
 
 use burn::module::Module;
 use burn::nn::{Linear, LinearConfig};
-use burn::tensor::activation::softmax;
 use burn::tensor::{Device, Int, Tensor, TensorData};
 
+use crate::attention::{self, AttentionKernel, AttentionTensors};
 use crate::cloud::{CloudRole, FlowError, FrameCloud, read_rows};
 use crate::config::{FlowHeadConfig, HeadInputs};
 use crate::mlp::{Mlp, OutputInit};
@@ -60,8 +70,10 @@ pub struct FlowHead {
 /// What every query chunk reads of the target cloud.
 struct Target {
     points: Tensor<2>,
-    /// `[Nt, hidden]`: the projected features.
-    tokens: Tensor<2>,
+    /// `[Nt, 2 hidden]`: the keys then the values of the projected features (the values without their bias).
+    keys_values: Tensor<2>,
+    /// The offset encoding's last layer folded into the key and value matrices.
+    folded: FoldedOffsets,
     search: NeighbourSearch,
     /// `[1]`: the spacing offsets are measured in.
     scale: Tensor<1>,
@@ -69,6 +81,17 @@ struct Target {
     k: usize,
     /// The longest displacement allowed: the diagonal of the box holding both clouds' points.
     extent: f32,
+}
+
+/// The offset encoding's last layer `fc2` (`W_2`, `b_2`) folded into the attention's key and value matrices, per
+/// head: the neighbour's hidden encoding `g` enters the keys as `g W_2 W_k` and the values as `g W_2 W_v`.
+struct FoldedOffsets {
+    /// `[heads, width, hidden]`: head `h`'s block of `(W_2 W_k)^T`, turning its query into a weighting of `g`.
+    key: Tensor<3>,
+    /// `[heads, hidden, width]`: head `h`'s block of `W_2 W_v`, turning its pooled `g` into its value share.
+    value: Tensor<3>,
+    /// `[1, hidden]`: what every value carries whatever its neighbour, `b_2 W_v + b_v`.
+    value_bias: Tensor<2>,
 }
 
 /// One chunk of queries during refinement.
@@ -134,9 +157,13 @@ impl FlowHead {
     fn prepare_target(&self, query: &FrameCloud, target: &FrameCloud, host_points: &[[f32; 3]], extent: f32) -> Target {
         let search = NeighbourSearch::new(host_points);
         let scale = ScaleSource::of_target(host_points, &search).length(query, target);
+        let tokens = self.feature_tokens(target.features.clone());
+        let keys_values =
+            Tensor::cat(vec![tokens.clone().matmul(self.key.weight.val()), tokens.matmul(self.value.weight.val())], 1);
         Target {
             points: target.points.clone(),
-            tokens: self.feature_tokens(target.features.clone()),
+            keys_values,
+            folded: self.folded_offsets(),
             scale,
             k: self.neighbours.min(search.len()),
             search,
@@ -181,47 +208,80 @@ impl FlowHead {
     fn step(&self, target: &Target, queries: Queries, rows: Vec<usize>) -> Queries {
         let scale = target.scale.clone().reshape([1, 1]);
         let position = queries.points.clone() + queries.displacement.clone();
-        let (offsets, tokens) = self.neighbourhood(target, rows, position, scale.clone());
+        let neighbourhood = self.neighbourhood(target, rows, position, scale.clone());
         let query = queries.state.clone() + self.state_in.forward(queries.displacement.clone() / scale.clone());
-        let attended = self.attend(query, tokens, offsets);
+        let attended = self.attend(query, neighbourhood, target);
         let state = queries.state + self.merge.forward(attended);
         let displacement = capped(queries.displacement + self.update.forward(state.clone()) * scale, target.extent);
         Queries { state, displacement, ..queries }
     }
 
-    /// The neighbours at `rows` of the queries at `position` `[N, 3]`: their offsets `(p_j - x_q) / s`,
-    /// `[N, k, 3]`, and their tokens, projected features plus the offset's encoding, `[N, k, hidden]`.
-    fn neighbourhood(
-        &self,
-        target: &Target,
-        rows: Vec<usize>,
-        position: Tensor<2>,
-        scale: Tensor<2>,
-    ) -> (Tensor<3>, Tensor<3>) {
+    /// `W_2` of the offset encoding folded into the key and value matrices, split by head.
+    fn folded_offsets(&self) -> FoldedOffsets {
+        let fc2 = &self.offset_in.fc2;
+        let hidden = fc2.weight.dims()[0];
+        let (heads, width) = (self.heads, hidden / self.heads);
+        let value_weight = self.value.weight.val();
+        let key = fc2.weight.val().matmul(self.key.weight.val()).reshape([hidden, heads, width]).permute([1, 2, 0]);
+        let value = fc2.weight.val().matmul(value_weight.clone()).reshape([hidden, heads, width]).swap_dims(0, 1);
+        let bias = |linear: &Linear| linear.bias.as_ref().map(|b| b.val().reshape([1, hidden]));
+        let carried = bias(fc2).map(|b| b.matmul(value_weight));
+        let value_bias = [carried, bias(&self.value)]
+            .into_iter()
+            .flatten()
+            .fold(Tensor::zeros([1, hidden], &fc2.weight.device()), |sum, b| sum + b);
+        FoldedOffsets { key, value, value_bias }
+    }
+
+    /// The neighbours at `rows` of the queries at `position` `[N, 3]`: their rows `[N, k]` and offsets
+    /// `(p_j - x_q) / s`, `[N, k, 3]`.
+    fn neighbourhood(&self, target: &Target, rows: Vec<usize>, position: Tensor<2>, scale: Tensor<2>) -> Neighbourhood {
         let [n, _] = position.dims();
-        let (k, hidden) = (target.k, target.tokens.dims()[1]);
+        let k = target.k;
         let rows = TensorData::new(rows.into_iter().map(|r| r as i64).collect(), [n * k]);
         let rows = Tensor::<1, Int>::from_data(rows, &position.device());
         let neighbours = target.points.clone().select(0, rows.clone()).reshape([n, k, 3]);
         let offsets = (neighbours - position.unsqueeze_dim::<3>(1)) / scale.unsqueeze_dim::<3>(0);
-        let tokens = target.tokens.clone().select(0, rows).reshape([n, k, hidden]);
-        (offsets.clone(), tokens + self.offset_in.forward(offsets))
+        Neighbourhood { rows: rows.reshape([n, k]), offsets }
     }
 
-    /// Multi-head attention of each query token `[N, hidden]` over its neighbours' tokens `[N, k, hidden]`:
-    /// `[N, hidden + 3 heads]`, the attended values, then each head's attention-weighted offset.
-    fn attend(&self, query: Tensor<2>, tokens: Tensor<3>, offsets: Tensor<3>) -> Tensor<2> {
-        let [n, k, hidden] = tokens.dims();
+    /// Multi-head attention of each query token `[N, hidden]` over its neighbourhood (factored, see the module's
+    /// doc): `[N, hidden + 3 heads]`, the attended values, then each head's attention-weighted offset.
+    fn attend(&self, query: Tensor<2>, neighbourhood: Neighbourhood, target: &Target) -> Tensor<2> {
+        let [n, hidden] = query.dims();
         let (heads, width) = (self.heads, hidden / self.heads);
-        let split = |t: Tensor<3>| t.reshape([n, k, heads, width]).swap_dims(1, 2);
-        let q = self.query.forward(query).reshape([n, heads, 1, width]);
-        let keys = split(self.key.forward(tokens.clone()));
-        let values = split(self.value.forward(tokens));
-        let weights = softmax(q.matmul(keys.swap_dims(2, 3)) / (width as f64).sqrt(), 3);
-        let attended = weights.clone().matmul(values).reshape([n, hidden]);
-        let matched = weights.matmul(offsets.unsqueeze_dim::<4>(1).expand([n, heads, k, 3])).reshape([n, 3 * heads]);
-        Tensor::cat(vec![attended, matched], 1)
+        let folded = &target.folded;
+        let kernel = AttentionKernel::for_queries(&query);
+        // Scaled once here rather than every score.
+        let q = self.query.forward(query).reshape([n, heads, width]) / (width as f64).sqrt();
+        let turned = q.clone().swap_dims(0, 1).matmul(folded.key.clone()).swap_dims(0, 1);
+        let encoder = &self.offset_in.fc1;
+        let encoder_bias = match &encoder.bias {
+            Some(bias) => bias.val(),
+            None => Tensor::zeros([hidden], &q.device()),
+        };
+        let inputs = AttentionTensors {
+            offsets: neighbourhood.offsets,
+            rows: neighbourhood.rows,
+            keys_values: target.keys_values.clone(),
+            encoder_weight: encoder.weight.val(),
+            encoder_bias,
+            queries: q,
+            turned,
+        };
+        let attended = attention::attend(inputs, kernel);
+        let offset_values = attended.pooled.swap_dims(0, 1).matmul(folded.value.clone()).swap_dims(0, 1);
+        let values = (attended.values + offset_values).reshape([n, hidden]) + folded.value_bias.clone();
+        Tensor::cat(vec![values, attended.matched.reshape([n, 3 * heads])], 1)
     }
+}
+
+/// One query chunk's neighbourhood, `k` target points per query.
+struct Neighbourhood {
+    /// `[N, k]`: the neighbours' target rows.
+    rows: Tensor<2, Int>,
+    /// `[N, k, 3]`: offsets `(p_j - x_q) / s`.
+    offsets: Tensor<3>,
 }
 
 /// `displacement` `[N, 3]` with each row no longer than `limit`: rows within it unchanged (and their gradient), longer

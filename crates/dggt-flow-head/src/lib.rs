@@ -16,6 +16,7 @@
 //! displacement of a query row goes from its point at the query's time `ta` to where that point is at the target's
 //! time `tb`.
 
+pub mod attention;
 pub mod cloud;
 pub mod config;
 pub mod head;
