@@ -8,7 +8,10 @@
 //! - **release**: 4 input views of 518 x 350 with a tenth of their pixels dynamic (18 130 each: 3 pairs, 6 ways),
 //!   the released network's widths (its DPT maps 256 + 512 + 1024 + 1024 and 128 full-resolution channels); the
 //!   forward pass (inference), then forward and backward of one way, with the process's peak resident memory
-//!   before and after it (the backward holds every neighbourhood tensor of every iteration).
+//!   before and after it (the backward holds what every iteration's attention saved).
+//!
+//! `cargo bench -p dggt-flow-head --bench head -- CHUNK` runs the release cases alone with queries in chunks of
+//! `CHUNK` (the default 8192).
 //!
 //! The clouds are random points in a 20 m box with standard normal features, and the head's last layer is random
 //! (a fresh head's is zero), so every query moves. Medians after a warm-up.
@@ -103,7 +106,6 @@ fn peak_mib() -> f64 {
 }
 
 fn main() {
-    // `cargo bench -p dggt-flow-head --bench head -- CHUNK`: the release cases with queries in chunks of CHUNK.
     let chunk = std::env::args().skip(1).find_map(|a| a.parse::<usize>().ok());
     let default = FlowHeadShape::default();
     let release_shape = FlowHeadShape { chunk: chunk.unwrap_or(default.chunk), ..default.clone() };

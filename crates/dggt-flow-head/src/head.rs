@@ -21,7 +21,8 @@
 //! matrix once per query and head), and its value share `(sum_j a_j g_j) (W_2 W_v)_h` (the weighted encodings
 //! pooled first); the constant `b_2 W_k` of the keys cancels in the softmax and `b_2 W_v` adds to the values'
 //! bias. Per neighbour this costs the encoding's first layer and a few dot products of `hidden` channels instead
-//! of three `hidden x hidden` products. `tests/attention.rs` checks it against the formulas above written out.
+//! of three `hidden x hidden` products. The per-neighbour sums run in [`crate::attention`]: fused on the CPU, tensor
+//! operations on other devices. `tests/attention.rs` checks both against the formulas above written out.
 //!
 //! After each iteration a displacement longer than the diagonal of the box holding both clouds is shortened to it
 //! along its direction (no match lies further; a head gone wrong stays within the scene), and left as it is

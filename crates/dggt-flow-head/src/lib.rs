@@ -9,7 +9,9 @@
 //! 3. [`neighbours`]: the k nearest target points of each moved query (an R*-tree on the host);
 //! 4. [`scale`]: the cloud's sampling spacing, the unit the head measures offsets in;
 //! 5. [`head`]: [`FlowHead`], the transformer that refines each query's displacement by attention over its
-//!    target neighbourhood, built from a [`FlowHeadConfig`] ([`config`]).
+//!    target neighbourhood, built from a [`FlowHeadConfig`] ([`config`]);
+//! 6. [`attention`]: the per-neighbour sums of that attention, a fused CPU op with a hand-written backward, or
+//!    burn's tensor operations on other devices.
 //!
 //! Conventions: points and displacements in the reconstruction's world axes and units (whatever scale the network
 //! predicted); one point per row (`[N, 3]`, `x y z`), features row-aligned with the points (`[N, C]`); the

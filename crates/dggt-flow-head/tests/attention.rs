@@ -189,3 +189,40 @@ fn close(found: &[f64], expected: &[f64], what: &str) {
         assert!((f - e).abs() <= 1e-5 * largest, "{what}[{i}]: fused {f}, tensor operations {e}");
     }
 }
+
+/// On a CubeCL device the head runs the tensor operations: its displacements and their gradients (of both clouds'
+/// points and features) agree with the fused op's on `flex`.
+#[cfg(feature = "wgpu")]
+#[test]
+fn the_head_agrees_on_wgpu() {
+    use dggt_flow_head::FrameCloud;
+    let config = config(HeadInputs::FeaturesAndOffsets);
+    let mut rng = Rng::new(40);
+    let (query, target) = (cloud(10, 5, &mut rng), cloud(9, 5, &mut rng));
+    let weights = Host::new(10, 3, rng.normals(30, 1.0));
+    let run = |device: Device| {
+        let head = randomised(&config, 41, &device);
+        let leaf = |h: &Host| h.tensor(&device).require_grad();
+        let leaves = [leaf(&query.points), leaf(&query.features), leaf(&target.points), leaf(&target.features)];
+        let flow = head
+            .forward(
+                &FrameCloud::new(leaves[0].clone(), leaves[1].clone()),
+                &FrameCloud::new(leaves[2].clone(), leaves[3].clone()),
+            )
+            .unwrap();
+        let grads = (flow.clone() * weights.tensor(&device)).sum().backward();
+        let mut found = vec![values(flow)];
+        found.extend(leaves.iter().map(|t| values(t.grad(&grads).expect("an input gradient"))));
+        found
+    };
+    let flex = run(Device::flex().autodiff());
+    let wgpu = run(Device::wgpu(burn::tensor::DeviceKind::default()).autodiff());
+    let names = ["displacement", "query points", "query features", "target points", "target features"];
+    for ((name, f), w) in names.iter().zip(&flex).zip(&wgpu) {
+        let largest = f.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        assert!(largest > 0.0, "{name} is all zero");
+        for (i, (f, w)) in f.iter().zip(w).enumerate() {
+            assert!((f - w).abs() <= 1e-4 * largest, "{name}[{i}]: flex {f}, wgpu {w}");
+        }
+    }
+}

@@ -92,30 +92,30 @@ impl HostCall {
             .zip(grad_queries.par_chunks_mut(block * heads * width))
             .zip(turned.par_chunks_mut(block * heads * hidden))
             .enumerate()
-            .map(|(index, ((offsets, grad_queries), turned))| {
-                let (mut scratch, mut shared) = (Scratch::new(&dims), SharedGrads::zeros(&dims));
-                let first = index * block;
-                for local in 0..offsets.len() / (neighbours * 3) {
-                    let query = first + local;
-                    let row = heads * dims.out_channels();
-                    let own = OwnGrads {
-                        offsets: &mut offsets[local * neighbours * 3..(local + 1) * neighbours * 3],
-                        queries: &mut grad_queries[local * heads * width..(local + 1) * heads * width],
-                        turned: &mut turned[local * heads * hidden..(local + 1) * heads * hidden],
-                    };
-                    backward_query(
-                        &inputs,
-                        query,
-                        &grad_out[query * row..(query + 1) * row],
-                        &mut scratch,
-                        own,
-                        &mut shared,
-                    );
-                }
-                shared
+            .map(|(index, ((offsets, queries), turned))| {
+                let own = OwnGrads { offsets, queries, turned };
+                self.backward_block(&inputs, index * block, grad_out, own)
             })
             .reduce(|| SharedGrads::zeros(&dims), SharedGrads::sum);
         (offsets, grad_queries, turned, shared)
+    }
+
+    /// The queries from `first` on whose own gradient rows `own` holds (`[count, k, 3]` and so on): those rows
+    /// written, and the shared gradients of the block returned.
+    fn backward_block(&self, inputs: &HostInputs, first: usize, grad_out: &[f32], own: OwnGrads) -> SharedGrads {
+        let dims = self.dims;
+        let Dims { neighbours, heads, width, hidden, .. } = dims;
+        let (mut scratch, mut shared) = (Scratch::new(&dims), SharedGrads::zeros(&dims));
+        let row = heads * dims.out_channels();
+        let rows = own.offsets.chunks_exact_mut(neighbours * 3);
+        let rows =
+            rows.zip(own.queries.chunks_exact_mut(heads * width)).zip(own.turned.chunks_exact_mut(heads * hidden));
+        for (local, ((offsets, queries), turned)) in rows.enumerate() {
+            let query = first + local;
+            let grad = &grad_out[query * row..(query + 1) * row];
+            backward_query(inputs, query, grad, &mut scratch, OwnGrads { offsets, queries, turned }, &mut shared);
+        }
+        shared
     }
 }
 

@@ -120,14 +120,16 @@ impl HostInputs<'_> {
     /// The encodings of the query's neighbours into `scratch` (`pre` always; `encoded` as GELU of it).
     fn encode(&self, query: usize, scratch: &mut Scratch) {
         let hidden = self.dims.hidden;
-        let w = self.encoder_weight;
-        for j in 0..self.dims.neighbours {
+        let (w0, rest) = self.encoder_weight.split_at(hidden);
+        let (w1, w2) = rest.split_at(hidden);
+        let rows = scratch.pre.chunks_exact_mut(hidden).zip(scratch.encoded.chunks_exact_mut(hidden));
+        for (j, (pre, encoded)) in rows.enumerate() {
             let o = self.offset(query, j);
-            let pre = &mut scratch.pre[j * hidden..(j + 1) * hidden];
-            let encoded = &mut scratch.encoded[j * hidden..(j + 1) * hidden];
-            for c in 0..hidden {
-                pre[c] = self.encoder_bias[c] + o[0] * w[c] + o[1] * w[hidden + c] + o[2] * w[2 * hidden + c];
-                encoded[c] = gelu(pre[c]);
+            // Zipped rather than indexed, so that the loop has no bounds checks and vectorises.
+            let weights = w0.iter().zip(w1).zip(w2).zip(self.encoder_bias);
+            for ((pre, encoded), (((a, b), c), bias)) in pre.iter_mut().zip(encoded.iter_mut()).zip(weights) {
+                *pre = bias + o[0] * a + o[1] * b + o[2] * c;
+                *encoded = gelu(*pre);
             }
         }
     }

@@ -142,3 +142,21 @@ impl<B: AttentionKernels> NeighbourAttentionOps for B {
         B::attention_forward(inputs).0
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use burn::tensor::Device;
+
+    #[test]
+    fn the_fused_op_runs_for_f32_on_flex_with_or_without_autodiff() {
+        let queries = |device: &Device, dtype: DType| Tensor::<2>::zeros([2, 4], (device, dtype));
+        let flex = Device::flex();
+        assert_eq!(AttentionKernel::for_queries(&queries(&flex, DType::F32)), AttentionKernel::Fused);
+        assert_eq!(
+            AttentionKernel::for_queries(&queries(&flex.clone().autodiff(), DType::F32)),
+            AttentionKernel::Fused
+        );
+        assert_eq!(AttentionKernel::for_queries(&queries(&flex, DType::F64)), AttentionKernel::TensorOps);
+    }
+}
