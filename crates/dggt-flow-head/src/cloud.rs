@@ -9,38 +9,41 @@
 
 use burn::tensor::Tensor;
 
-/// Which of the head's two inputs a problem concerns.
+/// Which cloud a problem concerns.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum CloudRole {
     /// The points of time `ta` whose displacements are predicted.
     Query,
     /// The points of time `tb` the queries attend to.
     Target,
+    /// Input view `i`'s cloud, prepared once for every pair it takes part in (either role).
+    View(usize),
 }
 
 impl std::fmt::Display for CloudRole {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            Self::Query => "query",
-            Self::Target => "target",
-        })
+        match self {
+            Self::Query => f.write_str("query cloud"),
+            Self::Target => f.write_str("target cloud"),
+            Self::View(view) => write!(f, "cloud of input view {view}"),
+        }
     }
 }
 
 /// Why the flow head refused its input.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum FlowError {
-    #[error("the {cloud} cloud's points have {columns} columns, expected 3 (x y z)")]
+    #[error("the points of the {cloud} have {columns} columns, expected 3 (x y z)")]
     PointWidth { cloud: CloudRole, columns: usize },
-    #[error("the {cloud} cloud has {points} points but {features} feature rows")]
+    #[error("the {cloud} has {points} points but {features} feature rows")]
     RowMismatch { cloud: CloudRole, points: usize, features: usize },
-    #[error("the {cloud} cloud's features have {found} channels, the head was configured for {expected}")]
+    #[error("the features of the {cloud} have {found} channels, the head was configured for {expected}")]
     FeatureWidth { cloud: CloudRole, expected: usize, found: usize },
-    #[error("the {cloud} cloud's point {row} is not finite: {point:?}")]
+    #[error("point {row} of the {cloud} is not finite: {point:?}")]
     NonFinitePoint { cloud: CloudRole, row: usize, point: [f32; 3] },
     #[error("query {row}'s displacement became non-finite in refinement iteration {iteration}")]
     NonFiniteDisplacement { row: usize, iteration: usize },
-    #[error("reading the {cloud} cloud's points back from the device failed: {reason}")]
+    #[error("reading the points of the {cloud} back from the device failed: {reason}")]
     Readback { cloud: CloudRole, reason: String },
 }
 
@@ -65,11 +68,6 @@ impl FrameCloud {
 
     pub fn is_empty(&self) -> bool {
         self.len() == 0
-    }
-
-    /// Rows `start..start + len` of both tensors (`len > 0`: burn's `narrow` refuses an empty range).
-    pub(crate) fn rows(&self, start: usize, len: usize) -> Self {
-        Self::new(self.points.clone().narrow(0, start, len), self.features.clone().narrow(0, start, len))
     }
 
     /// Checks the shapes: three point columns, as many feature rows as points, `width` feature channels.

@@ -68,14 +68,46 @@ pub struct FlowHead {
     inputs: HeadInputs,
 }
 
+/// One time's cloud prepared for the head, once for every pair it takes part in (as query or as target): shapes
+/// and points checked, the points on the host and indexed, the features projected into tokens and into the
+/// attention's keys and values. Built by [`FlowHead::prepare`].
+pub struct PreparedCloud {
+    points: Tensor<2>,
+    host_points: Vec<[f32; 3]>,
+    /// `None` for an empty cloud.
+    projected: Option<Projected>,
+}
+
+/// What a non-empty prepared cloud holds beside its points.
+struct Projected {
+    /// `[N, hidden]`: the projected features, a query's initial state.
+    tokens: Tensor<2>,
+    /// `[N, 2 hidden]`: the keys then the values of the tokens (the values without their bias).
+    keys_values: Tensor<2>,
+    search: NeighbourSearch,
+    /// Where the offsets' unit comes from when this cloud is the target.
+    spacing: ScaleSource,
+}
+
+impl PreparedCloud {
+    /// Rows (points).
+    pub fn len(&self) -> usize {
+        self.host_points.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.host_points.is_empty()
+    }
+}
+
 /// What every query chunk reads of the target cloud.
-struct Target {
+struct Target<'a> {
     points: Tensor<2>,
     /// `[Nt, 2 hidden]`: the keys then the values of the projected features (the values without their bias).
     keys_values: Tensor<2>,
     /// The offset encoding's last layer folded into the key and value matrices.
     folded: FoldedOffsets,
-    search: NeighbourSearch,
+    search: &'a NeighbourSearch,
     /// `[1]`: the spacing offsets are measured in.
     scale: Tensor<1>,
     /// Neighbours per query: the configured count, or every target point when there are fewer.
@@ -130,46 +162,58 @@ impl FlowHead {
     }
 
     /// `[Nq, 3]`: the displacement, in world units, of each query point from the query's time to the target's.
-    /// Zero for every query when the target cloud is empty; `[0, 3]` for an empty query cloud.
+    /// Zero for every query when the target cloud is empty; `[0, 3]` for an empty query cloud. A cloud taking part
+    /// in several pairs is better prepared once ([`Self::prepare`], [`Self::forward_prepared`]).
     pub fn forward(&self, query: &FrameCloud, target: &FrameCloud) -> Result<Tensor<2>, FlowError> {
-        query.check_shapes(CloudRole::Query, self.feature_width)?;
-        target.check_shapes(CloudRole::Target, self.feature_width)?;
-        let held = query.points.zeros_like();
-        if query.is_empty() {
-            return Ok(held);
-        }
-        let query_points = query.host_points(CloudRole::Query)?;
-        let target_points = target.host_points(CloudRole::Target)?;
-        if target.is_empty() {
-            return Ok(held);
-        }
-        let target = self.prepare_target(query, target, &target_points, extent(&query_points, &target_points));
+        let query = self.prepare(query, CloudRole::Query)?;
+        let target = self.prepare(target, CloudRole::Target)?;
+        self.forward_prepared(&query, &target)
+    }
+
+    /// Checks `cloud` (its errors name it as `role`), reads its points and projects its features.
+    pub fn prepare(&self, cloud: &FrameCloud, role: CloudRole) -> Result<PreparedCloud, FlowError> {
+        cloud.check_shapes(role, self.feature_width)?;
+        let host_points = cloud.host_points(role)?;
+        let projected = (!cloud.is_empty()).then(|| {
+            let tokens = self.feature_tokens(cloud.features.clone());
+            let keys = tokens.clone().matmul(self.key.weight.val());
+            let values = tokens.clone().matmul(self.value.weight.val());
+            let search = NeighbourSearch::new(&host_points);
+            let spacing = ScaleSource::of_target(&host_points, &search);
+            Projected { tokens, keys_values: Tensor::cat(vec![keys, values], 1), search, spacing }
+        });
+        Ok(PreparedCloud { points: cloud.points.clone(), host_points, projected })
+    }
+
+    /// [`Self::forward`] on clouds prepared by this head.
+    pub fn forward_prepared(&self, query: &PreparedCloud, target: &PreparedCloud) -> Result<Tensor<2>, FlowError> {
+        let (Some(query_projected), Some(target_projected)) = (&query.projected, &target.projected) else {
+            return Ok(query.points.zeros_like());
+        };
+        let target = Target {
+            points: target.points.clone(),
+            keys_values: target_projected.keys_values.clone(),
+            folded: self.folded_offsets(),
+            scale: target_projected.spacing.length(&query.points, &target.points),
+            k: self.neighbours.min(target.len()),
+            search: &target_projected.search,
+            extent: extent(&query.host_points, &target.host_points),
+        };
         let chunks = (0..query.len())
             .step_by(self.chunk)
             .map(|start| {
                 let len = self.chunk.min(query.len() - start);
-                let rows = query.rows(start, len);
-                self.refine(&target, self.start(rows, query_points[start..start + len].to_vec(), start))
+                let queries = Queries {
+                    points: query.points.clone().narrow(0, start, len),
+                    host_points: query.host_points[start..start + len].to_vec(),
+                    first_row: start,
+                    state: query_projected.tokens.clone().narrow(0, start, len),
+                    displacement: Tensor::zeros([len, 3], (&query.points.device(), query.points.dtype())),
+                };
+                self.refine(&target, queries)
             })
             .collect::<Result<Vec<_>, _>>()?;
         Ok(Tensor::cat(chunks, 0))
-    }
-
-    fn prepare_target(&self, query: &FrameCloud, target: &FrameCloud, host_points: &[[f32; 3]], extent: f32) -> Target {
-        let search = NeighbourSearch::new(host_points);
-        let scale = ScaleSource::of_target(host_points, &search).length(query, target);
-        let tokens = self.feature_tokens(target.features.clone());
-        let keys_values =
-            Tensor::cat(vec![tokens.clone().matmul(self.key.weight.val()), tokens.matmul(self.value.weight.val())], 1);
-        Target {
-            points: target.points.clone(),
-            keys_values,
-            folded: self.folded_offsets(),
-            scale,
-            k: self.neighbours.min(search.len()),
-            search,
-            extent,
-        }
     }
 
     /// `[N, hidden]`: the points' projected features (`features` `[N, C]`), or the projection's bias alone when
@@ -178,17 +222,6 @@ impl FlowHead {
         match self.inputs {
             HeadInputs::FeaturesAndOffsets => self.feature_in.forward(features),
             HeadInputs::OffsetsOnly => self.feature_in.forward(features.zeros_like()),
-        }
-    }
-
-    /// A chunk's initial state: its projected features, and no displacement.
-    fn start(&self, cloud: FrameCloud, host_points: Vec<[f32; 3]>, first_row: usize) -> Queries {
-        Queries {
-            displacement: cloud.points.zeros_like(),
-            state: self.feature_tokens(cloud.features),
-            points: cloud.points,
-            host_points,
-            first_row,
         }
     }
 

@@ -30,5 +30,5 @@ pub mod scale;
 pub use cloud::{CloudRole, FlowError, FrameCloud};
 pub use config::{ConfigError, FlowHeadConfig, FlowHeadShape, HeadInputs};
 pub use dggt_geom::ImageSize;
-pub use head::FlowHead;
+pub use head::{FlowHead, PreparedCloud};
 pub use sample::{PixelIndex, SampleError, sample_features};

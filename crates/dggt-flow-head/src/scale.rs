@@ -13,7 +13,6 @@
 
 use burn::tensor::{Int, Tensor, TensorData};
 
-use crate::cloud::FrameCloud;
 use crate::neighbours::NeighbourSearch;
 
 /// Most target points whose nearest-neighbour distance enters the median.
@@ -44,20 +43,20 @@ impl ScaleSource {
         Self::Spacing { row, neighbour }
     }
 
-    /// The length as a `[1]` tensor, differentiable in the points.
-    pub fn length(self, query: &FrameCloud, target: &FrameCloud) -> Tensor<1> {
+    /// The length as a `[1]` tensor, differentiable in the points (`[N, 3]` each).
+    pub fn length(self, query: &Tensor<2>, target: &Tensor<2>) -> Tensor<1> {
         let length = match self {
             Self::Spacing { row, neighbour } => {
                 let rows = Tensor::<1, Int>::from_data(
                     TensorData::new(vec![row as i64, neighbour as i64], [2]),
-                    &target.points.device(),
+                    &target.device(),
                 );
-                let pair = target.points.clone().select(0, rows);
+                let pair = target.clone().select(0, rows);
                 let difference = pair.clone().narrow(0, 0, 1) - pair.narrow(0, 1, 1);
                 difference.powi_scalar(2).sum().sqrt()
             }
             Self::Spread => {
-                let points = Tensor::cat(vec![query.points.clone(), target.points.clone()], 0);
+                let points = Tensor::cat(vec![query.clone(), target.clone()], 0);
                 let centred = points.clone() - points.mean_dim(0);
                 centred.powi_scalar(2).sum_dim(1).mean().sqrt()
             }
@@ -70,6 +69,7 @@ impl ScaleSource {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::cloud::FrameCloud;
     use burn::tensor::Device;
 
     fn cloud(points: &[[f32; 3]]) -> FrameCloud {
@@ -83,7 +83,7 @@ mod tests {
 
     fn length_of(query: &[[f32; 3]], target: &[[f32; 3]]) -> f32 {
         let source = ScaleSource::of_target(target, &NeighbourSearch::new(target));
-        source.length(&cloud(query), &cloud(target)).into_scalar::<f32>()
+        source.length(&cloud(query).points, &cloud(target).points).into_scalar::<f32>()
     }
 
     #[test]

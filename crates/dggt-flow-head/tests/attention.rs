@@ -42,7 +42,8 @@ fn documented_flow(
     let (query, target) = (query_host.upload(&device), target_host.upload(&device));
     let host_targets: Vec<[f32; 3]> =
         values(target.points.clone()).chunks_exact(3).map(|p| [p[0] as f32, p[1] as f32, p[2] as f32]).collect();
-    let scale = ScaleSource::of_target(&host_targets, &NeighbourSearch::new(&host_targets)).length(&query, &target);
+    let scale = ScaleSource::of_target(&host_targets, &NeighbourSearch::new(&host_targets))
+        .length(&query.points, &target.points);
     let scale = scale.reshape([1, 1]);
     let extent = diagonal(&query_host.points.values, &target_host.points.values);
     let (n, m) = (query.len(), target.len());

@@ -226,3 +226,29 @@ fn overfits_a_translation() {
     assert!((initial - 1.0).abs() < 1e-6, "a fresh head holds the points: {initial}");
     assert!(error < 0.1, "mean error {error} of |t| after training");
 }
+
+/// A cloud prepared once serves as query and as target, with exactly the displacements of the unprepared calls;
+/// its errors name its view.
+#[test]
+fn a_prepared_cloud_serves_both_roles() {
+    let device = Device::flex();
+    let config = small_config();
+    let head = randomised(&config, 15, &device);
+    let (a, b) = clouds(&config, 11, 13, 16);
+    let (a, b) = (a.upload(&device), b.upload(&device));
+    let prepared_a = head.prepare(&a, CloudRole::View(0)).unwrap();
+    let prepared_b = head.prepare(&b, CloudRole::View(1)).unwrap();
+    for ((query, target), (prepared_query, prepared_target)) in
+        [((&a, &b), (&prepared_a, &prepared_b)), ((&b, &a), (&prepared_b, &prepared_a))]
+    {
+        let direct = values(head.forward(query, target).unwrap());
+        assert!(direct.iter().any(|v| *v != 0.0));
+        assert_eq!(values(head.forward_prepared(prepared_query, prepared_target).unwrap()), direct);
+    }
+    let mut points = values(b.points.clone());
+    points[3 * 4 + 1] = f64::NAN;
+    let broken = FrameCloud::new(Host::new(13, 3, points).tensor(&device), b.features.clone());
+    let error = head.prepare(&broken, CloudRole::View(1)).err().expect("a non-finite point is refused");
+    assert!(matches!(error, FlowError::NonFinitePoint { cloud: CloudRole::View(1), row: 4, .. }), "{error}");
+    assert!(error.to_string().contains("point 4 of the cloud of input view 1"), "{error}");
+}

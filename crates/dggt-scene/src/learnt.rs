@@ -12,7 +12,7 @@
 //! which either view has no dynamic pixel does not run the head (its rows keep zero flow).
 
 use burn::tensor::{IndexingUpdateOp, Int, Tensor, TensorData};
-use dggt_flow_head::{FlowHead, FrameCloud, PixelIndex, sample_features};
+use dggt_flow_head::{CloudRole, FlowHead, FrameCloud, PixelIndex, PreparedCloud, sample_features};
 use dggt_model::host::host_f32;
 
 use crate::error::SceneError;
@@ -139,18 +139,19 @@ impl PixelGaussians {
             .into_iter()
             .filter(|&(a, b)| !queries[a].is_empty() && !queries[b].is_empty())
             .collect();
-        // Each view's cloud is built once, for both of its pairs.
-        let mut clouds: Vec<Option<(FrameCloud, Tensor<1, Int>)>> = (0..self.views.len()).map(|_| None).collect();
+        // Each view's cloud is built and prepared once, for both of its pairs and both roles.
+        let mut clouds: Vec<Option<(PreparedCloud, Tensor<1, Int>)>> = (0..self.views.len()).map(|_| None).collect();
         for view in pairs.iter().flat_map(|&(a, b)| [a, b]) {
             if clouds[view].is_none() {
-                clouds[view] = Some(self.cloud(view, &queries[view], features)?);
+                let (cloud, rows) = self.cloud(view, &queries[view], features)?;
+                clouds[view] = Some((head.prepare(&cloud, CloudRole::View(view))?, rows));
             }
         }
         let mut moved_rows = [vec![false; self.len()], vec![false; self.len()]];
         for (a, b) in pairs {
             if let (Some((cloud_a, rows_a)), Some((cloud_b, rows_b))) = (&clouds[a], &clouds[b]) {
-                next_parts.push((rows_a.clone(), head.forward(cloud_a, cloud_b)?));
-                previous_parts.push((rows_b.clone(), head.forward(cloud_b, cloud_a)?));
+                next_parts.push((rows_a.clone(), head.forward_prepared(cloud_a, cloud_b)?));
+                previous_parts.push((rows_b.clone(), head.forward_prepared(cloud_b, cloud_a)?));
                 for (moved, view) in moved_rows.iter_mut().zip([a, b]) {
                     queries[view].iter().for_each(|p| moved[self.row(view, *p)] = true);
                 }
