@@ -219,11 +219,31 @@ fn the_head_agrees_on_wgpu() {
     let flex = run(Device::flex().autodiff());
     let wgpu = run(Device::wgpu(burn::tensor::DeviceKind::default()).autodiff());
     let names = ["displacement", "query points", "query features", "target points", "target features"];
-    for ((name, f), w) in names.iter().zip(&flex).zip(&wgpu) {
-        let largest = f.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        assert!(largest > 0.0, "{name} is all zero");
-        for (i, (f, w)) in f.iter().zip(w).enumerate() {
-            assert!((f - w).abs() <= 1e-4 * largest, "{name}[{i}]: flex {f}, wgpu {w}");
-        }
+    let worst: Vec<f64> = flex
+        .iter()
+        .zip(&wgpu)
+        .map(|(f, w)| {
+            let largest = f.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            assert!(largest > 0.0);
+            f.iter().zip(w).map(|(f, w)| (f - w).abs() / largest).fold(0.0, f64::max)
+        })
+        .collect();
+    println!(
+        "worst differences, relative to each tensor's largest entry: {:?}",
+        names.iter().zip(&worst).collect::<Vec<_>>()
+    );
+    let bounds =
+        [DISPLACEMENT_TOLERANCE, GRADIENT_TOLERANCE, GRADIENT_TOLERANCE, GRADIENT_TOLERANCE, GRADIENT_TOLERANCE];
+    for ((name, worst), bound) in names.iter().zip(&worst).zip(bounds) {
+        assert!(*worst <= bound, "{name}: {worst:.2e} of the largest entry, more than {bound:.0e}");
     }
 }
+
+/// How closely the head on wgpu follows it on `flex`, relative to each tensor's largest entry: the displacements
+/// to float rounding (seen on lavapipe: 4.5e-7); the gradients less closely, as they pass through the slopes of
+/// the GELUs and the softmax, which the GPU kernels compute with approximate transcendental functions (seen: at
+/// most 8.4e-4, for the query points; the fused op on `flex` matches burn's `flex` gradients to 1e-5).
+#[cfg(feature = "wgpu")]
+const DISPLACEMENT_TOLERANCE: f64 = 1e-4;
+#[cfg(feature = "wgpu")]
+const GRADIENT_TOLERANCE: f64 = 5e-3;
