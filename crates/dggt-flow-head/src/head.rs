@@ -285,7 +285,7 @@ impl FlowHead {
         let [n, hidden] = query.dims();
         let (heads, width) = (self.heads, hidden / self.heads);
         let folded = &target.folded;
-        let kernel = AttentionKernel::for_queries(&query);
+        let kernel = AttentionKernel::for_queries(&query, target.k, heads);
         // Scaled once here rather than every score.
         let q = self.query.forward(query).reshape([n, heads, width]) / (width as f64).sqrt();
         let turned = q.clone().swap_dims(0, 1).matmul(folded.key.clone()).swap_dims(0, 1);

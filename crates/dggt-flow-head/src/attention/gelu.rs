@@ -7,10 +7,15 @@
 //! `GELU(z) = z Phi(z)` and `GELU'(z) = Phi(z) + z phi(z)`, with `Phi(z) = erfc(-z / sqrt 2) / 2`: for negative
 //! `z` the tail is used directly, with no cancellation against 1. A NaN passes through.
 
-const P: f32 = 0.327_591_1;
-const A: [f32; 5] = [0.254_829_6, -0.284_496_74, 1.421_413_7, -1.453_152, 1.061_405_4];
+/// 7.1.26's constants, shared with the GPU kernel's GELU (`cube::kernels`).
+pub(crate) const P: f32 = 0.327_591_1;
+pub(crate) const A1: f32 = 0.254_829_6;
+pub(crate) const A2: f32 = -0.284_496_74;
+pub(crate) const A3: f32 = 1.421_413_7;
+pub(crate) const A4: f32 = -1.453_152;
+pub(crate) const A5: f32 = 1.061_405_4;
 /// `1 / sqrt(2 pi)`.
-const INV_SQRT_TAU: f32 = 0.398_942_3;
+pub(crate) const INV_SQRT_TAU: f32 = 0.398_942_3;
 
 /// `exp(x)` for `x <= 0`, within two f32 steps: `2^n e^t` with `n` the integer nearest `x log2(e)` (set as the
 /// exponent's bits) and `t = x - n ln 2` (`|t| <= ln(2) / 2`, `ln 2` in two parts so that `t` is exact to f32),
@@ -42,7 +47,7 @@ fn normal(z: f32) -> (f32, f32) {
     let x = z.abs() * std::f32::consts::FRAC_1_SQRT_2;
     let density = exp_non_positive(-x * x);
     let t = 1.0 / (1.0 + P * x);
-    let polynomial = t * (A[0] + t * (A[1] + t * (A[2] + t * (A[3] + t * A[4]))));
+    let polynomial = t * (A1 + t * (A2 + t * (A3 + t * (A4 + t * A5))));
     let tail = 0.5 * polynomial * density;
     let distribution = if z >= 0.0 { 1.0 - tail } else { tail };
     (distribution, INV_SQRT_TAU * density)

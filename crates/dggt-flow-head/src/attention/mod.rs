@@ -2,17 +2,24 @@
 //! encodings, offsets), given its per-head query and turned query (see [`crate::head`] for the factoring). Two
 //! implementations of one contract:
 //!
-//! - **fused** ([`NeighbourAttentionOps`], CPU devices): a burn backend extension that runs [`kernel`] per query
-//!   in parallel and writes only the `[N, heads, width + hidden + 3]` output; its hand-written backward
-//!   recomputes each query's encodings and weights instead of keeping `[N, k, hidden]` tensors, and adds the
-//!   shared gradients (target keys and values, the encoder) in one buffer per worker.
-//! - **tensor ops** ([`tensor_ops`], every other device: CubeCL's tuned products on the GPU): the neighbours'
-//!   keys and values gathered and the same sums taken with burn's operations and autodiff.
+//! - **fused** ([`NeighbourAttentionOps`]): a burn backend extension that writes only the
+//!   `[N, heads, width + hidden + 3]` output, with a hand-written backward that recomputes each query's encodings
+//!   and weights instead of keeping `[N, k, hidden]` tensors. On `flex` it runs [`kernel`] per query in parallel
+//!   and adds the shared gradients (target keys and values, the encoder) in one buffer per worker; on the CubeCL
+//!   devices (features `wgpu` / `cuda`, and `fusion`) it runs `cube`'s kernels, one cube per query, adding the
+//!   target keys' and values' gradients atomically.
+//! - **tensor ops** ([`tensor_ops`], every other case: `ndarray`, `f64`, a head too wide for a cube's shared
+//!   memory): the neighbours' keys and values gathered and the same sums taken with burn's operations and
+//!   autodiff.
 //!
-//! `tests/attention.rs` holds both against the documented formulas; `tests/gradients.rs` checks the fused
-//! backward against finite differences.
+//! `tests/attention.rs` holds both against the documented formulas, and the device kernels against the host's;
+//! `tests/gradients.rs` checks the fused backward against finite differences.
 
 mod autodiff;
+#[cfg(any(feature = "wgpu", feature = "cuda"))]
+mod cube;
+#[cfg(all(any(feature = "wgpu", feature = "cuda"), feature = "fusion"))]
+mod fusion;
 pub mod gelu;
 mod host;
 pub mod kernel;
@@ -59,12 +66,20 @@ pub enum AttentionKernel {
 }
 
 impl AttentionKernel {
-    /// The fused op for `f32` queries on `flex` (under autodiff or not), tensor operations otherwise.
-    pub fn for_queries(queries: &Tensor<2>) -> Self {
-        let on_flex = matches!(queries.device().without_autodiff().as_dispatch(), DispatchDevice::Flex(_));
-        match (on_flex, queries.dtype()) {
-            (true, DType::F32) => Self::Fused,
-            _ => Self::TensorOps,
+    /// The fused op for `f32` queries `[N, hidden]` on `flex`, and on a CubeCL device where the head's shape fits
+    /// a cube's shared memory (under autodiff or not); tensor operations otherwise.
+    pub fn for_queries(queries: &Tensor<2>, neighbours: usize, heads: usize) -> Self {
+        if queries.dtype() != DType::F32 {
+            return Self::TensorOps;
+        }
+        match queries.device().without_autodiff().as_dispatch() {
+            DispatchDevice::Flex(_) => Self::Fused,
+            #[cfg(any(feature = "wgpu", feature = "cuda"))]
+            DispatchDevice::Cube(_) if cube::fits(neighbours, heads, queries.dims()[1]) => Self::Fused,
+            _ => {
+                let _ = (neighbours, heads);
+                Self::TensorOps
+            }
         }
     }
 }
@@ -98,9 +113,14 @@ fn fused(inputs: AttentionTensors) -> AttendedTensors {
     }
 }
 
-/// The fused attention as a burn backend extension (CPU backends, and autodiff over them). Returns the packed
-/// `[N, heads, width + hidden + 3]` output; gradients reach every float input.
-#[backend_extension(Flex, Autodiff)]
+/// The fused attention as a burn backend extension (`flex`, the CubeCL devices, and autodiff over them). Returns
+/// the packed `[N, heads, width + hidden + 3]` output; gradients reach every float input.
+#[backend_extension(
+    Flex,
+    // burn's `Cube` type: `CubeBackend`, or `Fusion<CubeBackend>` when burn's `fusion` feature is on.
+    Cube: cfg(any(feature = "wgpu", feature = "cuda")),
+    Autodiff
+)]
 pub trait NeighbourAttentionOps: Backend {
     fn neighbour_attention(#[extension_type] inputs: AttentionInputs<Self>) -> FloatTensor<Self>;
 }
@@ -150,13 +170,12 @@ mod tests {
 
     #[test]
     fn the_fused_op_runs_for_f32_on_flex_with_or_without_autodiff() {
-        let queries = |device: &Device, dtype: DType| Tensor::<2>::zeros([2, 4], (device, dtype));
+        let kernel = |device: &Device, dtype: DType| {
+            AttentionKernel::for_queries(&Tensor::<2>::zeros([2, 4], (device, dtype)), 16, 2)
+        };
         let flex = Device::flex();
-        assert_eq!(AttentionKernel::for_queries(&queries(&flex, DType::F32)), AttentionKernel::Fused);
-        assert_eq!(
-            AttentionKernel::for_queries(&queries(&flex.clone().autodiff(), DType::F32)),
-            AttentionKernel::Fused
-        );
-        assert_eq!(AttentionKernel::for_queries(&queries(&flex, DType::F64)), AttentionKernel::TensorOps);
+        assert_eq!(kernel(&flex, DType::F32), AttentionKernel::Fused);
+        assert_eq!(kernel(&flex.clone().autodiff(), DType::F32), AttentionKernel::Fused);
+        assert_eq!(kernel(&flex, DType::F64), AttentionKernel::TensorOps);
     }
 }

@@ -149,6 +149,13 @@ impl ModuleVisitor for ParamGrads<'_> {
     }
 }
 
+/// Every float parameter of `head`: its module path, id and gradient in `grads` (empty when it has none).
+pub fn parameter_gradients(head: &FlowHead, grads: &burn::tensor::Gradients) -> Vec<(String, ParamId, Vec<f64>)> {
+    let mut visitor = ParamGrads { grads: Some(grads), ..Default::default() };
+    head.visit(&mut visitor);
+    visitor.found
+}
+
 /// The small head of the gradient checks: two feature scales, two heads, four neighbours, two iterations, and
 /// chunks of five queries (12 queries: three chunks).
 pub fn small_config() -> FlowHeadConfig {
@@ -250,9 +257,7 @@ impl GradientCheck {
         let target = FrameCloud::new(tensors[2].clone(), tensors[3].clone());
         let grads = self.loss(&self.head, &query, &target).backward();
         let inputs = tensors.iter().map(|t| values(t.grad(&grads).expect("an input gradient"))).collect();
-        let mut visitor = ParamGrads { grads: Some(&grads), ..Default::default() };
-        self.head.visit(&mut visitor);
-        (inputs, visitor.found)
+        (inputs, parameter_gradients(&self.head, &grads))
     }
 
     fn central_difference(&self, evaluate: impl Fn(f64) -> f64) -> f64 {

@@ -2,51 +2,27 @@
 //! dispatches to when burn's `fusion` feature is on.
 //!
 //! The rasteriser's intersection count depends on the data, so the call cannot be recorded lazily into a
-//! fusion stream. Each pass instead resolves its inputs (flushing the operations queued on them), runs the
-//! CubeCL kernels of [`CubeBackend`] eagerly, and registers the results as new tensors of the stream, the way
-//! fusion registers data created outside it. The saved state is the unfused backend's, device buffers only.
+//! fusion stream: each pass runs the CubeCL kernels of [`CubeBackend`] eagerly between `dggt_cube::fusion`'s
+//! resolve and publish. The saved state is the unfused backend's, device buffers only.
 
 use std::sync::Arc;
 
-use burn::backend::TensorMetadata;
-use burn::backend::fusion::stream::StreamId;
-use burn::backend::fusion::{Fusion, FusionBackend, FusionTensor, NoOp, get_client};
-use burn::backend::ir::{BackendIr, InitOperationIr, OperationIr, OperationOutput};
+use burn::backend::fusion::{Fusion, FusionTensor};
 use burn::backend::tensor::FloatTensor;
 use burn_cubecl::CubeBackend;
 use burn_cubecl::tensor::CubeTensor;
+use dggt_cube::fusion::{self, Runtime, TensorKind, publish};
 use dggt_geom::ImageSize;
 
 use super::cube::CubeForward;
 use super::{SplatGrads, SplatInputs, SplatKernels, SplatOutputs};
 use crate::settings::RasterSettings;
 
-type Runtime = <CubeBackend as FusionBackend>::FusionRuntime;
 type Fused = Fusion<CubeBackend>;
 
-/// The device tensor behind a fused tensor, once every operation producing it has run.
+/// The device tensor behind a fused float tensor, once every operation producing it has run.
 fn resolve(tensor: FusionTensor<Runtime>) -> CubeTensor {
-    let client = tensor.client.clone();
-    client.resolve_tensor_float::<CubeBackend>(tensor)
-}
-
-/// Which kind of burn tensor a computed device tensor becomes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum TensorKind {
-    Float,
-    Int,
-}
-
-/// Registers a computed device tensor in the current fusion stream.
-fn publish(tensor: CubeTensor, kind: TensorKind) -> FusionTensor<Runtime> {
-    let client = get_client::<CubeBackend>(&tensor.device);
-    let (shape, dtype) = (tensor.shape(), tensor.dtype);
-    let handle = match kind {
-        TensorKind::Float => CubeBackend::float_tensor_handle(tensor),
-        TensorKind::Int => CubeBackend::int_tensor_handle(tensor),
-    };
-    let desc = InitOperationIr::create(shape, dtype, || client.register_tensor_handle(handle));
-    client.register(StreamId::current(), OperationIr::Init(desc), NoOp::<CubeBackend>::new()).output()
+    fusion::resolve(tensor, TensorKind::Float)
 }
 
 fn resolve_inputs(inputs: SplatInputs<Fused>) -> SplatInputs<CubeBackend> {

@@ -11,9 +11,9 @@ use burn_cubecl::cubecl;
 use cubecl::prelude::*;
 
 use super::composite::tile_range;
-use super::math::*;
 use super::stage::{FootprintStage, load_footprint};
 use crate::constants::{ALPHA_THRESHOLD, MAX_ALPHA, MIN_DEPTH_ALPHA};
+use dggt_cube::atomic::FloatAdd;
 
 /// How the units of a cube add their gradients.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

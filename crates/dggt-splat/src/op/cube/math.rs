@@ -1,55 +1,8 @@
 //! Device math shared by the kernels: 3-vectors and 3x3 matrices, finiteness, the rotation of a `w x y z`
-//! quaternion, and the float addition the backward kernels accumulate gradients with (a native `f32` atomic
-//! where the device has one, a compare-and-swap loop otherwise).
+//! quaternion. (The float addition the backward kernels accumulate gradients with is `dggt_cube::atomic`.)
 
 use burn_cubecl::cubecl;
 use cubecl::prelude::*;
-
-/// Float addition into a gradient buffer shared by many threads: a native `f32` atomic add where the device
-/// has one, otherwise a compare-and-swap loop on the bits (`Atomic<u32>`). Both buffers hold `f32` bits.
-#[cube]
-pub trait FloatAdd: Send + Sync + 'static {
-    type Slot: CubePrimitive;
-
-    /// `buffer[index] += value`.
-    fn add(buffer: &Tensor<Atomic<Self::Slot>>, index: usize, value: f32);
-}
-
-/// Native `f32` atomic add.
-pub struct NativeAdd;
-
-/// Compare-and-swap on the `u32` bits of an `f32`.
-pub struct SwapAdd;
-
-#[cube]
-impl FloatAdd for NativeAdd {
-    type Slot = f32;
-
-    fn add(buffer: &Tensor<Atomic<f32>>, index: usize, value: f32) {
-        if value != 0.0 {
-            buffer[index].fetch_add(value);
-        }
-    }
-}
-
-#[cube]
-impl FloatAdd for SwapAdd {
-    type Slot = u32;
-
-    fn add(buffer: &Tensor<Atomic<u32>>, index: usize, value: f32) {
-        if value != 0.0 {
-            let mut current = buffer[index].load();
-            loop {
-                let expected = current;
-                let sum = f32::from_bits(expected) + value;
-                current = buffer[index].compare_exchange_weak(expected, sum.to_bits());
-                if current == expected {
-                    break;
-                }
-            }
-        }
-    }
-}
 
 /// A 3-vector.
 #[derive(CubeType, Clone, Copy)]

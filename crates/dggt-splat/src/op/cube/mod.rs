@@ -81,8 +81,7 @@ use burn::backend::ops::FloatTensorOps;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{DType, Shape, TensorMetadata};
 use burn::tensor::Slice;
-use burn_cubecl::cubecl::features::{AtomicUsage, Plane};
-use burn_cubecl::cubecl::ir::{FloatKind, Type};
+use burn_cubecl::cubecl::features::Plane;
 use burn_cubecl::cubecl::prelude::*;
 use burn_cubecl::cubecl::{self, calculate_cube_count_elemwise};
 use burn_cubecl::kernel::into_contiguous;
@@ -95,8 +94,8 @@ use super::{PACKED_EXTRA_CHANNELS, SplatGrads, SplatInputs, SplatKernels, SplatO
 use crate::cull::CullStats;
 use crate::settings::RasterSettings;
 use composite_backward::GradientSum;
+use dggt_cube::atomic::{FloatAtomics, NativeAdd, SwapAdd};
 use lists::{FootprintBuffers, ListBatch};
-use math::{NativeAdd, SwapAdd};
 pub use probe::{SortedIntersections, prefix_sums, sort_intersections};
 
 /// Units per cube of the per-element kernels.
@@ -230,8 +229,7 @@ fn gradient_sum(client: &cubecl::client::Client) -> GradientSum {
 /// Whether the backward pass adds gradients with native `f32` atomics: when the device supports them, unless
 /// the environment variable `DGGT_SPLAT_CAS_ATOMICS` is set (to test the compare-and-swap path on any device).
 fn native_float_atomics(client: &cubecl::client::Client) -> bool {
-    std::env::var_os("DGGT_SPLAT_CAS_ATOMICS").is_none()
-        && client.properties().atomic_type_usage(Type::atomic(FloatKind::F32)).contains(AtomicUsage::Add)
+    std::env::var_os("DGGT_SPLAT_CAS_ATOMICS").is_none() && FloatAtomics::of(client) == FloatAtomics::Native
 }
 
 fn layout(inputs: &SplatInputs<CubeBackend>, settings: &RasterSettings, size: ImageSize) -> Layout {
