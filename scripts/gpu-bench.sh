@@ -126,8 +126,9 @@ part ours-forward 12 "$dggt" "${common[@]}" --out "$out/ours-forward" --workload
 part ours-forward-half 10 "$dggt" "${common[@]}" --out "$out/ours-forward-half" --workloads forward \
     --precisions f16,bf16
 part ours-train-step 10 "$dggt" "${common[@]}" --out "$out/ours-train-step" --workloads train-step
-part ours-longest 14 "$dggt" "${common[@]}" --out "$out/ours-longest" --workloads longest \
-    --longest-budget-s "$(allowance 9)" "${longest[@]}"
+part ours-flow-head 4 "$dggt" "${common[@]}" --out "$out/ours-flow-head" --workloads flow-head
+part ours-longest 10 "$dggt" "${common[@]}" --out "$out/ours-longest" --workloads longest \
+    --longest-budget-s "$(allowance 6)" "${longest[@]}"
 
 if ((reference)); then
     reference_args=(--out "$out/reference.json" --gsplat)

@@ -306,12 +306,14 @@ fn gpu_bench_script_measures_every_part_at_reduced_scale() {
     let log = format!("{}\n{}", String::from_utf8_lossy(&run.stdout), String::from_utf8_lossy(&run.stderr));
     assert!(run.status.success(), "{log}");
     let parts = std::fs::read_to_string(out.join("parts.txt")).unwrap();
-    for part in ["ours-raster", "ours-forward", "ours-train-step", "ours-longest", "baseline"] {
+    for part in ["ours-raster", "ours-forward", "ours-train-step", "ours-flow-head", "ours-longest", "baseline"] {
         assert!(parts.contains(&format!("== {part}: exit 0")), "{part} did not finish: {parts}\n{log}");
     }
     let table = std::fs::read_to_string(out.join("compute.md")).unwrap();
     assert!(table.contains("Baseline: dggt-rs, "), "{table}");
-    for key in ["raster/20000x2/forward+backward", "forward/4/f32", "train-step/2+4/f32", "longest/f32"] {
+    let keys =
+        ["raster/20000x2/forward+backward", "forward/4/f32", "train-step/2+4/f32", "flow-head/3x300/forward+backward"];
+    for key in keys.into_iter().chain(["longest/f32"]) {
         let row = table.lines().find(|line| line.starts_with(&format!("| `{key}` |"))).unwrap_or_else(|| {
             panic!("no row for {key}:\n{table}");
         });

@@ -23,8 +23,8 @@ pub struct Args {
     /// `full` (the release's sizes) or `reduced` (the tiny network, seconds on a CPU).
     #[arg(long, value_enum, default_value = "full")]
     scale: ScaleArg,
-    /// Workloads to run: forward, aggregator, train-step, raster, longest.
-    #[arg(long, value_delimiter = ',', default_value = "forward,aggregator,train-step,raster,longest")]
+    /// Workloads to run: forward, aggregator, train-step, raster, flow-head, longest.
+    #[arg(long, value_delimiter = ',', default_value = "forward,aggregator,train-step,raster,flow-head,longest")]
     workloads: Vec<String>,
     /// Precisions of the forward workload.
     #[arg(long, value_delimiter = ',', default_value = "f32,bf16")]

@@ -44,6 +44,8 @@ pub enum BenchError {
     #[error(transparent)]
     Splat(#[from] dggt_splat::SplatError),
     #[error(transparent)]
+    Flow(#[from] dggt_flow_head::FlowError),
+    #[error(transparent)]
     Infer(#[from] dggt_infer::InferError),
     #[error(transparent)]
     Loss(#[from] dggt_losses::LossError),

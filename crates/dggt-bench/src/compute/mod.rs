@@ -7,6 +7,7 @@
 //! - `forward/{S}/{precision}`: the network on `S` frames ([`forward`]);
 //! - `train-step/{N}+{2N}/f32`: one optimiser step of the release's fine-tuning recipe ([`training`]);
 //! - `raster/{G}x{V}/forward` and `.../forward+backward`: the rasteriser alone ([`raster`]);
+//! - `flow-head/{V}x{Q}/forward` and `.../forward+backward`: the learnt scene-flow head alone ([`flow_head`]);
 //! - `aggregator/{S}/{precision}`: the aggregator alone, to tell the backbone from the heads ([`forward`]);
 //! - `longest/{precision}`: the most frames the forward pass fits in the device's memory ([`forward`]).
 //!
@@ -14,6 +15,7 @@
 //! [`Scale::Reduced`] runs the same code on the tiny network at a size a CPU finishes in seconds, so that the
 //! suite is tested without a GPU.
 
+mod flow_head;
 mod forward;
 mod memory;
 mod raster;
@@ -55,6 +57,9 @@ pub struct ScaleSpec {
     pub train_inputs: usize,
     pub raster_gaussians: usize,
     pub raster_views: usize,
+    /// Input views of the flow-head workload and dynamic pixels (queries) of each.
+    pub flow_views: usize,
+    pub flow_queries: usize,
     /// Frame counts the longest-sequence search starts from and never passes.
     pub longest_start: usize,
     pub longest_max: usize,
@@ -70,6 +75,9 @@ impl Scale {
                 train_inputs: 4,
                 raster_gaussians: 2_200_000,
                 raster_views: 12,
+                // Four frames of 518x350 with a tenth of their pixels dynamic.
+                flow_views: 4,
+                flow_queries: 18_130,
                 longest_start: 16,
                 longest_max: 1024,
             },
@@ -80,6 +88,8 @@ impl Scale {
                 train_inputs: 2,
                 raster_gaussians: 20_000,
                 raster_views: 2,
+                flow_views: 3,
+                flow_queries: 300,
                 longest_start: 2,
                 longest_max: 8,
             },
@@ -94,11 +104,13 @@ pub enum Workload {
     Aggregator,
     TrainStep,
     Raster,
+    FlowHead,
     Longest,
 }
 
 impl Workload {
-    pub const ALL: [Workload; 5] = [Self::Forward, Self::Aggregator, Self::TrainStep, Self::Raster, Self::Longest];
+    pub const ALL: [Workload; 6] =
+        [Self::Forward, Self::Aggregator, Self::TrainStep, Self::Raster, Self::FlowHead, Self::Longest];
 
     pub fn name(self) -> &'static str {
         match self {
@@ -106,6 +118,7 @@ impl Workload {
             Self::Aggregator => "aggregator",
             Self::TrainStep => "train-step",
             Self::Raster => "raster",
+            Self::FlowHead => "flow-head",
             Self::Longest => "longest",
         }
     }
@@ -114,7 +127,7 @@ impl Workload {
         Self::ALL.into_iter().find(|w| w.name() == text.trim()).ok_or_else(|| {
             BenchError::setting(
                 "workload",
-                format!("`{text}`: expected forward, aggregator, train-step, raster or longest"),
+                format!("`{text}`: expected forward, aggregator, train-step, raster, flow-head or longest"),
             )
         })
     }
@@ -240,6 +253,7 @@ pub fn run_compute(
             Workload::Aggregator => forward::aggregator_records(options, &spec, device, &mut keep)?,
             Workload::TrainStep => keep(training::train_step_record(options, &spec, device)),
             Workload::Raster => raster::raster_records(options, &spec, device, &mut keep),
+            Workload::FlowHead => flow_head::flow_head_records(options, &spec, device, &mut keep)?,
             Workload::Longest => forward::longest_records(options, &spec, device, &mut keep)?,
         }
     }
