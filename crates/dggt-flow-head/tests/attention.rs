@@ -258,6 +258,9 @@ fn the_device_kernels_match_the_host_kernel() {
         }
         println!("{shape:?}: worst differences {worst:?}");
     }
+    // A head whose neighbourhood outgrows a cube's shared memory (16 x 512 encodings) runs the tensor operations.
+    let wide = Tensor::<2>::zeros([1, 512], &wgpu);
+    assert_eq!(AttentionKernel::for_queries(&wide, 16, 8), AttentionKernel::TensorOps);
 }
 
 /// On a CubeCL device the head runs the device kernels: its displacements and their gradients (of both clouds'
