@@ -39,7 +39,7 @@ use crate::attention::{self, AttentionKernel, AttentionTensors};
 use crate::cloud::{CloudRole, FlowError, FrameCloud, read_rows};
 use crate::config::{FlowHeadConfig, HeadInputs};
 use crate::mlp::{Mlp, OutputInit};
-use crate::neighbours::NeighbourSearch;
+use crate::neighbours::{NeighbourSearch, SearchPlace};
 use crate::scale::ScaleSource;
 
 /// The learnt scene-flow head `F(ta, tb)`; built by [`FlowHeadConfig::init`].
@@ -108,6 +108,8 @@ struct Target<'a> {
     /// The offset encoding's last layer folded into the key and value matrices.
     folded: FoldedOffsets,
     search: &'a NeighbourSearch,
+    /// Where the queries' neighbours are looked up: `search` on the host, or brute force on the device.
+    place: SearchPlace,
     /// `[1]`: the spacing offsets are measured in.
     scale: Tensor<1>,
     /// Neighbours per query: the configured count, or every target point when there are fewer.
@@ -197,6 +199,7 @@ impl FlowHead {
             scale: target_projected.spacing.length(&query.points, &target.points),
             k: self.neighbours.min(target.len()),
             search: &target_projected.search,
+            place: SearchPlace::for_points(&target.points),
             extent: extent(&query.host_points, &target.host_points),
         };
         let chunks = (0..query.len())
@@ -229,8 +232,7 @@ impl FlowHead {
     fn refine(&self, target: &Target, mut queries: Queries) -> Result<Tensor<2>, FlowError> {
         let mut positions = queries.host_points.clone();
         for iteration in 0..self.iterations {
-            let rows = target.search.k_nearest(&positions, target.k);
-            queries = self.step(target, queries, rows);
+            queries = self.step(target, queries, &positions);
             if iteration + 1 < self.iterations {
                 positions = moved(&queries, iteration)?;
             }
@@ -238,10 +240,11 @@ impl FlowHead {
         Ok(queries.displacement)
     }
 
-    /// One refinement iteration with the neighbours' `rows` (`k` per query, query after query).
-    fn step(&self, target: &Target, queries: Queries, rows: Vec<usize>) -> Queries {
+    /// One refinement iteration of the queries now at `host_positions` (on the host, as the device has them).
+    fn step(&self, target: &Target, queries: Queries, host_positions: &[[f32; 3]]) -> Queries {
         let scale = target.scale.clone().reshape([1, 1]);
         let position = queries.points.clone() + queries.displacement.clone();
+        let rows = neighbour_rows(target, host_positions, &position);
         let neighbourhood = self.neighbourhood(target, rows, position, scale.clone());
         let query = queries.state.clone() + self.state_in.forward(queries.displacement.clone() / scale.clone());
         let attended = self.attend(query, neighbourhood, target);
@@ -267,16 +270,19 @@ impl FlowHead {
         FoldedOffsets { key, value, value_bias }
     }
 
-    /// The neighbours at `rows` of the queries at `position` `[N, 3]`: their rows `[N, k]` and offsets
+    /// The neighbours at `rows` `[N, k]` of the queries at `position` `[N, 3]`: their rows and offsets
     /// `(p_j - x_q) / s`, `[N, k, 3]`.
-    fn neighbourhood(&self, target: &Target, rows: Vec<usize>, position: Tensor<2>, scale: Tensor<2>) -> Neighbourhood {
-        let [n, _] = position.dims();
-        let k = target.k;
-        let rows = TensorData::new(rows.into_iter().map(|r| r as i64).collect(), [n * k]);
-        let rows = Tensor::<1, Int>::from_data(rows, &position.device());
-        let neighbours = target.points.clone().select(0, rows.clone()).reshape([n, k, 3]);
+    fn neighbourhood(
+        &self,
+        target: &Target,
+        rows: Tensor<2, Int>,
+        position: Tensor<2>,
+        scale: Tensor<2>,
+    ) -> Neighbourhood {
+        let [n, k] = rows.dims();
+        let neighbours = target.points.clone().select(0, rows.clone().reshape([n * k])).reshape([n, k, 3]);
         let offsets = (neighbours - position.unsqueeze_dim::<3>(1)) / scale.unsqueeze_dim::<3>(0);
-        Neighbourhood { rows: rows.reshape([n, k]), offsets }
+        Neighbourhood { rows, offsets }
     }
 
     /// Multi-head attention of each query token `[N, hidden]` over its neighbourhood (factored, see the module's
@@ -316,6 +322,20 @@ struct Neighbourhood {
     rows: Tensor<2, Int>,
     /// `[N, k, 3]`: offsets `(p_j - x_q) / s`.
     offsets: Tensor<3>,
+}
+
+/// `[N, k]`: the rows of the `k` target points nearest each query, looked up where the target's points are
+/// searched ([`SearchPlace`]): on the device from `position` `[N, 3]`, or on the host from `host_positions`.
+fn neighbour_rows(target: &Target, host_positions: &[[f32; 3]], position: &Tensor<2>) -> Tensor<2, Int> {
+    match target.place {
+        #[cfg(any(feature = "wgpu", feature = "cuda"))]
+        SearchPlace::Device => crate::neighbours::device::k_nearest(position.clone(), target.points.clone(), target.k),
+        SearchPlace::Host => {
+            let rows = target.search.k_nearest(host_positions, target.k);
+            let data = TensorData::new(rows.into_iter().map(|r| r as i64).collect(), [host_positions.len(), target.k]);
+            Tensor::from_data(data, &position.device())
+        }
+    }
 }
 
 /// `displacement` `[N, 3]` with each row no longer than `limit`: rows within it unchanged (and their gradient), longer

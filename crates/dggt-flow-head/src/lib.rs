@@ -6,12 +6,13 @@
 //!
 //! 1. [`sample`]: multi-scale image features read at the query and target pixels (bilinear, pixel centres);
 //! 2. [`cloud`]: one time's points (the Gaussian means) with their features, checked, as a [`FrameCloud`];
-//! 3. [`neighbours`]: the k nearest target points of each moved query (an R*-tree on the host);
+//! 3. [`neighbours`]: the k nearest target points of each moved query (an R*-tree on the host, brute force on a
+//!    CubeCL device);
 //! 4. [`scale`]: the cloud's sampling spacing, the unit the head measures offsets in;
 //! 5. [`head`]: [`FlowHead`], the transformer that refines each query's displacement by attention over its
 //!    target neighbourhood, built from a [`FlowHeadConfig`] ([`config`]);
-//! 6. [`attention`]: the per-neighbour sums of that attention, a fused CPU op with a hand-written backward, or
-//!    burn's tensor operations on other devices.
+//! 6. [`attention`]: the per-neighbour sums of that attention, a fused op with a hand-written backward (on the
+//!    host, and as CubeCL kernels), or burn's tensor operations elsewhere.
 //!
 //! Conventions: points and displacements in the reconstruction's world axes and units (whatever scale the network
 //! predicted); one point per row (`[N, 3]`, `x y z`), features row-aligned with the points (`[N, C]`); the

@@ -1,11 +1,41 @@
-//! Nearest-neighbour search over one cloud's points, on the host (an R*-tree).
+//! Nearest-neighbour search over one cloud's points: on the host (an R*-tree, [`NeighbourSearch`]) or, on a CubeCL
+//! device, by brute force where the points are (`device`, features `wgpu` / `cuda`). [`SearchPlace::for_points`]
+//! says which the head uses.
 //!
-//! The head reads the moved query positions back from the device and looks their neighbours up here; the indices
-//! it gets are data, not part of the gradient (the neighbour set is piecewise constant in the positions). Ties in
-//! distance are broken in whatever order the tree visits them.
+//! On the host the head reads the moved query positions back from the device and looks their neighbours up here.
+//! Either way the rows are data, not part of the gradient (the neighbour set is piecewise constant in the
+//! positions). Ties in distance are broken in whatever order the tree visits them (on the device: target order).
 
+#[cfg(any(feature = "wgpu", feature = "cuda"))]
+pub mod device;
+
+use burn::tensor::Tensor;
 use rstar::RTree;
 use rstar::primitives::GeomWithData;
+
+/// Where the head looks a cloud's neighbours up.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SearchPlace {
+    /// The host's R*-tree, from positions read back.
+    Host,
+    /// The points' CubeCL device, by brute force (`device::k_nearest`).
+    #[cfg(any(feature = "wgpu", feature = "cuda"))]
+    Device,
+}
+
+impl SearchPlace {
+    /// The device for `f32` points on a CubeCL device (with the `wgpu` / `cuda` features), the host otherwise.
+    pub fn for_points(points: &Tensor<2>) -> Self {
+        #[cfg(any(feature = "wgpu", feature = "cuda"))]
+        if points.dtype() == burn::tensor::DType::F32
+            && matches!(points.device().without_autodiff().as_dispatch(), burn::backend::DispatchDevice::Cube(_))
+        {
+            return Self::Device;
+        }
+        let _ = points;
+        Self::Host
+    }
+}
 
 /// A point with its row in the cloud.
 type Entry = GeomWithData<[f32; 3], usize>;
