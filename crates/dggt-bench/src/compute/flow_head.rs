@@ -13,25 +13,9 @@ use burn::tensor::{Device, Tensor, TensorData};
 use dggt_data::random::SplitMix64;
 use dggt_flow_head::{CloudRole, FlowHead, FlowHeadConfig, FlowHeadShape, FrameCloud, PreparedCloud};
 
-use super::{ComputeOptions, Record, ScaleSpec, timed};
+use super::{ComputeOptions, Passes, Record, ScaleSpec, timed};
 use crate::error::BenchError;
 use crate::stages::settle;
-
-/// Which passes a record times.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Passes {
-    Forward,
-    ForwardBackward,
-}
-
-impl Passes {
-    fn name(self) -> &'static str {
-        match self {
-            Self::Forward => "forward",
-            Self::ForwardBackward => "forward+backward",
-        }
-    }
-}
 
 /// `flow-head/{V}x{Q}/forward` and `flow-head/{V}x{Q}/forward+backward`.
 pub fn flow_head_records(

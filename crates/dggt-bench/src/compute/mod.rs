@@ -260,6 +260,22 @@ pub fn run_compute(
     Ok(records)
 }
 
+/// Which passes a record of the rasteriser or the flow head times (part of its key).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Passes {
+    Forward,
+    ForwardBackward,
+}
+
+impl Passes {
+    fn name(self) -> &'static str {
+        match self {
+            Self::Forward => "forward",
+            Self::ForwardBackward => "forward+backward",
+        }
+    }
+}
+
 /// Times `work` `repeat` times after `warmup` untimed runs; the record has every run and their median, and the
 /// device memory held at the end. `work` must block until its results are computed.
 fn timed(

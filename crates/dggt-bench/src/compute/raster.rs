@@ -14,25 +14,9 @@ use dggt_data::random::SplitMix64;
 use dggt_geom::ImageSize;
 use dggt_splat::{CameraTensors, GaussianTensors, OpacityTensor, RenderSettings, render};
 
-use super::{ComputeOptions, Record, ScaleSpec, timed};
+use super::{ComputeOptions, Passes, Record, ScaleSpec, timed};
 use crate::error::BenchError;
 use crate::stages::settle;
-
-/// Which passes a record times.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Passes {
-    Forward,
-    ForwardBackward,
-}
-
-impl Passes {
-    fn name(self) -> &'static str {
-        match self {
-            Self::Forward => "forward",
-            Self::ForwardBackward => "forward+backward",
-        }
-    }
-}
 
 /// `raster/{G}x{V}/forward` and `raster/{G}x{V}/forward+backward`.
 pub fn raster_records(options: &ComputeOptions, spec: &ScaleSpec, device: &Device, keep: &mut impl FnMut(Record)) {
