@@ -4,8 +4,9 @@
 //! Each query carries a state (a `hidden`-wide token, initially its projected features) and a displacement
 //! (initially zero: the point is held where it is). One refinement iteration:
 //!
-//! 1. the query's current position `x_q = p_q + d_q` is read back and its `k` nearest target points `j` are found
-//!    on the host ([`crate::neighbours`]); their rows are data, not part of the gradient;
+//! 1. the `k` nearest target points `j` of the query's current position `x_q = p_q + d_q` are found, on the host
+//!    from the position read back, or on a CubeCL device where the points are ([`crate::neighbours`]); their rows
+//!    are data, not part of the gradient;
 //! 2. offsets `o_j = (p_j - x_q) / s` are measured in the target's spacing `s` ([`crate::scale`]);
 //! 3. attention, per head: the query token is `state + enc_d(d_q / s)` (the iteration state), each key and value
 //!    token is `proj(f_j) + enc_o(o_j)` (the neighbour's features and where it lies); the attended vector is the
@@ -21,8 +22,9 @@
 //! matrix once per query and head), and its value share `(sum_j a_j g_j) (W_2 W_v)_h` (the weighted encodings
 //! pooled first); the constant `b_2 W_k` of the keys cancels in the softmax and `b_2 W_v` adds to the values'
 //! bias. Per neighbour this costs the encoding's first layer and a few dot products of `hidden` channels instead
-//! of three `hidden x hidden` products. The per-neighbour sums run in [`crate::attention`]: fused on the CPU, tensor
-//! operations on other devices. `tests/attention.rs` checks both against the formulas above written out.
+//! of three `hidden x hidden` products. The per-neighbour sums run in [`crate::attention`]: fused on the CPU and on
+//! CubeCL devices, tensor operations elsewhere. `tests/attention.rs` checks them against the formulas above written
+//! out.
 //!
 //! After each iteration a displacement longer than the diagonal of the box holding both clouds is shortened to it
 //! along its direction (no match lies further; a head gone wrong stays within the scene), and left as it is
