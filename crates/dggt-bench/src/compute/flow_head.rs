@@ -35,9 +35,8 @@ pub fn flow_head_records(
         };
         let head = moving_head(&widths, &device)?;
         let mut random = SplitMix64::new(options.seed);
-        let trainable = passes == Passes::ForwardBackward;
         let clouds: Vec<FrameCloud> =
-            (0..views).map(|_| cloud(queries, widths.iter().sum(), trainable, &mut random, &device)).collect();
+            (0..views).map(|_| cloud(queries, widths.iter().sum(), passes, &mut random, &device)).collect();
         let record = timed(key, options, &device, || run(&head, &clouds, &ways, passes));
         let note = format!("{} ways of {queries} queries, feature widths {widths:?}, default head", ways.len());
         keep(record.with_note(note));
@@ -53,15 +52,16 @@ fn moving_head(widths: &[usize], device: &Device) -> Result<FlowHead, BenchError
     Ok(head)
 }
 
-fn cloud(points: usize, width: usize, trainable: bool, random: &mut SplitMix64, device: &Device) -> FrameCloud {
+/// One view's cloud; with `passes` including the backward, its points and features need gradients.
+fn cloud(points: usize, width: usize, passes: Passes, random: &mut SplitMix64, device: &Device) -> FrameCloud {
     let mut draw = |len: usize, low: f32, high: f32| -> Vec<f32> {
         (0..len).map(|_| low + (high - low) * random.unit()).collect()
     };
     let positions = Tensor::<2>::from_data(TensorData::new(draw(3 * points, 0.0, 20.0), [points, 3]), device);
     let features = Tensor::<2>::from_data(TensorData::new(draw(points * width, -1.0, 1.0), [points, width]), device);
-    match trainable {
-        true => FrameCloud::new(positions.require_grad(), features.require_grad()),
-        false => FrameCloud::new(positions, features),
+    match passes {
+        Passes::ForwardBackward => FrameCloud::new(positions.require_grad(), features.require_grad()),
+        Passes::Forward => FrameCloud::new(positions, features),
     }
 }
 

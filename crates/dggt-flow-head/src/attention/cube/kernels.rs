@@ -37,13 +37,11 @@ pub struct Sizes {
 }
 
 /// A query's neighbourhood in shared memory: the encodings `g` `[k, hidden]` (in the backward, later their
-/// pre-activation gradients) and the attention weights `[heads, k]` (in the backward, later the scores'
-/// gradients).
+/// pre-activation gradients) and the attention weights `[heads, k]`.
 #[derive(CubeType)]
 pub struct Neighbourhood {
     pub encoded: Shared<[f32]>,
     pub weights: Shared<[f32]>,
-    pub grads: Shared<[f32]>,
 }
 
 /// The cube's query, and whether it exists (a cube past the last query works on the last one, writing nothing).
@@ -112,10 +110,11 @@ fn softmax_row(scores: &mut Shared<[f32]>, start: usize, #[comptime] len: usize)
     }
 }
 
-/// Fills `space` with the query's encodings and attention weights (three phases, a barrier after each).
+/// The query's encodings and attention weights in shared memory (three phases, a barrier after each): how both
+/// passes start.
 #[cube]
 #[allow(clippy::too_many_arguments)]
-fn encode_and_weigh(
+fn query_neighbourhood(
     offsets: &Tensor<f32>,
     rows: &Tensor<i32>,
     keys_values: &Tensor<f32>,
@@ -124,10 +123,13 @@ fn encode_and_weigh(
     queries: &Tensor<f32>,
     turned: &Tensor<f32>,
     query: usize,
-    space: &mut Neighbourhood,
     #[comptime] sizes: Sizes,
-) {
+) -> Neighbourhood {
     let (k, heads, width, hidden) = comptime!((sizes.neighbours, sizes.heads, sizes.width, sizes.hidden));
+    let mut space = Neighbourhood {
+        encoded: Shared::<[f32]>::new_slice(comptime!(k * hidden)),
+        weights: Shared::<[f32]>::new_slice(comptime!(heads * k)),
+    };
     let unit = UNIT_POS as usize;
     let pairs = comptime!(k * hidden);
     for round in 0..comptime!(pairs.div_ceil(UNITS)) {
@@ -162,6 +164,7 @@ fn encode_and_weigh(
         softmax_row(&mut space.weights, unit * k, k);
     }
     sync_cube();
+    space
 }
 
 /// The forward pass: `out [N, heads, width + hidden + 3]`, per head the weighted values, encodings and offsets.
@@ -181,23 +184,8 @@ pub fn attention_forward_kernel(
 ) {
     let (k, heads, width, hidden) = comptime!((sizes.neighbours, sizes.heads, sizes.width, sizes.hidden));
     let (query, valid) = cube_query(count);
-    let mut space = Neighbourhood {
-        encoded: Shared::<[f32]>::new_slice(comptime!(k * hidden)),
-        weights: Shared::<[f32]>::new_slice(comptime!(heads * k)),
-        grads: Shared::<[f32]>::new_slice(1usize),
-    };
-    encode_and_weigh(
-        offsets,
-        rows,
-        keys_values,
-        encoder_weight,
-        encoder_bias,
-        queries,
-        turned,
-        query,
-        &mut space,
-        sizes,
-    );
+    let space =
+        query_neighbourhood(offsets, rows, keys_values, encoder_weight, encoder_bias, queries, turned, query, sizes);
     let channels = comptime!(width + hidden + 3);
     let outputs = comptime!(heads * channels);
     let unit = UNIT_POS as usize;
@@ -250,23 +238,10 @@ pub fn attention_backward_kernel<A: FloatAdd>(
 ) {
     let (k, heads, width, hidden) = comptime!((sizes.neighbours, sizes.heads, sizes.width, sizes.hidden));
     let (query, valid) = cube_query(count);
-    let mut space = Neighbourhood {
-        encoded: Shared::<[f32]>::new_slice(comptime!(k * hidden)),
-        weights: Shared::<[f32]>::new_slice(comptime!(heads * k)),
-        grads: Shared::<[f32]>::new_slice(comptime!(heads * k)),
-    };
-    encode_and_weigh(
-        offsets,
-        rows,
-        keys_values,
-        encoder_weight,
-        encoder_bias,
-        queries,
-        turned,
-        query,
-        &mut space,
-        sizes,
-    );
+    let mut space =
+        query_neighbourhood(offsets, rows, keys_values, encoder_weight, encoder_bias, queries, turned, query, sizes);
+    // `[heads, k]`: the weights' gradients, then the scores'.
+    let mut grads = Shared::<[f32]>::new_slice(comptime!(heads * k));
     let unit = UNIT_POS as usize;
     let channels = comptime!(width + hidden + 3);
     let kv_channels = comptime!(2 * heads * width);
@@ -288,7 +263,7 @@ pub fn attention_backward_kernel<A: FloatAdd>(
             for axis in 0..3usize {
                 d += grad_out[g_out + width + hidden + axis] * offsets[(query * k + j) * 3 + axis];
             }
-            space.grads[t] = d;
+            grads[t] = d;
         }
     }
     sync_cube();
@@ -297,10 +272,10 @@ pub fn attention_backward_kernel<A: FloatAdd>(
         let start = unit * k;
         let mut mean = 0.0f32;
         for j in 0..k {
-            mean += space.weights[start + j] * space.grads[start + j];
+            mean += space.weights[start + j] * grads[start + j];
         }
         for j in 0..k {
-            space.grads[start + j] = space.weights[start + j] * (space.grads[start + j] - mean);
+            grads[start + j] = space.weights[start + j] * (grads[start + j] - mean);
         }
     }
     sync_cube();
@@ -312,7 +287,7 @@ pub fn attention_backward_kernel<A: FloatAdd>(
             let (h, c) = (t / (width + hidden), t % (width + hidden));
             let mut sum = 0.0f32;
             for j in 0..k {
-                let ds = space.grads[h * k + j];
+                let ds = grads[h * k + j];
                 if c < width {
                     sum += ds * keys_values[rows[query * k + j] as usize * kv_channels + h * width + c];
                 } else {
@@ -337,7 +312,7 @@ pub fn attention_backward_kernel<A: FloatAdd>(
             for h in 0..heads {
                 let u = turned[(query * heads + h) * hidden + c];
                 let pooled = grad_out[(query * heads + h) * channels + width + c];
-                grad += space.grads[h * k + j] * u + space.weights[h * k + j] * pooled;
+                grad += grads[h * k + j] * u + space.weights[h * k + j] * pooled;
             }
             let pre = pre_activation(offsets, encoder_weight, encoder_bias, query * k + j, c, hidden);
             let (distribution, density) = normal(pre);
@@ -394,7 +369,7 @@ pub fn attention_backward_kernel<A: FloatAdd>(
             let at = rows[query * k + j] as usize * kv_channels + h * width + c;
             let q = queries[(query * heads + h) * width + c];
             let grad_values = grad_out[(query * heads + h) * channels + c];
-            A::add(grad_keys_values, at, space.grads[h * k + j] * q);
+            A::add(grad_keys_values, at, grads[h * k + j] * q);
             A::add(grad_keys_values, at + comptime!(heads * width), space.weights[h * k + j] * grad_values);
         }
     }

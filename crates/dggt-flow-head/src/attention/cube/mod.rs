@@ -36,8 +36,6 @@ pub fn fits(neighbours: usize, heads: usize, hidden: usize) -> bool {
 #[derive(Clone)]
 pub struct CubeCall {
     sizes: Sizes,
-    queries_count: usize,
-    targets: usize,
     offsets: CubeTensor,
     rows: CubeTensor,
     keys_values: CubeTensor,
@@ -49,7 +47,7 @@ pub struct CubeCall {
 
 impl std::fmt::Debug for CubeCall {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("CubeCall").field("sizes", &self.sizes).field("queries", &self.queries_count).finish()
+        f.debug_struct("CubeCall").field("sizes", &self.sizes).field("queries", &self.queries_count()).finish()
     }
 }
 
@@ -65,18 +63,15 @@ fn dims3(tensor: &CubeTensor) -> [usize; 3] {
 
 impl CubeCall {
     fn new(inputs: AttentionInputs<CubeBackend>) -> Self {
-        let [queries_count, neighbours, _] = dims3(&inputs.offsets);
+        let [_, neighbours, _] = dims3(&inputs.offsets);
         let [_, heads, width] = dims3(&inputs.queries);
         let [_, _, hidden] = dims3(&inputs.turned);
-        let targets = inputs.keys_values.shape()[0];
         let rows = match inputs.rows.dtype {
             DType::I32 => inputs.rows,
             _ => CubeBackend::int_cast(inputs.rows, IntDType::I32),
         };
         Self {
             sizes: Sizes { neighbours, heads, width, hidden },
-            queries_count,
-            targets,
             offsets: float_input(inputs.offsets, "offsets"),
             rows: into_contiguous(rows),
             keys_values: float_input(inputs.keys_values, "keys_values"),
@@ -85,6 +80,11 @@ impl CubeCall {
             queries: float_input(inputs.queries, "queries"),
             turned: float_input(inputs.turned, "turned"),
         }
+    }
+
+    /// Queries (`N`).
+    fn queries_count(&self) -> usize {
+        self.offsets.shape()[0]
     }
 
     fn client(&self) -> burn_cubecl::cubecl::client::Client {
@@ -101,15 +101,15 @@ impl CubeCall {
 
     /// One cube per query, in rows of at most 65 535 cubes.
     fn launch_size(&self) -> (CubeCount, CubeDim) {
-        let per_row = self.queries_count.clamp(1, 65_535);
-        let rows = self.queries_count.div_ceil(per_row).max(1);
+        let per_row = self.queries_count().clamp(1, 65_535);
+        let rows = self.queries_count().div_ceil(per_row).max(1);
         (CubeCount::new_2d(per_row as u32, rows as u32), CubeDim::new_1d(UNITS as u32))
     }
 
     fn forward(&self) -> CubeTensor {
         let Sizes { heads, width, hidden, .. } = self.sizes;
-        let out = self.empty(Shape::new([self.queries_count, heads, width + hidden + 3]));
-        if self.queries_count == 0 {
+        let out = self.empty(Shape::new([self.queries_count(), heads, width + hidden + 3]));
+        if self.queries_count() == 0 {
             return out;
         }
         let (cubes, dim) = self.launch_size();
@@ -125,7 +125,7 @@ impl CubeCall {
             arg(&self.queries),
             arg(&self.turned),
             arg(&out),
-            self.queries_count as u32,
+            self.queries_count() as u32,
             self.sizes,
         );
         out
@@ -133,10 +133,10 @@ impl CubeCall {
 
     fn backward(&self, grad_out: CubeTensor) -> AttentionGrads<CubeBackend> {
         let Sizes { neighbours, heads, width, hidden } = self.sizes;
-        let n = self.queries_count;
+        let n = self.queries_count();
         let grads = AttentionGrads {
             offsets: self.empty(Shape::new([n, neighbours, 3])),
-            keys_values: self.zeros(Shape::new([self.targets, 2 * heads * width])),
+            keys_values: self.zeros(Shape::new([self.keys_values.shape()[0], 2 * heads * width])),
             encoder_weight: self.zeros(Shape::new([3, hidden])),
             encoder_bias: self.zeros(Shape::new([hidden])),
             queries: self.empty(Shape::new([n, heads, width])),
