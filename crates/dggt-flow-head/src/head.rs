@@ -230,15 +230,25 @@ impl FlowHead {
         }
     }
 
-    /// The chunk's displacement after every iteration.
+    /// The chunk's displacement after every iteration. Every iteration's result but the last is checked finite:
+    /// where the search runs on the host, as its positions are read back for the next search; where it runs on
+    /// the device, all at once after the last iteration (one read-back of a flag per chunk, not one of the
+    /// displacements per iteration), the same error either way.
     fn refine(&self, target: &Target, mut queries: Queries) -> Result<Tensor<2>, FlowError> {
         let mut positions = queries.host_points.clone();
+        let mut unchecked = Vec::new();
         for iteration in 0..self.iterations {
             queries = self.step(target, queries, &positions);
-            if iteration + 1 < self.iterations {
-                positions = moved(&queries, iteration)?;
+            if iteration + 1 == self.iterations {
+                break;
+            }
+            match target.place {
+                SearchPlace::Host => positions = moved(&queries, iteration)?,
+                #[cfg(any(feature = "wgpu", feature = "cuda"))]
+                SearchPlace::Device => unchecked.push(queries.displacement.clone()),
             }
         }
+        check_finite(&unchecked, queries.first_row)?;
         Ok(queries.displacement)
     }
 
@@ -365,12 +375,62 @@ fn extent(query: &[[f32; 3]], target: &[[f32; 3]]) -> f32 {
 
 /// The chunk's current positions `p_q + d_q` on the host, refused if a displacement is not finite.
 fn moved(queries: &Queries, iteration: usize) -> Result<Vec<[f32; 3]>, FlowError> {
-    let displacement = read_rows(queries.displacement.clone())
-        .map_err(|reason| FlowError::Readback { cloud: CloudRole::Query, reason })?;
-    let positions: Vec<[f32; 3]> =
-        queries.host_points.iter().zip(&displacement).map(|(p, d)| [p[0] + d[0], p[1] + d[1], p[2] + d[2]]).collect();
+    let displacement = read_displacement(queries.displacement.clone())?;
+    refuse_non_finite(&displacement, queries.first_row, iteration)?;
+    Ok(queries.host_points.iter().zip(&displacement).map(|(p, d)| [p[0] + d[0], p[1] + d[1], p[2] + d[2]]).collect())
+}
+
+/// Checks the displacements of the first iterations of a chunk starting at `first_row`, one per entry of
+/// `iterations`, on their device: one flag read back, and each iteration's rows only when it is raised (to name the
+/// first row and iteration that is not finite).
+fn check_finite(iterations: &[Tensor<2>], first_row: usize) -> Result<(), FlowError> {
+    if iterations.is_empty() {
+        return Ok(());
+    }
+    let finite = Tensor::cat(iterations.to_vec(), 0).is_finite().all();
+    let finite = finite
+        .try_into_vec_as::<bool>()
+        .map_err(|e| FlowError::Readback { cloud: CloudRole::Query, reason: e.to_string() })?;
+    if finite.iter().all(|&flag| flag) {
+        return Ok(());
+    }
+    for (iteration, displacement) in iterations.iter().enumerate() {
+        refuse_non_finite(&read_displacement(displacement.clone())?, first_row, iteration)?;
+    }
+    Ok(())
+}
+
+/// A chunk's displacements `[N, 3]` on the host.
+fn read_displacement(displacement: Tensor<2>) -> Result<Vec<[f32; 3]>, FlowError> {
+    read_rows(displacement).map_err(|reason| FlowError::Readback { cloud: CloudRole::Query, reason })
+}
+
+/// The error naming the first row (counted in the whole query cloud) of `displacement` that is not finite.
+fn refuse_non_finite(displacement: &[[f32; 3]], first_row: usize, iteration: usize) -> Result<(), FlowError> {
     match displacement.iter().position(|d| !d.iter().all(|v| v.is_finite())) {
-        Some(row) => Err(FlowError::NonFiniteDisplacement { row: queries.first_row + row, iteration }),
-        None => Ok(positions),
+        Some(row) => Err(FlowError::NonFiniteDisplacement { row: first_row + row, iteration }),
+        None => Ok(()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rows(values: &[f32]) -> Tensor<2> {
+        Tensor::from_data(TensorData::new(values.to_vec(), [values.len() / 3, 3]), &Device::flex())
+    }
+
+    #[test]
+    fn the_check_of_all_iterations_names_the_first_bad_row_and_iteration() {
+        let finite = rows(&[0.0, 1.0, 2.0, 3.0, 4.0, 5.0]);
+        assert_eq!(check_finite(&[], 0), Ok(()));
+        assert_eq!(check_finite(&[finite.clone(), finite.clone()], 0), Ok(()));
+        let infinite_second = rows(&[0.0, 1.0, 2.0, 3.0, f32::INFINITY, 5.0]);
+        let nan_first = rows(&[f32::NAN, 1.0, 2.0, 3.0, 4.0, 5.0]);
+        let error = check_finite(&[finite.clone(), infinite_second.clone(), nan_first.clone()], 16);
+        assert_eq!(error, Err(FlowError::NonFiniteDisplacement { row: 17, iteration: 1 }));
+        let error = check_finite(&[nan_first, infinite_second], 0);
+        assert_eq!(error, Err(FlowError::NonFiniteDisplacement { row: 0, iteration: 0 }));
     }
 }

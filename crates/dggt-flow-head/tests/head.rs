@@ -183,14 +183,20 @@ impl burn::module::ModuleMapper for Poison {
     }
 }
 
+/// The same error where the search runs on the host (positions read back every iteration) and, with the `wgpu`
+/// feature, where it runs on the device (every iteration checked at once after the last).
 #[test]
 fn a_non_finite_displacement_stops_the_search() {
-    let device = Device::flex();
-    let config = small_config();
-    let head = config.init(&device).unwrap().map(&mut Poison);
-    let (query, target) = clouds(&config, 8, 10, 9);
-    let error = head.forward(&query.upload(&device), &target.upload(&device)).unwrap_err();
-    assert_eq!(error, FlowError::NonFiniteDisplacement { row: 0, iteration: 0 });
+    let mut devices = vec![Device::flex()];
+    #[cfg(feature = "wgpu")]
+    devices.push(Device::wgpu(burn::tensor::DeviceKind::default()));
+    for device in devices {
+        let config = small_config();
+        let head = config.init(&device).unwrap().map(&mut Poison);
+        let (query, target) = clouds(&config, 8, 10, 9);
+        let error = head.forward(&query.upload(&device), &target.upload(&device)).unwrap_err();
+        assert_eq!(error, FlowError::NonFiniteDisplacement { row: 0, iteration: 0 }, "on {device:?}");
+    }
 }
 
 /// A target that is the query translated by `t`, features equal per point: a few hundred Adam steps bring the

@@ -36,6 +36,18 @@ pub struct Sizes {
     pub hidden: usize,
 }
 
+/// The call's inputs (their shapes in the host kernel's table), one argument of both kernels.
+#[derive(CubeLaunch, CubeType)]
+pub struct Inputs {
+    pub offsets: OwnedTensor<f32>,
+    pub rows: OwnedTensor<i32>,
+    pub keys_values: OwnedTensor<f32>,
+    pub encoder_weight: OwnedTensor<f32>,
+    pub encoder_bias: OwnedTensor<f32>,
+    pub queries: OwnedTensor<f32>,
+    pub turned: OwnedTensor<f32>,
+}
+
 /// A query's neighbourhood in shared memory: the encodings `g` `[k, hidden]` (in the backward, later their
 /// pre-activation gradients) and the attention weights `[heads, k]`.
 #[derive(CubeType)]
@@ -74,19 +86,13 @@ fn normal(z: f32) -> (f32, f32) {
 
 /// The pre-activation of channel `c` of the encoding of offset `pair` (`query * k + j`).
 #[cube]
-fn pre_activation(
-    offsets: &Tensor<f32>,
-    encoder_weight: &Tensor<f32>,
-    encoder_bias: &Tensor<f32>,
-    pair: usize,
-    c: usize,
-    #[comptime] hidden: usize,
-) -> f32 {
+fn pre_activation(inputs: &Inputs, pair: usize, c: usize, #[comptime] hidden: usize) -> f32 {
+    let (offsets, weight) = (&inputs.offsets, &inputs.encoder_weight);
     let o = pair * 3;
-    encoder_bias[c]
-        + offsets[o] * encoder_weight[c]
-        + offsets[o + 1] * encoder_weight[hidden + c]
-        + offsets[o + 2] * encoder_weight[2 * hidden + c]
+    inputs.encoder_bias[c]
+        + offsets[o] * weight[c]
+        + offsets[o + 1] * weight[hidden + c]
+        + offsets[o + 2] * weight[2 * hidden + c]
 }
 
 /// Softmax of `len` shared scores from `start`, in place (the maximum subtracted first).
@@ -113,19 +119,10 @@ fn softmax_row(scores: &mut Shared<[f32]>, start: usize, #[comptime] len: usize)
 /// The query's encodings and attention weights in shared memory (three phases, a barrier after each): how both
 /// passes start.
 #[cube]
-#[allow(clippy::too_many_arguments)]
-fn query_neighbourhood(
-    offsets: &Tensor<f32>,
-    rows: &Tensor<i32>,
-    keys_values: &Tensor<f32>,
-    encoder_weight: &Tensor<f32>,
-    encoder_bias: &Tensor<f32>,
-    queries: &Tensor<f32>,
-    turned: &Tensor<f32>,
-    query: usize,
-    #[comptime] sizes: Sizes,
-) -> Neighbourhood {
+fn query_neighbourhood(inputs: &Inputs, query: usize, #[comptime] sizes: Sizes) -> Neighbourhood {
     let (k, heads, width, hidden) = comptime!((sizes.neighbours, sizes.heads, sizes.width, sizes.hidden));
+    let (rows, keys_values) = (&inputs.rows, &inputs.keys_values);
+    let (queries, turned) = (&inputs.queries, &inputs.turned);
     let mut space = Neighbourhood {
         encoded: Shared::<[f32]>::new_slice(comptime!(k * hidden)),
         weights: Shared::<[f32]>::new_slice(comptime!(heads * k)),
@@ -135,7 +132,7 @@ fn query_neighbourhood(
     for round in 0..comptime!(pairs.div_ceil(UNITS)) {
         let t = round * UNITS + unit;
         if t < pairs {
-            let pre = pre_activation(offsets, encoder_weight, encoder_bias, query * k + t / hidden, t % hidden, hidden);
+            let pre = pre_activation(inputs, query * k + t / hidden, t % hidden, hidden);
             let (distribution, _) = normal(pre);
             space.encoded[t] = pre * distribution;
         }
@@ -169,23 +166,11 @@ fn query_neighbourhood(
 
 /// The forward pass: `out [N, heads, width + hidden + 3]`, per head the weighted values, encodings and offsets.
 #[cube(launch)]
-#[allow(clippy::too_many_arguments)]
-pub fn attention_forward_kernel(
-    offsets: &Tensor<f32>,
-    rows: &Tensor<i32>,
-    keys_values: &Tensor<f32>,
-    encoder_weight: &Tensor<f32>,
-    encoder_bias: &Tensor<f32>,
-    queries: &Tensor<f32>,
-    turned: &Tensor<f32>,
-    out: &mut Tensor<f32>,
-    count: u32,
-    #[comptime] sizes: Sizes,
-) {
+pub fn attention_forward_kernel(inputs: &Inputs, out: &mut Tensor<f32>, count: u32, #[comptime] sizes: Sizes) {
     let (k, heads, width, hidden) = comptime!((sizes.neighbours, sizes.heads, sizes.width, sizes.hidden));
     let (query, valid) = cube_query(count);
-    let space =
-        query_neighbourhood(offsets, rows, keys_values, encoder_weight, encoder_bias, queries, turned, query, sizes);
+    let space = query_neighbourhood(inputs, query, sizes);
+    let (offsets, rows, keys_values) = (&inputs.offsets, &inputs.rows, &inputs.keys_values);
     let channels = comptime!(width + hidden + 3);
     let outputs = comptime!(heads * channels);
     let unit = UNIT_POS as usize;
@@ -220,13 +205,7 @@ pub fn attention_forward_kernel(
 #[cube(launch)]
 #[allow(clippy::too_many_arguments)]
 pub fn attention_backward_kernel<A: FloatAdd>(
-    offsets: &Tensor<f32>,
-    rows: &Tensor<i32>,
-    keys_values: &Tensor<f32>,
-    encoder_weight: &Tensor<f32>,
-    encoder_bias: &Tensor<f32>,
-    queries: &Tensor<f32>,
-    turned: &Tensor<f32>,
+    inputs: &Inputs,
     grad_out: &Tensor<f32>,
     grad_offsets: &mut Tensor<f32>,
     grad_queries: &mut Tensor<f32>,
@@ -238,8 +217,9 @@ pub fn attention_backward_kernel<A: FloatAdd>(
 ) {
     let (k, heads, width, hidden) = comptime!((sizes.neighbours, sizes.heads, sizes.width, sizes.hidden));
     let (query, valid) = cube_query(count);
-    let mut space =
-        query_neighbourhood(offsets, rows, keys_values, encoder_weight, encoder_bias, queries, turned, query, sizes);
+    let mut space = query_neighbourhood(inputs, query, sizes);
+    let (offsets, rows, keys_values) = (&inputs.offsets, &inputs.rows, &inputs.keys_values);
+    let (queries, turned, encoder_weight) = (&inputs.queries, &inputs.turned, &inputs.encoder_weight);
     // `[heads, k]`: the weights' gradients, then the scores'.
     let mut grads = Shared::<[f32]>::new_slice(comptime!(heads * k));
     let unit = UNIT_POS as usize;
@@ -314,7 +294,7 @@ pub fn attention_backward_kernel<A: FloatAdd>(
                 let pooled = grad_out[(query * heads + h) * channels + width + c];
                 grad += grads[h * k + j] * u + space.weights[h * k + j] * pooled;
             }
-            let pre = pre_activation(offsets, encoder_weight, encoder_bias, query * k + j, c, hidden);
+            let pre = pre_activation(inputs, query * k + j, c, hidden);
             let (distribution, density) = normal(pre);
             space.encoded[t] = grad * (distribution + pre * density);
         }

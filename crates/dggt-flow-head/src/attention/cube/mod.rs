@@ -22,7 +22,7 @@ use burn_cubecl::tensor::CubeTensor;
 use dggt_cube::atomic::{FloatAtomics, NativeAdd, SwapAdd};
 
 use super::{AttentionGrads, AttentionInputs, AttentionKernels};
-use kernels::{Sizes, UNITS, attention_backward_kernel, attention_forward_kernel};
+use kernels::{InputsLaunch, Sizes, UNITS, attention_backward_kernel, attention_forward_kernel};
 
 /// Floats of shared memory a cube may use: WebGPU's guaranteed 16 KiB of workgroup storage.
 pub const SHARED_FLOATS: usize = 4096;
@@ -99,6 +99,19 @@ impl CubeCall {
         zeros_client(self.client(), self.offsets.device.clone(), shape, DType::F32)
     }
 
+    /// The inputs as the kernels' argument.
+    fn kernel_inputs(&self) -> InputsLaunch {
+        InputsLaunch::new(
+            arg(&self.offsets),
+            arg(&self.rows),
+            arg(&self.keys_values),
+            arg(&self.encoder_weight),
+            arg(&self.encoder_bias),
+            arg(&self.queries),
+            arg(&self.turned),
+        )
+    }
+
     /// One cube per query, in rows of at most 65 535 cubes.
     fn launch_size(&self) -> (CubeCount, CubeDim) {
         let per_row = self.queries_count().clamp(1, 65_535);
@@ -117,13 +130,7 @@ impl CubeCall {
             &self.client(),
             cubes,
             dim,
-            arg(&self.offsets),
-            arg(&self.rows),
-            arg(&self.keys_values),
-            arg(&self.encoder_weight),
-            arg(&self.encoder_bias),
-            arg(&self.queries),
-            arg(&self.turned),
+            self.kernel_inputs(),
             arg(&out),
             self.queries_count() as u32,
             self.sizes,
@@ -156,13 +163,7 @@ impl CubeCall {
             &self.client(),
             cubes,
             dim,
-            arg(&self.offsets),
-            arg(&self.rows),
-            arg(&self.keys_values),
-            arg(&self.encoder_weight),
-            arg(&self.encoder_bias),
-            arg(&self.queries),
-            arg(&self.turned),
+            self.kernel_inputs(),
             arg(&grad_out),
             arg(&grads.offsets),
             arg(&grads.queries),
