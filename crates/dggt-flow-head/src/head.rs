@@ -242,10 +242,10 @@ impl FlowHead {
             if iteration + 1 == self.iterations {
                 break;
             }
-            match target.place {
-                SearchPlace::Host => positions = moved(&queries, iteration)?,
-                #[cfg(any(feature = "wgpu", feature = "cuda"))]
-                SearchPlace::Device => unchecked.push(queries.displacement.clone()),
+            if target.place == SearchPlace::Host {
+                positions = moved(&queries, iteration)?;
+            } else {
+                unchecked.push(queries.displacement.clone());
             }
         }
         check_finite(&unchecked, queries.first_row)?;

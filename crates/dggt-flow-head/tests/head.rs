@@ -187,9 +187,11 @@ impl burn::module::ModuleMapper for Poison {
 /// feature, where it runs on the device (every iteration checked at once after the last).
 #[test]
 fn a_non_finite_displacement_stops_the_search() {
-    let mut devices = vec![Device::flex()];
-    #[cfg(feature = "wgpu")]
-    devices.push(Device::wgpu(burn::tensor::DeviceKind::default()));
+    let devices = [
+        Device::flex(),
+        #[cfg(feature = "wgpu")]
+        Device::wgpu(burn::tensor::DeviceKind::default()),
+    ];
     for device in devices {
         let config = small_config();
         let head = config.init(&device).unwrap().map(&mut Poison);
