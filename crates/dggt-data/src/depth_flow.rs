@@ -11,6 +11,10 @@
 //! Who writes the maps: STORM's Waymo export, the synthetic scenes (exact surface velocities), and the converters
 //! with `--depth-flows boxes` (`dggt_convert::depth_flows`: lidar returns binned as above, flow from the tracked
 //! box each return lies in, zero outside boxes).
+//!
+//! Axes: [`Scene::depth_map`] gives the flow along the log world's axes (metres per second), the axes the
+//! converters and the generator write. STORM's maps carry it along the axes of the frame's vehicle and are
+//! turned on reading ([`FlowOrigin::Export`]).
 
 use std::path::Path;
 
@@ -46,7 +50,8 @@ pub enum FlowOrigin {
     /// Lidar returns moved with the tracked 3D box they lie in, zero outside boxes (`dggt convert --depth-flows
     /// boxes`).
     TrackedBoxes,
-    /// Maps the export came with from elsewhere (STORM's Waymo export): the flow as that export computed it.
+    /// Maps the export came with from elsewhere (STORM's Waymo export): the flow as that export computed it,
+    /// along the axes of the frame's vehicle (turned into the log world's when read, [`Scene::depth_map`]).
     Export,
 }
 
@@ -160,16 +165,43 @@ impl Scene {
     }
 
     /// The depth map of the view at frame position `frame` and camera position `camera`: its `depth_flows_4`
-    /// file when it has one, else the frame's lidar sweep projected into the camera; `None` when neither.
+    /// file when it has one (its flow along the log world's axes, whatever the origin), else the frame's lidar
+    /// sweep projected into the camera; `None` when neither.
     pub fn depth_map(&self, frame: usize, camera: usize) -> Result<Option<DepthFlowMap>> {
         let view = self.view(frame, camera);
         let size = self.cameras[camera].size;
         if let Some(path) = &view.files.depth_flow {
-            return DepthFlowMap::read(path, size).map(Some);
+            let map = DepthFlowMap::read(path, size)?;
+            return match self.flow_origin()? {
+                FlowOrigin::Export => self.turned_from_vehicle_axes(map, frame, path).map(Some),
+                _ => Ok(Some(map)),
+            };
         }
         let Some(Some(sweep)) = self.lidar.get(frame) else { return Ok(None) };
         let points = sweep.read_in_world()?;
         let camera_from_world = view.world_from_camera.inverse();
         Ok(Some(DepthFlowMap::from_points(&points, &camera_from_world, &self.cameras[camera].intrinsics, size)))
+    }
+
+    /// `map` (read from `path`, of frame position `frame`) with its flow turned from the axes of the frame's
+    /// vehicle into the log world's. STORM's Waymo export writes Waymo's per-point velocities as they come,
+    /// along the vehicle frame of `frame.pose` (docs/DATA.md); the converters here and the generator write the
+    /// log world's axes. Speeds are unchanged: which cells move does not depend on the axes.
+    fn turned_from_vehicle_axes(&self, mut map: DepthFlowMap, frame: usize, path: &Path) -> Result<DepthFlowMap> {
+        let Some(world_from_ego) = self.frames[frame].world_from_ego else {
+            return Err(DataError::malformed(
+                path,
+                "an ego pose for its frame (its flow is along the vehicle's axes)",
+                "a scene without ego poses",
+            ));
+        };
+        let log_from_ego = (self.world_from_log.inverse() * world_from_ego).rotation_matrix();
+        if let Some(flow) = &mut map.flow {
+            for velocity in flow.iter_mut() {
+                let turned = log_from_ego * DVec3::from(velocity.map(f64::from));
+                *velocity = turned.to_array().map(|v| v as f32);
+            }
+        }
+        Ok(map)
     }
 }

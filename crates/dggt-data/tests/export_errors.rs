@@ -164,3 +164,31 @@ fn the_scene_flow_says_where_it_comes_from() {
     let message = origin().expect_err("an unknown origin").to_string();
     assert!(message.contains(&record.display().to_string()) && message.contains("guessed"), "{message}");
 }
+
+/// STORM's maps (no origin record: [`FlowOrigin::Export`]) carry the flow along the vehicle's axes of their frame;
+/// the scene gives it along the log world's. Frame 1's ego is turned a quarter turn about up, so its forward
+/// (x) is the log's left (y); the converters' maps (a record) are read as written.
+#[test]
+fn storm_maps_flow_is_turned_from_the_vehicle_axes() {
+    let dir = tempfile::tempdir().unwrap();
+    let layout = write_minimal_export(dir.path());
+    let turned = [[0.0, -1.0, 0.0, 1.0], [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]];
+    text::write_rows(&layout.ego_pose(1), &turned).unwrap();
+    let mut cells = vec![0.0f32; 12 * 16 * 4];
+    cells[..4].copy_from_slice(&[5.0, 2.0, 0.5, -0.25]);
+    for t in 0..2 {
+        npy::write_npy_f32(&layout.depth_flow(t, 0), &[12, 16, 4], &cells).unwrap();
+    }
+    let first_flow = |frame: usize| {
+        let scene = read_export(dir.path(), &ExportOptions::default()).unwrap();
+        let map = scene.depth_map(frame, 0).unwrap().expect("a map");
+        assert_eq!(map.depth[0], 5.0);
+        map.flow.expect("flow")[0]
+    };
+    let close = |found: [f32; 3], expected: [f32; 3]| found.iter().zip(expected).all(|(f, e)| (f - e).abs() < 1e-6);
+    assert!(close(first_flow(0), [2.0, 0.5, -0.25]), "frame 0's vehicle has the log's axes: {:?}", first_flow(0));
+    assert!(close(first_flow(1), [-0.5, 2.0, -0.25]), "forward is the log's left: {:?}", first_flow(1));
+
+    write_flow_origin(&layout, FlowOrigin::TrackedBoxes).unwrap();
+    assert!(close(first_flow(1), [2.0, 0.5, -0.25]), "the converters' maps are in the log's axes already");
+}
