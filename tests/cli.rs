@@ -407,3 +407,47 @@ fn edit_checks_every_edit_before_writing_and_never_mixes_outputs() {
     let again = dggt(&[&remove_box[..], &["--overwrite"]].concat());
     assert!(again.status.success(), "{}", String::from_utf8_lossy(&again.stderr));
 }
+
+/// The speed/accuracy sweep from the command line: one value per knob, a fresh tiny model, one timed run; the
+/// table and its files are written. Without `--out` (or `--scene`) it says what it needs.
+#[test]
+fn bench_sweeps_the_fixture_from_the_command_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("sweep");
+    let (scene, out_arg) = (fixture(), out.to_str().unwrap().to_string());
+    let knobs = [
+        "--widths",
+        "84",
+        "--frame-counts",
+        "4",
+        "--frames",
+        "4",
+        "--min-opacities",
+        "1/255",
+        "--precisions",
+        "f32",
+        "--sky",
+        "on",
+        "--skips",
+        "none",
+        "--motions",
+        "held",
+        "--repeat",
+        "1",
+        "--warmup",
+        "0",
+    ];
+    let mut args = vec!["bench", "--scene", &scene, "--out", &out_arg];
+    args.extend(knobs);
+    let run = dggt(&args);
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let table = String::from_utf8_lossy(&run.stdout);
+    assert!(table.contains("skip-none held"), "the swept motion has its row: {table}");
+    let csv = std::fs::read_to_string(out.join("bench.csv")).expect("bench.csv");
+    assert_eq!(csv.lines().count(), 4, "a header, the exact render, the baseline and the held row: {csv}");
+    assert!(out.join("bench-notes.txt").is_file());
+
+    let missing = dggt(&["bench", "--scene", &scene]);
+    assert!(!missing.status.success());
+    assert!(String::from_utf8_lossy(&missing.stderr).contains("needs --scene and --out"));
+}

@@ -2,7 +2,7 @@
 //! table and writes `bench.csv`, `bench.png`, `bench.svg` and `bench-notes.txt`), or with `compute` the suite of
 //! [`super::bench_compute`].
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use dggt_bench::knobs::parse_opacity;
@@ -24,8 +24,10 @@ use crate::commands::{bench_compute, bench_refiner};
 pub struct Args {
     #[command(subcommand)]
     suite: Option<Suite>,
+    /// Not an `Option`: clap never fills a flattened `Option` whose struct flattens groups of its own (the
+    /// overwrite and refiner arguments), so the sweep's required files are checked when it runs.
     #[command(flatten)]
-    sweep: Option<SweepArgs>,
+    sweep: SweepArgs,
 }
 
 #[derive(Debug, Clone, clap::Subcommand)]
@@ -40,12 +42,11 @@ enum Suite {
 
 /// Runs the suite the arguments name.
 pub fn run(args: Args) -> Result<()> {
-    match (args.suite, args.sweep) {
-        (Some(Suite::Compute(compute)), _) => bench_compute::run(compute),
-        (Some(Suite::Table(table)), _) => bench_compute::run_table(table),
-        (Some(Suite::Refiner(refiner)), _) => bench_refiner::run(refiner),
-        (None, Some(sweep)) => run_sweep(sweep),
-        (None, None) => anyhow::bail!("dggt bench needs --scene and --out (the sweep), or a suite (`compute`)"),
+    match args.suite {
+        Some(Suite::Compute(compute)) => bench_compute::run(compute),
+        Some(Suite::Table(table)) => bench_compute::run_table(table),
+        Some(Suite::Refiner(refiner)) => bench_refiner::run(refiner),
+        None => run_sweep(args.sweep),
     }
 }
 
@@ -54,9 +55,9 @@ pub fn run(args: Args) -> Result<()> {
 /// of each knob (`--grid` adds every combination).
 #[derive(Debug, Clone, clap::Args)]
 pub struct SweepArgs {
-    /// A scene export (its images are the ground truth of the target frames).
+    /// A scene export (its images are the ground truth of the target frames); required for the sweep.
     #[arg(long)]
-    pub scene: PathBuf,
+    pub scene: Option<PathBuf>,
     /// A trainer checkpoint folder (or run folder) or release file [default: a fresh tiny model with a fixed
     /// seed, whose ground-truth error is meaningless].
     #[arg(long)]
@@ -139,9 +140,9 @@ pub struct SweepArgs {
     /// Frames per chunk of the dense heads.
     #[arg(long, default_value_t = 4)]
     pub chunk: usize,
-    /// Output folder; must not exist or be empty.
+    /// Output folder; must not exist or be empty; required for the sweep.
     #[arg(long)]
-    pub out: PathBuf,
+    pub out: Option<PathBuf>,
     #[command(flatten)]
     pub overwrite: OverwriteArg,
     /// With `--refine MODEL_DIR`, every row's renders are also refined: its time and its error against the
@@ -159,8 +160,8 @@ fn parse_sky(text: &str) -> Result<SkyChoice> {
 }
 
 impl SweepArgs {
-    /// The options these arguments describe.
-    pub fn options(&self) -> Result<BenchOptions> {
+    /// The options these arguments describe, for the sweep of `scene`.
+    pub fn options(&self, scene: &Path) -> Result<BenchOptions> {
         let sweep = SweepSpec {
             baseline: Knobs {
                 width: self.width,
@@ -181,7 +182,7 @@ impl SweepArgs {
             full_grid: self.grid,
         };
         Ok(BenchOptions {
-            scene: self.scene.clone(),
+            scene: scene.to_path_buf(),
             checkpoint: self.checkpoint.clone(),
             cameras: self.cameras.clone(),
             targets: self.targets.clone(),
@@ -207,11 +208,14 @@ const SWEEP_OUTPUT: OutputKind = OutputKind { command: "bench", signature: "benc
 
 /// Runs the sweep, writes the outputs and prints the table, the notes and where the files are.
 fn run_sweep(args: SweepArgs) -> Result<()> {
+    let (Some(scene), Some(out)) = (&args.scene, &args.out) else {
+        anyhow::bail!("dggt bench needs --scene and --out (the sweep), or a suite (`compute`, `table`, `refiner`)");
+    };
     let device = args.device.single()?;
-    let options = args.options()?;
-    output::prepare(&args.out, SWEEP_OUTPUT, args.overwrite.existing())?;
+    let options = args.options(scene)?;
+    output::prepare(out, SWEEP_OUTPUT, args.overwrite.existing())?;
     let report = run_bench(&options, &device)?;
-    let files = write_outputs(&report, &args.out)?;
+    let files = write_outputs(&report, out)?;
     print!("{}", report::table_text(&report));
     print!("{}", report::notes_text(&report));
     println!(
