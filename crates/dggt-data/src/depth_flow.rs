@@ -153,6 +153,12 @@ impl Scene {
         if self.depth_source() != Some(DepthSource::DepthFlows4) {
             return Ok(FlowOrigin::Absent);
         }
+        self.maps_origin()
+    }
+
+    /// Who wrote the scene's `depth_flows_4` maps, whether or not every view has one: the record, else a
+    /// generated scene's description, else the export.
+    fn maps_origin(&self) -> Result<FlowOrigin> {
         let layout = ExportLayout::new(&self.root);
         let record = layout.depth_flow_origin();
         match std::fs::read(&record) {
@@ -172,7 +178,7 @@ impl Scene {
         let size = self.cameras[camera].size;
         if let Some(path) = &view.files.depth_flow {
             let map = DepthFlowMap::read(path, size)?;
-            return match self.flow_origin()? {
+            return match self.maps_origin()? {
                 FlowOrigin::Export => self.turned_from_vehicle_axes(map, frame, path).map(Some),
                 _ => Ok(Some(map)),
             };
