@@ -128,10 +128,14 @@ pub fn read_preprocess(dir: &Path) -> Result<Option<Preprocess>, InferError> {
 /// Loads the network of a checkpoint folder into `model` (built from the stored configuration); any module
 /// saved the same way loads alike.
 pub fn load_model<M: Module>(dir: &Path, model: M) -> Result<M, InferError> {
-    let path = dir.join(MODEL_FILE);
-    let record = ModuleRecord::from_bytes(Bytes::from_bytes_vec(read(&path)?))
-        .map_err(|e| InferError::checkpoint(&path, format!("{e:?}")))?;
-    model.try_load_record(record).map_err(|e| InferError::checkpoint(&path, format!("does not fit the network: {e:?}")))
+    load_module_file(&dir.join(MODEL_FILE), model)
+}
+
+/// Loads the module file `path` (burnpack, as a checkpoint writes its modules) into `model`.
+pub fn load_module_file<M: Module>(path: &Path, model: M) -> Result<M, InferError> {
+    let record = ModuleRecord::from_bytes(Bytes::from_bytes_vec(read(path)?))
+        .map_err(|e| InferError::checkpoint(path, format!("{e:?}")))?;
+    model.try_load_record(record).map_err(|e| InferError::checkpoint(path, format!("does not fit the network: {e:?}")))
 }
 
 /// The checkpoint folder of a `step-N` folder, a run's `checkpoints/` folder or a run folder, its network's

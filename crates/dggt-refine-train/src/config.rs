@@ -178,6 +178,7 @@ impl OptimSettings {
             accumulation: 1,
             pose_warmup_steps: 0,
             max_failed_steps_in_a_row: self.max_failed_steps_in_a_row,
+            average: None,
         }
     }
 }

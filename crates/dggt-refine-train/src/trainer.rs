@@ -22,7 +22,7 @@ use dggt_metrics::psnr;
 use dggt_model::host::host_f32;
 use dggt_model::safetensors_file::SafetensorsFile;
 use dggt_refine::{Latent, Prompt};
-use dggt_run::checkpoint::{Purpose, RunState, latest, load_model, optimizer_file, read_state, save_folder};
+use dggt_run::checkpoint::{Purpose, RunState, Weights, latest, load_model, optimizer_file, read_state, save_folder};
 use dggt_run::divergence::{self, CheckpointDue, CheckpointGate, DivergenceLimit, StepFailure};
 use dggt_run::metrics::{MetricsLog, RecordKind};
 use dggt_run::progress::{Visibility, progress_bar};
@@ -296,7 +296,14 @@ impl RefineTrainer {
     /// Writes `checkpoints/step-NNNNNNNN/` and points `latest` at it; keeps the newest `run.keep_checkpoints`.
     pub fn save_checkpoint(&self) -> Result<PathBuf, RefineTrainError> {
         let keep = self.config.run.keep_checkpoints;
-        Ok(save_folder(&self.checkpoints(), &self.model.weights, &self.optimizer, &self.state, keep, &[])?)
+        Ok(save_folder(
+            &self.checkpoints(),
+            Weights::Trained(&self.model.weights),
+            &self.optimizer,
+            &self.state,
+            keep,
+            &[],
+        )?)
     }
 
     /// Continues from the checkpoint folder `dir`: weights, AdamW moments and run state.

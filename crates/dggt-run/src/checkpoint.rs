@@ -16,6 +16,10 @@
 //! the middle of a checkpoint included, resumes from the last complete one, and one whose newest checkpoint
 //! was damaged afterwards from the newest intact one. No checkpoint is written with a non-finite weight or
 //! moment.
+//!
+//! A run that averages its weights ([`crate::average`]) stores the average as `model.bpk`, the weights
+//! inference and fine-tuning load, and the trained weights the optimiser steps as `trained.bpk`, which a
+//! resume continues from ([`load_trained`]).
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -23,7 +27,7 @@ use std::path::{Path, PathBuf};
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::tensor::Tensor;
 use dggt_data::io::write_atomically;
-pub use dggt_infer::checkpoint::{LATEST, MODEL_FILE, STATE_FILE, latest, load_model, verified};
+pub use dggt_infer::checkpoint::{LATEST, MODEL_FILE, STATE_FILE, latest, load_model, load_module_file, verified};
 use dggt_infer::checksums;
 pub use dggt_infer::checksums::{MANIFEST_FILE, Purpose};
 use serde::{Deserialize, Serialize};
@@ -75,17 +79,47 @@ impl RunState {
 
 /// The optimiser's state in a checkpoint folder.
 const OPTIMIZER_FILE: &str = "optimizer.bpk";
+/// The trained weights in a checkpoint folder whose `model.bpk` holds their average.
+pub const TRAINED_FILE: &str = "trained.bpk";
 
 fn checkpoint_error(path: &Path, detail: impl ToString) -> RunError {
     RunError::Checkpoint { path: path.to_path_buf(), detail: detail.to_string() }
 }
 
-/// Writes a checkpoint of any trained module under `root` (`run/checkpoints`): its parameters, the optimiser,
+/// The weights a checkpoint holds.
+#[derive(Debug, Clone, Copy)]
+pub enum Weights<'a, M> {
+    /// The trained weights alone (`model.bpk`).
+    Trained(&'a M),
+    /// The average of the weights (`model.bpk`) and the trained ones (`trained.bpk`).
+    Averaged { trained: &'a M, average: &'a M },
+}
+
+impl<M: Module> Weights<'_, M> {
+    /// Each module with the file it is written to.
+    fn files(&self) -> Vec<(&'static str, &M)> {
+        match *self {
+            Self::Trained(trained) => vec![(MODEL_FILE, trained)],
+            Self::Averaged { trained, average } => vec![(MODEL_FILE, average), (TRAINED_FILE, trained)],
+        }
+    }
+
+    fn first_non_finite(&self, optimizer: &Optimizer) -> Option<crate::finite::NonFinite> {
+        match *self {
+            Self::Trained(trained) => first_non_finite(trained, Some(optimizer)),
+            Self::Averaged { trained, average } => {
+                first_non_finite(trained, Some(optimizer)).or_else(|| first_non_finite(average, None))
+            }
+        }
+    }
+}
+
+/// Writes a checkpoint of any trained module under `root` (`run/checkpoints`): its weights, the optimiser,
 /// `extra` files (name, bytes) and the run state, written last, in `root/step-NNNNNNNN/`; then `latest` and
 /// pruning to the newest `keep`. Nothing is written when a weight or moment is not finite.
 pub fn save_folder<M: Module>(
     root: &Path,
-    model: &M,
+    weights: Weights<'_, M>,
     optimizer: &Optimizer,
     state: &RunState,
     keep: usize,
@@ -93,7 +127,7 @@ pub fn save_folder<M: Module>(
 ) -> Result<PathBuf, RunError> {
     let name = format!("step-{:08}", state.step);
     let dir = root.join(&name);
-    if let Some(non_finite) = first_non_finite(model, Some(optimizer)) {
+    if let Some(non_finite) = weights.first_non_finite(optimizer) {
         return Err(RunError::NonFiniteCheckpoint { dir, non_finite });
     }
     fs::create_dir_all(&dir).map_err(|e| checkpoint_error(&dir, e))?;
@@ -101,16 +135,27 @@ pub fn save_folder<M: Module>(
         write_atomically(&dir.join(file), bytes).map_err(|e| checkpoint_error(&dir.join(file), e))
     };
     // The run state goes last: a folder without it is incomplete and never resumed from.
-    let _ = fs::remove_file(dir.join(STATE_FILE));
-    save_model(&dir.join(MODEL_FILE), model)?;
+    // So is the trained weights' file of an earlier write of this folder: its presence says `model.bpk` is an
+    // average.
+    for stale in [STATE_FILE, TRAINED_FILE] {
+        let _ = fs::remove_file(dir.join(stale));
+    }
+    let modules = weights.files();
+    for (file, module) in &modules {
+        save_model(&dir.join(file), *module)?;
+    }
     failpoint::reached(failpoint::INSIDE_CHECKPOINT);
     optimizer.save(&dir.join(OPTIMIZER_FILE))?;
     for (file, bytes) in extra {
         write(file, bytes)?;
     }
     let state_bytes = serde_json::to_string_pretty(state).expect("states serialise").into_bytes();
-    let written: Vec<&str> =
-        [MODEL_FILE, OPTIMIZER_FILE].into_iter().chain(extra.iter().map(|(name, _)| *name)).collect();
+    let written: Vec<&str> = modules
+        .iter()
+        .map(|(name, _)| *name)
+        .chain([OPTIMIZER_FILE])
+        .chain(extra.iter().map(|(name, _)| *name))
+        .collect();
     checksums::write_manifest(&dir, &written, &[(STATE_FILE, &state_bytes)])?;
     write(STATE_FILE, &state_bytes)?;
     write_atomically(&root.join(LATEST), name.as_bytes()).map_err(|e| checkpoint_error(&root.join(LATEST), e))?;
@@ -165,6 +210,18 @@ pub fn prune(root: &Path, keep: usize) -> Result<(), RunError> {
     Ok(())
 }
 
+/// The trained weights of the checkpoint folder `dir` loaded into `blank`, with their average when the
+/// checkpoint holds one (without autodiff).
+pub fn load_trained<M: Module>(dir: &Path, blank: M) -> Result<(M, Option<M>), RunError> {
+    let trained_file = dir.join(TRAINED_FILE);
+    if !trained_file.is_file() {
+        return Ok((load_model(dir, blank)?, None));
+    }
+    let trained = load_module_file(&trained_file, blank.clone())?;
+    let average = load_model(dir, blank)?.valid();
+    Ok((trained, Some(average)))
+}
+
 /// The run state of the checkpoint folder `dir` (`state.json`).
 pub fn read_state(dir: &Path) -> Result<RunState, RunError> {
     let path = dir.join(STATE_FILE);
@@ -175,4 +232,39 @@ pub fn read_state(dir: &Path) -> Result<RunState, RunError> {
 /// The AdamW state's file in a checkpoint folder (see [`Optimizer::load`]).
 pub fn optimizer_file(dir: &Path) -> PathBuf {
     dir.join(OPTIMIZER_FILE)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::average::tests::{Pair, Values};
+    use crate::optim_config::OptimSection;
+
+    fn trained_values(dir: &Path, like: &Pair) -> (Values, Option<Values>) {
+        let (trained, average) = load_trained(dir, Pair::new([0.0, 0.0], 0.0, Some(like))).unwrap();
+        (trained.values(), average.map(|a| a.values()))
+    }
+
+    #[test]
+    fn an_averaging_run_gives_inference_the_average_and_a_resume_the_trained_weights() {
+        let root = tempfile::tempdir().unwrap();
+        let optimizer = Optimizer::ungrouped(&OptimSection::default());
+        let trained = Pair::new([1.0, 2.0], 5.0, None);
+        let average = Pair::new([3.0, 4.0], 5.0, Some(&trained));
+        let state = RunState::starting(0, 1);
+        let weights = Weights::Averaged { trained: &trained, average: &average };
+        let dir = save_folder(root.path(), weights, &optimizer, &state, 2, &[]).unwrap();
+
+        let inference = load_model(&dir, Pair::new([0.0, 0.0], 0.0, Some(&trained))).unwrap();
+        assert_eq!(inference.values(), (vec![3.0, 4.0], vec![5.0]), "model.bpk holds the average");
+        let (resumed, averaged) = trained_values(&dir, &trained);
+        assert_eq!(resumed, (vec![1.0, 2.0], vec![5.0]));
+        assert_eq!(averaged, Some((vec![3.0, 4.0], vec![5.0])));
+        verified(&dir, Purpose::Resume).expect("the trained weights' file is in the manifest");
+
+        // The same step written again without an average leaves no stale trained weights behind.
+        let dir = save_folder(root.path(), Weights::Trained(&trained), &optimizer, &state, 2, &[]).unwrap();
+        assert!(!dir.join(TRAINED_FILE).exists());
+        assert_eq!(trained_values(&dir, &trained), ((vec![1.0, 2.0], vec![5.0]), None));
+    }
 }

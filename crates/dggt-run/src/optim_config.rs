@@ -37,6 +37,20 @@ pub struct OptimSection {
     /// Steps in a row that may fail (skipped for a non-finite loss or gradient, or rolled back for an update
     /// that made a weight non-finite) before the run stops as diverged ([`crate::divergence`]).
     pub max_failed_steps_in_a_row: u64,
+    /// A moving average of the trained weights, which validation scores and checkpoints give to inference
+    /// ([`crate::average`]); none when absent.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub average: Option<AverageSection>,
+}
+
+/// `[optim.average]`: an exponential moving average of the trained weights from `start_step` on.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AverageSection {
+    /// The average's share kept at each step, in (0, 1): it spans about `1 / (1 - decay)` steps.
+    pub decay: f64,
+    /// Steps taken when the average starts, as a copy of the weights then.
+    pub start_step: u64,
 }
 
 impl Default for OptimSection {
@@ -55,6 +69,7 @@ impl Default for OptimSection {
             accumulation: 1,
             pose_warmup_steps: 0,
             max_failed_steps_in_a_row: DEFAULT_MAX_FAILED_STEPS_IN_A_ROW,
+            average: None,
         }
     }
 }

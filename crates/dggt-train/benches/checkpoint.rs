@@ -57,8 +57,8 @@ fn main() {
     let started = Instant::now();
     let settings =
         checkpoint::Settings { model: config.clone(), preprocess: Default::default(), configured: Default::default() };
-    let written =
-        checkpoint::save(dir.path(), &model, &settings, &optimizer, &state, 1).expect("the checkpoint writes");
+    let written = checkpoint::save(dir.path(), checkpoint::Weights::Trained(&model), &settings, &optimizer, &state, 1)
+        .expect("the checkpoint writes");
     let seconds = started.elapsed().as_secs_f64();
     let added = status_bytes("VmHWM").saturating_sub(before) as f64 / GIB;
     let files = folder_bytes(&written) as f64 / GIB;

@@ -12,7 +12,8 @@ use dggt_data::Preprocess;
 pub use dggt_infer::checkpoint::{MODEL_CONFIG_FILE, PREPROCESS_FILE, read_model_config, read_preprocess};
 use dggt_model::{Dggt, ModelConfig};
 use dggt_run::Optimizer;
-use dggt_run::checkpoint::{RunState, load_model, read_state, save_folder};
+pub use dggt_run::checkpoint::Weights;
+use dggt_run::checkpoint::{RunState, load_trained, read_state, save_folder};
 use serde::Serialize;
 
 use crate::error::TrainError;
@@ -32,7 +33,7 @@ pub struct Settings {
 /// Writes a checkpoint under `root` (`run/checkpoints`) and points `latest` at it; keeps the newest `keep`.
 pub fn save(
     root: &Path,
-    model: &Dggt,
+    weights: Weights<'_, Dggt>,
     settings: &Settings,
     optimizer: &Optimizer,
     state: &RunState,
@@ -47,21 +48,24 @@ pub fn save(
         (TRAINING_FILE, json(&settings.configured)),
     ];
     let extra: Vec<(&str, &[u8])> = files.iter().map(|(name, text)| (*name, text.as_bytes())).collect();
-    Ok(save_folder(root, model, optimizer, state, keep, &extra)?)
+    Ok(save_folder(root, weights, optimizer, state, keep, &extra)?)
 }
 
 /// A loaded checkpoint.
 pub struct Loaded {
+    /// The trained weights.
     pub model: Dggt,
+    /// Their average, when the run kept one ([`dggt_run::average`]).
+    pub average: Option<Dggt>,
     pub config: ModelConfig,
     pub state: RunState,
 }
 
-/// Loads the network into `model` (built from the stored configuration) and the run state; the optimiser
-/// loads its own file ([`dggt_run::checkpoint::optimizer_file`]).
+/// Loads the trained network (and its average, if any) into `model` (built from the stored configuration) and
+/// the run state; the optimiser loads its own file ([`dggt_run::checkpoint::optimizer_file`]).
 pub fn load(dir: &Path, model: Dggt) -> Result<Loaded, TrainError> {
     let config = read_model_config(dir)?;
-    let model = load_model(dir, model)?;
+    let (model, average) = load_trained(dir, model)?;
     let state = read_state(dir)?;
-    Ok(Loaded { model, config, state })
+    Ok(Loaded { model, average, config, state })
 }

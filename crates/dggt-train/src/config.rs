@@ -216,6 +216,15 @@ impl TrainConfig {
             number("optim.clip_grad_norm", clip, "(0, inf)", |v| v > 0.0)?;
         }
         divergence::validate_limit("optim.max_failed_steps_in_a_row", o.max_failed_steps_in_a_row)?;
+        if let Some(average) = o.average {
+            number("optim.average.decay", average.decay, "(0, 1)", |v| v > 0.0 && v < 1.0)?;
+            if average.start_step >= self.run.steps {
+                return Err(setting(
+                    "optim.average.start_step",
+                    format!("{} never starts in a run of run.steps = {}", average.start_step, self.run.steps),
+                ));
+            }
+        }
         if o.pose_warmup_steps > 0 && !(self.loss.camera > 0.0) {
             return Err(setting("optim.pose_warmup_steps", "trains the camera loss alone: it needs loss.camera > 0"));
         }

@@ -125,9 +125,19 @@ pub struct LoggedStep<'a> {
 #[derive(Debug, Serialize)]
 pub struct ValidationRecord<'a> {
     pub step: u64,
+    /// Whose renders were scored.
+    pub weights: ScoredWeights,
     #[serde(flatten)]
     pub validation: &'a Validation,
     pub time_s: f64,
+}
+
+/// The weights a validation pass scores: the trained ones, or their average once `optim.average` has started.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ScoredWeights {
+    Trained,
+    Average,
 }
 
 #[cfg(test)]

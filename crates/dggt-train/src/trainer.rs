@@ -34,7 +34,8 @@ use dggt_infer::{StartingWeights, fresh_model};
 use dggt_losses::{Lpips, LpipsKind};
 use dggt_model::{Dggt, ModelConfig};
 use dggt_objective::{DepthFlowMaps, LossTerm, Objective, StepBatch};
-use dggt_run::checkpoint::{Purpose, RunState, optimizer_file};
+use dggt_run::average::WeightAverage;
+use dggt_run::checkpoint::{Purpose, RunState, Weights, optimizer_file};
 use dggt_run::divergence::{self, CheckpointDue, CheckpointGate, DivergenceLimit, StepFailure};
 use dggt_run::metrics::{MetricsLog, RecordKind};
 use dggt_run::progress::{Visibility, progress_bar, styled_bar};
@@ -47,7 +48,7 @@ use crate::error::TrainError;
 use crate::modules::{freeze, grouped_optimizer};
 use crate::rank_gradients::{GradientTransport, sum_over_ranks};
 use crate::ranks;
-use crate::records::{FailureRecord, LoggedStep, StepMeasures, StepRecord, ValidationRecord};
+use crate::records::{FailureRecord, LoggedStep, ScoredWeights, StepMeasures, StepRecord, ValidationRecord};
 use crate::replicas::{Replica, Replicas};
 use crate::resume::{self, ConfiguredSections};
 use crate::validate::{Validation, Validator};
@@ -102,6 +103,8 @@ pub struct Trainer {
     last_failure: Option<StepFailure>,
     /// Holds back checkpoints while steps fail.
     checkpoint_gate: CheckpointGate,
+    /// The average of the master's weights (`optim.average`; rank 0 alone keeps it).
+    average: Option<WeightAverage<Dggt>>,
     /// The processes of the run (this one alone, or the ranks of an MPI job).
     group: ProcessGroup,
     /// How the ranks' gradients travel (host buffers, or NCCL on CUDA devices).
@@ -137,7 +140,7 @@ impl Trainer {
         )?;
         let objective = Objective::new(config.loss.clone(), config.render.clone(), &device)?;
 
-        let (model, model_config, optimizer, state) = match resume_from {
+        let (model, model_config, optimizer, state, average) = match resume_from {
             Some(dir) => {
                 let model_config = checkpoint::read_model_config(&dir)?;
                 let blank = Dggt::new(&model_config, &device)?;
@@ -146,7 +149,7 @@ impl Trainer {
                 let mut optimizer = grouped_optimizer(&config.optim, &model);
                 optimizer.load(&optimizer_file(&dir), &device)?;
                 tracing::info!(checkpoint = %dir.display(), step = loaded.state.step, "resuming");
-                (model, loaded.config, optimizer, loaded.state)
+                (model, loaded.config, optimizer, loaded.state, loaded.average)
             }
             None => {
                 let model_config = config.model.architecture();
@@ -159,7 +162,7 @@ impl Trainer {
                 let model = freeze(model, &config.optim.frozen)?;
                 let optimizer = grouped_optimizer(&config.optim, &model);
                 let state = RunState::starting(config.run.seed, 0);
-                (model, model_config, optimizer, state)
+                (model, model_config, optimizer, state, None)
             }
         };
         if state.seed != config.run.seed {
@@ -177,6 +180,7 @@ impl Trainer {
         }
         state.samples_per_step = samples_per_step;
         let validation_lpips = validation_lpips(&config, &plain_device)?;
+        let average = weight_average(&config, average, &group);
         let transport = GradientTransport::agree(&group, &plain_device)?;
         Ok(Self {
             config,
@@ -190,6 +194,7 @@ impl Trainer {
             state,
             last_failure: None,
             checkpoint_gate: CheckpointGate::default(),
+            average,
             group,
             transport,
         })
@@ -264,7 +269,8 @@ impl Trainer {
         if frames.inputs.is_empty() {
             return Ok(None);
         }
-        let model = self.model().clone().valid().fork(&self.plain_device);
+        let (_, model) = self.scored_weights();
+        let model = model.fork(&self.plain_device);
         let validator = Validator {
             model: &model,
             objective: &self.objective,
@@ -273,6 +279,14 @@ impl Trainer {
             device: &self.plain_device,
         };
         validator.scenes(&self.validation_scenes, frames, save_to)
+    }
+
+    /// The weights validation scores, without autodiff: their average once it has started, else the master's.
+    pub fn scored_weights(&self) -> (ScoredWeights, Dggt) {
+        match self.average.as_ref().and_then(WeightAverage::average) {
+            Some(average) => (ScoredWeights::Average, average.clone()),
+            None => (ScoredWeights::Trained, self.model().valid()),
+        }
     }
 
     /// The sample drawn for sample index `index` (`step · samples_per_step + j`), decoded.
@@ -383,12 +397,18 @@ impl Trainer {
                         ssim = validation.ssim,
                         "validation"
                     );
-                    let record = ValidationRecord { step: self.state.step, validation: &validation, time_s: elapsed };
+                    let weights = self.scored_weights().0;
+                    let record =
+                        ValidationRecord { step: self.state.step, weights, validation: &validation, time_s: elapsed };
                     if let Some(metrics) = &mut metrics {
                         metrics.append(RecordKind::Validation, &record)?;
                     }
+                    let whose = match weights {
+                        ScoredWeights::Average => " (the average of the weights)",
+                        ScoredWeights::Trained => "",
+                    };
                     bar.println(format!(
-                        "validation at step {} on {} scene(s): {}",
+                        "validation at step {} on {} scene(s){whose}: {}",
                         self.state.step,
                         validation.scenes.len(),
                         validation.scores_line()
@@ -443,6 +463,9 @@ impl Trainer {
             _ => Some(StepFailure::NonFiniteLoss),
         };
         record.failure = failure.as_ref().map(FailureRecord::from);
+        if let Some(average) = &mut self.average {
+            average.fold(&self.replicas.master().model, step + 1);
+        }
         record.step_s = started.elapsed().as_secs_f64();
         divergence::count_step(&mut self.state, step, failure.as_ref());
         self.last_failure = failure;
@@ -569,9 +592,13 @@ impl Trainer {
             preprocess: self.config.data.preprocess,
             configured: ConfiguredSections::of(&self.config),
         };
+        let weights = match self.average.as_ref().and_then(WeightAverage::average) {
+            Some(average) => Weights::Averaged { trained: &master.model, average },
+            None => Weights::Trained(&master.model),
+        };
         checkpoint::save(
             &run.out_dir.join(run_folder::CHECKPOINTS),
-            &master.model,
+            weights,
             &settings,
             &master.optimizer,
             &self.state,
@@ -619,6 +646,22 @@ fn resume_point(config: &TrainConfig, start: Start) -> Result<Option<PathBuf>, T
         }
     }
     Ok(dir)
+}
+
+/// The average of the weights `optim.average` asks for, kept by the writing rank, continuing a checkpoint's
+/// average `resumed` when there is one.
+fn weight_average(config: &TrainConfig, resumed: Option<Dggt>, group: &ProcessGroup) -> Option<WeightAverage<Dggt>> {
+    match (config.optim.average, resumed) {
+        (Some(section), resumed) if group.is_writer() => Some(WeightAverage::new(section, resumed)),
+        (None, Some(_)) => {
+            tracing::warn!(
+                "the checkpoint holds an average of the weights, and optim.average no longer asks for one: \
+                 continuing from the trained weights without it"
+            );
+            None
+        }
+        _ => None,
+    }
 }
 
 /// LPIPS-Alex for validation when `data.validation` names its weights.

@@ -102,7 +102,9 @@ fn a_checkpoint_with_a_non_finite_weight_is_not_written() {
     let module = OneWeight { weight: Param::from_tensor(weight) };
     let optimizer = Optimizer::ungrouped(&OptimSection::default());
     let state = RunState::starting(0, 1);
-    let error = checkpoint::save_folder(root.path(), &module, &optimizer, &state, 2, &[]).unwrap_err().to_string();
+    let error = checkpoint::save_folder(root.path(), checkpoint::Weights::Trained(&module), &optimizer, &state, 2, &[])
+        .unwrap_err()
+        .to_string();
     assert!(error.contains("not written") && error.contains("weight `weight`"), "{error}");
     assert_eq!(std::fs::read_dir(root.path()).unwrap().count(), 0, "nothing written");
 }

@@ -1,5 +1,6 @@
 //! The trainer end to end on the bundled fixture (CPU): a few dozen steps reduce the loss and raise the target
-//! PSNR; a run interrupted and resumed ends with the same weights as the uninterrupted one; a non-finite loss
+//! PSNR; a run interrupted and resumed ends with the same weights (and average of the weights) as the
+//! uninterrupted one; a non-finite loss
 //! skips the step and leaves the weights untouched; two devices sharing the accumulated samples train like
 //! one; training on freshly generated synthetic scenes stays finite; the shipped configurations parse and validate;
 //! a configuration's model section describes the network the trainer builds.
@@ -9,7 +10,10 @@ mod common;
 use common::{parameters, repo, small_config, weights};
 
 use burn::tensor::Device;
-use dggt_train::records::{FailureRecord, SkipReason};
+use dggt_model::Dggt;
+use dggt_run::checkpoint;
+use dggt_run::optim_config::AverageSection;
+use dggt_train::records::{FailureRecord, ScoredWeights, SkipReason};
 use dggt_train::{DepthFlowMaps, RunOptions, Start, TrainConfig, Trainer};
 
 #[test]
@@ -50,6 +54,43 @@ fn an_interrupted_run_resumes_exactly() {
     assert_eq!(expected.len(), actual.len());
     let worst = expected.iter().zip(&actual).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
     assert!(worst == 0.0, "resumed weights differ by up to {worst}");
+}
+
+/// With `optim.average`, validation scores the average, checkpoints hold it as the network inference loads
+/// (the trained weights beside it), and a resumed run continues both exactly.
+#[test]
+fn an_interrupted_run_that_averages_its_weights_resumes_both_exactly() {
+    let config = |out: &std::path::Path| {
+        let mut config = small_config(out, 4);
+        config.optim.average = Some(AverageSection { decay: 0.5, start_step: 1 });
+        (config.data.validation.inputs, config.data.validation.targets) = (vec![0, 4], vec![2]);
+        config
+    };
+    let straight = tempfile::tempdir().unwrap();
+    let mut trainer = Trainer::new(config(straight.path()), vec![Device::flex()], Start::Fresh).unwrap();
+    let summary = trainer.run(RunOptions::default()).unwrap();
+    let (scored, average) = trainer.scored_weights();
+    assert_eq!(scored, ScoredWeights::Average);
+    let (expected_trained, expected_average) = (weights(&trainer), parameters(&average));
+    assert_ne!(expected_trained, expected_average, "the average is not the trained weights");
+
+    let dir = summary.checkpoint.expect("a checkpoint at the end");
+    let blank = || Dggt::new(trainer.model_config(), &Device::flex()).unwrap();
+    assert_eq!(parameters(&checkpoint::load_model(&dir, blank()).unwrap()), expected_average, "model.bpk");
+    let trained = checkpoint::load_module_file(&dir.join(checkpoint::TRAINED_FILE), blank()).unwrap();
+    assert_eq!(parameters(&trained), expected_trained, "trained.bpk");
+    let metrics = std::fs::read_to_string(straight.path().join("metrics.jsonl")).unwrap();
+    let validation = metrics.lines().rfind(|line| line.contains(r#""kind":"validation""#)).expect("a validation");
+    assert!(validation.contains(r#""weights":"average""#), "{validation}");
+
+    let split = tempfile::tempdir().unwrap();
+    let mut first = Trainer::new(config(split.path()), vec![Device::flex()], Start::Fresh).unwrap();
+    first.run(RunOptions { stop_after: Some(2), ..RunOptions::default() }).unwrap();
+    drop(first);
+    let mut resumed = Trainer::new(config(split.path()), vec![Device::flex()], Start::Resume).unwrap();
+    resumed.run(RunOptions::default()).unwrap();
+    assert!(weights(&resumed) == expected_trained, "the resumed trained weights differ");
+    assert!(parameters(&resumed.scored_weights().1) == expected_average, "the resumed average differs");
 }
 
 #[test]
@@ -293,7 +334,7 @@ fn the_model_section_describes_the_network_the_trainer_builds() {
 fn settings_out_of_their_range_are_refused_naming_the_key_and_the_range() {
     let out = tempfile::tempdir().unwrap();
     type Edit = fn(&mut TrainConfig);
-    let cases: [(Edit, &str); 12] = [
+    let cases: [(Edit, &str); 14] = [
         (|c| c.optim.weight_decay = -1.0, "optim.weight_decay: must lie in [0, inf), got -1"),
         (|c| c.optim.beta1 = 1.0, "optim.beta1: must lie in [0, 1), got 1"),
         (|c| c.optim.beta2 = -0.1, "optim.beta2: must lie in [0, 1), got -0.1"),
@@ -301,6 +342,14 @@ fn settings_out_of_their_range_are_refused_naming_the_key_and_the_range() {
         (|c| c.optim.min_lr_ratio = 2.0, "optim.min_lr_ratio: must lie in [0, 1], got 2"),
         (|c| c.optim.clip_grad_norm = Some(f64::INFINITY), "optim.clip_grad_norm: must lie in (0, inf), got inf"),
         (|c| c.optim.max_failed_steps_in_a_row = 0, "optim.max_failed_steps_in_a_row: must lie in [1, 10000], got 0"),
+        (
+            |c| c.optim.average = Some(AverageSection { decay: 1.0, start_step: 0 }),
+            "optim.average.decay: must lie in (0, 1), got 1",
+        ),
+        (
+            |c| c.optim.average = Some(AverageSection { decay: 0.9, start_step: 1 }),
+            "optim.average.start_step: 1 never starts in a run of run.steps = 1",
+        ),
         (|c| c.run.steps = 0, "run.steps: must be at least 1, got 0"),
         (|c| c.run.keep_checkpoints = 0, "run.keep_checkpoints: must be at least 1, got 0"),
         (|c| c.run.time_limit_s = Some(-5.0), "run.time_limit_s: must lie in (0, inf), got -5"),
