@@ -1,7 +1,8 @@
 //! The progress bars of a run, drawn on stderr in one style: the step bar of a training loop and any other
 //! bar a trainer shows while it prepares (indexing scenes, rendering pairs).
 
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+pub use indicatif::ProgressBar;
+use indicatif::{ProgressDrawTarget, ProgressStyle};
 
 /// Whether a bar is drawn.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

@@ -38,7 +38,7 @@ use dggt_run::average::WeightAverage;
 use dggt_run::checkpoint::{Purpose, RunState, Weights, optimizer_file};
 use dggt_run::divergence::{self, CheckpointDue, CheckpointGate, DivergenceLimit, StepFailure};
 use dggt_run::metrics::{MetricsLog, RecordKind};
-use dggt_run::progress::{Visibility, progress_bar, styled_bar};
+use dggt_run::progress::{ProgressBar, Visibility, progress_bar, styled_bar};
 use dggt_run::schedule::WarmupCosine;
 use dggt_run::{Start, failpoint, run_folder};
 
@@ -265,12 +265,16 @@ impl Trainer {
 
     /// [`Trainer::validate`], writing each target's render, truth and difference as a PNG into `save_to`.
     pub fn validate_into(&self, save_to: Option<&Path>) -> Result<Option<Validation>, TrainError> {
+        self.validate_weights(&self.scored_weights().1, save_to)
+    }
+
+    /// Scores `model` on the validation frames, writing its renders into `save_to`.
+    fn validate_weights(&self, model: &Dggt, save_to: Option<&Path>) -> Result<Option<Validation>, TrainError> {
         let frames = &self.config.data.validation;
         if frames.inputs.is_empty() {
             return Ok(None);
         }
-        let (_, model) = self.scored_weights();
-        let model = model.fork(&self.plain_device);
+        let model = model.clone().fork(&self.plain_device);
         let validator = Validator {
             model: &model,
             objective: &self.objective,
@@ -287,6 +291,49 @@ impl Trainer {
             Some(average) => (ScoredWeights::Average, average.clone()),
             None => (ScoredWeights::Trained, self.model().valid()),
         }
+    }
+
+    /// A validation pass of the run: the trained weights, and their average once it has started, each logged
+    /// and recorded; the renders (into `renders`) and the returned scores are those of the scored weights
+    /// ([`Trainer::scored_weights`]).
+    fn validate_and_record(
+        &self,
+        renders: &Path,
+        mut metrics: Option<&mut MetricsLog>,
+        bar: &ProgressBar,
+        elapsed: f64,
+    ) -> Result<Option<Validation>, TrainError> {
+        let (scored, scored_model) = self.scored_weights();
+        let mut passes = vec![(scored, scored_model, Some(renders))];
+        if scored == ScoredWeights::Average {
+            passes.push((ScoredWeights::Trained, self.model().valid(), None));
+        }
+        let mut scored_validation = None;
+        for (weights, model, save_to) in passes {
+            let Some(validation) = self.validate_weights(&model, save_to)? else { return Ok(None) };
+            let step = self.state.step;
+            tracing::info!(step, psnr = validation.psnr, ssim = validation.ssim, ?weights, "validation");
+            if let Some(metrics) = metrics.as_deref_mut() {
+                metrics.append(
+                    RecordKind::Validation,
+                    &ValidationRecord { step, weights, validation: &validation, time_s: elapsed },
+                )?;
+            }
+            let (count, scores) = (validation.scenes.len(), validation.scores_line());
+            bar.println(match weights {
+                ScoredWeights::Trained if scored == ScoredWeights::Trained => {
+                    format!("validation at step {step} on {count} scene(s): {scores}")
+                }
+                ScoredWeights::Trained => format!("  the trained weights: {scores}"),
+                ScoredWeights::Average => {
+                    format!("validation at step {step} on {count} scene(s), the average of the weights: {scores}")
+                }
+            });
+            if weights == scored {
+                scored_validation = Some(validation);
+            }
+        }
+        Ok(scored_validation)
     }
 
     /// The sample drawn for sample index `index` (`step · samples_per_step + j`), decoded.
@@ -388,33 +435,9 @@ impl Trainer {
             if validate_now && writer {
                 let renders = run.out_dir.join(run_folder::VALIDATION).join(format!("step-{:08}", self.state.step));
                 let validated = self
-                    .validate_into(Some(&renders))
+                    .validate_and_record(&renders, metrics.as_mut(), &bar, elapsed)
                     .map_err(|source| TrainError::Validation { step: self.state.step, source: Box::new(source) })?;
-                if let Some(validation) = validated {
-                    tracing::info!(
-                        step = self.state.step,
-                        psnr = validation.psnr,
-                        ssim = validation.ssim,
-                        "validation"
-                    );
-                    let weights = self.scored_weights().0;
-                    let record =
-                        ValidationRecord { step: self.state.step, weights, validation: &validation, time_s: elapsed };
-                    if let Some(metrics) = &mut metrics {
-                        metrics.append(RecordKind::Validation, &record)?;
-                    }
-                    let whose = match weights {
-                        ScoredWeights::Average => " (the average of the weights)",
-                        ScoredWeights::Trained => "",
-                    };
-                    bar.println(format!(
-                        "validation at step {} on {} scene(s){whose}: {}",
-                        self.state.step,
-                        validation.scenes.len(),
-                        validation.scores_line()
-                    ));
-                    summary.validation = Some(validation);
-                }
+                summary.validation = validated.or(summary.validation.take());
             }
             if done {
                 break;

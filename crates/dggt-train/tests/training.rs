@@ -56,8 +56,8 @@ fn an_interrupted_run_resumes_exactly() {
     assert!(worst == 0.0, "resumed weights differ by up to {worst}");
 }
 
-/// With `optim.average`, validation scores the average, checkpoints hold it as the network inference loads
-/// (the trained weights beside it), and a resumed run continues both exactly.
+/// With `optim.average`, validation scores the average (and the trained weights beside it), checkpoints hold it
+/// as the network inference loads (the trained weights beside it), and a resumed run continues both exactly.
 #[test]
 fn an_interrupted_run_that_averages_its_weights_resumes_both_exactly() {
     let config = |out: &std::path::Path| {
@@ -80,8 +80,13 @@ fn an_interrupted_run_that_averages_its_weights_resumes_both_exactly() {
     let trained = checkpoint::load_module_file(&dir.join(checkpoint::TRAINED_FILE), blank()).unwrap();
     assert_eq!(parameters(&trained), expected_trained, "trained.bpk");
     let metrics = std::fs::read_to_string(straight.path().join("metrics.jsonl")).unwrap();
-    let validation = metrics.lines().rfind(|line| line.contains(r#""kind":"validation""#)).expect("a validation");
-    assert!(validation.contains(r#""weights":"average""#), "{validation}");
+    let validations: Vec<&str> = metrics.lines().filter(|line| line.contains(r#""kind":"validation""#)).collect();
+    assert_eq!(validations.len(), 2, "the average and the trained weights scored at the end: {validations:?}");
+    assert!(validations[0].contains(r#""weights":"average""#), "{}", validations[0]);
+    assert!(validations[1].contains(r#""weights":"trained""#), "{}", validations[1]);
+    let psnr = |line: &str| serde_json::from_str::<serde_json::Value>(line).unwrap()["psnr"].as_f64().unwrap();
+    assert_eq!(summary.validation.map(|v| v.psnr), Some(psnr(validations[0])), "the run reports the average's");
+    assert_ne!(psnr(validations[0]), psnr(validations[1]));
 
     let split = tempfile::tempdir().unwrap();
     let mut first = Trainer::new(config(split.path()), vec![Device::flex()], Start::Fresh).unwrap();
