@@ -1,6 +1,7 @@
 //! The device radix sort of tile intersections (feature `wgpu`) against a stable host sort of the same keys, on
 //! keys a render rarely produces: equal depths everywhere, every entry in one list, many and empty lists,
-//! lengths around the sort's run and the scan's block size (256), extreme depths; and the prefix sum behind it over several levels.
+//! lengths around the sort's cube (256 units) and tile (1024 entries) and the scan's tile (2048 values),
+//! extreme depths; and the prefix sum behind it over one, two and three levels.
 
 use dggt_splat::{SortedIntersections, prefix_sums, sort_intersections};
 
@@ -53,6 +54,12 @@ fn radix_sort_keeps_input_order_for_equal_depths() {
 }
 
 #[test]
+fn radix_sort_keeps_input_order_for_equal_keys() {
+    // Every key equal: each pass's scatter must keep the identity order, within and across tiles.
+    check_sort("all keys equal", &vec![3; 5000], &vec![2.0; 5000], 4);
+}
+
+#[test]
 fn radix_sort_handles_one_list_holding_every_entry() {
     let mut rng = Rng::new(2);
     let depths = tied_depths(&mut rng, 4097);
@@ -76,9 +83,9 @@ fn radix_sort_handles_many_lists_and_empty_ones() {
 }
 
 #[test]
-fn radix_sort_handles_lengths_around_the_run_size() {
+fn radix_sort_handles_lengths_around_the_tile_sizes() {
     let mut rng = Rng::new(4);
-    for len in [0, 1, 2, 255, 256, 257, 2048, 4097, 65_537] {
+    for len in [0, 1, 2, 255, 256, 257, 1000, 1023, 1024, 1025, 2047, 2048, 2049, 4097, 65_537] {
         let lists = random_lists(&mut rng, len, 9);
         let depths = tied_depths(&mut rng, len);
         check_sort(&format!("length {len}"), &lists, &depths, 9);
@@ -96,7 +103,7 @@ fn radix_sort_orders_extreme_depths() {
 
 #[test]
 fn radix_sort_of_a_large_batch_matches_the_host() {
-    // 300 000 entries: 1172 runs, a histogram of 18 752 counts scanned over two levels.
+    // 300 000 entries: 293 tiles of 1024, a histogram of 4688 counts scanned over two levels.
     let mut rng = Rng::new(6);
     let lists = random_lists(&mut rng, 300_000, 4056);
     let depths = rng.ranges(300_000, 0.01, 80.0);
@@ -107,8 +114,9 @@ fn radix_sort_of_a_large_batch_matches_the_host() {
 fn prefix_sums_over_three_levels_match_the_host() {
     let device = wgpu_device();
     let mut rng = Rng::new(7);
-    // 1 100 000 values: blocks of 256, then 4297 block sums, then 17: three levels.
-    for len in [0usize, 1, 255, 256, 257, 70_000, 1_100_000] {
+    // Tiles of 2048: up to 2048 values take one level, up to 2048² two, 2048² + 1 three (2049 tile sums,
+    // then 2).
+    for len in [0usize, 1, 255, 256, 257, 2047, 2048, 2049, 70_000, 1_100_000, 4_194_304, 4_194_305] {
         let values: Vec<u32> = (0..len).map(|_| rng.below(40) as u32).collect();
         let ours = prefix_sums(&device, &values);
         let mut expected = Vec::with_capacity(len + 1);
@@ -120,4 +128,18 @@ fn prefix_sums_over_three_levels_match_the_host() {
         expected.push(running);
         assert_eq!(ours, expected, "prefix sums of {len} values");
     }
+}
+
+#[test]
+fn prefix_sums_wrap_past_u32() {
+    let device = wgpu_device();
+    let mut rng = Rng::new(8);
+    // Sums pass 2^32 many times, within tiles and across them.
+    let values: Vec<u32> = (0..5000).map(|_| (1 << 31) + rng.below(1000) as u32).collect();
+    let ours = prefix_sums(&device, &values);
+    let mut expected = vec![0u32];
+    for v in &values {
+        expected.push(expected.last().unwrap().wrapping_add(*v));
+    }
+    assert_eq!(ours, expected, "wrapping prefix sums");
 }

@@ -37,15 +37,15 @@
 //!
 //! | | before (bitonic) | now (radix) |
 //! |---|---|---|
-//! | binning | zero, count, one-cube scan, zero, fill (atomic cursors), pad: 6 launches | count, pair scan (7 launches: 4 levels of 256), view starts, per batch zero and fill |
-//! | sort | `L (L + 1) / 2` launches (378 at `I ≈ 10^8`, 435 at `2^29`), each reading and writing all `2^L` padded entries | 12 passes (8 over the depth bits, 4 over the 14 list bits) of 2 launches plus a histogram scan (`I / 16` counts: 5 launches at `I = 10^8`): 84 launches |
-//! | sort traffic | `24 · 2^L` B per launch: ≈ 1.6 TB at `I ≈ 10^8` (`2^27`), 5.6 TB at `2^29` | 28 B/entry per depth pass, 20 B/entry per list pass, ≈ 10 B/entry of histogram scans: ≈ 0.31 kB per intersection, 31 GB at `10^8` |
-//! | forward launches | ≈ 9 + `L (L + 1) / 2`: 387 at `10^8`, 444 at `2^29` | ≈ 10 + 88 per batch: ≈ 98 with one batch |
+//! | binning | zero, count, one-cube scan, zero, fill (atomic cursors), pad: 6 launches | count, pair scan (5 launches: 3 levels of 2048), view starts, per batch zero and fill |
+//! | sort | `L (L + 1) / 2` launches (378 at `I ≈ 10^8`, 435 at `2^29`), each reading and writing all `2^L` padded entries | 12 passes (8 over the depth bits, 4 over the 14 list bits) of 2 launches plus a histogram scan (`I / 64` counts: 3 launches at `I = 10^8`): 60 launches |
+//! | sort traffic | `24 · 2^L` B per launch: ≈ 1.6 TB at `I ≈ 10^8` (`2^27`), 5.6 TB at `2^29` | 28 B/entry per depth pass, 20 B/entry per list pass, ≈ 4 B/entry of histograms and their scans: ≈ 0.31 kB per intersection, 31 GB at `10^8`, in coalesced tiles |
+//! | forward launches | ≈ 9 + `L (L + 1) / 2`: 387 at `10^8`, 444 at `2^29` | ≈ 8 + 64 per batch: ≈ 72 with one batch |
 //! | backward launches | compositing backward, projection backward, background reduction | the same, the compositing backward once per batch |
 //! | largest buffer | `2^L` entries of 4 B (4 GiB past `2^29`: beyond wgpu's limit) | `I_batch` entries of 4 B, `I_batch` capped by the device's buffer limit |
 //!
 //! Device memory of the sort, per intersection of a batch: keys, depth bits and payloads, each double
-//! buffered (`6 · 4 = 24` B) while sorting by depth, `4 · 4 = 16` B while sorting by list, and `16 / 256 · 4`
+//! buffered (`6 · 4 = 24` B) while sorting by depth, `4 · 4 = 16` B while sorting by list, and `16 / 1024 · 4`
 //! B of histogram; after the forward only the sorted Gaussian ids (4 B per intersection) stay alive.
 //!
 //! Everything stays on the device; the saved state ([`CubeForward`]) holds device buffers only. Kernels bind at
@@ -54,8 +54,9 @@
 //!
 //! Lavapipe (Mesa 22.3, the software Vulkan of the CI machine) cannot compile the shared memory CubeCL 0.11.3
 //! emits as SPIR-V for devices without Vulkan's explicit workgroup layout (it crashes in pipeline creation);
-//! through WGSL (the `wgpu` feature) it runs the compositing kernels' shared memory. The scan and the sort use
-//! none: each unit works serially on its own block or run.
+//! through WGSL (the `wgpu` feature, which the tests use) it runs the shared memory of every kernel that has
+//! some: compositing, and the scan and sort, which work cooperatively on tiles, one cube each. The `vulkan`
+//! (SPIR-V) feature's shared-memory kernels are checked on a GPU.
 //!
 //! Against the host implementation: the images agree to float rounding (the host projects in `f64`, these
 //! kernels in `f32`, and accumulation orders differ under atomics), so the GPU path is tested against the host
@@ -196,6 +197,13 @@ fn contiguous(tensor: CubeTensor, what: &str) -> CubeTensor {
 fn element_launch(client: &cubecl::client::Client, elements: usize) -> (CubeCount, CubeDim) {
     let dim = CubeDim::new_1d(ELEMENT_UNITS);
     (calculate_cube_count_elemwise(client, elements, dim), dim)
+}
+
+/// `cubes` cubes of `units` units, spread over two dimensions where one would pass the device's limit (kernels
+/// read their index as `CUBE_POS` and mask the idle cubes past `cubes`).
+fn cube_launch(client: &cubecl::client::Client, cubes: usize, units: u32) -> (CubeCount, CubeDim) {
+    let dim = CubeDim::new_1d(units);
+    (calculate_cube_count_elemwise(client, cubes * units as usize, dim), dim)
 }
 
 /// One cube per tile of the `views` views of a batch, one unit per pixel of the tile.
