@@ -179,6 +179,7 @@ impl OptimSettings {
             pose_warmup_steps: 0,
             max_failed_steps_in_a_row: self.max_failed_steps_in_a_row,
             average: None,
+            skip_loss_spikes: None,
         }
     }
 }

@@ -59,6 +59,12 @@ pub struct RunState {
     /// Samples drawn per step (`optim.accumulation` x devices) when the checkpoint was written; 0 when unknown.
     #[serde(default)]
     pub samples_per_step: u64,
+    /// Steps whose update was skipped as a loss spike ([`crate::spikes`]).
+    #[serde(default)]
+    pub spike_skipped_steps: u64,
+    /// The last steps' finite losses, oldest first, that the next spike is judged against ([`crate::spikes`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub recent_losses: Vec<f64>,
 }
 
 impl RunState {
@@ -73,6 +79,8 @@ impl RunState {
             elapsed_s: 0.0,
             bad_samples: 0,
             samples_per_step,
+            spike_skipped_steps: 0,
+            recent_losses: Vec::new(),
         }
     }
 }

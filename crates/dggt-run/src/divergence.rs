@@ -18,6 +18,7 @@ use crate::checkpoint::RunState;
 use crate::error::RunError;
 use crate::finite::NonFinite;
 use crate::optimizer::StepOutcome;
+use crate::spikes::Spike;
 
 /// `optim.max_failed_steps_in_a_row` when not configured.
 pub const DEFAULT_MAX_FAILED_STEPS_IN_A_ROW: u64 = 5;
@@ -33,6 +34,9 @@ pub enum StepFailure {
     NonFiniteGradient,
     /// The update made the named tensor non-finite: rolled back.
     RolledBack(NonFinite),
+    /// The loss jumped above `optim.skip_loss_spikes.factor` times the recent median: skipped. Not a failure of
+    /// the weights: it neither counts towards divergence nor holds back a checkpoint.
+    LossSpike(Spike),
 }
 
 impl StepFailure {
@@ -53,6 +57,7 @@ impl StepFailure {
             Self::RolledBack(tensor) => {
                 format!("the update made the {tensor} non-finite: step rolled back, weights and moments restored")
             }
+            Self::LossSpike(spike) => format!("{spike}: step skipped, weights untouched"),
         }
     }
 }
@@ -76,6 +81,11 @@ pub fn count_step(state: &mut RunState, step: u64, failure: Option<&StepFailure>
     match failure {
         StepFailure::RolledBack(_) => state.rolled_back_steps += 1,
         StepFailure::NonFiniteLoss | StepFailure::NonFiniteGradient => state.skipped_steps += 1,
+        StepFailure::LossSpike(_) => {
+            state.spike_skipped_steps += 1;
+            tracing::warn!(step, "{}", failure.describe());
+            return;
+        }
     }
     state.failed_in_a_row += 1;
     tracing::warn!(step, in_a_row = state.failed_in_a_row, "{}", failure.describe());

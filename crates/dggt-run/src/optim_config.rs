@@ -41,6 +41,21 @@ pub struct OptimSection {
     /// ([`crate::average`]); none when absent.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub average: Option<AverageSection>,
+    /// Skips the update of a step whose loss jumps far above the recent ones ([`crate::spikes`]); none when
+    /// absent.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub skip_loss_spikes: Option<SpikeSection>,
+}
+
+/// `[optim.skip_loss_spikes]`: a step whose loss exceeds `factor` times the median of the last `window` steps'
+/// losses makes no update.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SpikeSection {
+    /// How many times the recent median a loss must exceed to be a spike (above 1).
+    pub factor: f64,
+    /// Steps whose losses the median is taken over; no step is skipped before that many have run.
+    pub window: usize,
 }
 
 /// `[optim.average]`: an exponential moving average of the trained weights from `start_step` on.
@@ -70,6 +85,7 @@ impl Default for OptimSection {
             pose_warmup_steps: 0,
             max_failed_steps_in_a_row: DEFAULT_MAX_FAILED_STEPS_IN_A_ROW,
             average: None,
+            skip_loss_spikes: None,
         }
     }
 }

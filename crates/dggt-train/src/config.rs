@@ -225,6 +225,15 @@ impl TrainConfig {
                 ));
             }
         }
+        if let Some(spikes) = o.skip_loss_spikes {
+            number("optim.skip_loss_spikes.factor", spikes.factor, "(1, inf)", |v| v > 1.0 && v.is_finite())?;
+            if spikes.window < 3 {
+                return Err(setting(
+                    "optim.skip_loss_spikes.window",
+                    format!("must be at least 3, got {}", spikes.window),
+                ));
+            }
+        }
         if o.pose_warmup_steps > 0 && !(self.loss.camera > 0.0) {
             return Err(setting("optim.pose_warmup_steps", "trains the camera loss alone: it needs loss.camera > 0"));
         }

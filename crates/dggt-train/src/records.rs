@@ -77,6 +77,9 @@ pub enum SkipReason {
     NonFiniteLoss,
     #[serde(rename = "non-finite gradient")]
     NonFiniteGradient,
+    /// The loss jumped far above the recent ones (`optim.skip_loss_spikes`).
+    #[serde(rename = "loss spike")]
+    LossSpike,
 }
 
 impl std::fmt::Display for SkipReason {
@@ -84,6 +87,7 @@ impl std::fmt::Display for SkipReason {
         f.write_str(match self {
             Self::NonFiniteLoss => "non-finite loss",
             Self::NonFiniteGradient => "non-finite gradient",
+            Self::LossSpike => "loss spike",
         })
     }
 }
@@ -94,6 +98,7 @@ impl From<&StepFailure> for FailureRecord {
             StepFailure::RolledBack(tensor) => Self::RolledBack(tensor.to_string()),
             StepFailure::NonFiniteGradient => Self::Skipped(SkipReason::NonFiniteGradient),
             StepFailure::NonFiniteLoss => Self::Skipped(SkipReason::NonFiniteLoss),
+            StepFailure::LossSpike(_) => Self::Skipped(SkipReason::LossSpike),
         }
     }
 }

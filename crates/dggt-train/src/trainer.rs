@@ -9,12 +9,15 @@
 //! a non-finite loss or network output (a depth that overflowed, say), or a step with a non-finite gradient
 //! norm, is skipped with a warning and leaves the weights untouched; an update that makes a weight or moment
 //! non-finite is rolled back; a checkpoint falling due meanwhile waits for a step that trains, and too many
-//! such steps in a row stop the run ([`divergence`]). Metrics go to
+//! such steps in a row stop the run ([`divergence`]). With `optim.skip_loss_spikes`, a step whose loss jumps far
+//! above the recent ones makes no update either ([`spikes`]); with `optim.average`, an average of the weights is
+//! kept beside them ([`average`]). Metrics go to
 //! `metrics.jsonl` ([`records`](crate::records)), checkpoints to `checkpoints/` (see [`checkpoint`]); an error
 //! of a validation pass names the step it validated. Of several ranks, rank 0 alone writes them, validates and
 //! draws the progress bar.
 //!
 //! [`checkpoint`]: crate::checkpoint
+//! [`average`]: dggt_run::average
 //! [`ranks`]: crate::ranks
 
 use std::fs;
@@ -40,6 +43,7 @@ use dggt_run::divergence::{self, CheckpointDue, CheckpointGate, DivergenceLimit,
 use dggt_run::metrics::{MetricsLog, RecordKind};
 use dggt_run::progress::{ProgressBar, Visibility, progress_bar, styled_bar};
 use dggt_run::schedule::WarmupCosine;
+use dggt_run::spikes::{self, Spike};
 use dggt_run::{Start, failpoint, run_folder};
 
 use crate::checkpoint;
@@ -472,6 +476,10 @@ impl Trainer {
         let mut record =
             StepRecord { step, lr_factor: factor, update: None, measures: None, failure: None, step_s: 0.0 };
         let failure = match (outcome, measures) {
+            (Some(_), Some(measures)) if let Some(spike) = self.judge_spike(measures.loss) => {
+                record.measures = Some(measures);
+                Some(StepFailure::LossSpike(spike))
+            }
             (Some(outcome), Some(mut measures)) => {
                 let update = Instant::now();
                 let master = self.replicas.master();
@@ -494,6 +502,14 @@ impl Trainer {
         self.last_failure = failure;
         self.state.step += 1;
         Ok(record)
+    }
+
+    /// Whether a step's `loss` is a spike (`optim.skip_loss_spikes`), remembering it for the steps to come.
+    fn judge_spike(&mut self, loss: f64) -> Option<Spike> {
+        let section = self.config.optim.skip_loss_spikes?;
+        let spike = spikes::judge(&self.state.recent_losses, loss, &section);
+        spikes::remember(&mut self.state.recent_losses, loss, section.window);
+        spike
     }
 
     /// [`dggt_run::RunError::Diverged`] once `optim.max_failed_steps_in_a_row` steps in a row have failed.

@@ -1,6 +1,6 @@
 //! The trainer end to end on the bundled fixture (CPU): a few dozen steps reduce the loss and raise the target
 //! PSNR; a run interrupted and resumed ends with the same weights (and average of the weights) as the
-//! uninterrupted one; a non-finite loss
+//! uninterrupted one; a loss spike skips its step; a non-finite loss
 //! skips the step and leaves the weights untouched; two devices sharing the accumulated samples train like
 //! one; training on freshly generated synthetic scenes stays finite; the shipped configurations parse and validate;
 //! a configuration's model section describes the network the trainer builds.
@@ -12,7 +12,7 @@ use common::{parameters, repo, small_config, weights};
 use burn::tensor::Device;
 use dggt_model::Dggt;
 use dggt_run::checkpoint;
-use dggt_run::optim_config::AverageSection;
+use dggt_run::optim_config::{AverageSection, SpikeSection};
 use dggt_train::records::{FailureRecord, ScoredWeights, SkipReason};
 use dggt_train::{DepthFlowMaps, RunOptions, Start, TrainConfig, Trainer};
 
@@ -121,6 +121,50 @@ fn a_non_finite_loss_skips_the_step_and_keeps_the_weights() {
     let record = trainer.train_step(&[sample], 1.0, DepthFlowMaps::Skip).unwrap();
     assert!(record.finite_loss().is_some(), "{record:?}");
     assert_ne!(before, weights(&trainer));
+}
+
+/// With `optim.skip_loss_spikes`, a step whose loss jumps above the recent median times the factor makes no
+/// update, is counted apart from divergence, and the next ordinary step trains; the window of recent losses is
+/// saved with the run state, so a resumed run judges its steps against the same losses.
+#[test]
+fn a_loss_spike_skips_the_step_and_the_window_of_losses_survives_a_resume() {
+    let out = tempfile::tempdir().unwrap();
+    let mut config = small_config(out.path(), 8);
+    config.optim.skip_loss_spikes = Some(SpikeSection { factor: 3.0, window: 3 });
+    let mut trainer = Trainer::new(config, vec![Device::flex()], Start::Fresh).unwrap();
+    for index in 0..3 {
+        let sample = trainer.sample(index).unwrap();
+        let record = trainer.train_step(&[sample], 1.0, DepthFlowMaps::Skip).unwrap();
+        assert_eq!(record.failure, None, "step {index}: {record:?}");
+    }
+    let before = weights(&trainer);
+    let mut sample = trainer.sample(3).unwrap();
+    sample.targets[0].image.data.iter_mut().for_each(|v| *v = 40.0);
+    let record = trainer.train_step(&[sample], 1.0, DepthFlowMaps::Skip).unwrap();
+    assert_eq!(record.failure, Some(FailureRecord::Skipped(SkipReason::LossSpike)), "{record:?}");
+    assert!(record.finite_loss().is_some(), "the spike's loss is recorded: {record:?}");
+    assert_eq!(before, weights(&trainer), "a spike leaves the weights untouched");
+    let state = trainer.state();
+    assert_eq!((state.spike_skipped_steps, state.skipped_steps, state.failed_in_a_row), (1, 0, 0));
+    assert_eq!(state.recent_losses.len(), 3, "the window keeps the newest three losses, the spike's included");
+    let sample = trainer.sample(4).unwrap();
+    let record = trainer.train_step(&[sample], 1.0, DepthFlowMaps::Skip).unwrap();
+    assert_eq!(record.failure, None, "{record:?}");
+    assert_ne!(before, weights(&trainer));
+
+    let split = tempfile::tempdir().unwrap();
+    let config = |out: &std::path::Path| {
+        let mut config = small_config(out, 4);
+        config.optim.skip_loss_spikes = Some(SpikeSection { factor: 3.0, window: 50 });
+        config
+    };
+    let mut first = Trainer::new(config(split.path()), vec![Device::flex()], Start::Fresh).unwrap();
+    first.run(RunOptions { stop_after: Some(2), ..RunOptions::default() }).unwrap();
+    let remembered = first.state().recent_losses.clone();
+    assert_eq!(remembered.len(), 2);
+    drop(first);
+    let resumed = Trainer::new(config(split.path()), vec![Device::flex()], Start::Resume).unwrap();
+    assert_eq!(resumed.state().recent_losses, remembered, "the resumed run judges against the same losses");
 }
 
 #[test]
@@ -339,7 +383,7 @@ fn the_model_section_describes_the_network_the_trainer_builds() {
 fn settings_out_of_their_range_are_refused_naming_the_key_and_the_range() {
     let out = tempfile::tempdir().unwrap();
     type Edit = fn(&mut TrainConfig);
-    let cases: [(Edit, &str); 14] = [
+    let cases: [(Edit, &str); 16] = [
         (|c| c.optim.weight_decay = -1.0, "optim.weight_decay: must lie in [0, inf), got -1"),
         (|c| c.optim.beta1 = 1.0, "optim.beta1: must lie in [0, 1), got 1"),
         (|c| c.optim.beta2 = -0.1, "optim.beta2: must lie in [0, 1), got -0.1"),
@@ -354,6 +398,14 @@ fn settings_out_of_their_range_are_refused_naming_the_key_and_the_range() {
         (
             |c| c.optim.average = Some(AverageSection { decay: 0.9, start_step: 1 }),
             "optim.average.start_step: 1 never starts in a run of run.steps = 1",
+        ),
+        (
+            |c| c.optim.skip_loss_spikes = Some(SpikeSection { factor: 1.0, window: 50 }),
+            "optim.skip_loss_spikes.factor: must lie in (1, inf), got 1",
+        ),
+        (
+            |c| c.optim.skip_loss_spikes = Some(SpikeSection { factor: 3.0, window: 2 }),
+            "optim.skip_loss_spikes.window: must be at least 3, got 2",
         ),
         (|c| c.run.steps = 0, "run.steps: must be at least 1, got 0"),
         (|c| c.run.keep_checkpoints = 0, "run.keep_checkpoints: must be at least 1, got 0"),
