@@ -79,8 +79,12 @@ pub fn run(args: Args) -> Result<()> {
         return Ok(());
     }
     let out = &trainer.config().run.out_dir;
+    let spikes = match trainer.state().spike_skipped_steps {
+        0 => String::new(),
+        n => format!(", {n} loss spikes skipped"),
+    };
     print!(
-        "trained steps {}..{} in {:.1} s ({} skipped)",
+        "trained steps {}..{} in {:.1} s ({} skipped{spikes})",
         summary.final_step - summary.steps_run,
         summary.final_step,
         summary.elapsed_s,
