@@ -476,7 +476,7 @@ impl Trainer {
         let mut record =
             StepRecord { step, lr_factor: factor, update: None, measures: None, failure: None, step_s: 0.0 };
         let failure = match (outcome, measures) {
-            (Some(_), Some(measures)) if let Some(spike) = self.judge_spike(measures.loss) => {
+            (Some(_), Some(measures)) if let Some(spike) = self.judge_spike(step, measures.loss) => {
                 record.measures = Some(measures);
                 Some(StepFailure::LossSpike(spike))
             }
@@ -504,9 +504,14 @@ impl Trainer {
         Ok(record)
     }
 
-    /// Whether a step's `loss` is a spike (`optim.skip_loss_spikes`), remembering it for the steps to come.
-    fn judge_spike(&mut self, loss: f64) -> Option<Spike> {
+    /// Whether step `step`'s `loss` is a spike (`optim.skip_loss_spikes`), remembering it for the steps to come.
+    /// The pose warm-up's losses (the camera term alone) are neither judged nor remembered: against them every
+    /// full loss after the warm-up would be a spike.
+    fn judge_spike(&mut self, step: u64, loss: f64) -> Option<Spike> {
         let section = self.config.optim.skip_loss_spikes?;
+        if step < self.config.optim.pose_warmup_steps {
+            return None;
+        }
         let spike = spikes::judge(&self.state.recent_losses, loss, &section);
         spikes::remember(&mut self.state.recent_losses, loss, section.window);
         spike

@@ -167,6 +167,23 @@ fn a_loss_spike_skips_the_step_and_the_window_of_losses_survives_a_resume() {
     assert_eq!(resumed.state().recent_losses, remembered, "the resumed run judges against the same losses");
 }
 
+/// The pose warm-up's losses (the camera term alone) do not enter the window: the first full steps after it
+/// are judged against full losses only, not skipped as spikes.
+#[test]
+fn the_pose_warm_up_leaves_the_window_of_losses_empty() {
+    let out = tempfile::tempdir().unwrap();
+    let mut config = small_config(out.path(), 5);
+    config.optim.pose_warmup_steps = 3;
+    config.optim.skip_loss_spikes = Some(SpikeSection { factor: 1.5, window: 3 });
+    let mut trainer = Trainer::new(config, vec![Device::flex()], Start::Fresh).unwrap();
+    for index in 0..5 {
+        let sample = trainer.sample(index).unwrap();
+        let record = trainer.train_step(&[sample], 1.0, DepthFlowMaps::Skip).unwrap();
+        assert_eq!(record.failure, None, "step {index}: {record:?}");
+    }
+    assert_eq!(trainer.state().recent_losses.len(), 2, "only the two full steps are remembered");
+}
+
 #[test]
 fn shipped_configurations_parse_and_validate() {
     let dir = repo().join("configs");
