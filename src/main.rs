@@ -14,8 +14,8 @@ use clap::{Parser, Subcommand};
 use tracing_subscriber::EnvFilter;
 
 use crate::commands::{
-    bench, convert, devices, edit, eval, inspect, parity, reconstruct, refine, refine_pairs, refine_train, stress,
-    synth, train,
+    bench, convert, curves, devices, edit, eval, inspect, parity, reconstruct, refine, refine_pairs, refine_train,
+    stress, synth, train,
 };
 
 #[derive(Debug, Parser)]
@@ -41,6 +41,7 @@ enum Command {
     Stress(stress::Args),
     Eval(eval::Args),
     Bench(bench::Args),
+    Curves(curves::Args),
     Devices(devices::Args),
     Refine(refine::Args),
 }
@@ -81,6 +82,7 @@ fn run(command: Command) -> Result<()> {
         Command::Stress(args) => stress::run(args),
         Command::Eval(args) => eval::run(args),
         Command::Bench(args) => bench::run(args),
+        Command::Curves(args) => curves::run(args),
         Command::Devices(args) => devices::run(args),
         Command::Refine(args) => refine::run(args),
     }

@@ -451,3 +451,49 @@ fn bench_sweeps_the_fixture_from_the_command_line() {
     assert!(!missing.status.success());
     assert!(String::from_utf8_lossy(&missing.stderr).contains("needs --scene and --out"));
 }
+
+/// `dggt curves` draws the curves of runs (a run folder, or its metrics file) into one PNG, its folder created,
+/// and prints each run's last and best validation PSNR; an existing PNG is replaced only with `--overwrite`.
+#[test]
+fn curves_draws_runs_into_one_png_and_replaces_it_only_with_overwrite() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("seed-a");
+    std::fs::create_dir(&run).unwrap();
+    let mut metrics: Vec<String> = (0..40)
+        .map(|step| {
+            format!(r#"{{"kind":"train","step":{step},"loss":{},"target_psnr":20.0}}"#, 1.0 / (step + 1) as f64)
+        })
+        .collect();
+    for (step, psnr) in [(10, 20.0), (20, 22.5), (30, 21.0)] {
+        metrics.push(format!(r#"{{"kind":"validation","step":{step},"weights":"trained","psnr":{psnr},"ssim":0.5}}"#));
+    }
+    std::fs::write(run.join("metrics.jsonl"), metrics.join("\n")).unwrap();
+    let (run_arg, out) = (run.to_str().unwrap(), dir.path().join("plots/curves.png"));
+    let out_arg = out.to_str().unwrap();
+
+    let drawn = dggt(&["curves", run_arg, "--out", out_arg]);
+    assert!(drawn.status.success(), "{}", String::from_utf8_lossy(&drawn.stderr));
+    let stdout = String::from_utf8_lossy(&drawn.stdout);
+    assert!(stdout.contains(&format!("curves: {out_arg}")), "{stdout}");
+    assert!(
+        stdout.contains("seed-a: validation PSNR last 21.00 dB (step 30), best 22.50 dB at step 20"),
+        "the run named by its folder: {stdout}"
+    );
+    assert_eq!(image::image_dimensions(&out).unwrap(), (1280, 560));
+    let written = std::fs::read(&out).unwrap();
+
+    let stderr = refused(&["curves", run_arg, "--out", out_arg]);
+    assert!(stderr.contains(&format!("{out_arg} exists")) && stderr.contains("--overwrite"), "{stderr}");
+    assert_eq!(std::fs::read(&out).unwrap(), written, "the refused command left the file as it was");
+
+    let metrics_file = run.join("metrics.jsonl");
+    let two = ["curves", run_arg, metrics_file.to_str().unwrap(), "--labels", "first,second", "--out", out_arg];
+    let replaced = dggt(&[&two[..], &["--overwrite"]].concat());
+    assert!(replaced.status.success(), "{}", String::from_utf8_lossy(&replaced.stderr));
+    let stdout = String::from_utf8_lossy(&replaced.stdout);
+    assert!(stdout.contains("first: validation PSNR") && stdout.contains("second: validation PSNR"), "{stdout}");
+    assert_ne!(std::fs::read(&out).unwrap(), written, "two runs drawn over the one");
+
+    let stderr = refused(&["curves", run_arg, "--labels", "a,b", "--out", out_arg, "--overwrite"]);
+    assert!(stderr.contains("--labels gives 2 labels for 1 runs"), "{stderr}");
+}

@@ -5,6 +5,7 @@ pub mod bench;
 pub mod bench_compute;
 pub mod bench_refiner;
 pub mod convert;
+pub mod curves;
 pub mod devices;
 pub mod edit;
 pub mod eval;

@@ -1,10 +1,12 @@
 //! `dggt train`: a run as a TOML configuration describes it, with progress, and where its results are.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Result;
+use dggt_bench::curves::{RunCurves, default_label, draw_curves};
 use dggt_run::RunError;
 use dggt_run::progress::Visibility;
+use dggt_run::run_folder::METRICS;
 use dggt_train::{ProcessGroup, RunOptions, Start, TrainConfig, TrainError, Trainer};
 
 use crate::backend::DeviceList;
@@ -32,6 +34,9 @@ pub struct Args {
     #[arg(long)]
     dry_run: bool,
 }
+
+/// The training curves `dggt train` draws into its run folder at the end of a run.
+const CURVES_FILE: &str = "curves.png";
 
 /// Builds the run, trains with a progress bar, prints where the results are.
 pub fn run(args: Args) -> Result<()> {
@@ -79,6 +84,7 @@ pub fn run(args: Args) -> Result<()> {
         return Ok(());
     }
     let out = &trainer.config().run.out_dir;
+    let curves = draw_run_curves(out);
     let spikes = match trainer.state().spike_skipped_steps {
         0 => String::new(),
         n => format!(", {n} loss spikes skipped"),
@@ -115,11 +121,28 @@ pub fn run(args: Args) -> Result<()> {
             trainer.state().bad_samples
         );
     }
-    println!("metrics: {}", out.join("metrics.jsonl").display());
+    println!("metrics: {}", out.join(METRICS).display());
+    if let Some(png) = curves {
+        println!("curves: {}", png.display());
+    }
     if let Some(dir) = &summary.checkpoint {
         println!("checkpoint: {}", dir.display());
     }
     Ok(())
+}
+
+/// Draws the run's training curves (all of its metrics, a resumed run's earlier steps included) into its
+/// folder; returns the file. A failure to draw them is a warning: the run's results stand without them.
+fn draw_run_curves(out: &Path) -> Option<PathBuf> {
+    let png = out.join(CURVES_FILE);
+    let drawn = RunCurves::read(&out.join(METRICS), default_label(out)).and_then(|run| draw_curves(&[run], &png));
+    match drawn {
+        Ok(()) => Some(png),
+        Err(error) => {
+            tracing::warn!("training curves not drawn: {error}");
+            None
+        }
+    }
 }
 
 /// A refusal to start a run, with the flags that resolve it; other errors as they are.

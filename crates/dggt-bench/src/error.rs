@@ -35,6 +35,9 @@ pub enum BenchError {
     ReadBack(#[from] dggt_model::host::ReadBackError),
     #[error("{}: {detail}", path.display())]
     File { path: PathBuf, detail: String },
+    /// A line of a run's `metrics.jsonl` that is not a record (`line` counts from 1).
+    #[error("{}, line {line}: {detail}", path.display())]
+    MetricsLine { path: PathBuf, line: usize, detail: String },
     #[error(transparent)]
     Data(#[from] dggt_data::DataError),
     #[error(transparent)]

@@ -14,9 +14,14 @@
 //! [`compute`] is the other suite (`dggt bench compute`): the network, a training step and the rasteriser at
 //! the release's scale, with the reference implementations' figures beside ours; [`refiner`] times the
 //! diffusion refiner per frame (`dggt bench refiner`).
+//!
+//! [`curves`] draws the training curves of runs from their `metrics.jsonl` (`dggt curves`, and the
+//! `curves.png` of `dggt train`); it shares the font lookup of the PNG plots with [`plot`].
 
 pub mod compute;
+pub mod curves;
 mod error;
+mod font;
 pub mod frames;
 pub mod knobs;
 pub mod pareto;
@@ -29,6 +34,7 @@ pub mod stages;
 
 use std::path::{Path, PathBuf};
 
+pub use curves::{RunCurves, draw_curves};
 pub use error::BenchError;
 pub use knobs::{Configuration, Culling, Knobs, Precision, Skips, SweepSpec, Varied, parse_motion};
 pub use pareto::pareto_front;
