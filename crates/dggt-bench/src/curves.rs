@@ -17,11 +17,14 @@ use std::cmp::Ordering;
 use std::path::{Path, PathBuf};
 use std::sync::Once;
 
+use dggt_run::metrics::RecordKind;
+use dggt_run::run_folder::METRICS;
 use dggt_train::records::ScoredWeights;
 use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
+use serde::Serialize;
 use serde_json::Value;
 
 use crate::error::BenchError;
@@ -32,13 +35,6 @@ pub const PNG_SIZE: (u32, u32) = (1280, 560);
 
 /// Logged steps in the running median of the loss.
 pub const LOSS_WINDOW: usize = 25;
-
-/// The metrics file in a run folder (`dggt_run::run_folder::METRICS`).
-const METRICS_FILE: &str = "metrics.jsonl";
-
-/// The `kind` of a step's record and of a validation pass's (`dggt_run::metrics::RecordKind`).
-const TRAIN_KIND: &str = "train";
-const VALIDATION_KIND: &str = "validation";
 
 /// One colour per run, in order (repeating past the tenth run).
 const RUN_COLOURS: [RGBColor; 10] = [
@@ -111,25 +107,25 @@ impl RunCurves {
     /// Adds what `record` contributes to the curves; `Err` says what is wrong with it.
     fn add(&mut self, record: &Value) -> Result<(), String> {
         let Some(fields) = record.as_object() else { return Err("not a JSON object".into()) };
-        let kind = fields.get("kind").and_then(Value::as_str);
-        if kind != Some(TRAIN_KIND) && kind != Some(VALIDATION_KIND) {
+        let kind = fields.get("kind");
+        let train = names(RecordKind::Train, kind);
+        if !train && !names(RecordKind::Validation, kind) {
             return Ok(());
         }
-        let step = fields
-            .get("step")
-            .and_then(Value::as_u64)
-            .ok_or_else(|| format!("a `{}` record without a step number", kind.unwrap_or_default()))?;
+        let step = fields.get("step").and_then(Value::as_u64).ok_or_else(|| {
+            format!("a `{}` record without a step number", kind.and_then(Value::as_str).unwrap_or_default())
+        })?;
         let finite = |key: &str| fields.get(key).and_then(Value::as_f64).filter(|v| v.is_finite());
-        if kind == Some(TRAIN_KIND) {
+        if train {
             if let Some(loss) = finite("loss").filter(|_| !fields.contains_key("skipped")) {
                 let target_psnr = finite("target_psnr").unwrap_or(f64::NAN);
                 self.train.push(TrainPoint { step, loss, target_psnr });
             }
         } else if let Some(psnr) = finite("psnr") {
-            let scores = |weights: ScoredWeights| serde_json::to_value(weights).ok().as_ref() == fields.get("weights");
-            if !fields.contains_key("weights") || scores(ScoredWeights::Trained) {
+            let weights = fields.get("weights");
+            if weights.is_none() || names(ScoredWeights::Trained, weights) {
                 self.validation_trained.push((step, psnr));
-            } else if scores(ScoredWeights::Average) {
+            } else if names(ScoredWeights::Average, weights) {
                 self.validation_average.push((step, psnr));
             }
         }
@@ -150,9 +146,14 @@ impl RunCurves {
     }
 }
 
+/// Whether a record's field `value` is `variant` as the trainer writes it (its serialised form).
+fn names(variant: impl Serialize, value: Option<&Value>) -> bool {
+    value.is_some_and(|value| serde_json::to_value(variant).is_ok_and(|written| &written == value))
+}
+
 /// The metrics file of `path`: itself, or `metrics.jsonl` in it when it is a folder.
 fn metrics_file(path: &Path) -> PathBuf {
-    if path.is_dir() { path.join(METRICS_FILE) } else { path.to_path_buf() }
+    if path.is_dir() { path.join(METRICS) } else { path.to_path_buf() }
 }
 
 /// A run's default label: the name of its folder (of the folder holding it, for a metrics file).
@@ -440,7 +441,7 @@ mod tests {
 
     fn run_folder(metrics: &str) -> tempfile::TempDir {
         let dir = tempfile::tempdir().unwrap();
-        std::fs::write(dir.path().join(METRICS_FILE), metrics).unwrap();
+        std::fs::write(dir.path().join(dggt_run::run_folder::METRICS), metrics).unwrap();
         dir
     }
 
@@ -455,12 +456,12 @@ mod tests {
         assert!(curves.train[2].target_psnr.is_nan(), "a null target PSNR reads as NaN");
         assert_eq!(curves.validation_trained, [(1, 20.5), (3, 21.0)]);
         assert_eq!(curves.validation_average, [(3, 21.5)]);
-        let file = RunCurves::read(&dir.path().join(METRICS_FILE), "run").unwrap();
+        let file = RunCurves::read(&dir.path().join(dggt_run::run_folder::METRICS), "run").unwrap();
         // Compared as text: the NaN target PSNR is not equal to itself.
         assert_eq!(format!("{file:?}"), format!("{curves:?}"), "the run folder and its metrics file read alike");
         let name = dir.path().file_name().unwrap().to_string_lossy().into_owned();
         assert_eq!(default_label(dir.path()), name);
-        assert_eq!(default_label(&dir.path().join(METRICS_FILE)), name);
+        assert_eq!(default_label(&dir.path().join(dggt_run::run_folder::METRICS)), name);
         assert_eq!(best_point(&[(1, 20.0), (2, 22.0), (3, 22.0), (4, 21.0)]), Some((2, 22.0)));
     }
 
@@ -482,7 +483,7 @@ mod tests {
     fn a_corrupt_line_is_an_error_naming_the_file_and_the_line() {
         let dir = run_folder(&METRICS.replace(r#"{"kind":"failure","step":3,"detail":"ignored"}"#, "{\"kind\":"));
         let error = RunCurves::read(dir.path(), "run").unwrap_err();
-        let file = dir.path().join(METRICS_FILE);
+        let file = dir.path().join(dggt_run::run_folder::METRICS);
         assert!(matches!(&error, BenchError::MetricsLine { path, line: 6, .. } if *path == file), "{error:?}");
         let text = error.to_string();
         assert!(text.contains(&file.display().to_string()) && text.contains("line 6"), "{text}");
@@ -497,13 +498,13 @@ mod tests {
         for metrics in ["", "\n\n", validation_only] {
             let dir = run_folder(metrics);
             let error = RunCurves::read(dir.path(), "run").unwrap_err();
-            let file = dir.path().join(METRICS_FILE);
+            let file = dir.path().join(dggt_run::run_folder::METRICS);
             assert!(matches!(&error, BenchError::File { path, .. } if *path == file), "{metrics:?}: {error:?}");
             assert!(error.to_string().contains("no training step"), "{error}");
         }
         let dir = tempfile::tempdir().unwrap();
         let error = RunCurves::read(dir.path(), "run").unwrap_err().to_string();
-        assert!(error.contains(&dir.path().join(METRICS_FILE).display().to_string()), "{error}");
+        assert!(error.contains(&dir.path().join(dggt_run::run_folder::METRICS).display().to_string()), "{error}");
     }
 
     #[test]
