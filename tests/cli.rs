@@ -193,6 +193,58 @@ fn single_file_outputs_are_not_replaced_without_overwrite() {
     assert!(replaced.contains("/no/such/model_difix.pkl"), "{replaced}");
 }
 
+/// Another path a command names, an output (`--rerun`) or an input, that is its `--out` folder or lies in it is
+/// refused before any work (here before the checkpoint is opened), naming both; `--overwrite` removes nothing.
+#[test]
+fn paths_in_the_output_folder_are_refused_naming_both_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("recon");
+    std::fs::create_dir_all(out.join("inputs")).unwrap();
+    std::fs::write(out.join("summary.json"), "an earlier reconstruction's").unwrap();
+    let (scene, out_text) = (fixture(), out.display().to_string());
+    let reconstruct = ["reconstruct", "--checkpoint", "/no/such/run", "--out", out_text.as_str(), "--overwrite"];
+    for rerun in [out.join("summary.json"), out.clone(), out.join("renders/../recording.rrd")] {
+        let rerun = rerun.display().to_string();
+        let stderr = refused(&[&reconstruct[..], &["--images", scene.as_str(), "--rerun", rerun.as_str()]].concat());
+        assert!(stderr.contains(&format!("--rerun {rerun} lies in")), "{stderr}");
+        assert!(stderr.contains(&format!("--out {out_text}")) && !stderr.contains("/no/such/run"), "{stderr}");
+    }
+    let inputs = out.join("inputs").display().to_string();
+    let stderr = refused(&[&reconstruct[..], &["--images", inputs.as_str()]].concat());
+    assert!(stderr.contains(&format!("--images {inputs} lies in")), "{stderr}");
+    let eval = ["eval", "--scene", inputs.as_str(), "--checkpoint", "/no/such/run", "--out", out_text.as_str()];
+    let stderr = refused(&[&eval[..], &["--overwrite"]].concat());
+    assert!(stderr.contains(&format!("--scene {inputs} lies in")), "{stderr}");
+    let saved = out.join("scene.safetensors").display().to_string();
+    let stderr = refused(&["edit", "--scene", saved.as_str(), "--remove", "0", "--out", out_text.as_str()]);
+    assert!(stderr.contains(&format!("--scene {saved} lies in")), "{stderr}");
+    assert!(out.join("inputs").is_dir(), "an input in the output folder was removed");
+    assert_eq!(std::fs::read_to_string(out.join("summary.json")).unwrap(), "an earlier reconstruction's");
+}
+
+/// An output another command holds (its lock beside the folder names a running process: this test's) is refused
+/// at once, naming that command, and nothing is written into it.
+#[test]
+fn an_output_another_command_holds_is_refused_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let lock = dir.path().join(".out.dggt-lock");
+    std::fs::write(&lock, format!("{}\ndggt reconstruct\n", std::process::id())).unwrap();
+    let (scene, out_text) = (fixture(), out.display().to_string());
+    let config = format!("{}/configs/tiny-overfit.toml", env!("CARGO_MANIFEST_DIR"));
+    let commands: [&[&str]; 3] = [
+        &["reconstruct", "--images", scene.as_str(), "--checkpoint", "/no/such/run", "--out", out_text.as_str()],
+        &["eval", "--scene", scene.as_str(), "--checkpoint", "/no/such/run", "--out", out_text.as_str()],
+        &["train", "--config", config.as_str(), "--out", out_text.as_str(), "--dry-run"],
+    ];
+    for args in commands {
+        let stderr = refused(args);
+        assert!(stderr.contains(&format!("{out_text} is in use by `dggt reconstruct`")), "{args:?}: {stderr}");
+        assert!(!out.exists(), "{args:?} wrote into a held output");
+    }
+    assert!(lock.is_file(), "another command's lock is left alone");
+}
+
 /// A sampler window too short for its inputs is a configuration error at `--dry-run`, not a run whose every
 /// sample fails to load.
 #[test]

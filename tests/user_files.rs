@@ -204,6 +204,27 @@ fn resume_refuses_another_architecture_and_reports_changed_optimiser_settings() 
     assert!(resumed.contains("optim.lr is 0.006 in the checkpoint, 0.001 in the configuration"), "{resumed}");
 }
 
+/// `--resume` with another input preprocessing or sampler is refused, naming the setting and both values, and
+/// leaves the run as it was; `--allow-changed KEY` (the setting, or its section) lets the change through and the
+/// run reports it.
+#[test]
+fn resume_refuses_changed_inputs_unless_allowed() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = trained_run(dir.path(), 2);
+    let before = snapshot(&run);
+    let wider = write_config(dir.path(), "wider.toml", |c| c.data.preprocess.target_width = 70);
+    let stderr = failed(train(&wider, &run, &["--resume", "--steps", "3"]));
+    let expected = "data.preprocess.target_width is 56 in the checkpoint, 70 in the configuration";
+    assert!(stderr.contains(expected) && stderr.contains("--allow-changed"), "{stderr}");
+    let more = write_config(dir.path(), "more-targets.toml", |c| c.sampler.targets_per_input += 1);
+    let stderr = failed(train(&more, &run, &["--resume", "--steps", "3", "--allow-changed", "data.preprocess"]));
+    assert!(stderr.contains("sampler.targets_per_input is"), "{stderr}");
+    assert!(snapshot(&run) == before, "a refused resume changed the run");
+
+    let resumed = succeeded(train(&more, &run, &["--resume", "--steps", "3", "--allow-changed", "sampler"]));
+    assert!(resumed.contains("trained steps 2..3") && resumed.contains("sampler.targets_per_input is"), "{resumed}");
+}
+
 /// `reconstruct` and `eval` of a trainer run default to the width it trained at (56 here), an explicit
 /// `--width` wins, and a checkpoint that records no preprocessing (an older version's) keeps the release's
 /// width and says so.

@@ -213,6 +213,7 @@ fn run_sweep(args: SweepArgs) -> Result<()> {
     };
     let device = args.device.single()?;
     let options = args.options(scene)?;
+    let _lock = output::lock(out, "dggt bench")?;
     output::prepare(out, SWEEP_OUTPUT, args.overwrite.existing())?;
     let report = run_bench(&options, &device)?;
     let files = write_outputs(&report, out)?;

@@ -121,6 +121,7 @@ pub fn run(args: Args) -> Result<()> {
     let device = args.device.single()?;
     let options = args.options()?;
     let references = read_all(&args.reference)?;
+    let _lock = output::lock(&args.out, "dggt bench compute")?;
     output::prepare(&args.out, COMPUTE_OUTPUT, args.overwrite.existing())?;
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let json_path = args.out.join("compute.json");

@@ -8,6 +8,7 @@ use std::time::Duration;
 
 use anyhow::{Context, Result};
 use dggt_convert::batch::{self, ExistingScenes, FailurePolicy, Outcome, Progress, ProgressUnit, SegmentJob};
+use dggt_convert::masks::DynamicMaskStyle as MaskStyle;
 use dggt_convert::nuscenes::{FrameRate, NuScenesVersion};
 use dggt_convert::sky;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
@@ -70,6 +71,17 @@ pub enum DepthFlows {
     Boxes,
 }
 
+/// Dynamic masks to write.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum DynamicMasks {
+    /// The objects whose tracks move (faster than `--moving-speed`), each as its projected 3D box outline, placed
+    /// at the camera's own time; parked cars are static.
+    Moving,
+    /// The release's data exactly: drivestudio's rectangles (every box of a masked class on nuScenes and
+    /// Argoverse 2, parked cars included; boxes the lidar saw faster than 1 m/s on Waymo).
+    Drivestudio,
+}
+
 impl Dataset {
     fn converter(self, version: NuScenesVersion, rate: NuscenesRate) -> batch::Dataset {
         match self {
@@ -120,6 +132,13 @@ pub struct Args {
     /// tracked boxes, metres per second in the log's world; about 16 bytes per 16 pixels of every image).
     #[arg(long, value_enum, default_value = "none")]
     depth_flows: DepthFlows,
+    /// Dynamic masks (recorded in `dynamic_masks/SOURCE.txt`).
+    #[arg(long, value_enum, default_value = "moving")]
+    dynamic_masks: DynamicMasks,
+    /// With `--dynamic-masks moving`: the horizontal speed (m/s) above which an object moves, from its track's
+    /// displacement over a second (Waymo: its annotated speed).
+    #[arg(long, default_value_t = dggt_convert::tracks::DEFAULT_MOVING_SPEED_M_S)]
+    moving_speed: f64,
     /// Convert the chosen scenes again even when their folders exist, replacing each once its new version is
     /// complete. Without it, a scene finished from the same source with the same options is skipped and any
     /// other folder in its place is refused.
@@ -140,8 +159,13 @@ pub fn run(args: Args) -> Result<()> {
         nuscenes_rate,
         sky_masks,
         depth_flows,
+        dynamic_masks,
+        moving_speed,
         overwrite,
     } = args;
+    if !(moving_speed.is_finite() && moving_speed >= 0.0) {
+        anyhow::bail!("--moving-speed: expected a finite speed of 0 m/s or more, found {moving_speed}");
+    }
     let dataset = dataset.converter(version, nuscenes_rate);
     let names = dataset.variant().camera_names();
     let cameras = cameras.unwrap_or_else(|| (0..names.len()).collect());
@@ -161,7 +185,11 @@ pub fn run(args: Args) -> Result<()> {
         DepthFlows::None => dggt_convert::depth_flows::DepthFlows::None,
         DepthFlows::Boxes => dggt_convert::depth_flows::DepthFlows::FromBoxes,
     };
-    let options = batch::ConvertOptions { cameras, sky_masks, depth_flows };
+    let dynamic_masks = match dynamic_masks {
+        DynamicMasks::Moving => MaskStyle::MovingOutlines { min_speed_m_s: moving_speed },
+        DynamicMasks::Drivestudio => MaskStyle::Drivestudio,
+    };
+    let options = batch::ConvertOptions { cameras, sky_masks, depth_flows, dynamic_masks };
     let existing = if overwrite { ExistingScenes::Replace } else { ExistingScenes::Keep };
     let outcomes = batch::convert_segments(&dataset, &jobs, &options, workers, policy, existing, &bars)?;
     bars.overall.finish_and_clear();

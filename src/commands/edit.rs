@@ -77,6 +77,9 @@ pub fn run(args: Args) -> Result<()> {
     if edits.is_empty() {
         bail!("nothing to edit: give --remove, --move, --insert or --remove-box");
     }
+    let named = [("--scene", Some(&args.scene))].into_iter().chain(args.refine.paths());
+    output::refuse_inside_output(&args.out, named.filter_map(|(flag, path)| Some((flag, path?.as_path()))))?;
+    let _lock = output::lock(&args.out, "dggt edit")?;
     let refine = args.refine.spec()?;
     if refine.as_ref().is_some_and(|spec| spec.reference != ReferenceView::None) {
         bail!("--refine-reference: an edit has no input images beside its renders; use none");

@@ -9,7 +9,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 use dggt_eval::protocol::{DEFAULT_CAMERAS, DEFAULT_WINDOW, PAPER_EVERY};
 use dggt_eval::{CropImages, EvalOptions, LpipsWeights, Protocol, evaluate};
-use dggt_infer::Architecture;
+use dggt_infer::{Architecture, CameraSource};
 use dggt_model::Preset;
 
 use crate::backend::DeviceList;
@@ -30,6 +30,15 @@ pub enum ProtocolChoice {
     /// Every `--every`-th frame is an input; inputs, in-between frames and frames after the last input reported
     /// separately.
     Interpolation,
+}
+
+/// Where `--poses` takes the cameras from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum PosesChoice {
+    /// The camera head's, targets interpolated between the inputs: the paper's unposed protocol.
+    Predicted,
+    /// The export's poses, relative to the first input view (how `render.cameras = "ground_truth"` trains).
+    Export,
 }
 
 /// Arguments of `dggt eval`.
@@ -60,6 +69,14 @@ pub struct Args {
     /// Export camera ids (comma separated) [default: 0,1,2].
     #[arg(long, value_delimiter = ',')]
     pub cameras: Option<Vec<usize>>,
+    /// Only these frames are scored besides the inputs (comma separated): the frames a training run held out
+    /// (its `sampler.held_out`), so that no scored frame between the inputs was trained on [default: every
+    /// frame of the window].
+    #[arg(long, value_delimiter = ',')]
+    pub score_frames: Option<Vec<usize>>,
+    /// Where the cameras come from: `predicted` (unposed) or `export`.
+    #[arg(long, value_enum, default_value = "predicted")]
+    pub poses: PosesChoice,
     /// LPIPS linear weights (the lpips package's `alex.pth`, a full LPIPS state dict, or safetensors).
     #[arg(long)]
     pub lpips_weights: Option<PathBuf>,
@@ -110,6 +127,7 @@ impl Args {
                 Protocol::interpolation(start, length, self.every.unwrap_or(PAPER_EVERY), cameras)
             }
         };
+        let protocol = Protocol { scored: self.score_frames.clone(), ..protocol };
         protocol.validate()?;
         Ok(protocol)
     }
@@ -132,6 +150,10 @@ impl Args {
         });
         options.refine = self.refine.spec()?;
         options.crops = if self.crops { CropImages::Write } else { CropImages::Skip };
+        options.poses = match self.poses {
+            PosesChoice::Predicted => CameraSource::Predicted,
+            PosesChoice::Export => CameraSource::GroundTruth,
+        };
         Ok(options)
     }
 }
@@ -154,6 +176,14 @@ fn check_distinct(scenes: &[PathBuf]) -> Result<()> {
 pub fn run(args: Args) -> Result<()> {
     let device = args.device.single()?;
     let options = args.options()?;
+    let named = args.scenes.iter().map(|scene| ("--scene", Some(scene)));
+    let named = named
+        .chain([("--checkpoint", Some(&args.checkpoint)), ("--config", args.config.as_ref())])
+        .chain([("--lpips-weights", args.lpips_weights.as_ref()), ("--alexnet", args.alexnet.as_ref())])
+        .chain(args.refine.paths())
+        .filter_map(|(flag, path)| Some((flag, path?.as_path())));
+    output::refuse_inside_output(&options.out, named)?;
+    let _lock = output::lock(&options.out, "dggt eval")?;
     output::prepare(&options.out, OUTPUT, args.overwrite.existing())?;
     let report = evaluate(&options, &device)?;
     print!("{}", report.markdown());

@@ -10,7 +10,7 @@ use dggt_reconstruct::{ReconstructOptions, TimeRequest, reconstruct};
 use dggt_refine::ReferenceView;
 
 use crate::backend::DeviceList;
-use crate::commands::output::{self, OutputBoundArg, OutputKind, OverwriteArg};
+use crate::commands::output::{self, OutputBoundArg, OutputKind, OverwriteArg, StagedOutput};
 use crate::commands::parse_range;
 use crate::commands::refine::{RefineArgs, RefineJob, load_refiner, refine_files};
 
@@ -78,17 +78,24 @@ pub const REFINED_RENDERS: &str = "renders_refined";
 
 /// Runs the reconstruction with progress on stderr and prints its summary; with `--refine`, refines every
 /// render into `renders_refined/` under the same name (attending to its nearest input view in `images/` with
-/// `--refine-reference nearest-input`).
+/// `--refine-reference nearest-input`). Everything is written beside `--out` and moved into place at the end.
 pub fn run(args: Args) -> Result<()> {
+    let named = [("--images", Some(&args.images)), ("--checkpoint", Some(&args.checkpoint))]
+        .into_iter()
+        .chain([("--config", args.config.as_ref()), ("--rerun", args.rerun.as_ref())])
+        .chain(args.refine.paths())
+        .filter_map(|(flag, path)| Some((flag, path?.as_path())));
+    output::refuse_inside_output(&args.out, named)?;
+    let _lock = output::lock(&args.out, "dggt reconstruct")?;
     if let Some(file) = &args.rerun {
         check_rerun_build()?;
         output::prepare_file(file, "--rerun", args.overwrite.existing())?;
     }
-    output::prepare(&args.out, OUTPUT, args.overwrite.existing())?;
+    let staged = StagedOutput::begin(&args.out, OUTPUT, args.overwrite.existing())?;
     let device = args.device.single()?;
     let refine = args.refine.spec()?;
     let refiner = refine.as_ref().map(|spec| load_refiner(spec, &device)).transpose()?;
-    let mut options = ReconstructOptions::new(args.images, args.checkpoint, args.out);
+    let mut options = ReconstructOptions::new(args.images, args.checkpoint, staged.path());
     options.architecture = match (args.config, args.preset) {
         (Some(path), _) => Some(Architecture::Config(path)),
         (None, Some(preset)) => Some(Architecture::Preset(preset)),
@@ -128,13 +135,14 @@ pub fn run(args: Args) -> Result<()> {
         println!(
             "refined {} renders into {} (unrefined kept in renders/)",
             jobs.len(),
-            options.out.join(REFINED_RENDERS).display()
+            args.out.join(REFINED_RENDERS).display()
         );
     }
+    staged.finish()?;
     if let Some(file) = &args.rerun {
-        record(&options.out, file)?;
+        record(&args.out, file)?;
     }
-    println!("outputs: {} (summary.json)", options.out.display());
+    println!("outputs: {} (summary.json)", args.out.display());
     Ok(())
 }
 

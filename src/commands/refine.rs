@@ -173,6 +173,11 @@ pub struct RefineArgs {
 }
 
 impl RefineArgs {
+    /// The files these arguments name, each with its flag (for checks against the command's output folder).
+    pub fn paths(&self) -> [(&'static str, Option<&PathBuf>); 2] {
+        [("--refine", self.refine_model.as_ref()), ("--refine-checkpoint", self.refine_checkpoint.as_ref())]
+    }
+
     /// The refiner these arguments name, if any.
     pub fn spec(&self) -> Result<Option<RefinerSpec>> {
         let Some(model) = &self.refine_model else { return Ok(None) };

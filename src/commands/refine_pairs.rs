@@ -67,6 +67,7 @@ struct Tally {
 
 pub fn run(args: Args) -> Result<()> {
     let existing = args.overwrite.existing();
+    let _lock = output::lock(&args.out, "dggt refine-pairs")?;
     if !args.shards {
         output::prepare_file(&args.out, "--out", existing)?;
     }

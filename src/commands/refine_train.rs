@@ -53,6 +53,7 @@ pub fn run(args: Args) -> Result<()> {
     }
     config.validate().map_err(|e| anyhow::anyhow!("{}: {e}", args.config.display()))?;
     let start = if args.resume { Start::Resume } else { Start::Fresh };
+    let _lock = output::lock(&config.run.out_dir, "dggt refine-train")?;
     let mut trainer = RefineTrainer::new(config, args.device.device()?, start).map_err(|error| match error {
         RefineTrainError::Run(error) => train::run_with_flags(error),
         other => other.into(),

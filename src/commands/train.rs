@@ -7,9 +7,11 @@ use dggt_bench::curves::{RunCurves, default_label, draw_curves};
 use dggt_run::RunError;
 use dggt_run::progress::Visibility;
 use dggt_run::run_folder::METRICS;
+use dggt_train::resume::AllowedChanges;
 use dggt_train::{ProcessGroup, RunOptions, Start, TrainConfig, TrainError, Trainer};
 
 use crate::backend::DeviceList;
+use crate::commands::output;
 
 /// Train (or fine-tune) the network as a TOML configuration describes (`configs/`).
 #[derive(Debug, clap::Args)]
@@ -33,6 +35,11 @@ pub struct Args {
     /// Build everything and run no step (checks a configuration and its files).
     #[arg(long)]
     dry_run: bool,
+    /// With --resume: continue although this setting of what the network sees changed since the checkpoint
+    /// (`data.preprocess.target_width`, `sampler.max_inputs`, ..., or a whole section: `data.preprocess`,
+    /// `sampler`); repeatable. Without it such a change is refused.
+    #[arg(long, value_name = "KEY", requires = "resume")]
+    allow_changed: Vec<String>,
 }
 
 /// The training curves `dggt train` draws into its run folder at the end of a run.
@@ -60,7 +67,10 @@ pub fn run(args: Args) -> Result<()> {
     if group.size() > 1 {
         tracing::info!(rank = group.rank(), ranks = group.size(), "training as one rank of an MPI job");
     }
-    let mut trainer = Trainer::in_group(config, devices.devices()?, start, group).map_err(with_flags)?;
+    // The writing rank owns the run folder; the other ranks only read the checkpoint it names.
+    let _lock = group.is_writer().then(|| output::lock(&config.run.out_dir, "dggt train")).transpose()?;
+    let allowed = AllowedChanges::keys(args.allow_changed);
+    let mut trainer = Trainer::in_group(config, devices.devices()?, start, group, &allowed).map_err(with_flags)?;
     let params = burn::module::Module::num_params(trainer.model());
     tracing::info!(
         "{} parameters, starting at step {} of {}",

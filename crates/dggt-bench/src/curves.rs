@@ -11,9 +11,13 @@
 //! running median over [`LOSS_WINDOW`] logged steps centred on each step (fewer at the ends), which also keeps a
 //! single spike from bending it; the raw losses lie faintly behind it.
 //!
+//! Any finite value is drawn, up to the limits of `f64`: the loss axis spans at most [`LOSS_AXIS_DECADES`]
+//! powers of ten down from the highest loss (a lower loss lies on its bottom edge), the PSNR axis at most
+//! [`PSNR_AXIS_LIMIT`] either side of zero (a PSNR beyond lies on its edge), and every point is drawn within
+//! its panel, so that neither plotters' axes nor its lines meet an infinite range.
+//!
 //! Text needs a font file (the `font` module); without one the curves are drawn without text, with a warning.
 
-use std::cmp::Ordering;
 use std::path::{Path, PathBuf};
 use std::sync::Once;
 
@@ -35,6 +39,12 @@ pub const PNG_SIZE: (u32, u32) = (1280, 560);
 
 /// Logged steps in the running median of the loss.
 pub const LOSS_WINDOW: usize = 25;
+
+/// Powers of ten the loss axis spans at most: plotters' log axis needs its end over its start to be finite.
+pub const LOSS_AXIS_DECADES: i32 = 300;
+
+/// The largest magnitude the PSNR axis reaches: its width and padding then stay finite.
+pub const PSNR_AXIS_LIMIT: f64 = f64::MAX / 8.0;
 
 /// One colour per run, in order (repeating past the tenth run).
 const RUN_COLOURS: [RGBColor; 10] = [
@@ -176,11 +186,12 @@ pub fn running_median(values: &[f64], window: usize) -> Vec<f64> {
     (0..values.len())
         .map(|i| {
             let mut neighbourhood = values[i.saturating_sub(before)..(i + after + 1).min(values.len())].to_vec();
-            neighbourhood.sort_by(|a, b| a.partial_cmp(b).unwrap_or(Ordering::Equal));
+            neighbourhood.sort_by(f64::total_cmp);
             let middle = neighbourhood.len() / 2;
             match neighbourhood.len() % 2 {
                 1 => neighbourhood[middle],
-                _ => 0.5 * (neighbourhood[middle - 1] + neighbourhood[middle]),
+                // Without overflow at the limits of f64.
+                _ => neighbourhood[middle - 1].midpoint(neighbourhood[middle]),
             }
         })
         .collect()
@@ -241,8 +252,28 @@ fn value_range(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
     values.fold(None, |range, v| Some(range.map_or((v, v), |(low, high): (f64, f64)| (low.min(v), high.max(v)))))
 }
 
-fn points(series: &[(u64, f64)]) -> Vec<(f64, f64)> {
-    series.iter().map(|&(step, value)| (step as f64, value)).collect()
+/// The points of `series`, each value moved into `axis` (a value beyond it lies on its edge).
+fn points(series: &[(u64, f64)], axis: &std::ops::Range<f64>) -> Vec<(f64, f64)> {
+    series.iter().map(|&(step, value)| (step as f64, value.clamp(axis.start, axis.end))).collect()
+}
+
+/// The PSNR axis over the values `low..=high`: padded by 6 % of their spread and at least a decibel and a bit
+/// wide, so that a single validation gets readable ticks; within [`PSNR_AXIS_LIMIT`] either side of zero.
+fn psnr_axis(low: f64, high: f64) -> std::ops::Range<f64> {
+    let (low, high) = (low.clamp(-PSNR_AXIS_LIMIT, PSNR_AXIS_LIMIT), high.clamp(-PSNR_AXIS_LIMIT, PSNR_AXIS_LIMIT));
+    let spread = high - low;
+    let pad = 0.06 * spread.max(1.0) + 0.5 * (1.0 - spread).max(0.0);
+    // Far from zero a decibel is below the values' precision: the axis then keeps a relative width.
+    let pad = pad.max(1e-6 * low.abs().max(high.abs()));
+    (low - pad)..(high + pad)
+}
+
+/// The log axis of the positive losses `low..=high`: 10 % beyond them and at least half as high again as the
+/// lowest, ending at most at `f64::MAX` and starting at most [`LOSS_AXIS_DECADES`] powers of ten below its end.
+fn loss_axis(low: f64, high: f64) -> std::ops::Range<f64> {
+    let end = (high.max(low * 1.5) * 1.1).min(f64::MAX);
+    let start = (low * 0.9).max(end / 10f64.powi(LOSS_AXIS_DECADES)).max(f64::from_bits(1));
+    start..end
 }
 
 /// A legend's sample of a line: 24 pixels of it from the legend's anchor.
@@ -258,11 +289,7 @@ fn draw_validation(
 ) -> DrawResult {
     let all = runs.iter().flat_map(|run| run.validation_trained.iter().chain(&run.validation_average));
     let (psnr, caption) = match value_range(all.map(|&(_, psnr)| psnr)) {
-        Some((low, high)) => {
-            // At least a decibel and a bit, so that a single validation gets readable ticks.
-            let pad = 0.06 * (high - low).max(1.0) + 0.5 * (1.0 - (high - low)).max(0.0);
-            ((low - pad)..(high + pad), "validation PSNR (dB)")
-        }
+        Some((low, high)) => (psnr_axis(low, high), "validation PSNR (dB)"),
         None => (0.0..1.0, "validation PSNR (dB): no validation records"),
     };
     let mut chart = chart_builder(area, caption, with_text).build_cartesian_2d(steps.clone(), psnr.clone())?;
@@ -284,7 +311,7 @@ fn draw_validation(
     }
     for (index, run) in runs.iter().enumerate() {
         let colour = run_colour(index);
-        let average = points(&run.validation_average);
+        let average = points(&run.validation_average, &psnr);
         if !average.is_empty() {
             let series =
                 chart.draw_series(DashedLineSeries::new(average.clone(), 8, 5, colour.mix(0.6).stroke_width(2)))?;
@@ -295,7 +322,7 @@ fn draw_validation(
             }
             chart.draw_series(average.iter().map(|&point| Circle::new(point, 3, colour.mix(0.6).stroke_width(1))))?;
         }
-        let trained = points(&run.validation_trained);
+        let trained = points(&run.validation_trained, &psnr);
         let series = chart.draw_series(LineSeries::new(trained.clone(), colour.stroke_width(2)))?;
         if with_text {
             series
@@ -316,14 +343,15 @@ fn draw_loss(
     steps: std::ops::Range<f64>,
     with_text: bool,
 ) -> DrawResult {
-    let positive = |series: Vec<(u64, f64)>| -> Vec<(f64, f64)> {
-        series.into_iter().filter(|&(_, loss)| loss > 0.0).map(|(step, loss)| (step as f64, loss)).collect()
-    };
-    let raw: Vec<Vec<(f64, f64)>> =
+    let positive =
+        |series: Vec<(u64, f64)>| -> Vec<(u64, f64)> { series.into_iter().filter(|&(_, loss)| loss > 0.0).collect() };
+    let raw: Vec<Vec<(u64, f64)>> =
         runs.iter().map(|run| positive(run.train.iter().map(|p| (p.step, p.loss)).collect())).collect();
-    let smoothed: Vec<Vec<(f64, f64)>> = runs.iter().map(|run| positive(run.smoothed_loss())).collect();
     let (low, high) = value_range(raw.iter().flatten().map(|&(_, loss)| loss)).unwrap_or((0.1, 1.0));
-    let losses = (low * 0.9)..(high.max(low * 1.5) * 1.1);
+    let losses = loss_axis(low, high);
+    let raw: Vec<Vec<(f64, f64)>> = raw.iter().map(|series| points(series, &losses)).collect();
+    let smoothed: Vec<Vec<(f64, f64)>> =
+        runs.iter().map(|run| points(&positive(run.smoothed_loss()), &losses)).collect();
     let caption = format!("training loss (running median of {LOSS_WINDOW} steps)");
     let mut chart =
         chart_builder(area, &caption, with_text).build_cartesian_2d(steps.clone(), losses.clone().log_scale())?;
@@ -400,9 +428,14 @@ fn log_ticks(range: &std::ops::Range<f64>) -> Vec<(f64, bool)> {
     ticks
 }
 
-/// A loss tick's label with the decimals its power of ten needs (`0.05`, `0.2`, `1`, `20`).
+/// A loss tick's label with the decimals its power of ten needs (`0.05`, `0.2`, `1`, `20`), in scientific
+/// notation beyond 10^-4..10^5 (`2e-7`, `5e12`).
 fn format_loss(loss: f64) -> String {
-    let decimals = (-loss.log10().floor()).max(0.0) as usize;
+    let exponent = loss.log10().floor();
+    if !(-4.0..=5.0).contains(&exponent) {
+        return format!("{loss:e}");
+    }
+    let decimals = (-exponent).max(0.0) as usize;
     format!("{loss:.decimals$}")
 }
 
@@ -515,6 +548,93 @@ mod tests {
         assert_eq!(ticks.len(), 8 + 5, "0.02 to 0.09, then 0.1 to 0.5");
         let narrow: Vec<String> = log_ticks(&(0.35..0.65)).iter().filter(|t| t.1).map(|t| format_loss(t.0)).collect();
         assert_eq!(narrow, ["0.4", "0.5", "0.6"], "a range with one of 1, 2 or 5 labels every tick");
+    }
+
+    /// Runs `work` on its own thread and returns its result, failing when it takes more than a minute (a loop
+    /// that does not end) or panics.
+    fn returns_in_time<T: Send + 'static>(what: &str, work: impl FnOnce() -> T + Send + 'static) -> T {
+        let (sender, receiver) = std::sync::mpsc::channel();
+        std::thread::spawn(move || sender.send(work()));
+        match receiver.recv_timeout(std::time::Duration::from_secs(60)) {
+            Ok(result) => result,
+            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => panic!("{what}: did not return within a minute"),
+            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => panic!("{what}: panicked"),
+        }
+    }
+
+    /// Losses and PSNRs at and near the limits of f64, alone and mixed with ordinary and opposite extremes.
+    const EXTREME_SERIES: [&[f64]; 9] = [
+        &[1e308],
+        &[f64::MAX, f64::MAX],
+        &[f64::MAX, 1e308, 0.5],
+        &[f64::MIN_POSITIVE],
+        &[f64::MIN_POSITIVE, f64::MAX],
+        &[5e-324, 1e308, 0.3, f64::MIN_POSITIVE],
+        &[1e-300, 1e300],
+        &[-f64::MAX, f64::MAX, 1.0],
+        &[0.25, 1e308, 0.25, 0.25],
+    ];
+
+    /// A metrics file whose steps have `values` as loss and (a validation after each) as PSNR.
+    fn extreme_metrics(values: &[f64]) -> String {
+        let mut lines = String::new();
+        for (step, value) in values.iter().enumerate() {
+            let value = serde_json::to_string(value).unwrap();
+            lines.push_str(&format!(
+                "{{\"kind\":\"train\",\"step\":{step},\"loss\":{value},\"target_psnr\":{value}}}\n"
+            ));
+            lines.push_str(&format!("{{\"kind\":\"validation\",\"step\":{step},\"psnr\":{value}}}\n"));
+            lines.push_str(&format!(
+                "{{\"kind\":\"validation\",\"step\":{step},\"weights\":\"average\",\"psnr\":{value}}}\n"
+            ));
+        }
+        lines
+    }
+
+    #[test]
+    fn values_at_the_limits_of_f64_are_read_smoothed_and_drawn() {
+        for values in EXTREME_SERIES {
+            let dir = run_folder(&extreme_metrics(values));
+            let curves = RunCurves::read(dir.path(), "extreme").unwrap();
+            let losses: Vec<f64> = curves.train.iter().map(|point| point.loss).collect();
+            assert_eq!(losses, values, "every finite loss is kept as written");
+            assert_eq!(curves.validation_trained.len(), values.len(), "{values:?}");
+            let smoothed = curves.smoothed_loss();
+            assert!(smoothed.iter().all(|&(_, loss)| loss.is_finite()), "{values:?}: {smoothed:?}");
+            for with_text in [false, font_available()] {
+                let runs = vec![curves.clone()];
+                let buffer = returns_in_time(&format!("drawing {values:?}"), move || {
+                    let (width, height) = PNG_SIZE;
+                    let mut buffer = vec![255u8; width as usize * height as usize * 3];
+                    draw(&runs, &mut buffer, with_text).map_err(|e| e.to_string()).map(|()| buffer)
+                });
+                let buffer = buffer.unwrap_or_else(|e| panic!("{values:?}: {e}"));
+                assert!(left_half_has(&buffer, run_colour(0)), "{values:?}: the PSNR is drawn");
+            }
+        }
+    }
+
+    #[test]
+    fn axes_and_medians_stay_finite_and_bounded_at_the_limits_of_f64() {
+        assert_eq!(running_median(&[f64::MAX, f64::MAX], 2), [f64::MAX, f64::MAX], "no overflow to infinity");
+        assert_eq!(running_median(&[-f64::MAX, f64::MAX], 2), [0.0, f64::MAX]);
+        assert_eq!(running_median(&[5e-324, 5e-324], 2), [5e-324, 5e-324], "no underflow to zero");
+        let extremes = [f64::MIN_POSITIVE, 5e-324, 1e-300, 0.5, 1e300, 1e308, f64::MAX];
+        for &low in &extremes {
+            for &high in extremes.iter().filter(|&&high| high >= low) {
+                let axis = loss_axis(low, high);
+                assert!(axis.start > 0.0 && axis.end.is_finite() && axis.start < axis.end, "{low}..{high}: {axis:?}");
+                assert!((axis.end / axis.start).is_finite(), "{low}..{high}: plotters divides the ends: {axis:?}");
+                assert!(axis.end >= high, "{low}..{high}: the highest loss is on the axis: {axis:?}");
+                let ticks = returns_in_time("log ticks", move || log_ticks(&axis));
+                assert!(ticks.len() <= 9 * (LOSS_AXIS_DECADES as usize + 3), "{low}..{high}: {} ticks", ticks.len());
+                assert!(ticks.iter().all(|(tick, _)| tick.is_finite() && !format_loss(*tick).is_empty()));
+                let psnr = psnr_axis(-high, high);
+                assert!(psnr.start < psnr.end && (psnr.end - psnr.start).is_finite(), "{high}: {psnr:?}");
+            }
+        }
+        assert_eq!(format_loss(1e308), "1e308");
+        assert_eq!(format_loss(2e-7), "2e-7");
     }
 
     /// Whether the left half of the RGB `buffer` has a pixel of `colour`.

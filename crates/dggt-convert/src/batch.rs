@@ -6,7 +6,8 @@
 //! was converted from and with, [`Provenance`]), and is then renamed into place, so `<out>/{i:03}/` only ever
 //! holds a finished scene. A re-run skips a scene whose marker records the same conversion, refuses any other
 //! folder in its place unless told to replace it ([`ExistingScenes`]), and restarts an interrupted scene from
-//! scratch; a failed scene leaves no partial folder behind.
+//! scratch; a failed scene leaves no partial folder behind. A scene being converted is locked
+//! ([`dggt_data::output_lock`]): another command converting the same scene fails on it at once, naming the first.
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -15,7 +16,8 @@ use rayon::prelude::*;
 
 use crate::depth_flows::DepthFlows;
 use crate::error::{ConvertError, Result};
-use crate::marker::{DoneMarker, Found, Provenance, Refusal, examine, read_done, write_done};
+use crate::marker::{DoneMarker, Found, Provenance, Refusal, examine, read_done, source_stamp, write_done};
+use crate::masks::DynamicMaskStyle;
 use crate::nuscenes::{FrameRate, NuScenesOptions, NuScenesVersion, Tables};
 use crate::sky::SkyMasks;
 use crate::waymo::{WaymoOptions, convert_segment};
@@ -40,12 +42,13 @@ pub enum ProgressUnit {
 }
 
 /// What every segment of a run is converted with.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct ConvertOptions {
     /// Export camera ids.
     pub cameras: Vec<usize>,
     pub sky_masks: SkyMasks,
     pub depth_flows: DepthFlows,
+    pub dynamic_masks: DynamicMaskStyle,
 }
 
 impl Dataset {
@@ -135,6 +138,7 @@ impl Prepared {
                     cameras: options.cameras.clone(),
                     sky_masks: options.sky_masks,
                     depth_flows: options.depth_flows,
+                    dynamic_masks: options.dynamic_masks,
                 };
                 let summary = convert_segment(input, scene, &waymo, progress)?;
                 (summary.frames, summary.instances)
@@ -148,6 +152,7 @@ impl Prepared {
                     cameras: options.cameras.clone(),
                     sky_masks: options.sky_masks,
                     depth_flows: options.depth_flows,
+                    dynamic_masks: options.dynamic_masks,
                     rate: *rate,
                 };
                 let summary = crate::nuscenes::convert_scene(tables, job.index, scene, &nuscenes, progress)?;
@@ -213,7 +218,7 @@ pub enum FailurePolicy {
 pub enum Outcome {
     Converted(Converted),
     /// A previous run finished it from the same source with the same options.
-    AlreadyDone(DoneMarker),
+    AlreadyDone(Box<DoneMarker>),
     /// Something else is in the scene's place (see [`ExistingScenes`]); it was left as it was.
     Refused(Refusal),
     Failed(ConvertError),
@@ -308,6 +313,10 @@ fn convert_one(
     existing: ExistingScenes,
     progress: &dyn Progress,
 ) -> Outcome {
+    let _lock = match dggt_data::output_lock::OutputLock::acquire(&job.scene, "dggt convert") {
+        Ok(lock) => lock,
+        Err(error) => return Outcome::Failed(error.into()),
+    };
     let provenance = provenance(dataset, job, options);
     if existing == ExistingScenes::Keep {
         match examine(&job.scene, &provenance) {
@@ -324,13 +333,21 @@ fn convert_one(
 
 /// What converting `job` with `options` records in its done marker.
 fn provenance(dataset: &Dataset, job: &SegmentJob, options: &ConvertOptions) -> Provenance {
+    // nuScenes: the data root holds every scene's files, too many to stamp per scene; its tables say what a
+    // scene is made of.
+    let stamped = match dataset {
+        Dataset::NuScenes(version, _) => job.input.join(version.folder()),
+        Dataset::Waymo | Dataset::Argoverse2 => job.input.clone(),
+    };
     Provenance {
         source: std::fs::canonicalize(&job.input).unwrap_or_else(|_| job.input.clone()),
+        source_stamp: source_stamp(&stamped),
         segment: job.name.clone(),
         dataset: dataset.describe(),
         cameras: options.cameras.clone(),
         sky_masks: options.sky_masks.name().into(),
         depth_flows: options.depth_flows.name().into(),
+        dynamic_masks: options.dynamic_masks.describe(),
         converter: format!("dggt-convert {}", env!("CARGO_PKG_VERSION")),
     }
 }

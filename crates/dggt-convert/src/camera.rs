@@ -51,6 +51,29 @@ impl EgoCamera {
         Some(DVec2::new(k.fx * distorted.x + k.cx, k.fy * distorted.y + k.cy))
     }
 
+    /// Pixel coordinates of a camera-frame point in front of the camera, for outlines that reach beyond the
+    /// image: the lens model is applied at most out to the image corners' radius (beyond, OpenCV's polynomial
+    /// can fold back towards the centre), and the point is carried on from there along its own ray direction.
+    pub fn project_camera_point(&self, point_in_camera: DVec3) -> Option<DVec2> {
+        if point_in_camera.z <= 0.0 {
+            return None;
+        }
+        let ideal = DVec2::new(point_in_camera.x / point_in_camera.z, point_in_camera.y / point_in_camera.z);
+        let k = &self.intrinsics;
+        let corner = DVec2::new(
+            (k.cx.abs()).max((self.size.width as f64 - k.cx).abs()) / k.fx,
+            (k.cy.abs()).max((self.size.height as f64 - k.cy).abs()) / k.fy,
+        );
+        let limit = corner.length();
+        let radius = ideal.length();
+        let distorted = if radius <= limit {
+            self.distortion.apply(ideal)
+        } else {
+            self.distortion.apply(ideal * (limit / radius)) * (radius / limit)
+        };
+        Some(DVec2::new(k.fx * distorted.x + k.cx, k.fy * distorted.y + k.cy))
+    }
+
     /// [`Self::project`], kept only when the pixel lies inside the image.
     pub fn project_inside(&self, point_in_ego: DVec3) -> Option<DVec2> {
         let pixel = self.project(point_in_ego)?;

@@ -25,6 +25,9 @@ pub enum ConvertError {
     BoxFlow { path: PathBuf, frame: usize, source: crate::box_flow::BoxFlowError },
     #[error(transparent)]
     Data(#[from] dggt_data::DataError),
+    /// Another command is converting into the scene's folder.
+    #[error(transparent)]
+    Lock(#[from] dggt_data::output_lock::LockError),
     /// A nuScenes version given by name is not a plain folder name.
     #[error("{name:?} is not a folder name (a nuScenes version such as v1.0-mini)")]
     VersionName { name: String },

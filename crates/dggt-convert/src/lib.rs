@@ -9,7 +9,8 @@
 //! - [`batch`]: many segments in parallel into numbered scene folders, finished ones skipped when their done
 //!   marker records the same conversion.
 //! - Shared by the datasets: [`camera`] (projection with lens distortion), [`boxes`] (annotated 3D boxes),
-//!   [`masks`] (dynamic masks from projected boxes), [`sky`] (approximate sky masks from lidar), [`instances`]
+//!   [`tracks`] (each object's boxes over time: its speed, its box at a camera's own time), [`masks`] (dynamic
+//!   masks from projected boxes: moving objects' outlines, or drivestudio's rectangles), [`sky`] (approximate sky masks from lidar), [`instances`]
 //!   (`instances/`), [`box_flow`] (scene flow of lidar points from tracked boxes) and [`depth_flows`]
 //!   (`depth_flows_4/`: lidar depth and that flow per quarter-resolution cell), [`marker`] (the done marker a finished scene gets, recording what it was converted from).
 //!
@@ -29,6 +30,7 @@ pub mod masks;
 pub mod nuscenes;
 pub mod sky;
 pub mod tfrecord;
+pub mod tracks;
 pub mod waymo;
 
 pub use error::{ConvertError, RecordAt, Result};

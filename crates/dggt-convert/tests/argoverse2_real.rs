@@ -9,6 +9,7 @@ use std::path::PathBuf;
 use dggt_convert::argoverse2::convert_log;
 use dggt_convert::batch::ConvertOptions;
 use dggt_convert::depth_flows::DepthFlows;
+use dggt_convert::masks::DynamicMaskStyle;
 use dggt_convert::sky::SkyMasks;
 use dggt_data::{DynamicMaskKind, ExportLayout, ExportVariant, read_export};
 use image::RgbImage;
@@ -194,7 +195,12 @@ fn a_non_unit_quaternion_and_a_missing_table_are_errors_naming_the_file() {
 }
 
 fn cameras(ids: &[usize]) -> ConvertOptions {
-    ConvertOptions { cameras: ids.to_vec(), sky_masks: SkyMasks::None, depth_flows: DepthFlows::None }
+    ConvertOptions {
+        cameras: ids.to_vec(),
+        sky_masks: SkyMasks::None,
+        depth_flows: DepthFlows::None,
+        dynamic_masks: DynamicMaskStyle::Drivestudio,
+    }
 }
 
 /// One object's box at a frame, from `instances_info.json`: log world <- box, and its size.

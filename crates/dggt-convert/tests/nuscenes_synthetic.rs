@@ -6,6 +6,7 @@
 use std::path::Path;
 
 use dggt_convert::depth_flows::DepthFlows;
+use dggt_convert::masks::DynamicMaskStyle;
 use dggt_convert::nuscenes::{FrameRate, NuScenesOptions, NuScenesVersion, Tables, convert_scene};
 use dggt_convert::sky::SkyMasks;
 use dggt_data::{DynamicMaskKind, ExportLayout, text};
@@ -20,11 +21,22 @@ fn convert(root: &Path, out: &Path, cameras: &[usize]) -> Result<usize, String> 
 }
 
 fn convert_at(root: &Path, out: &Path, cameras: &[usize], rate: FrameRate) -> Result<usize, String> {
+    convert_with(root, out, cameras, rate, DynamicMaskStyle::Drivestudio)
+}
+
+fn convert_with(
+    root: &Path,
+    out: &Path,
+    cameras: &[usize],
+    rate: FrameRate,
+    dynamic_masks: DynamicMaskStyle,
+) -> Result<usize, String> {
     let tables = Tables::read(root, &NuScenesVersion::Mini).map_err(|e| e.to_string())?;
     let options = NuScenesOptions {
         cameras: cameras.to_vec(),
         sky_masks: SkyMasks::Lidar,
         depth_flows: DepthFlows::FromBoxes,
+        dynamic_masks,
         rate,
     };
     convert_scene(&tables, 0, out, &options, &|_| {}).map(|s| s.frames).map_err(|e| e.to_string())
@@ -72,7 +84,7 @@ fn a_synthetic_scene_converts_to_the_hand_computed_poses_points_and_masks() {
     // target pixel.
     let bytes = std::fs::read(layout.lidar(0)).unwrap();
     let values: Vec<f32> = bytes.chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().unwrap())).collect();
-    assert_eq!(values.len(), 12);
+    assert_eq!(values.len(), 16);
     assert_eq!(values[3], 7.0);
     let point = DVec3::new(values[0].into(), values[1].into(), values[2].into());
     let world = read_matrix(&layout.lidar_pose(0)).transform_point3(point);
@@ -130,6 +142,36 @@ fn a_synthetic_scene_converts_to_the_hand_computed_poses_points_and_masks() {
 
 /// CAM_FRONT's depth-flow maps, read by the loader: the point on the car moves with it, every other return is
 /// static.
+#[test]
+fn a_moving_car_is_masked_by_its_outline_and_a_slow_one_not_at_all() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = write_root(dir.path(), |_| {});
+    // The car keeps 12 m ahead of an ego driving at 10 m/s: it moves.
+    let moving = DynamicMaskStyle::MovingOutlines { min_speed_m_s: 0.5 };
+    let out = dir.path().join("moving");
+    convert_with(&root, &out, &[0, 5], FrameRate::KeyFrames, moving).unwrap();
+    let layout = ExportLayout::new(&out);
+    let mask = image::open(layout.dynamic_mask(DynamicMaskKind::Vehicle, 0, 0)).unwrap().to_luma8();
+    // Seen from straight behind, the outline is the near face (the far one lies inside it): every pixel whose
+    // centre is inside u 34.1 .. 45.9, v 28.5 .. 37.4.
+    let (u0, u1) = (CX - FX / 8.5, CX + FX / 8.5);
+    let (v0, v1) = (CY + FX * -0.25 / 8.5, CY + FX * 1.25 / 8.5);
+    for (col, row, value) in mask.enumerate_pixels() {
+        let (u, v) = (col as f64 + 0.5, row as f64 + 0.5);
+        let inside = (u0..=u1).contains(&u) && (v0..=v1).contains(&v);
+        assert_eq!(value.0[0] == 255, inside, "pixel ({col}, {row})");
+    }
+    let note = std::fs::read_to_string(out.join("dynamic_masks/SOURCE.txt")).unwrap();
+    assert!(note.contains("moving-outlines (> 0.5 m/s)"), "{note}");
+
+    // Above 20 m/s nothing this car does counts as moving.
+    let out = dir.path().join("fast-only");
+    let fast_only = DynamicMaskStyle::MovingOutlines { min_speed_m_s: 20.0 };
+    convert_with(&root, &out, &[0], FrameRate::KeyFrames, fast_only).unwrap();
+    let mask = image::open(ExportLayout::new(&out).dynamic_mask(DynamicMaskKind::All, 1, 0)).unwrap();
+    assert!(mask.to_luma8().pixels().all(|p| p.0[0] == 0));
+}
+
 fn assert_front_depth_flows(out: &Path, frames: usize) {
     let scene = dggt_data::read_export(out, &Default::default()).unwrap();
     assert_eq!(scene.depth_source(), Some(dggt_data::DepthSource::DepthFlows4));

@@ -33,7 +33,8 @@ pub struct DatasetSpec {
     pub name: Option<String>,
     /// A folder of scene folders, or one scene folder.
     pub root: Option<PathBuf>,
-    /// A text file listing scene folders, one per line, relative to the file's folder; `#` starts a comment.
+    /// A text file listing scene folders, one per line, relative to the file's folder (and inside it: no `..`,
+    /// no absolute path, no symbolic link leading out); `#` starts a comment.
     pub list: Option<PathBuf>,
     /// Glob patterns matching scene folders.
     pub globs: Vec<String>,
@@ -140,7 +141,7 @@ impl DatasetSpec {
         let mut folders = if let Some(root) = &self.root {
             if is_scene_folder(root) { vec![root.clone()] } else { subfolders(root)? }
         } else if let Some(list) = &self.list {
-            read_list(list)?.into_iter().map(|line| list.parent().unwrap_or(Path::new(".")).join(line)).collect()
+            listed_folders(list)?
         } else {
             self.glob_folders()?
         };
@@ -185,13 +186,37 @@ fn subfolders(root: &Path) -> Result<Vec<PathBuf>> {
 }
 
 fn read_list(path: &Path) -> Result<Vec<String>> {
+    Ok(numbered_entries(path)?.into_iter().map(|(_, entry)| entry).collect())
+}
+
+/// The entries of a list file with their line numbers (from 1): each line up to a `#`, trimmed, when not empty.
+fn numbered_entries(path: &Path) -> Result<Vec<(usize, String)>> {
     let text = std::fs::read_to_string(path).map_err(|e| DataError::io(path, e))?;
     Ok(text
         .lines()
-        .map(|line| line.split('#').next().unwrap_or("").trim())
-        .filter(|line| !line.is_empty())
-        .map(str::to_owned)
+        .enumerate()
+        .map(|(index, line)| (index + 1, line.split('#').next().unwrap_or("").trim()))
+        .filter(|(_, line)| !line.is_empty())
+        .map(|(number, line)| (number, line.to_owned()))
         .collect())
+}
+
+/// The scene folders the list file `list` names, each inside the list's folder ([`crate::confined`]); one that
+/// leads out is an error naming the file and the line.
+fn listed_folders(list: &Path) -> Result<Vec<PathBuf>> {
+    let base = list.parent().filter(|parent| !parent.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    numbered_entries(list)?
+        .into_iter()
+        .map(|(number, entry)| {
+            crate::confined::confined_path(base, Path::new(&entry)).map_err(|escape| {
+                DataError::malformed(
+                    list,
+                    format!("line {number}: a scene folder inside the list's folder"),
+                    escape.to_string(),
+                )
+            })
+        })
+        .collect()
 }
 
 fn folder_name(path: &Path) -> String {
@@ -429,4 +454,44 @@ fn check_images(root: &Path, frames: &Range<usize>, cameras: &[usize]) -> Result
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A list file beside the scene folders `a` and `b`, with `lines` after a comment and a listed `a`.
+    fn list_with(dir: &Path, lines: &str) -> DatasetSpec {
+        for scene in ["a", "b"] {
+            std::fs::create_dir_all(dir.join("scenes").join(scene).join("images")).unwrap();
+        }
+        let list = dir.join("scenes/list.txt");
+        std::fs::write(&list, format!("# training scenes\na  # the first\n\n{lines}")).unwrap();
+        DatasetSpec { list: Some(list), ..DatasetSpec::default() }
+    }
+
+    #[test]
+    fn a_list_names_scene_folders_relative_to_its_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        let folders = list_with(dir.path(), "./b\n").scene_folders().unwrap();
+        assert_eq!(folders, [dir.path().join("scenes/a"), dir.path().join("scenes/./b")]);
+    }
+
+    #[test]
+    fn a_listed_folder_leading_out_of_the_lists_folder_is_refused_naming_the_file_and_line() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir_all(dir.path().join("elsewhere/images")).unwrap();
+        let absolute = dir.path().join("elsewhere").display().to_string();
+        for (line, why) in [("../elsewhere", "`..` component"), (absolute.as_str(), "is absolute")] {
+            let spec = list_with(dir.path(), &format!("{line}\n"));
+            let error = spec.scene_folders().unwrap_err().to_string();
+            assert!(error.contains("list.txt") && error.contains("line 4") && error.contains(why), "{error}");
+        }
+        #[cfg(unix)]
+        {
+            std::os::unix::fs::symlink(dir.path().join("elsewhere"), dir.path().join("scenes/linked")).unwrap();
+            let error = list_with(dir.path(), "linked\n").scene_folders().unwrap_err().to_string();
+            assert!(error.contains("line 4") && error.contains("leads outside"), "{error}");
+        }
+    }
 }

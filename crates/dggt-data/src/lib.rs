@@ -13,11 +13,13 @@
 //!   [`loader`] streams decoded training samples through it.
 //! - [`summary`]: what `dggt inspect` reports about a scene; [`window`]: a window of frames checked against a
 //!   scene's.
-//! - [`text`], [`npy`], [`images`], [`io`]: untrusted-input readers and atomic writers.
+//! - [`text`], [`npy`], [`images`], [`io`]: untrusted-input readers and atomic writers; [`confined`]: paths that
+//!   untrusted files name, kept inside their folder; [`output_lock`]: one command at a time per output.
 //! - [`random`]: the seeded generator (SplitMix64) of the sampler, the stress suite, and test and bench scenes.
 //!
 //! Every reader returns a [`DataError`] naming the file and what was expected; nothing here panics on bad input.
 
+pub mod confined;
 pub mod depth_flow;
 mod error;
 pub mod export;
@@ -32,6 +34,7 @@ pub mod loader;
 pub mod mix;
 pub mod npy;
 mod open;
+pub mod output_lock;
 pub mod prefetch;
 pub mod preprocess;
 pub mod random;

@@ -20,6 +20,10 @@
 //!
 //! Every view of a step uses the same cameras: the configured ones in the configured order, or all of them.
 //!
+//! Held-out frames (`held_out`, for validation on frames training never sees) are taken out of the log first:
+//! the rules above then run on the frames that remain, so a window counts remaining frames and no input or
+//! target is ever a held-out frame. Without held-out frames every sample is what it was before they existed.
+//!
 //! Reproducibility: [`Sampler::sample_at`] derives a generator from `(seed, step)` alone, so step `k` of a run
 //! can be reproduced, or training resumed at step `k`, without replaying steps `0..k`. The generator is
 //! xoshiro256++ (a fixed algorithm, unlike `StdRng`), so samples are stable for a given `rand` version, which
@@ -49,11 +53,22 @@ pub struct SamplerConfig {
     pub target_margin: usize,
     /// Camera positions in the scene used for every view, in this order; empty means all cameras.
     pub cameras: Vec<usize>,
+    /// Frame positions no step draws, as input or target: held out for validation.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub held_out: Vec<usize>,
 }
 
 impl Default for SamplerConfig {
     fn default() -> Self {
-        Self { min_inputs: 4, max_inputs: 8, window: 20, targets_per_input: 2, target_margin: 1, cameras: Vec::new() }
+        Self {
+            min_inputs: 4,
+            max_inputs: 8,
+            window: 20,
+            targets_per_input: 2,
+            target_margin: 1,
+            cameras: Vec::new(),
+            held_out: Vec::new(),
+        }
     }
 }
 
@@ -86,8 +101,15 @@ impl SamplerConfig {
     pub fn validate(&self, frame_count: usize, camera_count: usize) -> Result<()> {
         let fail = |message: String| Err(DataError::Config(format!("sampler: {message}")));
         self.check_counts()?;
-        if self.window > frame_count {
-            return fail(format!("the window of {} frames is longer than the log ({frame_count} frames)", self.window));
+        if let Some(outside) = self.held_out.iter().find(|&&f| f >= frame_count) {
+            return fail(format!("held-out frame {outside} does not exist; the log has {frame_count} frames"));
+        }
+        let remaining = self.remaining_frames(frame_count).len();
+        if self.window > remaining {
+            return fail(format!(
+                "the window of {} frames is longer than the log ({frame_count} frames, {remaining} of them not held out)",
+                self.window
+            ));
         }
         if camera_count == 0 {
             return fail("the scene has no cameras".into());
@@ -101,6 +123,13 @@ impl SamplerConfig {
             }
         }
         Ok(())
+    }
+}
+
+impl SamplerConfig {
+    /// The frames of a log of `frame_count` that steps draw from: every one not held out, in order.
+    fn remaining_frames(&self, frame_count: usize) -> Vec<usize> {
+        (0..frame_count).filter(|f| !self.held_out.contains(f)).collect()
     }
 }
 
@@ -119,6 +148,8 @@ pub struct TrainingSample {
 #[derive(Debug, Clone)]
 pub struct Sampler {
     config: SamplerConfig,
+    /// The frames steps draw from (the log's, less the held-out ones); the rules run on positions into it.
+    frames: Vec<usize>,
     frame_count: usize,
     cameras: Vec<usize>,
 }
@@ -128,7 +159,8 @@ impl Sampler {
     pub fn new(config: SamplerConfig, frame_count: usize, camera_count: usize) -> Result<Self> {
         config.validate(frame_count, camera_count)?;
         let cameras = if config.cameras.is_empty() { (0..camera_count).collect() } else { config.cameras.clone() };
-        Ok(Self { config, frame_count, cameras })
+        let frames = config.remaining_frames(frame_count);
+        Ok(Self { frame_count: frames.len(), frames, config, cameras })
     }
 
     pub fn config(&self) -> &SamplerConfig {
@@ -149,7 +181,12 @@ impl Sampler {
             index::sample(rng, config.window, input_count).into_iter().map(|i| window_start + i).collect();
         input_frames.sort_unstable();
         let target_frames = self.draw_targets(&input_frames, rng);
-        TrainingSample { input_frames, target_frames, cameras: self.cameras.clone() }
+        let in_log = |positions: Vec<usize>| positions.into_iter().map(|p| self.frames[p]).collect();
+        TrainingSample {
+            input_frames: in_log(input_frames),
+            target_frames: in_log(target_frames),
+            cameras: self.cameras.clone(),
+        }
     }
 
     /// The sample of training step `step` of the run seeded with `seed`; it depends on `(seed, step)` only.
@@ -257,8 +294,15 @@ mod tests {
             |(min_inputs, extra_inputs, extra_window, extra_frames, targets_per_input, target_margin, cameras)| {
                 let max_inputs = min_inputs + extra_inputs;
                 let window = max_inputs + extra_window;
-                let config =
-                    SamplerConfig { min_inputs, max_inputs, window, targets_per_input, target_margin, cameras: vec![] };
+                let config = SamplerConfig {
+                    min_inputs,
+                    max_inputs,
+                    window,
+                    targets_per_input,
+                    target_margin,
+                    cameras: vec![],
+                    held_out: vec![],
+                };
                 (config, window + extra_frames, cameras)
             },
         )
@@ -382,5 +426,27 @@ mod tests {
         let round_trip: SamplerConfig = serde_json::from_str(&serde_json::to_string(&config).unwrap()).unwrap();
         assert_eq!(round_trip, config);
         assert!(serde_json::from_str::<SamplerConfig>(r#"{"windows": 10}"#).is_err());
+    }
+
+    #[test]
+    fn held_out_frames_are_never_drawn_and_the_rest_are() {
+        let config = SamplerConfig { window: 8, held_out: vec![2, 6, 10, 14, 18], ..SamplerConfig::default() };
+        let sampler = Sampler::new(config.clone(), 20, 1).unwrap();
+        let mut drawn = BTreeSet::new();
+        for sample in sampler.samples(7).take(400) {
+            for frame in sample.input_frames.iter().chain(&sample.target_frames) {
+                assert!(!config.held_out.contains(frame), "held-out frame {frame} drawn: {sample:?}");
+                drawn.insert(*frame);
+            }
+            // The window counts remaining frames: 8 of them span at most 11 of the log here (3 held out).
+            let inputs = &sample.input_frames;
+            assert!(inputs[inputs.len() - 1] - inputs[0] <= 10, "{sample:?}");
+        }
+        let remaining: BTreeSet<usize> = (0..20).filter(|f| !config.held_out.contains(f)).collect();
+        assert_eq!(drawn, remaining);
+        let too_many = SamplerConfig { window: 16, ..config.clone() };
+        assert!(matches!(Sampler::new(too_many, 20, 1), Err(DataError::Config(m)) if m.contains("not held out")));
+        let outside = SamplerConfig { held_out: vec![20], ..config };
+        assert!(matches!(Sampler::new(outside, 20, 1), Err(DataError::Config(m)) if m.contains("does not exist")));
     }
 }

@@ -11,6 +11,9 @@
 //!   between them as *interpolated* and those after the last input (when the stride does not end on the
 //!   window's last frame) as *extrapolated*. The stride leaves at least two inputs in the window.
 //!
+//! `scored` narrows the frames scored besides the inputs to a list (the frames a training run held out, say, so
+//! that every scored frame between the inputs is one the model never trained on); the inputs are always scored.
+//!
 //! Frames are the export's frame indices; the window is `start..start + length` (end exclusive). Cameras are
 //! export camera ids (0 = FRONT, 1 = FRONT_LEFT, 2 = FRONT_RIGHT in Waymo exports).
 
@@ -96,6 +99,9 @@ pub struct Protocol {
     pub every: usize,
     /// Export camera ids, in the order the views are batched.
     pub cameras: Vec<usize>,
+    /// The frames scored besides the inputs; every other frame of the window when absent.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scored: Option<Vec<usize>>,
 }
 
 impl Protocol {
@@ -107,17 +113,18 @@ impl Protocol {
             length: DEFAULT_WINDOW,
             every: PAPER_EVERY,
             cameras: DEFAULT_CAMERAS.to_vec(),
+            scored: None,
         }
     }
 
     /// The release's reconstruction mode: frames `start..start + length` are inputs and are scored.
     pub fn reconstruction(start: usize, length: usize, cameras: Vec<usize>) -> Self {
-        Self { kind: ProtocolKind::Reconstruction, start, length, every: 1, cameras }
+        Self { kind: ProtocolKind::Reconstruction, start, length, every: 1, cameras, scored: None }
     }
 
     /// The release's interpolation mode: every `every`-th frame of the window is an input.
     pub fn interpolation(start: usize, length: usize, every: usize, cameras: Vec<usize>) -> Self {
-        Self { kind: ProtocolKind::Interpolation, start, length, every, cameras }
+        Self { kind: ProtocolKind::Interpolation, start, length, every, cameras, scored: None }
     }
 
     /// Checks the settings themselves (not yet against a scene).
@@ -145,6 +152,14 @@ impl Protocol {
         }
         if self.cameras.is_empty() {
             return Err(EvalError::option("--cameras", "no camera chosen"));
+        }
+        let inputs = self.input_frames();
+        let outside = |f: &&usize| !self.window().contains(*f) || inputs.contains(*f);
+        if let Some(frame) = self.scored.iter().flatten().find(outside) {
+            return Err(EvalError::option(
+                "--score-frames",
+                format!("frame {frame} is not a frame of the window {:?} between or after its inputs", self.window()),
+            ));
         }
         let mut sorted = self.cameras.clone();
         sorted.sort_unstable();
@@ -201,7 +216,8 @@ impl Protocol {
             }
             ProtocolKind::Reconstruction | ProtocolKind::Interpolation => TargetKind::Interpolated,
         };
-        self.window().map(|f| (f, split(f))).collect()
+        let scored = |frame: &usize| inputs.contains(frame) || self.scored.as_ref().is_none_or(|s| s.contains(frame));
+        self.window().filter(scored).map(|f| (f, split(f))).collect()
     }
 
     /// The splits this protocol reports, in report order.

@@ -63,6 +63,9 @@ pub struct ViewRecord {
     /// D-RMSE in metres; absent when the view has no usable lidar cell (see `depth_note`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub d_rmse: Option<f64>,
+    /// AbsRel under the same alignment as D-RMSE ([`dggt_metrics::DepthAlignment::abs_rel`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub abs_rel: Option<f64>,
     /// The alignment's scale and shift and the cells scored.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub depth_scale: Option<f64>,
@@ -86,6 +89,10 @@ pub struct ViewRecord {
     /// The image metrics of the render after the diffusion refiner; absent without one.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub refined: Option<ImageScores>,
+    /// The baseline a method must beat to have learnt anything: the image metrics of the input view of the same
+    /// camera nearest in time, copied unchanged (no LPIPS); absent at input views.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub nearest_input: Option<ImageScores>,
 }
 
 /// The scene-flow metrics of one motion source at one view.
@@ -144,6 +151,7 @@ pub struct SplitSummary {
     pub d_rmse: Option<f64>,
     /// Views (or scenes) with a D-RMSE.
     pub d_rmse_count: usize,
+    pub abs_rel: Option<f64>,
     pub epe3d: Option<f64>,
     pub acc5: Option<f64>,
     pub acc10: Option<f64>,
@@ -158,12 +166,15 @@ pub struct SplitSummary {
     pub dynamic_psnr_by_source: Vec<SourcePsnr>,
     /// The image metrics after the diffusion refiner; absent without one.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub refined: Option<RefinedSummary>,
+    pub refined: Option<ImageMeans>,
+    /// The nearest input copied ([`ViewRecord::nearest_input`]); absent in splits of input views.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub nearest_input: Option<ImageMeans>,
 }
 
-/// Means of the refined renders' image metrics.
+/// Means of the image metrics of images scored beside the renders: the refined renders, the nearest inputs.
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct RefinedSummary {
+pub struct ImageMeans {
     pub psnr: Option<f64>,
     pub ssim: Option<f64>,
     pub lpips: Option<f64>,
@@ -203,6 +214,9 @@ pub struct EvalReport {
     pub device: String,
     /// Where the predicted motion comes from.
     pub motion_source: String,
+    /// Where the cameras came from: the camera head's (`predicted`, the paper's unposed protocol) or the
+    /// export's (`ground_truth`).
+    pub poses: dggt_infer::CameraSource,
     /// What is compared for depth and motion, and how.
     pub depth_protocol: String,
     pub motion_protocol: String,
@@ -237,6 +251,7 @@ pub fn summarise_views(views: &[ViewRecord], split: TargetKind) -> SplitSummary 
         dynamic_psnr_count,
         d_rmse,
         d_rmse_count,
+        abs_rel: mean_present(views.iter().map(|v| v.abs_rel)).0,
         epe3d,
         acc5: motion(|m| Some(m.acc5)).0,
         acc10: motion(|m| Some(m.acc10)).0,
@@ -259,17 +274,25 @@ pub fn summarise_views(views: &[ViewRecord], split: TargetKind) -> SplitSummary 
             })
             .collect(),
         dynamic_psnr_by_source: mean_by_source(views.iter().flat_map(|v| &v.dynamic_psnr_by_source)),
-        refined: views.iter().any(|v| v.refined.is_some()).then(|| {
-            let refined = |f: fn(&ImageScores) -> Option<f64>| {
-                mean_present(views.iter().map(|v| v.refined.as_ref().and_then(f))).0
-            };
-            RefinedSummary {
-                psnr: refined(|r| Some(r.psnr)),
-                ssim: refined(|r| Some(r.ssim)),
-                lpips: refined(|r| r.lpips),
-            }
-        }),
+        refined: view_means(&views, |v| v.refined.as_ref()),
+        nearest_input: view_means(&views, |v| v.nearest_input.as_ref()),
     }
+}
+
+/// The means of the scores `of` picks from each view, when some view has them.
+fn view_means(views: &[&ViewRecord], of: fn(&ViewRecord) -> Option<&ImageScores>) -> Option<ImageMeans> {
+    views.iter().any(|v| of(v).is_some()).then(|| {
+        let mean = |f: fn(&ImageScores) -> Option<f64>| mean_present(views.iter().map(|v| of(v).and_then(f))).0;
+        ImageMeans { psnr: mean(|r| Some(r.psnr)), ssim: mean(|r| Some(r.ssim)), lpips: mean(|r| r.lpips) }
+    })
+}
+
+/// The means over scenes of the split means `of` picks, when some scene has them.
+fn split_means(rows: &[&SplitSummary], of: fn(&SplitSummary) -> Option<&ImageMeans>) -> Option<ImageMeans> {
+    rows.iter().any(|r| of(r).is_some()).then(|| {
+        let mean = |f: fn(&ImageMeans) -> Option<f64>| mean_present(rows.iter().map(|r| of(r).and_then(f))).0;
+        ImageMeans { psnr: mean(|r| r.psnr), ssim: mean(|r| r.ssim), lpips: mean(|r| r.lpips) }
+    })
 }
 
 /// Per split, the mean over the scenes' split means.
@@ -290,6 +313,7 @@ pub fn summarise_scenes(scenes: &[SceneReport], splits: &[TargetKind]) -> Vec<Sp
                 dynamic_psnr_count: mean(|r| r.dynamic_psnr).1,
                 d_rmse: mean(|r| r.d_rmse).0,
                 d_rmse_count: mean(|r| r.d_rmse).1,
+                abs_rel: mean(|r| r.abs_rel).0,
                 epe3d: mean(|r| r.epe3d).0,
                 acc5: mean(|r| r.acc5).0,
                 acc10: mean(|r| r.acc10).0,
@@ -314,12 +338,8 @@ pub fn summarise_scenes(scenes: &[SceneReport], splits: &[TargetKind]) -> Vec<Sp
                     })
                     .collect(),
                 dynamic_psnr_by_source: mean_by_source(rows.iter().flat_map(|r| &r.dynamic_psnr_by_source)),
-                refined: rows.iter().any(|r| r.refined.is_some()).then(|| {
-                    let refined = |f: fn(&RefinedSummary) -> Option<f64>| {
-                        mean_present(rows.iter().map(|r| r.refined.as_ref().and_then(f))).0
-                    };
-                    RefinedSummary { psnr: refined(|r| r.psnr), ssim: refined(|r| r.ssim), lpips: refined(|r| r.lpips) }
-                }),
+                refined: split_means(&rows, |r| r.refined.as_ref()),
+                nearest_input: split_means(&rows, |r| r.nearest_input.as_ref()),
             }
         })
         .collect()
@@ -358,12 +378,13 @@ fn percent(value: Option<f64>) -> String {
 
 fn row(label: &str, count: String, s: &SplitSummary) -> String {
     format!(
-        "| {label} | {count} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+        "| {label} | {count} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
         cell(s.psnr, 2),
         cell(s.ssim, 4),
         cell(s.lpips, 4),
         cell(s.dynamic_psnr, 2),
         cell(s.d_rmse, 3),
+        cell(s.abs_rel, 3),
         cell(s.epe3d, 3),
         percent(s.acc5),
         percent(s.acc10),
@@ -371,17 +392,16 @@ fn row(label: &str, count: String, s: &SplitSummary) -> String {
     )
 }
 
-/// A row of the with/without refinement table.
-fn refined_row(label: &str, count: String, s: &SplitSummary) -> String {
-    let refined = s.refined.as_ref();
+/// A row of a table of the renders beside other images (`other`: the refined renders, the nearest inputs).
+fn paired_row(label: &str, count: String, s: &SplitSummary, other: Option<&ImageMeans>) -> String {
     format!(
         "| {label} | {count} | {} | {} | {} | {} | {} | {} |\n",
         cell(s.psnr, 2),
-        cell(refined.and_then(|r| r.psnr), 2),
+        cell(other.and_then(|r| r.psnr), 2),
         cell(s.ssim, 4),
-        cell(refined.and_then(|r| r.ssim), 4),
+        cell(other.and_then(|r| r.ssim), 4),
         cell(s.lpips, 4),
-        cell(refined.and_then(|r| r.lpips), 4),
+        cell(other.and_then(|r| r.lpips), 4),
     )
 }
 
@@ -403,6 +423,15 @@ impl EvalReport {
         let _ = writeln!(md, "- checkpoint: {} ({})", self.checkpoint.path.display(), self.checkpoint.format);
         let _ = writeln!(md, "- device: {}", self.device);
         let _ = writeln!(md, "- motion source: {}", self.motion_source);
+        let _ = writeln!(
+            md,
+            "- cameras: {}",
+            match self.poses {
+                dggt_infer::CameraSource::Predicted =>
+                    "predicted by the camera head, targets interpolated between the inputs (unposed)",
+                dggt_infer::CameraSource::GroundTruth => "the export's poses, relative to the first input view",
+            }
+        );
         let _ = writeln!(md, "- depth: {}", self.depth_protocol);
         let _ = writeln!(md, "- motion: {}", self.motion_protocol);
         for scene in &self.scenes {
@@ -417,10 +446,10 @@ impl EvalReport {
         for summary in &self.overall {
             let _ = writeln!(md, "\n## {}\n", summary.split.title());
             md.push_str(
-                "| scene | views | PSNR (dB) | SSIM | LPIPS | moving PSNR (dB) | D-RMSE (m) | EPE3D | Acc5 (%) | Acc10 (%) | \
-                 angle (rad) |\n",
+                "| scene | views | PSNR (dB) | SSIM | LPIPS | moving PSNR (dB) | D-RMSE (m) | AbsRel | EPE3D | Acc5 (%) | \
+                 Acc10 (%) | angle (rad) |\n",
             );
-            md.push_str("|---|---|---|---|---|---|---|---|---|---|---|\n");
+            md.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
             for scene in &self.scenes {
                 if let Some(s) = scene.splits.iter().find(|s| s.split == summary.split) {
                     md.push_str(&row(&scene.name, s.count.to_string(), s));
@@ -461,10 +490,23 @@ impl EvalReport {
                 md.push_str("|---|---|---|---|---|---|---|---|\n");
                 for scene in &self.scenes {
                     if let Some(s) = scene.splits.iter().find(|s| s.split == summary.split) {
-                        md.push_str(&refined_row(&scene.name, s.count.to_string(), s));
+                        md.push_str(&paired_row(&scene.name, s.count.to_string(), s, s.refined.as_ref()));
                     }
                 }
-                md.push_str(&refined_row("**mean over scenes**", scenes, summary));
+                md.push_str(&paired_row("**mean over scenes**", scenes.clone(), summary, summary.refined.as_ref()));
+            }
+            if summary.nearest_input.is_some() {
+                md.push_str("\n### the renders against the nearest input copied (the baseline to beat)\n\n");
+                md.push_str(
+                    "| scene | views | PSNR (dB) | PSNR copied | SSIM | SSIM copied | LPIPS | LPIPS copied |\n",
+                );
+                md.push_str("|---|---|---|---|---|---|---|---|\n");
+                for scene in &self.scenes {
+                    if let Some(s) = scene.splits.iter().find(|s| s.split == summary.split) {
+                        md.push_str(&paired_row(&scene.name, s.count.to_string(), s, s.nearest_input.as_ref()));
+                    }
+                }
+                md.push_str(&paired_row("**mean over scenes**", scenes, summary, summary.nearest_input.as_ref()));
             }
         }
         let notes: Vec<String> = self

@@ -5,7 +5,11 @@
 //! `dggt reconstruct` (same preprocessing, chunked heads, predicted cameras; the world is the first input
 //! view's camera frame). Every target view is rendered at the release's scene time of its frame: an input
 //! view from its own predicted camera, any other from the camera interpolated between the predicted poses of
-//! the same rig camera's inputs (`dggt_scene::interpolate_camera`; extrapolated beyond the last input). The
+//! the same rig camera's inputs (`dggt_scene::interpolate_camera`; extrapolated beyond the last input): the
+//! paper's unposed protocol. With [`CameraSource::GroundTruth`] the export's poses (relative to the first input
+//! view) place the inputs' Gaussians and view every target instead, as a model trained with
+//! `render.cameras = "ground_truth"` was trained. Beside every view that is no input, the input view of the
+//! same camera nearest in time is scored as it is (the baseline a method must beat to have learnt anything). The
 //! render is scored against the export's image preprocessed as the network's inputs are (network
 //! resolution), its expected depth against the export's lidar depth ([`crate::grid`],
 //! `dggt-metrics`), and the predicted motion against the export's scene flow.
@@ -29,12 +33,13 @@ use std::time::Instant;
 
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_data::{
-    BinaryMask, DepthFlowMap, DepthSource, PlanarImage, Preprocess, Scene, images, open_scene, prepare_view,
+    BinaryMask, DepthFlowMap, DepthSource, PlanarImage, Preprocess, PreprocessPlan, Scene, images, open_scene,
+    prepare_view,
 };
-use dggt_geom::ImageSize;
 use dggt_geom::glam::DMat3;
+use dggt_geom::{ImageSize, PosedCamera};
 use dggt_infer::{
-    Architecture, GroundTruth, InputCameras, InputSet, LoadedNetwork, MotionPath, SceneOptions, ViewSlot,
+    Architecture, CameraSource, GroundTruth, InputCameras, InputSet, LoadedNetwork, MotionPath, SceneOptions, ViewSlot,
     forward_chunked, input_views, load_network,
 };
 use dggt_losses::{Lpips, LpipsKind};
@@ -94,6 +99,8 @@ pub struct EvalOptions {
     pub out: PathBuf,
     /// Whether crops of the moving objects under every image source are written to `out/crops/`.
     pub crops: CropImages,
+    /// Where the cameras come from: the camera head's (the paper's unposed protocol) or the export's.
+    pub poses: CameraSource,
 }
 
 impl EvalOptions {
@@ -110,6 +117,7 @@ impl EvalOptions {
             refine: None,
             out: out.into(),
             crops: CropImages::Skip,
+            poses: CameraSource::Predicted,
         }
     }
 }
@@ -208,6 +216,7 @@ pub fn evaluate(options: &EvalOptions, device: &Device) -> Result<EvalReport, Ev
         preprocess,
         device: format!("{device:?}"),
         motion_source: motion.label().into(),
+        poses: options.poses,
         depth_protocol: "rendered expected depth vs lidar depth (depth_flows_4, else the lidar sweep binned on the same grid), least-squares scale and shift, at \
                          cells with lidar depth > 0, no sky pixel and the centre (4 col + 2, 4 row + 2) inside the \
                          view, the render sampled bilinearly there"
@@ -369,6 +378,8 @@ struct ForwardScene {
     /// The inputs as the network saw them, in `inputs.views`' order.
     input_images: Vec<PlanarImage>,
     size: ImageSize,
+    /// How the export's images became the network's.
+    plan: PreprocessPlan,
     mapping: CellMapping,
     timeline: Timeline,
     scene: Scene4d,
@@ -399,7 +410,7 @@ struct FlowSeen {
 fn evaluate_scene(root: &Path, scene: &Scene, context: &SceneContext<'_>) -> Result<SceneReport, EvalError> {
     let protocol = &context.options.protocol;
     let mut watch = Stopwatch::default();
-    let mut forward = forward_scene(root, context, &mut watch)?;
+    let mut forward = forward_scene(root, scene, context, &mut watch)?;
     forward.flows = motion_flows(&mut forward, context, scene.seconds_per_frame())?;
     let mut records = Vec::new();
     let mut seen = FlowSeen::default();
@@ -416,7 +427,7 @@ fn evaluate_scene(root: &Path, scene: &Scene, context: &SceneContext<'_>) -> Res
             .ok_or_else(|| EvalError::scene(root, format!("frame {frame} is missing")))?;
         for camera_position in 0..protocol.cameras.len() {
             let started = Instant::now();
-            let target = target_view(&forward, frame, camera_position)?;
+            let target = target_view(&forward, scene, context, frame, camera_position)?;
             let render = forward.scene.render(&target)?;
             let rgb = clamped_colours(render.rgb)?;
             let depth = host(render.depth, "rendered depth")?;
@@ -429,6 +440,10 @@ fn evaluate_scene(root: &Path, scene: &Scene, context: &SceneContext<'_>) -> Res
             };
             let rendered_flows = rendered_flows(&forward, &target)?;
             let has_mask = scene.view(frame_position, camera_position).files.dynamic_mask.is_some();
+            let nearest_input = match forward.at_input(&target) {
+                true => None,
+                false => nearest_input(&forward, &target).map(|position| interleaved(&forward.input_images[position])),
+            };
             let source_renders = match has_mask && !forward.at_input(&target) {
                 true => render_sources(&forward.scene, &target, &image_sources, &rgb)?,
                 false => Vec::new(),
@@ -444,6 +459,7 @@ fn evaluate_scene(root: &Path, scene: &Scene, context: &SceneContext<'_>) -> Res
                 time: target.time,
                 rendered_flows,
                 source_renders,
+                nearest_input,
                 crops: crops.as_deref(),
             };
             let images = RenderedImages { rgb: &rgb, refined: refined.as_deref() };
@@ -516,13 +532,19 @@ fn rendered_flows(forward: &ForwardScene, target: &TargetView) -> Result<Vec<(Mo
 
 /// Loads the protocol's input views of `root`, runs the network and builds the scene (timed as load, forward
 /// and assembly).
-fn forward_scene(root: &Path, context: &SceneContext<'_>, watch: &mut Stopwatch) -> Result<ForwardScene, EvalError> {
+fn forward_scene(
+    root: &Path,
+    scene: &Scene,
+    context: &SceneContext<'_>,
+    watch: &mut Stopwatch,
+) -> Result<ForwardScene, EvalError> {
     let (protocol, network) = (&context.options.protocol, context.network);
     let started = Instant::now();
     let window = InputSet::open(root, Some(protocol.window()), Some(protocol.cameras.clone()))?;
     let inputs = restrict_inputs(window, &protocol.input_frames());
     let (input_images, size) = inputs.load(&context.preprocess)?;
-    let mapping = CellMapping::new(&context.preprocess.plan(inputs.size)?);
+    let plan = context.preprocess.plan(inputs.size)?;
+    let mapping = CellMapping::new(&plan);
     let data: Vec<f32> = input_images.iter().flat_map(|i| i.data.iter().copied()).collect();
     let (h, w) = (size.height as usize, size.width as usize);
     let batch = Tensor::<5>::from_data(TensorData::new(data, [1, input_images.len(), 3, h, w]), context.device);
@@ -534,7 +556,17 @@ fn forward_scene(root: &Path, context: &SceneContext<'_>, watch: &mut Stopwatch)
     let timeline = Timeline::new(&inputs.frames)?;
     let slots: Vec<ViewSlot> =
         inputs.views.iter().map(|v| ViewSlot { rig_camera: v.camera, time: timeline.time(v.frame as f64) }).collect();
-    let views = input_views(&prediction, &slots, InputCameras::Predicted, size)?;
+    let cameras = match context.options.poses {
+        CameraSource::Predicted => InputCameras::Predicted,
+        CameraSource::GroundTruth => InputCameras::Given(
+            inputs
+                .views
+                .iter()
+                .map(|v| export_camera(scene, &plan, protocol, v.frame, v.camera))
+                .collect::<Result<_, _>>()?,
+        ),
+    };
+    let views = input_views(&prediction, &slots, cameras, size)?;
     watch.add(FORWARD, started);
 
     let started = Instant::now();
@@ -550,7 +582,7 @@ fn forward_scene(root: &Path, context: &SceneContext<'_>, watch: &mut Stopwatch)
     }
     drop(prediction);
     watch.add(ASSEMBLY, started);
-    Ok(ForwardScene { inputs, input_images, size, mapping, timeline, scene, flows: Vec::new() })
+    Ok(ForwardScene { inputs, input_images, size, plan, mapping, timeline, scene, flows: Vec::new() })
 }
 
 /// The motion sources scored side by side (held; the predicted velocities when the network has them; the
@@ -583,15 +615,51 @@ fn motion_flows(
 }
 
 /// The view of the protocol's camera `camera_position` at log frame `frame`: an input view from its own
-/// predicted camera, any other from the camera interpolated between the rig camera's inputs.
-fn target_view(forward: &ForwardScene, frame: usize, camera_position: usize) -> Result<TargetView, EvalError> {
-    let time = forward.timeline.time(frame as f64);
+/// camera, any other from the camera interpolated between the rig camera's inputs, or with the export's poses
+/// its export camera.
+fn target_view(
+    forward: &ForwardScene,
+    scene: &Scene,
+    context: &SceneContext<'_>,
+    frame: usize,
+    camera_position: usize,
+) -> Result<TargetView, EvalError> {
+    let (time, protocol) = (forward.timeline.time(frame as f64), &context.options.protocol);
     let cameras = forward.inputs.cameras.len();
-    let camera = match forward.inputs.frames.iter().position(|&f| f == frame) {
-        Some(input_position) => forward.scene.views()[input_position * cameras + camera_position].camera,
-        None => forward.scene.camera_at(camera_position, time)?,
+    let camera = match (forward.inputs.frames.iter().position(|&f| f == frame), context.options.poses) {
+        (Some(input_position), _) => forward.scene.views()[input_position * cameras + camera_position].camera,
+        (None, CameraSource::Predicted) => forward.scene.camera_at(camera_position, time)?,
+        (None, CameraSource::GroundTruth) => export_camera(scene, &forward.plan, protocol, frame, camera_position)?,
     };
     Ok(TargetView { rig_camera: camera_position, time, camera })
+}
+
+/// The export's camera of the window's view (log frame `frame`, camera `camera_position`), as a prediction's
+/// world holds it: relative to the first input view (of camera position 0), intrinsics at the network's
+/// resolution.
+fn export_camera(
+    scene: &Scene,
+    plan: &PreprocessPlan,
+    protocol: &Protocol,
+    frame: usize,
+    camera_position: usize,
+) -> Result<PosedCamera, EvalError> {
+    let position = |frame: usize| {
+        let missing = || EvalError::option("--frames", format!("frame {frame} is not in the scene's window"));
+        scene.frames.iter().position(|f| f.index == frame).ok_or_else(missing)
+    };
+    let first_input = protocol.input_frames()[0];
+    let reference = scene.view(position(first_input)?, 0).world_from_camera;
+    Ok(PosedCamera {
+        world_from_camera: scene.view(position(frame)?, camera_position).world_from_camera.relative_to(&reference),
+        intrinsics: plan.intrinsics(&scene.cameras[camera_position].intrinsics),
+    })
+}
+
+/// The position among the inputs of the input view of `target`'s camera nearest it in time.
+fn nearest_input(forward: &ForwardScene, target: &TargetView) -> Option<usize> {
+    let views = forward.inputs.views.iter().map(|v| (v.camera, forward.timeline.time(v.frame as f64)));
+    nearest_in_time(views, target.rig_camera, target.time)
 }
 
 /// Which view a render is scored as.
@@ -606,6 +674,8 @@ struct ScoredView<'a> {
     /// At a view between the inputs with a dynamic mask, the view rendered under every image source
     /// (interleaved, clamped).
     source_renders: Vec<(ImageSource, Vec<f32>)>,
+    /// At a view that is no input, the input view of the same camera nearest in time (interleaved).
+    nearest_input: Option<Vec<f32>>,
     /// The scene's folder of crops, when they are written.
     crops: Option<&'a Path>,
 }
@@ -656,9 +726,8 @@ fn reference_view(
     match spec.reference {
         ReferenceView::None => Ok(None),
         ReferenceView::NearestInput => {
-            let views = forward.inputs.views.iter().map(|v| (v.camera, forward.timeline.time(v.frame as f64)));
-            let position = nearest_in_time(views, target.rig_camera, target.time)
-                .ok_or(EvalError::NoReferenceView { camera: target.rig_camera })?;
+            let position =
+                nearest_input(forward, target).ok_or(EvalError::NoReferenceView { camera: target.rig_camera })?;
             Ok(Some(interleaved(&forward.input_images[position])))
         }
     }
@@ -712,6 +781,7 @@ fn score_view(
         dynamic_psnr,
         dynamic_pixels,
         d_rmse: None,
+        abs_rel: None,
         depth_scale: None,
         depth_shift: None,
         depth_cells: 0,
@@ -720,6 +790,11 @@ fn score_view(
         motion_by_source: Vec::new(),
         dynamic_psnr_by_source: Vec::new(),
         refined,
+        nearest_input: view
+            .nearest_input
+            .as_deref()
+            .map(|copy| image_scores(copy, &truth, forward.size, context))
+            .transpose()?,
     };
     if let Some(mask) = prepared.dynamic_mask.as_ref().filter(|_| !view.source_renders.is_empty()) {
         record.dynamic_psnr_by_source = sources_on_mask(view, &truth, mask, forward.size, &record)?;
@@ -756,7 +831,10 @@ fn score_view(
     Ok(record)
 }
 
-/// Every image source's PSNR over `mask` at `view`, and with a crop folder the strip of their crops beside the
+/// How the nearest input copied is named among the image sources.
+pub const NEAREST_INPUT: &str = "nearest input copied";
+
+/// Every image source's PSNR over `mask` at `view`, and the nearest input copied, and with a crop folder the strip of their crops beside the
 /// truth (none for an empty mask).
 fn sources_on_mask(
     view: &ScoredView<'_>,
@@ -767,9 +845,11 @@ fn sources_on_mask(
 ) -> Result<Vec<SourcePsnr>, EvalError> {
     let Some(area) = crop_box(mask) else { return Ok(Vec::new()) };
     let mut scores = Vec::new();
-    for (source, rgb) in &view.source_renders {
+    let copied = view.nearest_input.as_deref().map(|rgb| (NEAREST_INPUT, rgb));
+    let renders = view.source_renders.iter().map(|(source, rgb)| (source.name(), &rgb[..]));
+    for (source, rgb) in renders.chain(copied) {
         if let (Some(dynamic_psnr), _) = moving_region_psnr(rgb, truth, Some(mask))? {
-            scores.push(SourcePsnr { source: source.name().into(), dynamic_psnr, count: 1 });
+            scores.push(SourcePsnr { source: source.into(), dynamic_psnr, count: 1 });
         }
     }
     if let Some(folder) = view.crops {
@@ -852,6 +932,7 @@ fn score_depth(record: &mut ViewRecord, cells: &Cells, seen: &mut FlowSeen) -> R
     match aligned_depth_rmse(&cells.predicted_depth, &cells.true_depth) {
         Ok(alignment) => {
             record.d_rmse = Some(alignment.rmse);
+            record.abs_rel = Some(alignment.abs_rel);
             record.depth_scale = Some(alignment.scale);
             record.depth_shift = Some(alignment.shift);
         }

@@ -3,7 +3,7 @@
 
 use dggt_data::Preprocess;
 use dggt_eval::grid::{CellMapping, cell_has_sky};
-use dggt_eval::report::{SourceFlowMetrics, SourcePsnr, ViewRecord, summarise_views};
+use dggt_eval::report::{ImageScores, SourceFlowMetrics, SourcePsnr, ViewRecord, summarise_views};
 use dggt_eval::{Protocol, ProtocolKind, TargetKind};
 use dggt_geom::ImageSize;
 use dggt_metrics::FlowMetrics;
@@ -104,6 +104,7 @@ fn record(split: TargetKind, psnr: f64, d_rmse: Option<f64>) -> ViewRecord {
         dynamic_psnr: None,
         dynamic_pixels: 0,
         d_rmse,
+        abs_rel: d_rmse.map(|d| d / 10.0),
         depth_scale: None,
         depth_shift: None,
         depth_cells: 0,
@@ -112,6 +113,7 @@ fn record(split: TargetKind, psnr: f64, d_rmse: Option<f64>) -> ViewRecord {
         motion_by_source: Vec::new(),
         dynamic_psnr_by_source: Vec::new(),
         refined: None,
+        nearest_input: None,
     }
 }
 
@@ -175,4 +177,32 @@ fn split_means_leave_out_missing_metrics() {
     assert_eq!((s.psnr, s.d_rmse, s.lpips, s.epe3d), (Some(25.0), Some(1.0), None, None));
     let s = summarise_views(&views, TargetKind::NovelView);
     assert_eq!((s.count, s.psnr, s.d_rmse), (1, Some(10.0), Some(4.0)));
+}
+
+#[test]
+fn the_nearest_input_baseline_is_averaged_where_views_have_it_and_reported_beside_the_renders() {
+    let copied = |psnr: f64| Some(ImageScores { psnr, ssim: 0.25, lpips: None });
+    let views = [
+        ViewRecord { nearest_input: copied(14.0), ..record(TargetKind::Interpolated, 20.0, Some(2.0)) },
+        ViewRecord { nearest_input: copied(16.0), ..record(TargetKind::Interpolated, 22.0, Some(4.0)) },
+        record(TargetKind::Reconstruction, 30.0, None),
+    ];
+    let between = summarise_views(&views, TargetKind::Interpolated);
+    let baseline = between.nearest_input.as_ref().unwrap();
+    assert_eq!((baseline.psnr, baseline.ssim, baseline.lpips), (Some(15.0), Some(0.25), None));
+    assert!((between.abs_rel.unwrap() - 0.3).abs() < 1e-12, "AbsRel means like D-RMSE: {:?}", between.abs_rel);
+    assert!(summarise_views(&views, TargetKind::Reconstruction).nearest_input.is_none());
+}
+
+#[test]
+fn scored_frames_narrow_the_targets_to_the_held_out_ones_and_keep_the_inputs() {
+    let mut protocol = Protocol::interpolation(0, 13, 4, vec![0, 1]);
+    protocol.scored = Some(vec![2, 6, 10]);
+    protocol.validate().unwrap();
+    let frames: Vec<usize> = protocol.targets().into_iter().map(|(f, _)| f).collect();
+    assert_eq!(frames, vec![0, 2, 4, 6, 8, 10, 12]);
+    protocol.scored = Some(vec![4]);
+    assert!(protocol.validate().unwrap_err().to_string().contains("--score-frames"), "an input is no scored frame");
+    protocol.scored = Some(vec![20]);
+    assert!(protocol.validate().is_err(), "outside the window");
 }

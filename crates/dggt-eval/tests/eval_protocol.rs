@@ -7,11 +7,12 @@ use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
 use burn::tensor::Device;
+use dggt_eval::runner::NEAREST_INPUT;
 use dggt_eval::{
     CropImages, EvalOptions, LpipsWeights, MOTION_HELD, MOTION_INSTANCES, MOTION_LEARNT, MOTION_VELOCITY, Protocol,
     evaluate,
 };
-use dggt_infer::Architecture;
+use dggt_infer::{Architecture, CameraSource};
 use dggt_refine::{Latent, Prompt, ReferenceView, RefinerSpec};
 use dggt_scene::DynamicMotion;
 use dggt_train::{RunOptions, Start, TrainConfig, Trainer};
@@ -174,8 +175,17 @@ fn paper_protocol_scores_every_view_of_the_fixture() {
     ] {
         assert!(markdown.contains(heading), "{heading} missing from\n{markdown}");
     }
-    assert_eq!(markdown.matches("| synth-s0 |").count(), 2, "{markdown}");
-    assert_eq!(markdown.matches("| **mean over scenes** |").count(), 2, "{markdown}");
+    // Each split's table, and the novel views' table against the nearest input copied.
+    assert_eq!(markdown.matches("| synth-s0 |").count(), 3, "{markdown}");
+    assert_eq!(markdown.matches("| **mean over scenes** |").count(), 3, "{markdown}");
+    assert!(markdown.contains("| PSNR (dB) | PSNR copied |"), "{markdown}");
+    for view in views {
+        let at_input = view["split"] == "reconstruction";
+        assert_eq!(view.get("nearest_input").is_none(), at_input, "the copy baseline at every non-input view: {view}");
+        let abs_rel = number(view, "abs_rel");
+        assert!(abs_rel.is_finite() && abs_rel >= 0.0, "{view}");
+    }
+    assert_export_poses_on_held_out_frames(run_dir.path());
 
     // The release's reconstruction mode on two frames of one camera, with LPIPS from the shared weights.
     let weights = parity_dir().join("metrics");
@@ -246,6 +256,33 @@ fn paper_protocol_scores_every_view_of_the_fixture() {
     assert!(markdown.contains("reference view: nearest-input"), "{markdown}");
 }
 
+/// The export's poses and a list of scored frames: only the inputs and the listed frames are scored; an input
+/// view's render is the same whichever frames are scored; a copied input scores exactly at its own frame.
+fn assert_export_poses_on_held_out_frames(run: &Path) {
+    let out = tempfile::tempdir().unwrap();
+    let mut options = EvalOptions::new(vec![fixture()], run, out.path());
+    options.width = Some(84);
+    options.poses = CameraSource::GroundTruth;
+    options.protocol = Protocol::interpolation(0, 9, 4, vec![0]);
+    let all = evaluate(&options, &Device::flex()).unwrap();
+    options.protocol.scored = Some(vec![2, 6]);
+    options.out = out.path().join("held-out");
+    let held_out = evaluate(&options, &Device::flex()).unwrap();
+    let frames = |report: &dggt_eval::EvalReport| report.scenes[0].views.iter().map(|v| v.frame).collect::<Vec<_>>();
+    assert_eq!(frames(&all), (0..9).collect::<Vec<_>>());
+    assert_eq!(frames(&held_out), vec![0, 2, 4, 6, 8]);
+    for view in &held_out.scenes[0].views {
+        let same = all.scenes[0].views.iter().find(|v| v.frame == view.frame).unwrap();
+        assert_eq!((view.psnr, view.ssim, view.d_rmse), (same.psnr, same.ssim, same.d_rmse), "frame {}", view.frame);
+        assert_eq!(view.nearest_input.is_some(), view.frame % 4 != 0, "frame {}", view.frame);
+    }
+    // Frame 1's nearest input is frame 0, frame 3's is frame 4: the copies differ from the renders.
+    let copied = all.scenes[0].views[1].nearest_input.as_ref().unwrap();
+    assert!(copied.psnr.is_finite() && copied.psnr != all.scenes[0].views[1].psnr, "{copied:?}");
+    let markdown = held_out.markdown();
+    assert!(markdown.contains("- cameras: the export's poses"), "{markdown}");
+}
+
 fn error_of(options: &EvalOptions) -> String {
     evaluate(options, &Device::flex()).map(|_| ()).unwrap_err().to_string()
 }
@@ -309,7 +346,7 @@ fn assert_images_side_by_side(views: &[Value], crops: &Path) {
         assert_eq!(view["split"], "novel_view", "{view}");
         let psnr = |name: &str| number(listed.iter().find(|m| m["source"] == name).unwrap(), "dynamic_psnr");
         let names: Vec<&str> = listed.iter().map(|m| m["source"].as_str().unwrap()).collect();
-        assert_eq!(names, ["held", "cross-fade", "velocity", "instances"], "{view}");
+        assert_eq!(names, ["held", "cross-fade", "velocity", "instances", NEAREST_INPUT], "{view}");
         assert_eq!(psnr("velocity"), number(view, "dynamic_psnr"), "{view}");
         differ += usize::from(psnr("held") != psnr("cross-fade"));
         let strip = crops.join(format!("f{:04}_c{}.png", number(view, "frame"), number(view, "camera")));
@@ -382,7 +419,7 @@ fn the_learnt_flow_is_rendered_and_scored_beside_the_other_sources() {
     assert_sources_side_by_side(views, &["held", "instances", "learnt"], "learnt");
     let overall = evaluated.overall.iter().find(|s| !s.dynamic_psnr_by_source.is_empty()).expect("in-between views");
     let names: Vec<&str> = overall.dynamic_psnr_by_source.iter().map(|s| s.source.as_str()).collect();
-    assert_eq!(names, ["held", "cross-fade", "instances", "learnt"]);
+    assert_eq!(names, ["held", "cross-fade", "instances", "learnt", NEAREST_INPUT]);
     assert!(markdown.contains("### moving objects between the inputs by source") && markdown.contains("| learnt |"));
 }
 

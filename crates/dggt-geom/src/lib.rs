@@ -22,6 +22,7 @@ mod interpolate;
 mod intrinsics;
 mod pose_encoding;
 mod quaternion;
+mod ray;
 mod rigid;
 mod unproject;
 
@@ -31,6 +32,7 @@ pub use interpolate::{PosedCamera, interpolate_intrinsics, interpolate_rigid};
 pub use intrinsics::{ImageSize, PinholeIntrinsics, PixelConvention};
 pub use pose_encoding::PoseEncoding;
 pub use quaternion::{QuatWxyz, QuatXyzw, slerp};
+pub use ray::ray_box_interval;
 pub use rigid::{CameraFromWorld, EgoFromCamera, Rigid, WorldFromCamera, WorldFromEgo, WorldFromLogWorld};
 pub use unproject::unproject_depth_map;
 

@@ -3,8 +3,10 @@
 //! `sum_i (a d_i + b - g_i)^2` over the cells given, and D-RMSE is `sqrt(mean_i (a d_i + b - g_i)^2)` in
 //! metres. The scale may come out negative (the fit is unconstrained). When every prediction is the same
 //! value the scale is undetermined; the fit then takes `a = 0`, `b = mean(g)`, its minimiser with the least
-//! scale, so the RMSE is the standard deviation of the truth. Which cells take part (not sky, lidar depth
-//! > 0, inside the rendered image) is the caller's choice; the evaluation samples them on a grid of lidar cells.
+//! scale, so the RMSE is the standard deviation of the truth. Which cells take part (not sky, a positive lidar
+//! depth, inside the rendered image) is the caller's choice; the evaluation samples them on a grid of lidar
+//! cells. AbsRel is `mean_i |a d_i + b - g_i| / g_i` under the same alignment (the truth must be positive), so it is
+//! as blind to the network's scale as D-RMSE is.
 
 use serde::Serialize;
 
@@ -15,6 +17,8 @@ use crate::error::{MetricError, check_lengths};
 pub struct DepthAlignment {
     /// Root mean square error of `scale * predicted + shift` against the truth (metres).
     pub rmse: f64,
+    /// Mean absolute error of `scale * predicted + shift` relative to the truth.
+    pub abs_rel: f64,
     pub scale: f64,
     pub shift: f64,
     /// Cells scored.
@@ -43,7 +47,11 @@ pub fn aligned_depth_rmse(predicted: &[f32], truth: &[f32]) -> Result<DepthAlign
     let resolution = f64::from(f32::EPSILON) * mean_p.abs().max(1e-30);
     let scale = if var_p > n * resolution * resolution { cov / var_p } else { 0.0 };
     let shift = mean_g - scale * mean_p;
-    let squared: f64 =
-        predicted.iter().zip(truth).map(|(&p, &g)| (scale * f64::from(p) + shift - f64::from(g)).powi(2)).sum();
-    Ok(DepthAlignment { rmse: (squared / n).sqrt(), scale, shift, cells: truth.len() })
+    if let Some(index) = truth.iter().position(|&g| g <= 0.0) {
+        return Err(MetricError::NonPositiveTruth { metric: METRIC, index, value: truth[index] });
+    }
+    let errors =
+        predicted.iter().zip(truth).map(|(&p, &g)| (scale * f64::from(p) + shift - f64::from(g), f64::from(g)));
+    let (squared, relative) = errors.fold((0.0, 0.0), |(sq, rel), (e, g)| (sq + e * e, rel + e.abs() / g));
+    Ok(DepthAlignment { rmse: (squared / n).sqrt(), abs_rel: relative / n, scale, shift, cells: truth.len() })
 }

@@ -9,6 +9,9 @@ pub enum MetricError {
     LengthMismatch { metric: &'static str, predicted: usize, truth: usize },
     #[error("{metric}: non-finite {which} value at point {index}")]
     NonFinite { metric: &'static str, which: &'static str, index: usize },
+    /// A true depth of zero or less, which no relative error can be taken against.
+    #[error("{metric}: true depth {value} at point {index}, expected a positive depth")]
+    NonPositiveTruth { metric: &'static str, index: usize, value: f32 },
     /// Image buffers that do not hold the image's values.
     #[error(
         "{metric}: image buffers of {rendered} and {truth} values for a non-empty {height}x{width}x{channels} image"

@@ -12,7 +12,7 @@ fn depth_that_is_an_affine_function_of_the_truth_scores_zero() {
     // The network's depth is the truth at a third of the scale, shifted.
     let predicted: Vec<f32> = truth.iter().map(|g| (g - 1.5) / 3.0).collect();
     let fit = aligned_depth_rmse(&predicted, &truth).unwrap();
-    assert!(fit.rmse < 1e-5, "{fit:?}");
+    assert!(fit.rmse < 1e-5 && fit.abs_rel < 1e-5, "{fit:?}");
     assert!(close(fit.scale, 3.0, 1e-5) && close(fit.shift, 1.5, 1e-4), "{fit:?}");
     assert_eq!(fit.cells, 50);
 }
@@ -25,6 +25,9 @@ fn depth_residuals_give_the_expected_rmse() {
     let fit = aligned_depth_rmse(&predicted, &truth).unwrap();
     assert!(close(fit.scale, 10.0, 1e-9) && close(fit.shift, 0.0, 1e-9), "{fit:?}");
     assert!(close(fit.rmse, 1.0, 1e-9), "{fit:?}");
+    // Residuals -1, +1, -1, +1 against 9, 11, 19, 21.
+    let abs_rel = (1.0 / 9.0 + 1.0 / 11.0 + 1.0 / 19.0 + 1.0 / 21.0) / 4.0;
+    assert!(close(fit.abs_rel, abs_rel, 1e-9), "{fit:?}");
     // A constant prediction explains nothing: the RMSE is the truth's standard deviation.
     let fit = aligned_depth_rmse(&[0.0; 4], &truth).unwrap();
     assert_eq!(fit.scale, 0.0);
@@ -36,6 +39,10 @@ fn depth_residuals_give_the_expected_rmse() {
 fn degenerate_depth_inputs_are_errors_not_nan() {
     assert_eq!(aligned_depth_rmse(&[], &[]), Err(MetricError::Empty { metric: "D-RMSE" }));
     assert!(matches!(aligned_depth_rmse(&[1.0], &[1.0, 2.0]), Err(MetricError::LengthMismatch { .. })));
+    assert!(matches!(
+        aligned_depth_rmse(&[1.0, 2.0], &[1.0, 0.0]),
+        Err(MetricError::NonPositiveTruth { index: 1, .. })
+    ));
     assert!(matches!(
         aligned_depth_rmse(&[1.0, f32::NAN], &[1.0, 2.0]),
         Err(MetricError::NonFinite { which: "predicted", index: 1, .. })

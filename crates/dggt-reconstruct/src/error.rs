@@ -14,6 +14,9 @@ pub enum ReconstructError {
     NoInputView { camera: usize },
     #[error("{0}")]
     OutputTooLarge(crate::volume::OutputTooLarge),
+    /// A value about to be written is not finite (NaN or infinite); nothing is written.
+    #[error("{}: {what} element {element} is {value}, not finite: the file is not written", path.display())]
+    NonFinite { path: PathBuf, what: String, element: usize, value: f64 },
     #[error(transparent)]
     Data(#[from] dggt_data::DataError),
     #[error(transparent)]

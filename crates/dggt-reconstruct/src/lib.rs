@@ -3,11 +3,13 @@
 //!
 //! - [`pipeline`]: cameras, maps, Gaussians and renders written in the formats of `dggt-formats`;
 //! - [`align`]: similarity alignment of predicted to reference camera centres (the pose report);
+//! - [`finite`]: every value checked finite before its file is written;
 //! - [`summary`]: counts, times and peak memory, printed and saved as `summary.json`;
 //! - [`volume`]: the requested times and the largest output they could give, checked before any work.
 
 pub mod align;
 mod error;
+pub mod finite;
 pub mod pipeline;
 pub mod summary;
 pub mod volume;

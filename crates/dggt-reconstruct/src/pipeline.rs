@@ -22,7 +22,7 @@
 
 use std::collections::HashMap;
 use std::ops::Range;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use burn::tensor::{Device, Tensor, TensorData};
@@ -47,6 +47,7 @@ use dggt_scene::{
 
 use crate::align::pose_error;
 use crate::error::ReconstructError;
+use crate::finite;
 use crate::summary::{
     GaussianCounts, InstanceAppearance, InstanceRecord, RenderRecord, StageTime, Summary, peak_memory_mib,
 };
@@ -320,20 +321,32 @@ fn write_gaussians(
     counts.per_pixel = host_pixels.len();
     let statics = host_pixels.static_cloud();
     counts.static_kept = statics.len();
-    write_ply(&written.path("gaussians/static.ply"), &statics)?;
+    write_checked_ply(&written.path("gaussians/static.ply"), &statics)?;
     drop(statics);
     let sky_cloud = scene.sky.as_ref().map(sky_cloud).transpose()?.unwrap_or_default();
     counts.sky_kept = sky_cloud.len();
-    write_ply(&written.path("gaussians/sky.ply"), &sky_cloud)?;
+    write_checked_ply(&written.path("gaussians/sky.ply"), &sky_cloud)?;
     if scene.sky.is_none() {
         warnings.push("the network has no sky model: sky.ply is empty and renders have a black sky".into());
     }
     for (k, &time_s) in request.times_s.iter().enumerate() {
         let cloud = host_pixels.dynamic_cloud(scene.views(), request.inputs.cameras.len(), request.scene_time(time_s));
         counts.dynamic_kept.push(cloud.len());
-        write_ply(&written.path(&format!("gaussians/dynamic_t{k:04}.ply")), &cloud)?;
+        write_checked_ply(&written.path(&format!("gaussians/dynamic_t{k:04}.ply")), &cloud)?;
     }
     Ok(counts)
+}
+
+/// Writes `cloud` as PLY to `path` once every value of it is checked finite.
+fn write_checked_ply(path: &Path, cloud: &GaussianCloud) -> Result<(), ReconstructError> {
+    finite::check_cloud(path, cloud)?;
+    Ok(write_ply(path, cloud)?)
+}
+
+/// Writes the render `rgb` as PNG to `path` once every value of it is checked finite.
+fn write_checked_render(path: &Path, size: ImageSize, rgb: &[f32]) -> Result<(), ReconstructError> {
+    finite::check_f32(path, "rendered colours", rgb)?;
+    Ok(write_rgb_png(path, size, rgb)?)
 }
 
 /// Re-renders the input views (sky masks, PSNR) and renders every camera at every requested time; returns the
@@ -356,8 +369,10 @@ fn render_views(
         let render = scene.render(&target)?;
         let rgb = host(render.rgb, "render")?;
         let alpha = host(render.alpha, "render alpha")?;
+        let sky_file = written.path(&format!("sky/{}.png", view.name));
+        finite::check_f32(&sky_file, "rendered opacities (the sky mask's source)", &alpha)?;
         let sky_mask: Vec<bool> = alpha.iter().map(|&a| a < 0.5).collect();
-        write_binary_png(&written.path(&format!("sky/{}.png", view.name)), size, &sky_mask)?;
+        write_binary_png(&sky_file, size, &sky_mask)?;
         input_psnr_db.push(psnr(&rgb, &interleaved(&request.images[i])));
         at_inputs.insert((view.camera, view.time_s.to_bits()), (rgb, render.counts));
         bar.inc(1);
@@ -376,7 +391,7 @@ fn render_views(
                     (host(render.rgb, "render")?, render.counts)
                 }
             };
-            write_rgb_png(&written.path(&file), size, &rgb)?;
+            write_checked_render(&written.path(&file), size, &rgb)?;
             let nearest = nearest_in_time(inputs.views.iter().map(|v| (v.camera, v.time_s)), camera, time_s)
                 .map(|position| &inputs.views[position])
                 .ok_or(ReconstructError::NoInputView { camera })?;
@@ -495,6 +510,7 @@ fn write_cameras(
         });
     }
     let world = "the camera frame of the first input view (predicted poses; distances up to scale)";
+    finite::check_cameras(&written.root.join("cameras.json"), cameras)?;
     write_cameras_json(&written.path("cameras.json"), &Convention::opencv(world), &records)?;
     for file in ["sparse/0/cameras.txt", "sparse/0/images.txt", "sparse/0/points3D.txt"] {
         written.path(file);
@@ -516,6 +532,11 @@ fn write_maps(
     let scale = scale_for(max);
     for (i, view) in inputs.views.iter().enumerate() {
         let range = i * per_view..(i + 1) * per_view;
+        finite::check_f32(&written.root.join(format!("depth/{}.npy", view.name)), "depth", &depth[range.clone()])?;
+        if let Some(dynamic) = dynamic {
+            let file = written.root.join(format!("dynamic/{}.png", view.name));
+            finite::check_f32(&file, "dynamic probabilities", &dynamic[range.clone()])?;
+        }
         write_depth_npy(&written.path(&format!("depth/{}.npy", view.name)), size, &depth[range.clone()])?;
         write_depth_png16(&written.path(&format!("depth/{}.png", view.name)), size, &depth[range.clone()], scale)?;
         written.path(&format!("depth/{}.json", view.name));

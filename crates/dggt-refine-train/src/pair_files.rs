@@ -121,13 +121,17 @@ impl PairFiles {
     }
 }
 
-/// The `.safetensors` files of a folder of shards, in name order; none is an error naming the folder.
+/// The `.safetensors` files of a folder of shards, in name order; none is an error naming the folder, and so is
+/// a symbolic link among them that leads out of the folder ([`dggt_data::confined`]).
 fn shard_files(dir: &Path) -> Result<Vec<PathBuf>, RefineTrainError> {
     let io = |source| RefineTrainError::Io { path: dir.into(), source };
     let mut files = Vec::new();
     for entry in std::fs::read_dir(dir).map_err(io)? {
-        let file = entry.map_err(io)?.path();
-        if file.extension().is_some_and(|e| e == "safetensors") {
+        let name = entry.map_err(io)?.file_name();
+        if Path::new(&name).extension().is_some_and(|e| e == "safetensors") {
+            let file = dggt_data::confined::confined_path(dir, Path::new(&name)).map_err(|escape| {
+                RefineTrainError::PairFile { path: dir.into(), detail: format!("a shard outside the folder: {escape}") }
+            })?;
             files.push(file);
         }
     }

@@ -103,3 +103,21 @@ fn a_value_outside_the_unit_range_is_found_when_its_pair_is_read() {
     assert_eq!(files.read(0).unwrap(), all[0]);
     assert_eq!(files.read(2).unwrap(), all[2]);
 }
+
+#[cfg(unix)]
+#[test]
+fn a_shard_linked_from_outside_the_folder_is_refused_naming_the_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let shards = dir.path().join("shards");
+    std::fs::create_dir(&shards).unwrap();
+    write_pairs(&pairs(2, 8, 16, 0), &shard_path(&shards, 0)).unwrap();
+    let outside = dir.path().join("elsewhere.safetensors");
+    write_pairs(&pairs(2, 8, 16, 2), &outside).unwrap();
+    std::os::unix::fs::symlink(&outside, shard_path(&shards, 1)).unwrap();
+    let error = message(&shards);
+    assert!(error.contains("shards") && error.contains("leads outside"), "{error}");
+    std::fs::remove_file(shard_path(&shards, 1)).unwrap();
+    // A link that stays in the folder is a shard like any other.
+    std::os::unix::fs::symlink(shard_path(&shards, 0), shard_path(&shards, 1)).unwrap();
+    assert_eq!(PairFiles::open(&shards).unwrap().len(), 4);
+}

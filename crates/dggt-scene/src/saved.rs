@@ -146,8 +146,9 @@ pub fn scene_file(path: &Path) -> PathBuf {
     if path.is_dir() { path.join(SCENE_FILE) } else { path.to_path_buf() }
 }
 
-/// Writes `scene` to `path` (see the module's doc), atomically: a reader never sees half a file. A scene whose
-/// instances are not finite is refused (JSON has no infinity).
+/// Writes `scene` to `path` (see the module's doc), atomically: a reader never sees half a file. A scene with a
+/// value that is not finite (a Gaussian's, or an instance's pose: JSON has no infinity) is refused, as reading it
+/// back would be.
 pub fn save_scene(scene: &Scene4d, path: &Path) -> Result<(), SceneError> {
     let pixels = &scene.pixels;
     let file_error = |detail: String| SceneError::File { path: path.to_path_buf(), detail };
@@ -161,6 +162,14 @@ pub fn save_scene(scene: &Scene4d, path: &Path) -> Result<(), SceneError> {
     let mut push_f32 = |name: &str, tensor: Tensor<2>| -> Result<(), SceneError> {
         let shape = tensor.dims().to_vec();
         let values = host_f32(tensor, name)?;
+        // A file it could not read back is not written.
+        if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+            let row = i / shape.get(1).copied().unwrap_or(1).max(1);
+            return Err(file_error(format!(
+                "`{name}`: value {} at row {row} is not finite: nothing written",
+                values[i]
+            )));
+        }
         tensors.push((name.into(), shape, Dtype::F32, values.iter().flat_map(|v| v.to_le_bytes()).collect()));
         Ok(())
     };

@@ -1,5 +1,5 @@
-//! A scene saved to one file and read back renders as before, and a file that does not hold a consistent
-//! scene is an error naming the file and what is wrong; an instance's placement moves its rows at every time.
+//! A scene saved to one file and read back renders as before, a scene with a value that is not finite is not
+//! written, and a file that does not hold a consistent scene is an error naming the file and what is wrong; an instance's placement moves its rows at every time.
 
 use std::path::Path;
 
@@ -112,12 +112,17 @@ fn a_file_that_is_not_a_consistent_scene_is_refused_by_name() {
     let message = load_error(&not_a_scene);
     assert!(message.contains("other.safetensors") && message.contains("not a safetensors file"), "{message}");
 
-    // A NaN among the means, written through the saver itself.
+    // A NaN among the means: the saver refuses it, and a file holding one (edited after saving) is refused.
     let mut broken = scene(&device);
     let mut means = host(broken.pixels.means.clone());
     means[3 * 7 + 1] = f32::NAN;
     broken.pixels.means = Tensor::from_data(TensorData::new(means, [S * H * W, 3]), &device);
-    let message = load_error(&saved(&broken, dir.path()));
+    let message = save_scene(&broken, &dir.path().join("refused.safetensors")).unwrap_err().to_string();
+    assert!(message.contains("pixels.means") && message.contains("row 7"), "{message}");
+    assert!(!dir.path().join("refused.safetensors").exists(), "nothing is written for a refused scene");
+    let path = saved(&scene(&device), dir.path());
+    overwrite_f32(&path, "pixels.means", 3 * 7 + 1, f32::NAN);
+    let message = load_error(&path);
     assert!(message.contains("pixels.means") && message.contains("row 7"), "{message}");
 
     // Scales of another width.
@@ -141,6 +146,18 @@ fn a_file_that_is_not_a_consistent_scene_is_refused_by_name() {
     });
     let message = load_error(&path);
     assert!(message.contains("instance 0") && message.contains("placement"), "{message}");
+}
+
+/// Sets element `index` of the f32 tensor `name` of the safetensors file `path` to `value`, in place.
+fn overwrite_f32(path: &Path, name: &str, index: usize, value: f32) {
+    let mut bytes = std::fs::read(path).unwrap();
+    let header = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
+    let tensors = safetensors::SafeTensors::deserialize(&bytes).unwrap();
+    let start = tensors.tensor(name).unwrap().data().as_ptr() as usize - bytes.as_ptr() as usize;
+    assert!(start >= 8 + header, "the tensor's data lies after the header");
+    let at = start + 4 * index;
+    bytes[at..at + 4].copy_from_slice(&value.to_le_bytes());
+    std::fs::write(path, bytes).unwrap();
 }
 
 /// Rewrites the scene record of the saved scene at `path` through `edit`, keeping its tensors.

@@ -43,6 +43,14 @@ pub enum TrainError {
         changes.iter().map(ToString::to_string).collect::<Vec<_>>().join("; ")
     )]
     ArchitectureChanged { checkpoint: PathBuf, changes: Vec<Change> },
+    /// A resume whose configuration changes what the network sees (preprocessing, sampler), unallowed.
+    #[error(
+        "cannot resume from {}: the configuration changes what the network sees ({}); resume with the \
+         checkpoint's settings, allow each change with --allow-changed KEY, or start a new run in another folder",
+        checkpoint.display(),
+        changes.iter().map(ToString::to_string).collect::<Vec<_>>().join("; ")
+    )]
+    InputsChanged { checkpoint: PathBuf, changes: Vec<Change> },
     /// The single scene of a run (`data.scene`) that cannot be indexed.
     #[error("data.scene {}: {reason}", scene.display())]
     SceneExcluded { scene: PathBuf, reason: String },

@@ -54,7 +54,7 @@ use crate::rank_gradients::{GradientTransport, sum_over_ranks};
 use crate::ranks;
 use crate::records::{FailureRecord, LoggedStep, ScoredWeights, StepMeasures, StepRecord, ValidationRecord};
 use crate::replicas::{Replica, Replicas};
-use crate::resume::{self, ConfiguredSections};
+use crate::resume::{self, AllowedChanges, ConfiguredSections};
 use crate::validate::{Validation, Validator};
 
 /// The cached scene index in a run's output folder. It is not among the run's own files
@@ -119,16 +119,18 @@ impl Trainer {
     /// Builds a run of `config` (validated here) on `devices` (at least one), started as `start` says, in this
     /// process alone.
     pub fn new(config: TrainConfig, devices: Vec<Device>, start: Start) -> Result<Self, TrainError> {
-        Self::in_group(config, devices, start, ProcessGroup::Single)
+        Self::in_group(config, devices, start, ProcessGroup::Single, &AllowedChanges::none())
     }
 
     /// [`Trainer::new`] as one rank of `group`: every rank calls it with the same configuration; rank 0 checks
-    /// and prepares the output folder and names the checkpoint every rank resumes.
+    /// and prepares the output folder and names the checkpoint every rank resumes. A resume may change the
+    /// settings of what the network sees that `allowed` names ([`resume`]).
     pub fn in_group(
         config: TrainConfig,
         devices: Vec<Device>,
         start: Start,
         group: ProcessGroup,
+        allowed: &AllowedChanges,
     ) -> Result<Self, TrainError> {
         config.validate()?;
         let plain_device = devices.first().cloned().ok_or(TrainError::NoDevice)?;
@@ -139,7 +141,7 @@ impl Trainer {
         let (resume_from, (sampling, validation_scenes)) = ranks::agree_on_start(
             &group,
             &checkpoints,
-            || Ok((resume_point(&config, start)?, index_datasets(&config)?)),
+            || Ok((resume_point(&config, start, allowed)?, index_datasets(&config)?)),
             || index_datasets(&config),
         )?;
         let objective = Objective::new(config.loss.clone(), config.render.clone(), &device)?;
@@ -673,8 +675,9 @@ impl Trainer {
 }
 
 /// The checkpoint a run continues from, if any, once its output folder is checked: a fresh run refuses a folder
-/// holding another run ([`run_folder`]), a resume a configuration of another network ([`resume`]).
-fn resume_point(config: &TrainConfig, start: Start) -> Result<Option<PathBuf>, TrainError> {
+/// holding another run ([`run_folder`]), a resume a configuration of another network or, unless `allowed`, of
+/// other inputs ([`resume`]).
+fn resume_point(config: &TrainConfig, start: Start, allowed: &AllowedChanges) -> Result<Option<PathBuf>, TrainError> {
     let dir = match start {
         Start::Fresh => {
             run_folder::ensure_no_run(&config.run.out_dir)?;
@@ -685,8 +688,8 @@ fn resume_point(config: &TrainConfig, start: Start) -> Result<Option<PathBuf>, T
         }
     };
     if let Some(dir) = &dir {
-        for change in resume::compare(dir, &checkpoint::read_model_config(dir)?, config)? {
-            tracing::warn!("resuming with a changed optimiser setting: {change}");
+        for change in resume::compare(dir, &checkpoint::read_model_config(dir)?, config, allowed)? {
+            tracing::warn!("resuming with a changed setting: {change}");
         }
     }
     Ok(dir)

@@ -14,7 +14,7 @@
 //! | `ego_pose/{t:03}.txt` | 4x4 ego -> city at the sweep's time (shared by the cameras) |
 //! | `timestamps.txt` | `t seconds` per frame, seconds since the first kept sweep |
 //! | `lidar/{t:03}.bin` | N x 4 float32: x y z (m, ego frame at the sweep's time), intensity (0-255) |
-//! | `dynamic_masks/{all,human,vehicle}/` | every box of the masked categories ([`MaskRule::EveryBox`]), pinhole cameras |
+//! | `dynamic_masks/{all,human,vehicle}/` | as `options.dynamic_masks` says ([`DynamicMaskStyle`]): by default the outlines of the objects whose tracks move, each box moved along its track to the image's time and seen from the ego at that time; drivestudio's, every box of the masked categories ([`MaskRule::EveryBox`]) at the sweep's time; pinhole cameras |
 //! | `sky_masks/` | with [`SkyMasks::Lidar`] only ([`crate::sky`]) |
 //! | `depth_flows_4/{t:03}_{cam}.npy` | with [`DepthFlows::FromBoxes`] only ([`crate::depth_flows`]): the sweep's points, flow from the annotations of the same `track_uuid` at the next kept sweep (or the previous), times from the sweeps' `timestamp_ns` |
 //! | `instances/` | those boxes; `obj_to_world` = ego -> city at the sweep · object -> ego |
@@ -24,18 +24,23 @@ use std::path::{Path, PathBuf};
 
 use dggt_data::{ExportLayout, ExportVariant, io, text};
 use dggt_geom::glam::DVec3;
-use dggt_geom::{ImageSize, PinholeIntrinsics};
+use std::collections::{BTreeMap, HashMap};
+
+use crate::boxes::AnnotatedBox;
+use dggt_geom::{Ego, ImageSize, LogWorld, PinholeIntrinsics, Rigid};
 
 use super::tables::{self, CameraCalibration};
 use crate::batch::ConvertOptions;
+use crate::box_flow::WorldBox;
 use crate::camera::{Distortion, EgoCamera};
 use crate::depth_flows::{DepthFlowWriter, DepthFlows, FrameSample, MapView};
 use crate::error::{ConvertError, Result};
 use crate::feather::Table;
 use crate::instances::InstanceLog;
 use crate::marker::{DoneMarker, write_done};
-use crate::masks::{DynamicMasks, MaskRule};
+use crate::masks::{DynamicMaskStyle, DynamicMasks, MaskRule};
 use crate::sky::{self, SkyMasks};
+use crate::tracks::Tracks;
 
 /// Largest offset between a sweep and the image paired with it (ns).
 pub const PAIRING_WINDOW_NS: i64 = 25_000_000;
@@ -150,6 +155,8 @@ pub fn convert_log(
     let poses = tables::ego_poses(log)?;
     let mut annotations = tables::annotations(log)?;
     let sweeps = timestamps_in(&log.join("sensors/lidar"), "feather")?;
+    let seconds = |time_ns: i64| (time_ns - sweeps.first().copied().unwrap_or_default()) as f64 * 1e-9;
+    let tracks = log_tracks(&annotations, &poses, seconds);
     let projections = cameras.iter().map(|camera| camera.export_camera(log)).collect::<Result<Vec<_>>>()?;
     let mut instances = InstanceLog::default();
     let annotations_file = log.join("annotations.feather");
@@ -167,9 +174,18 @@ pub fn convert_log(
             let bytes = std::fs::read(&source).map_err(|e| ConvertError::io(&source, e))?;
             io::write_atomically(&layout.image(t, camera.id), &bytes)?;
             let boxes = annotations.get(&sweep).map(Vec::as_slice).unwrap_or_default();
-            DynamicMasks::draw(projection, boxes, MaskRule::EveryBox).write(&layout, t, camera.id)?;
+            let boxes: Vec<AnnotatedBox> = match options.dynamic_masks {
+                DynamicMaskStyle::MovingOutlines { .. } => {
+                    let world_from_image_ego = &poses[&time];
+                    let at_view = |b: &AnnotatedBox| tracks.at_view(b.clone(), seconds(time), world_from_image_ego);
+                    boxes.iter().map(at_view).collect()
+                }
+                DynamicMaskStyle::Drivestudio => boxes.to_vec(),
+            };
+            let (rule, shape) = options.dynamic_masks.rule_and_shape(MaskRule::EveryBox);
+            DynamicMasks::draw(projection, &boxes, rule, shape).write(&layout, t, camera.id)?;
             if options.sky_masks == SkyMasks::Lidar {
-                let mask = sky::lidar_sky_mask(projection, points.iter().copied());
+                let mask = sky::lidar_sky_mask(projection, points.iter().copied(), sky::TopBeam::Unknown);
                 sky::write_lidar_sky_mask(&layout, t, camera.id, &mask)?;
             }
         }
@@ -205,6 +221,7 @@ pub fn convert_log(
         writer.finish()?;
     }
     instances.write(&layout)?;
+    options.dynamic_masks.write_note(&layout)?;
     let marker = DoneMarker {
         converter: format!("dggt-convert {} (argoverse2)", env!("CARGO_PKG_VERSION")),
         source: log.to_owned(),
@@ -222,6 +239,23 @@ pub fn convert_log(
         dropped_sweeps: sweeps.len() - kept.len(),
         instances: instances.len(),
     })
+}
+
+/// The log's tracks in the city frame: each sweep's annotations placed by the ego pose at the sweep (sweeps
+/// without a pose are left out), times from `seconds`.
+fn log_tracks(
+    annotations: &HashMap<i64, Vec<AnnotatedBox>>,
+    poses: &BTreeMap<i64, Rigid<LogWorld, Ego>>,
+    seconds: impl Fn(i64) -> f64,
+) -> Tracks {
+    let frames: Vec<(f64, Vec<WorldBox>)> = annotations
+        .iter()
+        .filter_map(|(time, boxes)| {
+            let world_from_ego = poses.get(time)?;
+            Some((seconds(*time), boxes.iter().map(|b| WorldBox::of(b, world_from_ego)).collect()))
+        })
+        .collect();
+    Tracks::new(frames.iter().map(|(t, boxes)| (*t, boxes.as_slice())))
 }
 
 /// Writes a sweep's `x y z intensity` rows (ego frame) as float32; returns its points.

@@ -9,6 +9,7 @@ use dggt_geom::glam::DVec3;
 use dggt_geom::{Ego, GeomError, LogWorld, Rigid, slerp};
 
 use super::tables::{AnnotationRow, SampleRow, Tables};
+use crate::box_flow::WorldBox;
 use crate::boxes::{AnnotatedBox, ObjectBox, ObjectClass};
 use crate::error::Result;
 
@@ -46,6 +47,11 @@ pub struct GlobalBox {
 }
 
 impl GlobalBox {
+    /// The box as box flow and tracks take it.
+    pub fn world_box(&self) -> WorldBox {
+        WorldBox { id: self.id.clone(), world_from_box: self.global_from_box, size: self.size }
+    }
+
     /// The box in the ego frame whose pose in the global frame is `global_from_ego`.
     pub fn in_ego(&self, global_from_ego: &Rigid<LogWorld, Ego>) -> AnnotatedBox {
         AnnotatedBox {

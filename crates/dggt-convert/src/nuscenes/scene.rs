@@ -10,7 +10,7 @@
 //! | `lidar_pose/{t:03}.txt` | 4x4 LIDAR_TOP -> global: `global_from_ego(the lidar's ego_pose) · ego_from_lidar` |
 //! | `lidar/{t:03}.bin` | N x 4 float32 `x y z intensity` in the **LIDAR_TOP frame** (x right, y forward, z up) |
 //! | `timestamps.txt` | `t seconds` per frame (its target time), since the first sample |
-//! | `dynamic_masks/{all,human,vehicle}/{t:03}_{cam}.png` | every annotated box of the class ([`MaskRule::EveryBox`]), moved from global into the camera's ego frame |
+//! | `dynamic_masks/{all,human,vehicle}/{t:03}_{cam}.png` | as [`DynamicMaskStyle`] says: by default the outlines of the objects whose tracks move, each box placed at the camera's own time ([`Tracks::box_at`]); with [`DynamicMaskStyle::Drivestudio`] every annotated box of the class ([`MaskRule::EveryBox`]) at the frame's time, as rectangles; either moved from global into the camera's ego frame |
 //! | `instances/` | the annotations' instances ([`crate::instances`]); `obj_to_world` in the global frame |
 //! | `sky_masks/` | with [`SkyMasks::Lidar`] only ([`crate::sky`]) |
 //! | `depth_flows_4/{t:03}_{cam}.npy` | with [`DepthFlows::FromBoxes`] only ([`crate::depth_flows`]): the frame's LIDAR_TOP points, flow from its boxes (annotated, or interpolated between key frames) of the same instance at `t + 1` (or `t - 1`), times the frames' target times; each camera projected with its own per-frame pose |
@@ -26,6 +26,7 @@ use dggt_data::{ExportLayout, ExportVariant, io, text};
 use dggt_geom::glam::DVec3;
 use dggt_geom::{Camera, Ego, ImageSize, LogWorld, PinholeIntrinsics, Rigid, Sweep};
 
+use super::annotations::GlobalBox;
 use super::frames::{FrameRate, PlannedFrame, plan};
 use super::tables::{SampleDataRow, Tables};
 use crate::box_flow::{FrameBoxes, WorldBox};
@@ -35,8 +36,9 @@ use crate::depth_flows::{DepthFlowWriter, DepthFlows, FrameSample, MapView};
 use crate::error::{ConvertError, Result};
 use crate::instances::InstanceLog;
 use crate::marker::{DoneMarker, write_done};
-use crate::masks::{DynamicMasks, MaskRule};
+use crate::masks::{DynamicMaskStyle, DynamicMasks, MaskRule};
 use crate::sky::{self, SkyMasks};
+use crate::tracks::Tracks;
 
 /// What a converted scene holds.
 #[derive(Debug, Clone, PartialEq)]
@@ -76,7 +78,7 @@ impl<'a, S: dggt_geom::frames::Frame> Reading<'a, S> {
 
     /// The file the row points at, read whole.
     fn bytes(&self, tables: &Tables) -> Result<Vec<u8>> {
-        let path = tables.file_of(self.data);
+        let path = tables.file_of(self.data)?;
         std::fs::read(&path).map_err(|e| {
             ConvertError::io(&path, std::io::Error::new(e.kind(), format!("sample_data `{}`: {e}", self.data.token)))
         })
@@ -110,7 +112,7 @@ fn sweep_points(tables: &Tables, reading: &Reading<Sweep>) -> Result<Vec<[f32; 5
     let bytes = reading.bytes(tables)?;
     if bytes.len() % 20 != 0 {
         return Err(ConvertError::Table {
-            path: tables.file_of(reading.data),
+            path: tables.file_of(reading.data)?,
             expected: format!("sample_data `{}`: N x 5 float32 (a multiple of 20 bytes)", reading.data.token),
             found: format!("{} bytes", bytes.len()),
         });
@@ -133,11 +135,31 @@ struct WrittenFrame {
     views: Vec<MapView>,
 }
 
-/// Writes frame `t`.
+/// The boxes a camera's dynamic masks draw, in its ego frame at its own time: with moving outlines, each box moved
+/// along its track to the camera's time (`time_s`) and given its track's speed there; drivestudio's, the frame's
+/// boxes as they are.
+fn view_boxes(
+    frame: &PlannedFrame,
+    tracks: &Tracks,
+    time_s: f64,
+    global_from_ego: &Rigid<LogWorld, Ego>,
+    style: DynamicMaskStyle,
+) -> Vec<AnnotatedBox> {
+    let in_ego = frame.boxes.iter().map(|b| b.in_ego(global_from_ego));
+    match style {
+        DynamicMaskStyle::MovingOutlines { .. } => {
+            in_ego.map(|object| tracks.at_view(object, time_s, global_from_ego)).collect()
+        }
+        DynamicMaskStyle::Drivestudio => in_ego.collect(),
+    }
+}
+
+/// Writes frame `t`; `tracks` and `first_us` place boxes at each camera's time.
 fn write_frame<'a>(
     tables: &'a Tables,
     frame: &PlannedFrame<'a>,
     t: usize,
+    (tracks, first_us): (&Tracks, i64),
     options: &NuScenesOptions,
     layout: &ExportLayout,
 ) -> Result<WrittenFrame> {
@@ -155,14 +177,17 @@ fn write_frame<'a>(
         let camera = camera_projection(tables, &reading)?;
         io::write_atomically(&layout.image(t, id), &reading.bytes(tables)?)?;
         text::write_rows(&layout.extrinsics_at(t, id), &reading.global_from_sensor().to_rows())?;
-        let in_ego: Vec<AnnotatedBox> = boxes.iter().map(|b| b.in_ego(&reading.global_from_ego)).collect();
-        DynamicMasks::draw(&camera, &in_ego, MaskRule::EveryBox).write(layout, t, id)?;
+        let time_s = (reading.data.timestamp - first_us) as f64 * 1e-6;
+        let in_ego = view_boxes(frame, tracks, time_s, &reading.global_from_ego, options.dynamic_masks);
+        let (rule, shape) = options.dynamic_masks.rule_and_shape(MaskRule::EveryBox);
+        DynamicMasks::draw(&camera, &in_ego, rule, shape).write(layout, t, id)?;
         if options.sky_masks == SkyMasks::Lidar {
             let ego_from_lidar = reading.global_from_ego.inverse() * global_from_lidar;
             let in_ego = points
                 .iter()
                 .map(|p| ego_from_lidar.transform_point(DVec3::new(p[0].into(), p[1].into(), p[2].into())));
-            sky::write_lidar_sky_mask(layout, t, id, &sky::lidar_sky_mask(&camera, in_ego))?;
+            let top_beam = sky::TopBeam::Known(ego_from_lidar.inverse());
+            sky::write_lidar_sky_mask(layout, t, id, &sky::lidar_sky_mask(&camera, in_ego, top_beam))?;
         }
         if t == 0 {
             let k = camera.intrinsics;
@@ -182,16 +207,26 @@ fn write_frame<'a>(
     })
 }
 
+/// The tracks of the planned frames' boxes, times in seconds since `first_us`.
+fn frame_tracks(frames: &[PlannedFrame], first_us: i64) -> Tracks {
+    let frames: Vec<(f64, Vec<WorldBox>)> = frames
+        .iter()
+        .map(|f| ((f.time_us - first_us) as f64 * 1e-6, f.boxes.iter().map(GlobalBox::world_box).collect()))
+        .collect();
+    Tracks::new(frames.iter().map(|(t, boxes)| (*t, boxes.as_slice())))
+}
+
 /// The lidar channel exported.
 const LIDAR: &str = "LIDAR_TOP";
 
 /// What to export of each scene.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct NuScenesOptions {
     /// Export camera ids (0 CAM_FRONT .. 5 CAM_BACK).
     pub cameras: Vec<usize>,
     pub sky_masks: SkyMasks,
     pub depth_flows: DepthFlows,
+    pub dynamic_masks: DynamicMaskStyle,
     pub rate: FrameRate,
 }
 
@@ -221,15 +256,12 @@ pub fn convert_scene(
     let mut depth_flows = (options.depth_flows == DepthFlows::FromBoxes)
         .then(|| DepthFlowWriter::new(&layout, &tables.sample_annotation.path));
     let first = frames[0].time_us;
+    let tracks = frame_tracks(&frames, first);
     for (t, frame) in frames.iter().enumerate() {
         progress(t as u64);
-        let written = write_frame(tables, frame, t, options, &layout)?;
+        let written = write_frame(tables, frame, t, (&tracks, first), options, &layout)?;
         if let Some(writer) = &mut depth_flows {
-            let boxes = frame.boxes.iter().map(|b| WorldBox {
-                id: b.id.clone(),
-                world_from_box: b.global_from_box,
-                size: b.size,
-            });
+            let boxes = frame.boxes.iter().map(GlobalBox::world_box);
             writer.push(FrameSample {
                 frame: t,
                 points_in_world: Some(written.points_in_global),
@@ -246,6 +278,7 @@ pub fn convert_scene(
         frames.iter().enumerate().map(|(t, f)| [t as f64, (f.time_us - first) as f64 * 1e-6]).collect();
     text::write_rows(&layout.timestamps(), &times)?;
     instances.write(&layout)?;
+    options.dynamic_masks.write_note(&layout)?;
     let marker = DoneMarker {
         converter: format!(
             "dggt-convert {} (nuscenes {}, {}, {})",

@@ -366,8 +366,34 @@ impl Tables {
         Ok(chain)
     }
 
-    /// Where a `sample_data` row's file is.
-    pub fn file_of(&self, data: &SampleDataRow) -> PathBuf {
-        self.root.join(&data.filename)
+    /// Where a `sample_data` row's file is: its `filename` under the data root, which the tables may not lead
+    /// out of ([`dggt_data::confined`]); a file named as a JPEG must start as one, since it is copied into the
+    /// export as it is. Either is an error naming the table, the row and the field.
+    pub fn file_of(&self, data: &SampleDataRow) -> Result<PathBuf> {
+        let path = dggt_data::confined::confined_path(&self.root, Path::new(&data.filename)).map_err(|escape| {
+            self.sample_data.error(&data.token, "a `filename` naming a file under the data root", escape.to_string())
+        })?;
+        let named_jpeg = Path::new(&data.filename)
+            .extension()
+            .is_some_and(|extension| extension.eq_ignore_ascii_case("jpg") || extension.eq_ignore_ascii_case("jpeg"));
+        if named_jpeg
+            && let Some(start) = first_bytes(&path)
+            && !start.starts_with(&JPEG_MAGIC)
+        {
+            let found = format!("{} starting with {start:02x?}", path.display());
+            return Err(self.sample_data.error(&data.token, "a `filename` naming a JPEG (ff d8 ff ...)", found));
+        }
+        Ok(path)
     }
+}
+
+/// The first bytes of every JPEG file (start of image, then a marker).
+const JPEG_MAGIC: [u8; 3] = [0xff, 0xd8, 0xff];
+
+/// Up to the first three bytes of `path`; `None` when it cannot be read (reading it whole then names why).
+fn first_bytes(path: &Path) -> Option<Vec<u8>> {
+    use std::io::Read;
+    let mut start = Vec::with_capacity(JPEG_MAGIC.len());
+    std::fs::File::open(path).ok()?.take(JPEG_MAGIC.len() as u64).read_to_end(&mut start).ok()?;
+    Some(start)
 }

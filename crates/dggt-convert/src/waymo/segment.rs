@@ -9,7 +9,7 @@
 //! | `ego_pose/{t:03}.txt` | 4x4 `Frame.pose`: ego -> the log's world |
 //! | `timestamps.txt` | `t seconds` per frame, seconds since the first frame's `timestamp_micros` |
 //! | `lidar/{t:03}.bin` | N x 14 float32 ([`lidar`](super::lidar)), for frames whose lasers have range images |
-//! | `dynamic_masks/{all,human,vehicle}/{t:03}_{cam}.png` | [`MaskRule::SeenAndFasterThan`] 1 m/s, calibrated size |
+//! | `dynamic_masks/{all,human,vehicle}/{t:03}_{cam}.png` | as [`DynamicMaskStyle`] says: by default the outlines of the boxes faster than its speed (Waymo's own per-box speeds); drivestudio's, [`MaskRule::SeenAndFasterThan`] 1 m/s as rectangles; calibrated size |
 //! | `instances/` | every vehicle, pedestrian and cyclist ([`crate::instances`]) |
 //! | `sky_masks/` | with [`SkyMasks::Lidar`] only ([`crate::sky`]) |
 //! | `depth_flows_4/{t:03}_{cam}.npy` | with [`DepthFlows::FromBoxes`] only ([`crate::depth_flows`]): the lidar rows' points, flow from the laser labels of the same id at `t + 1` (or `t - 1`), times from `timestamp_micros` |
@@ -28,7 +28,7 @@ use crate::depth_flows::{DepthFlowWriter, DepthFlows, FrameSample, MapView};
 use crate::error::{ConvertError, RecordAt, Result};
 use crate::instances::InstanceLog;
 use crate::marker::{DoneMarker, write_done};
-use crate::masks::{DynamicMasks, MaskRule};
+use crate::masks::{DynamicMaskStyle, DynamicMasks, MaskRule};
 use crate::sky::{self, SkyMasks};
 use dggt_geom::glam::DVec3;
 
@@ -36,16 +36,22 @@ use dggt_geom::glam::DVec3;
 pub const MOVING_SPEED_M_S: f64 = 1.0;
 
 /// Which cameras to export (export ids, `CameraName - 1`), and whether to write sky masks and depth-flow maps.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct WaymoOptions {
     pub cameras: Vec<usize>,
     pub sky_masks: SkyMasks,
     pub depth_flows: DepthFlows,
+    pub dynamic_masks: DynamicMaskStyle,
 }
 
 impl Default for WaymoOptions {
     fn default() -> Self {
-        Self { cameras: (0..CAMERA_COUNT).collect(), sky_masks: SkyMasks::None, depth_flows: DepthFlows::None }
+        Self {
+            cameras: (0..CAMERA_COUNT).collect(),
+            sky_masks: SkyMasks::None,
+            depth_flows: DepthFlows::None,
+            dynamic_masks: DynamicMaskStyle::default(),
+        }
     }
 }
 
@@ -107,12 +113,18 @@ pub fn convert_segment(
         // A row's point: columns 3..6, vehicle frame.
         let point = |r: &LidarRow| DVec3::new(r[3].into(), r[4].into(), r[5].into());
         for camera in calibration.cameras.iter().filter(|c| options.cameras.contains(&c.id)) {
-            let masks = DynamicMasks::draw(&camera.camera, &boxes, MaskRule::SeenAndFasterThan(MOVING_SPEED_M_S));
+            let (rule, shape) = options.dynamic_masks.rule_and_shape(MaskRule::SeenAndFasterThan(MOVING_SPEED_M_S));
+            let masks = DynamicMasks::draw(&camera.camera, &boxes, rule, shape);
             masks.write(&layout, record, camera.id)?;
             if options.sky_masks == SkyMasks::Lidar {
                 // A frame without lidar gets a mask without sky.
                 let points = lidar_rows.iter().flatten().map(point);
-                sky::write_lidar_sky_mask(&layout, record, camera.id, &sky::lidar_sky_mask(&camera.camera, points))?;
+                sky::write_lidar_sky_mask(
+                    &layout,
+                    record,
+                    camera.id,
+                    &sky::lidar_sky_mask(&camera.camera, points, sky::TopBeam::Unknown),
+                )?;
             }
         }
         if let Some(writer) = &mut depth_flows {
@@ -136,6 +148,7 @@ pub fn convert_segment(
         writer.finish()?;
     }
     instances.write(&layout)?;
+    options.dynamic_masks.write_note(&layout)?;
     let marker = DoneMarker {
         converter: format!("dggt-convert {} (waymo)", env!("CARGO_PKG_VERSION")),
         source: input.to_owned(),

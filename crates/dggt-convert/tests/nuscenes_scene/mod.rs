@@ -183,7 +183,14 @@ pub fn write_root(dir: &Path, edit: impl FnOnce(&mut Vec<(&'static str, Value)>)
             let p = target_point_in_lidar().as_vec3();
             let position = (row["timestamp"].as_i64().unwrap() - 1_000_000) as f64 / 500_000.0;
             let car = car_point_in_lidar(position).as_vec3();
-            let points = [[p.x, p.y, p.z, 7.0, 3.0], [0.0, 30.0, -1.0, 1.0, 0.0], [car.x, car.y, car.z, 2.0, 1.0]];
+            // The last return, high up behind the vehicle, is the sweep's top beam: the target's column lies
+            // below it, so the beams above the target passed into the sky.
+            let points = [
+                [p.x, p.y, p.z, 7.0, 3.0],
+                [0.0, 30.0, -1.0, 1.0, 0.0],
+                [car.x, car.y, car.z, 2.0, 1.0],
+                [0.0, -30.0, 12.0, 1.0, 5.0],
+            ];
             write_sweep(&path, &points);
         }
     }

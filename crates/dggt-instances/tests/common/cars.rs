@@ -39,20 +39,8 @@ impl Car {
         let (origin, direction) = (inverse * -self.centre, inverse * direction);
         // The box in its own frame: x along its length, z across, y vertical (camera axes turned).
         let half = DVec3::new(Self::HALF.x, Self::HALF.z, Self::HALF.y);
-        let (mut near, mut far) = (0.0f64, f64::INFINITY);
-        for axis in 0..3 {
-            let (o, d, h) = (origin[axis], direction[axis], half[axis]);
-            if d.abs() < 1e-12 {
-                if o.abs() > h {
-                    return None;
-                }
-                continue;
-            }
-            let (a, b) = ((-h - o) / d, (h - o) / d);
-            near = near.max(a.min(b));
-            far = far.min(a.max(b));
-        }
-        (near <= far && near > 0.0).then_some(near)
+        let (entry, _) = dggt_geom::ray_box_interval(origin, direction, half)?;
+        (entry > 0.0).then_some(entry)
     }
 
     /// The world motion taking this pose's points to `other`'s.
