@@ -392,6 +392,34 @@ fn row(label: &str, count: String, s: &SplitSummary) -> String {
     )
 }
 
+impl EvalReport {
+    /// The table of one split's renders beside other images (`other` of each scene's split and of the mean),
+    /// under `heading`, their columns labelled `label`.
+    fn paired_table(
+        &self,
+        heading: &str,
+        label: &str,
+        summary: &SplitSummary,
+        scenes: &str,
+        other: OtherImages,
+    ) -> String {
+        let mut md = format!(
+            "\n### {heading}\n\n| scene | views | PSNR (dB) | PSNR {label} | SSIM | SSIM {label} | LPIPS | LPIPS {label} |\n\
+             |---|---|---|---|---|---|---|---|\n"
+        );
+        for scene in &self.scenes {
+            if let Some(s) = scene.splits.iter().find(|s| s.split == summary.split) {
+                md.push_str(&paired_row(&scene.name, s.count.to_string(), s, other(s)));
+            }
+        }
+        md.push_str(&paired_row("**mean over scenes**", scenes.to_string(), summary, other(summary)));
+        md
+    }
+}
+
+/// Picks, from a split's means, those of images scored beside the renders.
+type OtherImages = fn(&SplitSummary) -> Option<&ImageMeans>;
+
 /// A row of a table of the renders beside other images (`other`: the refined renders, the nearest inputs).
 fn paired_row(label: &str, count: String, s: &SplitSummary, other: Option<&ImageMeans>) -> String {
     format!(
@@ -482,31 +510,16 @@ impl EvalReport {
                     let _ = writeln!(md, "| {} | {} | {:.2} |", source.source, source.count, source.dynamic_psnr);
                 }
             }
-            if summary.refined.is_some() {
-                md.push_str("\n### without and with the refiner\n\n");
-                md.push_str(
-                    "| scene | views | PSNR (dB) | PSNR refined | SSIM | SSIM refined | LPIPS | LPIPS refined |\n",
-                );
-                md.push_str("|---|---|---|---|---|---|---|---|\n");
-                for scene in &self.scenes {
-                    if let Some(s) = scene.splits.iter().find(|s| s.split == summary.split) {
-                        md.push_str(&paired_row(&scene.name, s.count.to_string(), s, s.refined.as_ref()));
-                    }
+            let pairs: [(&str, &str, OtherImages); 2] = [
+                ("without and with the refiner", "refined", |s| s.refined.as_ref()),
+                ("the renders against the nearest input copied (the baseline to beat)", "copied", |s| {
+                    s.nearest_input.as_ref()
+                }),
+            ];
+            for (heading, label, other) in pairs {
+                if other(summary).is_some() {
+                    md.push_str(&self.paired_table(heading, label, summary, &scenes, other));
                 }
-                md.push_str(&paired_row("**mean over scenes**", scenes.clone(), summary, summary.refined.as_ref()));
-            }
-            if summary.nearest_input.is_some() {
-                md.push_str("\n### the renders against the nearest input copied (the baseline to beat)\n\n");
-                md.push_str(
-                    "| scene | views | PSNR (dB) | PSNR copied | SSIM | SSIM copied | LPIPS | LPIPS copied |\n",
-                );
-                md.push_str("|---|---|---|---|---|---|---|---|\n");
-                for scene in &self.scenes {
-                    if let Some(s) = scene.splits.iter().find(|s| s.split == summary.split) {
-                        md.push_str(&paired_row(&scene.name, s.count.to_string(), s, s.nearest_input.as_ref()));
-                    }
-                }
-                md.push_str(&paired_row("**mean over scenes**", scenes, summary, summary.nearest_input.as_ref()));
             }
         }
         let notes: Vec<String> = self
