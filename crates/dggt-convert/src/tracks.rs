@@ -59,15 +59,21 @@ impl Tracks {
         Self { by_id }
     }
 
+    /// The annotations of object `id` (at least one), when its track reaches `time_s` (its span extended by
+    /// [`MAX_EXTRAPOLATION_S`] either side).
+    fn reaching(&self, id: &str, time_s: f64) -> Option<&[TrackPoint]> {
+        let points = self.by_id.get(id)?;
+        let (first, last) = (points.first()?, points.last()?);
+        let reaches = time_s >= first.time_s - MAX_EXTRAPOLATION_S && time_s <= last.time_s + MAX_EXTRAPOLATION_S;
+        reaches.then_some(points.as_slice())
+    }
+
     /// The object's horizontal speed (m/s) around `time_s`: the displacement of its box centre between the
     /// window's ends (clamped to the track's span) over their time apart; 0 for a track of one annotation, `None`
     /// for an unknown object or a time outside the track's (extended) span.
     pub fn speed_at(&self, id: &str, time_s: f64) -> Option<f64> {
-        let points = self.by_id.get(id)?;
-        let (first, last) = (points.first()?, points.last()?);
-        if time_s < first.time_s - MAX_EXTRAPOLATION_S || time_s > last.time_s + MAX_EXTRAPOLATION_S {
-            return None;
-        }
+        let points = self.reaching(id, time_s)?;
+        let (first, last) = (&points[0], &points[points.len() - 1]);
         let start = (time_s - SPEED_WINDOW_S / 2.0).clamp(first.time_s, last.time_s);
         let end = (time_s + SPEED_WINDOW_S / 2.0).clamp(first.time_s, last.time_s);
         if end <= start {
@@ -80,12 +86,7 @@ impl Tracks {
     /// The object's box at `time_s` (see the module's rules), or `None` for an unknown object or a time outside
     /// its track's extended span.
     pub fn box_at(&self, id: &str, time_s: f64) -> Option<WorldBox> {
-        let points = self.by_id.get(id)?;
-        let (first, last) = (points.first()?, points.last()?);
-        if time_s < first.time_s - MAX_EXTRAPOLATION_S || time_s > last.time_s + MAX_EXTRAPOLATION_S {
-            return None;
-        }
-        let (earlier, later) = bracket(points, time_s);
+        let (earlier, later) = bracket(self.reaching(id, time_s)?, time_s);
         if earlier.time_s == later.time_s {
             return Some(WorldBox { id: id.to_owned(), world_from_box: earlier.world_from_box, size: earlier.size });
         }

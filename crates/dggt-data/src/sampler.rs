@@ -54,7 +54,6 @@ pub struct SamplerConfig {
     /// Camera positions in the scene used for every view, in this order; empty means all cameras.
     pub cameras: Vec<usize>,
     /// Frame positions no step draws, as input or target: held out for validation.
-    #[serde(skip_serializing_if = "Vec::is_empty")]
     pub held_out: Vec<usize>,
 }
 
