@@ -122,6 +122,8 @@ pub struct SourceSummary {
     pub epe3d: Option<f64>,
     pub acc5: Option<f64>,
     pub acc10: Option<f64>,
+    /// EPE3D over the points that move ([`FlowMetrics::moving_epe3d`]).
+    pub moving_epe3d: Option<f64>,
     pub angle_error_rad: Option<f64>,
     /// Views (or scenes) with this source's metrics.
     pub count: usize,
@@ -268,6 +270,7 @@ pub fn summarise_views(views: &[ViewRecord], split: TargetKind) -> SplitSummary 
                     epe3d: mean(|m| Some(m.epe3d)).0,
                     acc5: mean(|m| Some(m.acc5)).0,
                     acc10: mean(|m| Some(m.acc10)).0,
+                    moving_epe3d: mean(|m| m.moving_epe3d).0,
                     angle_error_rad: mean(|m| m.angle_error_rad).0,
                     count: metrics.len(),
                 }
@@ -332,6 +335,7 @@ pub fn summarise_scenes(scenes: &[SceneReport], splits: &[TargetKind]) -> Vec<Sp
                             epe3d: mean(|m| m.epe3d).0,
                             acc5: mean(|m| m.acc5).0,
                             acc10: mean(|m| m.acc10).0,
+                            moving_epe3d: mean(|m| m.moving_epe3d).0,
                             angle_error_rad: mean(|m| m.angle_error_rad).0,
                             count: mean(|m| m.epe3d).1,
                         }
@@ -488,15 +492,17 @@ impl EvalReport {
             if !summary.motion_by_source.is_empty() {
                 md.push_str("\n### motion by source (mean over scenes)\n\n");
                 md.push_str(
-                    "| source | scenes | EPE3D | Acc5 (%) | Acc10 (%) | angle (rad) |\n|---|---|---|---|---|---|\n",
+                    "| source | scenes | EPE3D | EPE3D moving | Acc5 (%) | Acc10 (%) | angle (rad) |\n\
+                     |---|---|---|---|---|---|---|\n",
                 );
                 for source in &summary.motion_by_source {
                     let _ = writeln!(
                         md,
-                        "| {} | {} | {} | {} | {} | {} |",
+                        "| {} | {} | {} | {} | {} | {} | {} |",
                         source.source,
                         source.count,
                         cell(source.epe3d, 3),
+                        cell(source.moving_epe3d, 3),
                         percent(source.acc5),
                         percent(source.acc10),
                         cell(source.angle_error_rad, 3)

@@ -23,7 +23,7 @@
 //! pooled first); the constant `b_2 W_k` of the keys cancels in the softmax and `b_2 W_v` adds to the values'
 //! bias. Per neighbour this costs the encoding's first layer and a few dot products of `hidden` channels instead
 //! of three `hidden x hidden` products. The per-neighbour sums run in [`crate::attention`]: fused on the CPU and on
-//! CubeCL devices, tensor operations elsewhere. `tests/attention.rs` checks them against the formulas above written
+//! CubeCL devices, tensor operations elsewhere. `tests/flow_head/attention.rs` checks them against the formulas above written
 //! out.
 //!
 //! After each iteration a displacement longer than the diagonal of the box holding both clouds is shortened to it

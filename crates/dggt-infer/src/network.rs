@@ -15,7 +15,7 @@ use burn::module::{Module, ModuleVisitor, Param};
 use burn::tensor::{Device, Tensor};
 use dggt_data::Preprocess;
 use dggt_model::sky::SkyModel;
-use dggt_model::weights::{Coverage, LoadReport, load_checkpoint_with};
+use dggt_model::weights::{Coverage, LoadReport, load_checkpoint_with, load_module_from};
 use dggt_model::{Dggt, ModelConfig, Preset};
 use dggt_scene::AssemblySettings;
 use serde::Serialize;
@@ -235,7 +235,10 @@ fn read_architecture(arch: &Architecture) -> Result<(ModelConfig, Option<Trained
     }
 }
 
-/// A starting checkpoint (the release's key names) and the parameters it may lack.
+/// A starting checkpoint and the parameters it may lack: a release file (`.pt`, `.pth`, `.safetensors`, the
+/// release's key names) or one of this project's trainer checkpoints (a `step-N` folder, a run's `checkpoints/`
+/// folder or the run folder: the network inference would use, its weight average where the run kept one), whose
+/// parameters are carried over by module path into a network that may add modules (a flow head).
 #[derive(Debug, Clone, Copy)]
 pub struct StartingWeights<'a> {
     pub path: &'a Path,
@@ -254,23 +257,53 @@ pub fn fresh_model(
     seed: u64,
     device: &Device,
 ) -> Result<Dggt, InferError> {
+    // A trained network is read before the seeded draw, so that the draw is the same whatever the source.
+    let source = init.map(|init| StartingSource::open(init.path, device)).transpose()?;
     dggt_model::seeded::with_seed(device, seed, || {
         let mut model = Dggt::new(config, device)?;
         if let Some(sky) = &config.sky_model {
             model.sky_model = Some(SkyModel::initialised(sky, device));
         }
         // Loaded before the fresh parameters are drawn, so that a wrong file fails before the network is allocated.
-        if let Some(init) = init {
-            apply_starting_weights(&mut model, init)?;
+        if let (Some(init), Some(source)) = (init, &source) {
+            apply_starting_weights(&mut model, init, source)?;
         }
         materialise(&model);
         Ok(model)
     })
 }
 
+/// Where starting weights are read from.
+enum StartingSource {
+    /// A release-format file, read as it is applied.
+    ReleaseFile,
+    /// A trainer checkpoint's network, loaded whole.
+    Trained(Box<Dggt>),
+}
+
+impl StartingSource {
+    /// A folder is a trainer checkpoint (verified, its own architecture); anything else a release-format file.
+    fn open(path: &Path, device: &Device) -> Result<Self, InferError> {
+        if !path.is_dir() {
+            return Ok(Self::ReleaseFile);
+        }
+        let dir = checkpoint::checkpoint_dir(path)?;
+        let blank = Dggt::new(&checkpoint::read_model_config(&dir)?, device)?;
+        Ok(Self::Trained(Box::new(checkpoint::load_model(&dir, blank)?)))
+    }
+}
+
 /// Loads `init` over `model`, refusing it when it lacks what `may_lack` does not allow.
-fn apply_starting_weights(model: &mut Dggt, init: StartingWeights<'_>) -> Result<(), InferError> {
-    let report = load_checkpoint_with(model, init.path, Coverage::Partial)?;
+fn apply_starting_weights(
+    model: &mut Dggt,
+    init: StartingWeights<'_>,
+    source: &StartingSource,
+) -> Result<(), InferError> {
+    let report = match source {
+        StartingSource::ReleaseFile => load_checkpoint_with(model, init.path, Coverage::Partial)?,
+        StartingSource::Trained(trained) => load_module_from(model, trained.as_ref(), Coverage::Partial)
+            .map_err(|e| InferError::checkpoint(init.path, e))?,
+    };
     check_coverage(init, &report)?;
     if !report.unused.is_empty() {
         tracing::warn!(checkpoint = %init.path.display(), unused = ?report.unused, "tensors the network does not use");

@@ -19,8 +19,10 @@ use crate::error::InferError;
 pub struct ModelSection {
     /// `tiny`, `vggt_1b` or `dggt` (the released architecture).
     pub preset: Preset,
-    /// Starting weights with the release's key names (`.pt`, `.pth`, `.safetensors`): a VGGT-1B checkpoint
-    /// (the Gaussian heads then start fresh) or the DGGT release. `None` starts from random weights.
+    /// Starting weights: a file with the release's key names (`.pt`, `.pth`, `.safetensors`: a VGGT-1B
+    /// checkpoint, the Gaussian heads then starting fresh, or the DGGT release), or a trainer checkpoint of this
+    /// project (a `step-N` folder, a run's `checkpoints/` folder or the run folder), whose parameters are carried
+    /// over by module path into this network (which may add modules). `None` starts from random weights.
     pub init_checkpoint: Option<PathBuf>,
     /// Parameters the starting checkpoint may lack, as glob patterns over module paths (`gs_head.*`): they
     /// start fresh. Any other parameter the checkpoint lacks is an error naming it, so a wrong file never

@@ -4,6 +4,8 @@
 //! - EPE3D: `mean_i e_i`;
 //! - Acc5 (strict): the fraction of points with `e_i < 0.05` or `r_i < 0.05`;
 //! - Acc10 (relaxed): the fraction with `e_i < 0.1` or `r_i < 0.1`;
+//! - moving EPE3D: `mean_i e_i` over the points whose true flow is longer than 0.1 (the moving points, where
+//!   holding everything still is no answer; not in STORM);
 //! - angular error: over the points whose true flow is longer than 0.1 (shorter ones have no reliable
 //!   direction), the mean of `acos(clamp(u(p) . u(g), -1 + 1e-7, 1 - 1e-7))` in radians, with
 //!   `u(v) = v / (|v| + 1e-7)`. A zero prediction thus has an angular error of exactly pi/2 (its unit vector is
@@ -41,6 +43,9 @@ pub struct FlowMetrics {
     pub acc5: f64,
     /// Fraction of points within the relaxed threshold (Acc10).
     pub acc10: f64,
+    /// Mean end-point error over the points whose true flow is longer than [`ANGLE_MIN_FLOW`] (the moving
+    /// points); `None` when there are none.
+    pub moving_epe3d: Option<f64>,
     /// Mean angular error in radians; `None` when no true flow is longer than [`ANGLE_MIN_FLOW`].
     pub angle_error_rad: Option<f64>,
     /// Points scored for EPE3D and the accuracies.
@@ -67,7 +72,7 @@ pub fn scene_flow_metrics(predicted: &[[f32; 3]], truth: &[[f32; 3]]) -> Result<
         }
     }
     let (mut epe_sum, mut strict, mut relaxed) = (0.0, 0usize, 0usize);
-    let (mut angle_sum, mut angle_points) = (0.0, 0usize);
+    let (mut angle_sum, mut moving_epe_sum, mut angle_points) = (0.0, 0.0, 0usize);
     for (&p, &g) in predicted.iter().zip(truth) {
         let (p, g) = (widen(p), widen(g));
         let error = norm([p[0] - g[0], p[1] - g[1], p[2] - g[2]]);
@@ -80,6 +85,7 @@ pub fn scene_flow_metrics(predicted: &[[f32; 3]], truth: &[[f32; 3]]) -> Result<
             let (pn, gn) = (norm(p) + ANGLE_EPSILON, truth_norm + ANGLE_EPSILON);
             let cosine = (p[0] * g[0] + p[1] * g[1] + p[2] * g[2]) / (pn * gn);
             angle_sum += cosine.clamp(-1.0 + ANGLE_EPSILON, 1.0 - ANGLE_EPSILON).acos();
+            moving_epe_sum += error;
             angle_points += 1;
         }
     }
@@ -88,6 +94,7 @@ pub fn scene_flow_metrics(predicted: &[[f32; 3]], truth: &[[f32; 3]]) -> Result<
         epe3d: epe_sum / n,
         acc5: strict as f64 / n,
         acc10: relaxed as f64 / n,
+        moving_epe3d: (angle_points > 0).then(|| moving_epe_sum / angle_points as f64),
         angle_error_rad: (angle_points > 0).then(|| angle_sum / angle_points as f64),
         points: truth.len(),
         angle_points,

@@ -65,6 +65,8 @@ fn flow_errors_give_the_expected_storm_metrics() {
     assert!(close(m.epe3d, (0.04 + 0.15 + 0.6 + 0.02) / 4.0, 1e-6), "{m:?}");
     assert!(close(m.acc5, 0.5, 1e-12) && close(m.acc10, 0.75, 1e-12), "{m:?}");
     assert_eq!((m.points, m.angle_points), (4, 3));
+    // The moving points are the three whose true flow is longer than 0.1.
+    assert!(close(m.moving_epe3d.unwrap(), (0.04 + 0.15 + 0.6) / 3.0, 1e-6), "{m:?}");
     // Angles: about 0, 0 and atan(0.6 / 3); the first two are not quite 0 (the 1e-7 added to the norms and
     // the cosine clamp leave under 1e-3 rad each).
     let expected = (0.2f64).atan() / 3.0;
@@ -76,6 +78,8 @@ fn a_held_prediction_scores_as_storm_scores_zero_flow() {
     let truth = [[3.0f32, 4.0, 0.0], [0.0, 0.0, 0.0], [0.03, 0.0, 0.0]];
     let m = scene_flow_metrics(&[[0.0; 3]; 3], &truth).unwrap();
     assert!(close(m.epe3d, (5.0 + 0.0 + 0.03) / 3.0, 1e-6), "{m:?}");
+    // Over the moving point alone, holding is all error.
+    assert!(close(m.moving_epe3d.unwrap(), 5.0, 1e-6), "{m:?}");
     // Static points (and small motions) are accurate; the moving one is not.
     assert!(close(m.acc5, 2.0 / 3.0, 1e-12) && close(m.acc10, 2.0 / 3.0, 1e-12), "{m:?}");
     // The zero vector has no direction: its angular error is pi/2.
@@ -84,7 +88,15 @@ fn a_held_prediction_scores_as_storm_scores_zero_flow() {
     let still = scene_flow_metrics(&[[0.0; 3]; 2], &[[0.0; 3]; 2]).unwrap();
     assert_eq!(
         still,
-        FlowMetrics { epe3d: 0.0, acc5: 1.0, acc10: 1.0, angle_error_rad: None, points: 2, angle_points: 0 }
+        FlowMetrics {
+            epe3d: 0.0,
+            acc5: 1.0,
+            acc10: 1.0,
+            moving_epe3d: None,
+            angle_error_rad: None,
+            points: 2,
+            angle_points: 0
+        }
     );
     assert_eq!(scene_flow_metrics(&[], &[]), Err(MetricError::Empty { metric: "scene flow" }));
     assert!(matches!(

@@ -1,7 +1,7 @@
 //! The DGGT network on burn: a VGGT-style feedforward model that predicts, from a few unposed frames of a
 //! driving scene, per-frame cameras and dense per-pixel maps.
 //!
-//! Built so far, each matched against the release's own outputs (`tests/parity.rs`):
+//! Built so far, each matched against the release's own outputs (`dggt-parity`'s `tests/parity/parity.rs`):
 //! - [`config`]: every size, read from a parity `config.json` or from presets (`tiny`, `vggt_1b`, `dggt`);
 //! - [`dino`]: the DINOv2 patch embedding with its antialiased positional-embedding resize ([`resample`]);
 //! - [`aggregator`]: alternating frame/global attention with qk-norm and 2D RoPE ([`rope`]);
@@ -10,7 +10,7 @@
 //!   ([`gaussian_maps`]), instance (dynamic) and semantic heads;
 //! - [`weights`]: loading checkpoints (`.safetensors`, `.pt`) with the release's PyTorch key names; the
 //!   full-size presets are checked name by name and shape by shape against the released checkpoints' key
-//!   lists (`tests/checkpoint_keys.rs`).
+//!   lists (`tests/model/checkpoint_keys.rs`).
 //!
 //! - [`sky`]: the sky model's Gaussians and their colours sampled from the input views;
 //! - [`lifespan`]: frame times, the static/dynamic opacity split and the lifespan decay;

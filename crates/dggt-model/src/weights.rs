@@ -140,6 +140,24 @@ pub fn load_checkpoint_with<M: Module>(
         }
         _ => return Err(file_error("unknown checkpoint format (expected .safetensors, .pt or .pth)".into())),
     };
+    report_applied(result, coverage)
+}
+
+/// Loads the parameters of `source` into `module` wherever their module paths agree: the parameters of a network
+/// trained by this project carried into one built with more (a head added for fine-tuning). Parameters `source`
+/// lacks keep their values under [`Coverage::Partial`]; shape and type mismatches are errors either way.
+pub fn load_module_from<M: Module, S: Module>(
+    module: &mut M,
+    source: &S,
+    coverage: Coverage,
+) -> Result<LoadReport, ModelError> {
+    let result = module.apply(source.collect(None, None, false), None, None, false);
+    report_applied(result, coverage)
+}
+
+/// What an application of tensors did, or the error that names its first problem (every shape mismatch when
+/// there are several).
+fn report_applied(result: burn::store::ApplyResult, coverage: Coverage) -> Result<LoadReport, ModelError> {
     let mismatched: Vec<String> = result
         .errors
         .iter()

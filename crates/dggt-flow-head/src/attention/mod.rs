@@ -12,8 +12,8 @@
 //!   memory): the neighbours' keys and values gathered and the same sums taken with burn's operations and
 //!   autodiff.
 //!
-//! `tests/attention.rs` holds both against the documented formulas, and the device kernels against the host's;
-//! `tests/gradients.rs` checks the fused backward against finite differences.
+//! `tests/flow_head/attention.rs` holds both against the documented formulas, and the device kernels against the host's;
+//! `tests/flow_head/gradients.rs` checks the fused backward against finite differences.
 
 mod autodiff;
 #[cfg(any(feature = "wgpu", feature = "cuda"))]

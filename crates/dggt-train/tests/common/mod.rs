@@ -5,7 +5,6 @@ use std::path::{Path, PathBuf};
 
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::tensor::Tensor;
-use dggt_model::Dggt;
 use dggt_train::{TrainConfig, Trainer};
 
 pub fn repo() -> PathBuf {
@@ -29,8 +28,8 @@ pub fn small_config(out: &Path, steps: u64) -> TrainConfig {
     config.unattended(out)
 }
 
-/// Every float parameter of `model`, flattened in visiting order.
-pub fn parameters(model: &Dggt) -> Vec<f32> {
+/// Every float parameter of `model` (the network or one of its modules), flattened in visiting order.
+pub fn parameters<M: Module>(model: &M) -> Vec<f32> {
     struct Collect(Vec<f32>);
     impl ModuleVisitor for Collect {
         fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
