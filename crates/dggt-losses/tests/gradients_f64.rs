@@ -4,10 +4,12 @@
 //! to `sum |grad_i u_i|`; asserted: 1e-7) along the gradient and along random directions. Also shows that the losses run in f64 (weights, constants and
 //! inputs follow the device's default float type).
 
+mod common;
+
 use std::sync::Once;
 
-use crate::common::{Rng, synthetic_weights, write_safetensors};
 use burn::tensor::{Device, FloatDType, Tensor, TensorData};
+use common::{Rng, synthetic_weights, write_safetensors};
 use dggt_losses::backbone::{ALEXNET_CONVS, ALEXNET_TAP_CHANNELS, VGG16_CONVS, VGG16_TAP_CHANNELS};
 use dggt_losses::lpips::LpipsInput;
 use dggt_losses::{GramLoss, Lpips, LpipsKind};

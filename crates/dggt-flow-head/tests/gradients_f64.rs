@@ -5,10 +5,12 @@
 //! the differences agree with autodiff to ~1e-9 of the tensor's largest gradient entry (seen: <= 3.7e-9;
 //! asserted: 1e-7 of the largest entry + 1e-7 of the entry's own size).
 
+mod common;
+
 use std::sync::Once;
 
-use crate::common::{Tolerance, small_check};
 use burn::tensor::{DType, Device, FloatDType};
+use common::{Tolerance, small_check};
 
 fn device() -> Device {
     static CONFIGURE: Once = Once::new();
