@@ -81,9 +81,11 @@ fn the_reduced_training_step_fits_a_buffer_limit_lowered_with_the_workload() {
         // SAFETY: `_exit` ends the process at once; everything the test reports is flushed above.
         unsafe { libc::_exit(0) };
     }
-    let name = "gpu_buffer_limit::the_reduced_training_step_fits_a_buffer_limit_lowered_with_the_workload";
+    // The test's path inside the test binary (`module_path!` starts with the binary's crate name).
+    let module = module_path!().split_once("::").map_or("", |(_, module)| module);
+    let name = format!("{module}::the_reduced_training_step_fits_a_buffer_limit_lowered_with_the_workload");
     let child = Command::new(std::env::current_exe().expect("the test binary"))
-        .args(["--exact", name, "--nocapture", "--test-threads=1"])
+        .args(["--exact", &name, "--nocapture", "--test-threads=1"])
         .env(CHILD, "1")
         .output()
         .expect("the test binary runs");
