@@ -1,10 +1,21 @@
-//! `dggt reconstruct --rerun`: a tiny network trained one step reconstructs three frames of the fixture's
-//! two cameras, and the recording is read back with rerun's own Python SDK (`rerun-sdk` of the crate's version,
-//! `tests/rerun_readback.py`) as a client would: its entity paths, the splats at every rendered time, the
-//! cameras' poses and the time lines' values match `summary.json`, `cameras.json` and the PLY files.
+//! Rerun recordings read back with rerun's own Python SDK (`rerun-sdk` of the crate's version,
+//! `tests/rerun_readback.py`) as a client would.
+//!
+//! - `dggt reconstruct --rerun`: a tiny network trained one step reconstructs three frames of the fixture's two
+//!   cameras; the recording's entity paths, the splats at every rendered time, the cameras' poses and the time
+//!   lines' values match `summary.json`, `cameras.json` and the PLY files.
+//! - `dggt train --rerun` and `--rerun-connect`: a short run's scalars, validation scores, renders, cameras and
+//!   splats on the `step` time line, written to a file and streamed to a viewer process (`rerun --save`, the
+//!   pinned CLI in server mode); a viewer killed mid-run leaves the run's weights as an unwatched run's.
 
-use std::path::Path;
-use std::process::{Command, Output};
+mod common;
+
+use std::io::BufRead;
+use std::net::{TcpListener, TcpStream};
+use std::os::unix::process::CommandExt;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
 
 use dggt_formats::cameras_json::read_cameras_json;
 use dggt_formats::ply::read_ply;
@@ -138,4 +149,216 @@ fn a_reconstruction_recording_reads_back_as_its_files_say() {
     let refused = dggt(&[&reconstruct[..13], &["--out", path(&again), "--rerun", path(&rrd)]].concat());
     assert!(!refused.status.success() && String::from_utf8_lossy(&refused.stderr).contains("--rerun"));
     assert!(!again.exists(), "a refused recording starts no reconstruction");
+}
+
+/// The small overfit run of `steps` steps, validated every second step on frame 2 between inputs 0 and 4 (one
+/// camera), at most 400 splats a snapshot, written to `dir/NAME.toml`.
+fn watched_config(dir: &Path, name: &str, steps: u64) -> PathBuf {
+    let mut config = common::small_config(&dir.join("unused"));
+    config.run.steps = steps;
+    config.run.validate_every = 2;
+    config.data.validation.inputs = vec![0, 4];
+    config.data.validation.targets = vec![2];
+    config.viewer.max_splats = 400;
+    common::write_config(dir.join(format!("{name}.toml")), &config)
+}
+
+fn train(config: &Path, out: &Path, extra: &[&str]) -> Command {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_dggt"));
+    command.args(["train", "--config", path(config), "--out", path(out)]).args(extra);
+    command
+}
+
+/// The `step` values of an entity's rows.
+fn steps(entities: &serde_json::Map<String, Value>, entity: &str) -> Vec<u64> {
+    let rows = entities.get(entity).unwrap_or_else(|| panic!("{entity} missing: {:?}", entities.keys()));
+    rows["rows"].as_array().unwrap().iter().filter_map(|row| row["step"].as_u64()).collect()
+}
+
+/// The validation records of a run's `metrics.jsonl`: `(step, psnr)`.
+fn validation_records(out: &Path) -> Vec<(u64, f64)> {
+    let text = std::fs::read_to_string(out.join("metrics.jsonl")).unwrap();
+    text.lines()
+        .map(|line| serde_json::from_str::<Value>(line).unwrap())
+        .filter(|record| record["kind"] == "validation")
+        .map(|record| (record["step"].as_u64().unwrap(), record["psnr"].as_f64().unwrap()))
+        .collect()
+}
+
+#[test]
+fn a_training_recording_holds_each_step_and_validation_on_the_step_time_line() {
+    let work = tempfile::tempdir().unwrap();
+    let config = watched_config(work.path(), "watched", 4);
+    let (out, rrd) = (work.path().join("run"), work.path().join("training.rrd"));
+    let text = succeeded(&train(&config, &out, &["--rerun", path(&rrd)]).output().unwrap());
+    assert!(
+        text.contains(&format!("recording: {}", rrd.display())) && text.contains("4 steps, 2 validation passes"),
+        "{text}"
+    );
+    let recording = read_back(&rrd);
+    assert_eq!(recording["blueprints"], 1, "the recording carries its layout");
+    let entities = recording["entities"].as_object().unwrap();
+
+    // Every step's scalars, as metrics.jsonl numbers the steps.
+    for entity in
+        ["/train/loss", "/train/target_psnr", "/train/learning_rate", "/train/grad_norm", "/train/terms/rgb_l2"]
+    {
+        assert_eq!(steps(entities, entity), [0, 1, 2, 3], "{entity}");
+    }
+    // The validation scores are the run's own.
+    let recorded: Vec<(u64, f64)> = entities["/validation/scores/psnr"]["rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|row| (row["step"].as_u64().unwrap(), row["Scalars:scalars"][0].as_f64().unwrap()))
+        .collect();
+    let expected = validation_records(&out);
+    assert_eq!(recorded.len(), 2);
+    for ((step, psnr), (expected_step, expected_psnr)) in recorded.iter().zip(&expected) {
+        assert_eq!(step, expected_step);
+        assert!((psnr - expected_psnr).abs() < 1e-9, "step {step}: {psnr} vs {expected_psnr}");
+    }
+    // At each pass the target's render, truth, difference and depth, the inputs' cameras (predicted and the
+    // export's) with their images, depth and dynamic masks, and the window's splats.
+    for part in ["render", "truth", "difference", "depth"] {
+        assert_eq!(steps(entities, &format!("/validation/f002_c0/{part}")), [2, 4], "{part}");
+    }
+    for view in ["f000_c0", "f004_c0"] {
+        for entity in [format!("/world/predicted/{view}"), format!("/world/export/{view}")] {
+            let rows = entities[&entity]["rows"].as_array().unwrap();
+            let poses = rows.iter().filter(|row| row.get("Transform3D:translation").is_some()).count();
+            assert_eq!(poses, 2, "{entity}");
+        }
+        for part in ["image", "depth", "dynamic"] {
+            assert_eq!(steps(entities, &format!("/world/predicted/{view}/{part}")), [2, 4], "{view}/{part}");
+        }
+    }
+    let export = &entities["/world/export/f000_c0"]["rows"].as_array().unwrap();
+    let first = export.iter().find_map(|row| row.get("Transform3D:translation")).unwrap();
+    let norm: f64 = first[0].as_array().unwrap().iter().map(|v| v.as_f64().unwrap().powi(2)).sum();
+    assert!(norm < 1e-10, "the window's world is its first input camera's frame: {first}");
+    for row in entities["/world/gaussians"]["rows"].as_array().unwrap() {
+        let splats = row["GaussianSplats3D:centers"].as_u64().unwrap();
+        assert!((1..=400).contains(&splats), "{splats} splats, at most [viewer] max_splats = 400");
+    }
+
+    // A recording is never replaced: an existing file is refused before any work.
+    let again = work.path().join("again");
+    let refused = train(&config, &again, &["--rerun", path(&rrd)]).output().unwrap();
+    assert!(!refused.status.success() && String::from_utf8_lossy(&refused.stderr).contains("the file exists"));
+    assert!(!again.exists(), "a refused recording starts no run");
+}
+
+/// A `rerun` viewer in server mode on a free port, saving what it receives to `save`.
+struct ViewerProcess {
+    child: Child,
+    url: String,
+}
+
+impl ViewerProcess {
+    fn start(save: &Path) -> Self {
+        let port = TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+        // Its own process group: `rerun` may be a launcher (a pip entry point behind a shim) whose child serves.
+        let child = Command::new("rerun")
+            .args(["--port", &port.to_string(), "--bind", "127.0.0.1", "--save", path(save)])
+            .process_group(0)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("the rerun CLI runs (pip install rerun-sdk==0.36.3, as .ci/run does)");
+        let started = Instant::now();
+        while TcpStream::connect(("127.0.0.1", port)).is_err() {
+            assert!(started.elapsed() < Duration::from_secs(60), "the viewer never listened on port {port}");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        Self { child, url: format!("rerun+http://127.0.0.1:{port}/proxy") }
+    }
+
+    /// Sends `signal` to the viewer's whole process group.
+    fn signal(&self, signal: libc::c_int) {
+        let group = self.child.id() as libc::pid_t;
+        // SAFETY: `kill` only sends a signal, to the group this test started.
+        unsafe { libc::kill(-group, signal) };
+    }
+
+    /// Stops it as Ctrl-C would, letting it close its file.
+    fn interrupt(mut self) {
+        self.signal(libc::SIGINT);
+        let started = Instant::now();
+        while self.child.try_wait().unwrap().is_none() {
+            assert!(started.elapsed() < Duration::from_secs(30), "the viewer did not stop on SIGINT");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+}
+
+impl Drop for ViewerProcess {
+    /// Kills it (the whole group) as a crash would.
+    fn drop(&mut self) {
+        self.signal(libc::SIGKILL);
+        self.child.wait().ok();
+    }
+}
+
+/// The training records of a run's `metrics.jsonl` so far.
+fn trained_steps(out: &Path) -> usize {
+    let Ok(file) = std::fs::File::open(out.join("metrics.jsonl")) else { return 0 };
+    std::io::BufReader::new(file)
+        .lines()
+        .map_while(Result::ok)
+        .filter(|line| line.contains(r#""kind":"train""#))
+        .count()
+}
+
+#[test]
+fn a_run_streams_to_a_viewer_and_trains_on_unchanged_when_the_viewer_is_killed() {
+    let work = tempfile::tempdir().unwrap();
+
+    // Streamed to a viewer, which receives the run's entities.
+    let received = work.path().join("received.rrd");
+    let viewer = ViewerProcess::start(&received);
+    let short = watched_config(work.path(), "short", 2);
+    let text =
+        succeeded(&train(&short, &work.path().join("streamed"), &["--rerun-connect", &viewer.url]).output().unwrap());
+    assert!(text.contains("recording: the viewer at") && !text.contains("stopped early"), "{text}");
+    viewer.interrupt();
+    let entities = read_back(&received)["entities"].as_object().unwrap().clone();
+    assert_eq!(steps(&entities, "/train/loss"), [0, 1]);
+    assert_eq!(steps(&entities, "/validation/f002_c0/render"), [2]);
+    assert!(entities.contains_key("/world/gaussians") && entities.contains_key("/world/predicted/f004_c0"));
+
+    // The viewer killed after the first validation pass of an 8-step run: the run goes on and ends with the
+    // weights of the same run unwatched.
+    let config = watched_config(work.path(), "long", 8);
+    let unwatched = work.path().join("unwatched");
+    succeeded(&train(&config, &unwatched, &[]).output().unwrap());
+    let viewer = ViewerProcess::start(&work.path().join("killed.rrd"));
+    let watched = work.path().join("watched");
+    let mut run = train(&config, &watched, &["--rerun-connect", &viewer.url])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let started = Instant::now();
+    while validation_records_so_far(&watched) == 0 {
+        assert!(run.try_wait().unwrap().is_none(), "the run ended before its first validation pass was seen");
+        assert!(started.elapsed() < Duration::from_secs(600), "no validation pass within 10 minutes");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    drop(viewer);
+    let killed_at = trained_steps(&watched);
+    assert!(killed_at < 8, "the viewer was killed only after the run's last step");
+    let text = succeeded(&run.wait_with_output().unwrap());
+    assert!(text.contains("stopped early"), "the recording says it stopped when the viewer went away:\n{text}");
+    assert_eq!(
+        common::final_weights(&watched),
+        common::final_weights(&unwatched),
+        "a viewer killed after step {killed_at} changed the weights"
+    );
+}
+
+/// How many validation passes a run in progress has recorded.
+fn validation_records_so_far(out: &Path) -> usize {
+    let Ok(text) = std::fs::read_to_string(out.join("metrics.jsonl")) else { return 0 };
+    text.lines().filter(|line| line.contains(r#""kind":"validation""#)).count()
 }

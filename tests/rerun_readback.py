@@ -1,6 +1,7 @@
 """Reads a rerun recording back with rerun's own SDK, as a client would, and prints what it holds as JSON:
-per entity whether it is static and, per row, its time (nanoseconds) and frame, each transform's translation
-and quaternion, and the length of every other component (splats per row, one image, ...).
+per entity whether it is static and, per row, its time (nanoseconds), frame and step, each transform's
+translation and quaternion, each scalar's values, and the length of every other component (splats per row, one
+image, ...).
 
 Usage: python3 tests/rerun_readback.py FILE.rrd
 """
@@ -13,7 +14,8 @@ import rerun
 import rerun.experimental
 
 SKIPPED = ("rerun.controls.RowId", "log_time")
-VALUES = ("Transform3D:translation", "Transform3D:quaternion")
+VALUES = ("Transform3D:translation", "Transform3D:quaternion", "Scalars:scalars")
+INDICES = ("frame", "step")
 
 
 def rows(batch):
@@ -23,8 +25,8 @@ def rows(batch):
         for name, column in columns.items():
             if name == "time":
                 row["time_ns"] = column.cast("int64")[i].as_py()
-            elif name == "frame":
-                row["frame"] = column[i].as_py()
+            elif name in INDICES:
+                row[name] = column[i].as_py()
             elif name in VALUES:
                 row[name] = column[i].as_py()
             elif pyarrow.types.is_list(column.type) and column[i].is_valid:

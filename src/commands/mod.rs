@@ -19,6 +19,7 @@ pub mod refine_train;
 pub mod stress;
 pub mod synth;
 pub mod train;
+pub mod viewer;
 
 use std::ops::Range;
 

@@ -13,6 +13,7 @@ use crate::backend::DeviceList;
 use crate::commands::output::{self, OutputBoundArg, OutputKind, OverwriteArg, StagedOutput};
 use crate::commands::parse_range;
 use crate::commands::refine::{RefineArgs, RefineJob, load_refiner, refine_files};
+use crate::commands::viewer::check_rerun_build;
 
 /// Reconstruct a driving scene from unposed images with one forward pass: cameras (JSON, COLMAP, nerfstudio),
 /// depth, dynamic and sky maps, Gaussians as PLY (static, sky, dynamic per time) and renders.
@@ -88,7 +89,7 @@ pub fn run(args: Args) -> Result<()> {
     output::refuse_inside_output(&args.out, named)?;
     let _lock = output::lock(&args.out, "dggt reconstruct")?;
     if let Some(file) = &args.rerun {
-        check_rerun_build()?;
+        check_rerun_build("--rerun")?;
         output::prepare_file(file, "--rerun", args.overwrite.existing())?;
     }
     let staged = StagedOutput::begin(&args.out, OUTPUT, args.overwrite.existing())?;
@@ -146,17 +147,6 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
-/// Refuses `--rerun` in a build without the `rerun` feature, before any work.
-fn check_rerun_build() -> Result<()> {
-    if cfg!(feature = "rerun") {
-        Ok(())
-    } else {
-        anyhow::bail!(
-            "--rerun: this dggt was built without the `rerun` feature (cargo build --release --features rerun)"
-        )
-    }
-}
-
 /// Writes the reconstruction in `folder` as a rerun recording at `file`.
 #[cfg(feature = "rerun")]
 fn record(folder: &Path, file: &Path) -> Result<()> {
@@ -175,5 +165,5 @@ fn record(folder: &Path, file: &Path) -> Result<()> {
 
 #[cfg(not(feature = "rerun"))]
 fn record(_folder: &Path, _file: &Path) -> Result<()> {
-    check_rerun_build()
+    check_rerun_build("--rerun")
 }

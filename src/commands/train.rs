@@ -11,7 +11,7 @@ use dggt_train::resume::AllowedChanges;
 use dggt_train::{ProcessGroup, RunOptions, Start, TrainConfig, TrainError, Trainer};
 
 use crate::backend::DeviceList;
-use crate::commands::output;
+use crate::commands::{output, viewer};
 
 /// Train (or fine-tune) the network as a TOML configuration describes (`configs/`).
 #[derive(Debug, clap::Args)]
@@ -40,6 +40,15 @@ pub struct Args {
     /// `sampler`); repeatable. Without it such a change is refused.
     #[arg(long, value_name = "KEY", requires = "resume")]
     allow_changed: Vec<String>,
+    /// Show the run in rerun as it trains, as a recording written to this new file (`.rrd`, readable while it
+    /// grows): the losses per step, and at each validation pass the renders beside the truth, depth, dynamic
+    /// masks, cameras and Gaussians (`[viewer]` says what and how often; builds with the `rerun` feature).
+    #[arg(long, value_name = "FILE.rrd", conflicts_with = "rerun_connect")]
+    rerun: Option<PathBuf>,
+    /// Show the run in a running rerun viewer (`rerun`, of rerun-sdk 0.36.3) at this address, as
+    /// `rerun+http://127.0.0.1:9876/proxy`; a viewer that goes away never stops the run.
+    #[arg(long, value_name = "URL")]
+    rerun_connect: Option<String>,
 }
 
 /// The training curves `dggt train` draws into its run folder at the end of a run.
@@ -61,6 +70,7 @@ pub fn run(args: Args) -> Result<()> {
         None => DeviceList::from_names(&config.run.devices)
             .map_err(|e| anyhow::anyhow!("{}: run.devices: {e}", path.display()))?,
     };
+    let viewer = viewer::Viewer::from_flags(args.rerun, args.rerun_connect)?;
     let start = if args.resume { Start::Resume } else { Start::Fresh };
     // One process, or one rank of `mpirun -np P dggt train` (docs/DISTRIBUTED.md).
     let group = ProcessGroup::from_environment()?;
@@ -89,7 +99,11 @@ pub fn run(args: Args) -> Result<()> {
         );
         return Ok(());
     }
-    let summary = trainer.run(RunOptions { progress: Visibility::on_terminal(), stop_after: None })?;
+    let options = RunOptions { progress: Visibility::on_terminal(), stop_after: None };
+    let (summary, recording) = match trainer.group().is_writer() {
+        true => viewer.run(&mut trainer, options)?,
+        false => (trainer.run(options)?, None),
+    };
     if !trainer.group().is_writer() {
         return Ok(());
     }
@@ -137,6 +151,9 @@ pub fn run(args: Args) -> Result<()> {
     }
     if let Some(dir) = &summary.checkpoint {
         println!("checkpoint: {}", dir.display());
+    }
+    if let Some(recording) = recording {
+        println!("{recording}");
     }
     Ok(())
 }

@@ -71,24 +71,13 @@ fn finish(child: Child) -> u64 {
     first.and_then(|step| step.parse().ok()).unwrap_or_else(|| panic!("no `trained steps` line in {stdout}"))
 }
 
-/// Every tensor of the final checkpoint's weights, by name.
+/// Every tensor of the final checkpoint's weights, by name (the checkpoint of the last step).
 fn final_weights(out: &Path) -> Vec<(String, Vec<u8>)> {
     let dir = dggt_run::checkpoint::latest(&out.join("checkpoints"), dggt_run::checkpoint::Purpose::Resume)
         .unwrap()
         .expect("a checkpoint");
     assert!(dir.ends_with(format!("step-{STEPS:08}")), "{}", dir.display());
-    let reader = burn_pack::Reader::from_file(dir.join("model.bpk")).unwrap();
-    let mut tensors: Vec<(String, Vec<u8>)> = reader
-        .into_tensors()
-        .unwrap()
-        .into_iter()
-        .map(|t| {
-            let (name, _, _, _, bytes) = t.into_parts().unwrap();
-            (name, bytes.to_vec())
-        })
-        .collect();
-    tensors.sort();
-    tensors
+    common::final_weights(out)
 }
 
 #[test]

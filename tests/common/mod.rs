@@ -28,3 +28,22 @@ pub fn write_config(path: PathBuf, config: &TrainConfig) -> PathBuf {
     std::fs::write(&path, toml::to_string(config).unwrap()).unwrap();
     path
 }
+
+/// Every tensor of the newest resumable checkpoint's weights in the run folder `out`, by name.
+pub fn final_weights(out: &Path) -> Vec<(String, Vec<u8>)> {
+    let dir = dggt_run::checkpoint::latest(&out.join("checkpoints"), dggt_run::checkpoint::Purpose::Resume)
+        .unwrap()
+        .expect("a checkpoint");
+    let reader = burn_pack::Reader::from_file(dir.join("model.bpk")).unwrap();
+    let mut tensors: Vec<(String, Vec<u8>)> = reader
+        .into_tensors()
+        .unwrap()
+        .into_iter()
+        .map(|t| {
+            let (name, _, _, _, bytes) = t.into_parts().unwrap();
+            (name, bytes.to_vec())
+        })
+        .collect();
+    tensors.sort();
+    tensors
+}

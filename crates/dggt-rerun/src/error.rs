@@ -12,6 +12,8 @@ pub enum RerunError {
     Input { path: PathBuf, detail: String },
     #[error("writing the recording {}: {detail}", path.display())]
     Recording { path: PathBuf, detail: String },
+    #[error("opening the recording to {destination}: {detail}")]
+    Opening { destination: String, detail: String },
     #[error("logging {entity}: {detail}")]
     Entity { entity: String, detail: String },
 }

@@ -15,6 +15,7 @@ use dggt_formats::masks::read_mask_png;
 use dggt_formats::ply::read_ply;
 use serde::Deserialize;
 
+use crate::components::{camera_transform, depth_image, grey_image, pinhole, rgb_image};
 use crate::error::RerunError;
 use crate::splats::splats;
 
@@ -155,36 +156,19 @@ impl Logger<'_> {
     fn camera(&self, camera: &CameraRecord) -> Result<(), RerunError> {
         self.at(camera.time_s);
         let entity = format!("world/camera_{}", camera.camera);
-        let pose = camera.world_from_camera;
-        let [x, y, z, w] = pose.rotation().to_array().map(|v| v as f32);
-        let translation = pose.translation().to_array().map(|v| v as f32);
-        self.send(
-            &entity,
-            &rerun::Transform3D::from_translation_rotation(translation, rerun::Quaternion::from_xyzw([x, y, z, w])),
-        )?;
-        let k = camera.intrinsics;
-        let (width, height) = (camera.size.width, camera.size.height);
-        let pinhole =
-            rerun::Pinhole::from_focal_length_and_resolution([k.fx as f32, k.fy as f32], [width as f32, height as f32])
-                .with_principal_point([k.cx as f32, k.cy as f32])
-                .with_camera_xyz(rerun::components::ViewCoordinates::RDF);
-        self.send(&entity, &pinhole)?;
+        self.send(&entity, &camera_transform(&camera.world_from_camera))?;
+        self.send(&entity, &pinhole(&camera.intrinsics, camera.size))?;
         let file =
             |folder: &str, extension: &str| self.folder.join(folder).join(format!("{}.{extension}", camera.name));
         let (size, rgb) = read_rgb_png(&file("images", "png"))?;
         self.send(&format!("{entity}/image"), &rgb_image(size, &rgb))?;
         let (size, depth) = read_depth_npy(&file("depth", "npy"))?;
-        let bytes: Vec<u8> = depth.iter().flat_map(|d| d.to_le_bytes()).collect();
-        let depth =
-            rerun::DepthImage::from_data_type_and_bytes(bytes, [size.width, size.height], rerun::ChannelDatatype::F32)
-                .with_meter(1.0);
-        self.send(&format!("{entity}/depth"), &depth)?;
+        self.send(&format!("{entity}/depth"), &depth_image(size, &depth))?;
         for mask in ["dynamic", "sky"] {
             let path = file(mask, "png");
             if path.is_file() {
                 let (size, values) = read_mask_png(&path)?;
-                let bytes: Vec<u8> = values.iter().map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8).collect();
-                self.send(&format!("{entity}/{mask}"), &rerun::Image::from_l8(bytes, [size.width, size.height]))?;
+                self.send(&format!("{entity}/{mask}"), &grey_image(size, &values))?;
             }
         }
         Ok(())
@@ -260,9 +244,4 @@ fn layout(cameras: &[usize]) -> rerun::blueprint::Blueprint {
 
 fn read_cloud(path: &Path) -> Result<dggt_formats::ply::GaussianCloud, RerunError> {
     read_ply(path)?.to_cloud().map_err(|e| RerunError::Input { path: path.into(), detail: e.to_string() })
-}
-
-fn rgb_image(size: dggt_geom::ImageSize, rgb: &[f32]) -> rerun::Image {
-    let bytes: Vec<u8> = rgb.iter().map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8).collect();
-    rerun::Image::from_rgb24(bytes, [size.width, size.height])
 }

@@ -86,6 +86,9 @@ pub enum TrainError {
          expected to take identical steps"
     )]
     RanksOutOfStep { ranks: usize, checksum: u64 },
+    /// A validation pass's picture for a watcher that cannot be made.
+    #[error("validation snapshot: {0}")]
+    Snapshot(String),
     /// An error of a validation pass, with the step it validated.
     #[error("validation at step {step}: {source}")]
     Validation { step: u64, source: Box<TrainError> },

@@ -19,6 +19,7 @@ pub mod replicas;
 pub mod resume;
 pub mod trainer;
 pub mod validate;
+pub mod watch;
 
 pub use config::TrainConfig;
 /// The processes a run trains in: this one alone, or the ranks of an MPI job.
@@ -30,3 +31,4 @@ pub use dggt_run::Start;
 pub use error::TrainError;
 pub use records::StepRecord;
 pub use trainer::{RunOptions, RunSummary, Trainer};
+pub use watch::{RunWatcher, SnapshotOptions, ValidationSnapshot};

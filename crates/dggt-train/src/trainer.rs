@@ -56,6 +56,7 @@ use crate::records::{FailureRecord, LoggedStep, ScoredWeights, StepMeasures, Ste
 use crate::replicas::{Replica, Replicas};
 use crate::resume::{self, AllowedChanges, ConfiguredSections};
 use crate::validate::{Validation, Validator};
+use crate::watch::{RunWatcher, SnapshotOptions, Unwatched};
 
 /// The cached scene index in a run's output folder. It is not among the run's own files
 /// ([`run_folder::RUN_ENTRIES`]): it is checked against the scenes on every use and rebuilt when stale, and a
@@ -264,6 +265,13 @@ impl Trainer {
         &self.sampling
     }
 
+    /// The target views a validation pass pictures for a watcher: `(frame, camera)` positions in the first
+    /// validation scene.
+    pub fn validation_views(&self) -> Vec<(usize, usize)> {
+        let cameras = self.validation_scenes.first().map_or(0, |scene| scene.cameras.len());
+        self.config.data.validation.targets.iter().flat_map(|&frame| (0..cameras).map(move |c| (frame, c))).collect()
+    }
+
     /// Scores the current weights on the validation frames.
     pub fn validate(&self) -> Result<Option<Validation>, TrainError> {
         self.validate_into(None)
@@ -271,11 +279,17 @@ impl Trainer {
 
     /// [`Trainer::validate`], writing each target's render, truth and difference as a PNG into `save_to`.
     pub fn validate_into(&self, save_to: Option<&Path>) -> Result<Option<Validation>, TrainError> {
-        self.validate_weights(&self.scored_weights().1, save_to)
+        self.validate_weights(&self.scored_weights().1, save_to, None)
     }
 
-    /// Scores `model` on the validation frames, writing its renders into `save_to`.
-    fn validate_weights(&self, model: &Dggt, save_to: Option<&Path>) -> Result<Option<Validation>, TrainError> {
+    /// Scores `model` on the validation frames, writing its renders into `save_to` and picturing the first
+    /// scene as `snapshot` says.
+    fn validate_weights(
+        &self,
+        model: &Dggt,
+        save_to: Option<&Path>,
+        snapshot: Option<SnapshotOptions>,
+    ) -> Result<Option<Validation>, TrainError> {
         let frames = &self.config.data.validation;
         if frames.inputs.is_empty() {
             return Ok(None);
@@ -287,6 +301,7 @@ impl Trainer {
             lpips: self.validation_lpips.as_ref(),
             preprocess: &self.config.data.preprocess,
             device: &self.plain_device,
+            snapshot,
         };
         validator.scenes(&self.validation_scenes, frames, save_to)
     }
@@ -300,23 +315,25 @@ impl Trainer {
     }
 
     /// A validation pass of the run: the trained weights, and their average once it has started, each logged
-    /// and recorded; the renders (into `renders`) and the returned scores are those of the scored weights
-    /// ([`Trainer::scored_weights`]).
+    /// and recorded; the renders (into `renders`), the snapshot `watcher` asks for and the returned scores are
+    /// those of the scored weights ([`Trainer::scored_weights`]), which `watcher` is also shown.
     fn validate_and_record(
         &self,
         renders: &Path,
         mut metrics: Option<&mut MetricsLog>,
+        watcher: &mut dyn RunWatcher,
         bar: &ProgressBar,
         elapsed: f64,
     ) -> Result<Option<Validation>, TrainError> {
         let (scored, scored_model) = self.scored_weights();
-        let mut passes = vec![(scored, scored_model, Some(renders))];
+        let snapshot = watcher.snapshot_wanted(self.state.step);
+        let mut passes = vec![(scored, scored_model, Some(renders), snapshot)];
         if scored == ScoredWeights::Average {
-            passes.push((ScoredWeights::Trained, self.model().valid(), None));
+            passes.push((ScoredWeights::Trained, self.model().valid(), None, None));
         }
         let mut scored_validation = None;
-        for (weights, model, save_to) in passes {
-            let Some(validation) = self.validate_weights(&model, save_to)? else { return Ok(None) };
+        for (weights, model, save_to, snapshot) in passes {
+            let Some(validation) = self.validate_weights(&model, save_to, snapshot)? else { return Ok(None) };
             let step = self.state.step;
             tracing::info!(step, psnr = validation.psnr, ssim = validation.ssim, ?weights, "validation");
             if let Some(metrics) = metrics.as_deref_mut() {
@@ -336,6 +353,7 @@ impl Trainer {
                 }
             });
             if weights == scored {
+                watcher.validation(step, &validation);
                 scored_validation = Some(validation);
             }
         }
@@ -349,6 +367,11 @@ impl Trainer {
 
     /// Trains until `run.steps` (or the time limit, or `options.stop_after`), checkpointing on the way.
     pub fn run(&mut self, options: RunOptions) -> Result<RunSummary, TrainError> {
+        self.run_watched(options, &mut Unwatched)
+    }
+
+    /// [`Trainer::run`], showing `watcher` every step and validation pass (on the writing rank).
+    pub fn run_watched(&mut self, options: RunOptions, watcher: &mut dyn RunWatcher) -> Result<RunSummary, TrainError> {
         let run = self.config.run.clone();
         let writer = self.group.is_writer();
         let mut metrics = match writer {
@@ -420,6 +443,7 @@ impl Trainer {
             };
             if let Some(metrics) = &mut metrics {
                 metrics.append(RecordKind::Train, &logged)?;
+                watcher.step(&logged);
             }
             bar.inc(1);
             // No checkpoint then: the weights are those the last one holds, and a new one could prune it.
@@ -441,7 +465,7 @@ impl Trainer {
             if validate_now && writer {
                 let renders = run.out_dir.join(run_folder::VALIDATION).join(format!("step-{:08}", self.state.step));
                 let validated = self
-                    .validate_and_record(&renders, metrics.as_mut(), &bar, elapsed)
+                    .validate_and_record(&renders, metrics.as_mut(), watcher, &bar, elapsed)
                     .map_err(|source| TrainError::Validation { step: self.state.step, source: Box::new(source) })?;
                 summary.validation = validated.or(summary.validation.take());
             }

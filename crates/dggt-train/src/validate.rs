@@ -12,6 +12,7 @@ use std::sync::Arc;
 use burn::module::Module;
 use burn::tensor::{Device, Tensor};
 use dggt_data::{IndexedScene, LoadedSample, Preprocess, Scene, TrainingSample, load_sample};
+use dggt_geom::ImageSize;
 use dggt_losses::Lpips;
 use dggt_metrics::{MetricError, aligned_depth_rmse, image_metrics};
 use dggt_model::Dggt;
@@ -21,6 +22,7 @@ use serde::Serialize;
 
 use crate::config::ValidationSection;
 use crate::error::TrainError;
+use crate::watch::{SnapshotOptions, ValidationSnapshot, difference_image, rgb_image};
 
 /// Scores of one validation pass.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -34,6 +36,9 @@ pub struct Validation {
     pub views: Vec<ViewScore>,
     /// Per scene.
     pub scenes: Vec<SceneScore>,
+    /// The first scene pictured for a watcher, when the validator was asked to ([`Validator::snapshot`]).
+    #[serde(skip)]
+    pub snapshot: Option<Arc<ValidationSnapshot>>,
 }
 
 /// One target view's scores.
@@ -89,6 +94,8 @@ pub struct Validator<'a> {
     pub preprocess: &'a Preprocess,
     /// A device without autodiff.
     pub device: &'a Device,
+    /// Picture the first scene for a watcher ([`crate::watch`]), and how.
+    pub snapshot: Option<SnapshotOptions>,
 }
 
 impl Validator<'_> {
@@ -102,21 +109,24 @@ impl Validator<'_> {
         save_to: Option<&Path>,
     ) -> Result<Option<Validation>, TrainError> {
         let needed = frames.inputs.iter().chain(&frames.targets).max().map_or(0, |f| f + 1);
-        let (mut scores, mut views, mut last_error) = (Vec::new(), Vec::new(), None);
+        let (mut scores, mut views, mut last_error, mut snapshot) = (Vec::new(), Vec::new(), None, None);
         for indexed in scenes {
             let folder = save_to.map(|dir| match scenes.len() {
                 1 => dir.to_owned(),
                 _ => dir.join(indexed.name.replace('/', "_")),
             });
+            let pictured =
+                if snapshot.is_none() { self.snapshot.map(|options| (indexed.name.as_str(), options)) } else { None };
             let scored = indexed.open(0..needed).map_err(TrainError::from).and_then(|scene| {
                 let cameras: Vec<usize> = (0..scene.cameras.len()).collect();
                 let sample = validation_sample(&frames.inputs, &frames.targets, &cameras);
-                self.scene(&Arc::new(scene), &sample, folder.as_deref())
+                self.scene_pictured(&Arc::new(scene), &sample, folder.as_deref(), pictured)
             });
             match scored {
                 Ok(validation) => {
                     scores.push(SceneScore { scene: indexed.name.clone(), ..scene_score(&validation.views) });
                     views.extend(validation.views);
+                    snapshot = snapshot.or(validation.snapshot);
                 }
                 Err(error) => {
                     tracing::warn!(scene = %indexed.name, %error, "validation scene skipped");
@@ -134,6 +144,7 @@ impl Validator<'_> {
             d_rmse: mean(scores.iter().map(|s| s.d_rmse)),
             views,
             scenes: scores,
+            snapshot,
         }))
     }
 
@@ -145,10 +156,25 @@ impl Validator<'_> {
         sample: &TrainingSample,
         save_to: Option<&Path>,
     ) -> Result<Validation, TrainError> {
+        self.scene_pictured(scene, sample, save_to, None)
+    }
+
+    /// [`Validator::scene`], pictured for a watcher as `pictured` says (the scene's name and how).
+    fn scene_pictured(
+        &self,
+        scene: &Arc<Scene>,
+        sample: &TrainingSample,
+        save_to: Option<&Path>,
+        pictured: Option<(&str, SnapshotOptions)>,
+    ) -> Result<Validation, TrainError> {
         let loaded = load_sample(scene, self.preprocess, 0, sample.clone())?;
         let batch = StepBatch::new(&loaded, scene, self.preprocess, DepthFlowMaps::Skip, self.device)?;
         let model = self.model.valid();
-        let (_, views) = self.objective.render(&model, &batch, ViewsToRender::Targets)?;
+        let (forward, views) = self.objective.render(&model, &batch, ViewsToRender::Targets)?;
+        let snapshot = match pictured {
+            Some((name, options)) => Some(Arc::new(ValidationSnapshot::new(name, &forward, &views, &batch, options)?)),
+            None => None,
+        };
         let rendered = Tensor::stack::<4>(views.iter().map(|v| v.rgb.clone()).collect(), 0);
         let expected =
             Tensor::stack::<4>(views.iter().map(|v| batch.targets[v.truth_index].image.clone()).collect(), 0);
@@ -180,6 +206,7 @@ impl Validator<'_> {
             d_rmse: score.d_rmse,
             views: scores,
             scenes: Vec::new(),
+            snapshot,
         })
     }
 
@@ -235,15 +262,16 @@ fn save_comparisons(dir: &Path, views: &[RenderedView], batch: &StepBatch) -> Re
 /// `[H, W, 3]` render and truth in `[0, 1]` as one RGB image: render | truth | 4 |render - truth|.
 fn comparison(rendered: Tensor<3>, truth: Tensor<3>) -> Result<image::RgbImage, TrainError> {
     let [h, w, _] = rendered.dims();
+    let size = ImageSize { width: w as u32, height: h as u32 };
     let (rendered, truth) = (host_f32(rendered, "validation render")?, host_f32(truth, "validation truth")?);
-    let byte = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
-    Ok(image::RgbImage::from_fn(3 * w as u32, h as u32, |x, y| {
-        let (panel, x) = (x as usize / w, x as usize % w);
-        let at = (y as usize * w + x) * 3;
-        image::Rgb(std::array::from_fn(|k| match panel {
-            0 => byte(rendered[at + k]),
-            1 => byte(truth[at + k]),
-            _ => byte(4.0 * (rendered[at + k] - truth[at + k]).abs()),
-        }))
-    }))
+    let panels = [
+        rgb_image(size, &rendered, "validation render")?,
+        rgb_image(size, &truth, "validation truth")?,
+        difference_image(size, &rendered, &truth)?,
+    ];
+    let mut joined = image::RgbImage::new(3 * size.width, size.height);
+    for (k, panel) in panels.iter().enumerate() {
+        image::imageops::replace(&mut joined, panel, i64::from(k as u32 * size.width), 0);
+    }
+    Ok(joined)
 }
