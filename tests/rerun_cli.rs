@@ -229,8 +229,9 @@ fn a_training_recording_holds_each_step_and_validation_on_the_step_time_line() {
             let poses = rows.iter().filter(|row| row.get("Transform3D:translation").is_some()).count();
             assert_eq!(poses, 2, "{entity}");
         }
-        for part in ["image", "depth", "dynamic"] {
-            assert_eq!(steps(entities, &format!("/world/predicted/{view}/{part}")), [2, 4], "{view}/{part}");
+        assert_eq!(steps(entities, &format!("/world/predicted/{view}/image")), [2, 4], "{view}/image");
+        for part in ["depth", "dynamic"] {
+            assert_eq!(steps(entities, &format!("/validation/inputs/{view}/{part}")), [2, 4], "{view}/{part}");
         }
     }
     let export = &entities["/world/export/f000_c0"]["rows"].as_array().unwrap();
@@ -361,4 +362,28 @@ fn a_run_streams_to_a_viewer_and_trains_on_unchanged_when_the_viewer_is_killed()
 fn validation_records_so_far(out: &Path) -> usize {
     let Ok(text) = std::fs::read_to_string(out.join("metrics.jsonl")) else { return 0 };
     text.lines().filter(|line| line.contains(r#""kind":"validation""#)).count()
+}
+
+#[test]
+fn a_refiner_recording_holds_its_steps_and_held_out_pairs_before_and_after() {
+    dggt_test_data::parity("difix_tiny_s1");
+    let config = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/refine-tiny.toml");
+    let work = tempfile::tempdir().unwrap();
+    let (out, rrd) = (work.path().join("run"), work.path().join("refiner.rrd"));
+    let args = ["refine-train", "--config", path(&config), "--steps", "3", "--out", path(&out), "--rerun", path(&rrd)];
+    let text = succeeded(&dggt(&args));
+    assert!(text.contains("3 steps, 2 validation passes"), "{text}");
+    let recording = read_back(&rrd);
+    assert_eq!(recording["blueprints"], 1, "the recording carries its layout");
+    let entities = recording["entities"].as_object().unwrap();
+    for entity in ["/refine/loss", "/refine/l2", "/refine/lpips", "/refine/gram", "/refine/grad_norm"] {
+        assert_eq!(steps(entities, entity), [0, 1, 2], "{entity}");
+    }
+    // The held-out pair before training (step 0) and after (step 3): its render, the refined render, the truth.
+    for entity in ["/validation/scores/refined_psnr", "/validation/scores/render_psnr"] {
+        assert_eq!(steps(entities, entity), [0, 3], "{entity}");
+    }
+    for part in ["render", "refined", "target"] {
+        assert_eq!(steps(entities, &format!("/validation/pair_0/{part}")), [0, 3], "{part}");
+    }
 }

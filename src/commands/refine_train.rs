@@ -11,7 +11,7 @@ use dggt_run::progress::Visibility;
 
 use crate::backend::DeviceSpec;
 use crate::commands::output::{self, OverwriteFileArg};
-use crate::commands::train;
+use crate::commands::{train, viewer};
 
 /// Train the single-step diffusion refiner (Difix) on pairs of frames with artifacts and their ground truth.
 #[derive(Debug, clap::Args)]
@@ -38,6 +38,9 @@ pub struct Args {
     /// Replace an existing `--export` file.
     #[command(flatten)]
     overwrite: OverwriteFileArg,
+    /// The run shown live in rerun: at each validation pass held-out renders before and after refining.
+    #[command(flatten)]
+    viewer: viewer::ViewerArgs,
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -52,6 +55,7 @@ pub fn run(args: Args) -> Result<()> {
         config.run.out_dir = out;
     }
     config.validate().map_err(|e| anyhow::anyhow!("{}: {e}", args.config.display()))?;
+    let viewer = viewer::Viewer::from_flags(args.viewer)?;
     let start = if args.resume { Start::Resume } else { Start::Fresh };
     let _lock = output::lock(&config.run.out_dir, "dggt refine-train")?;
     let mut trainer = RefineTrainer::new(config, args.device.device()?, start).map_err(|error| match error {
@@ -59,8 +63,7 @@ pub fn run(args: Args) -> Result<()> {
         other => other.into(),
     })?;
     let first_step = trainer.state().step;
-    let before = trainer.validate()?;
-    let after = trainer.run(Visibility::on_terminal())?;
+    let (before, after, recording) = viewer.run_refiner(&mut trainer, Visibility::on_terminal())?;
     let out = trainer.config().run.out_dir.clone();
     let export = args.export.unwrap_or_else(|| out.join("refiner.safetensors"));
     trainer.write_difix_checkpoint(&export)?;
@@ -74,5 +77,8 @@ pub fn run(args: Args) -> Result<()> {
     );
     println!("metrics: {}", out.join("metrics.jsonl").display());
     println!("refiner: {}", export.display());
+    if let Some(recording) = recording {
+        println!("{recording}");
+    }
     Ok(())
 }

@@ -40,15 +40,10 @@ pub struct Args {
     /// `sampler`); repeatable. Without it such a change is refused.
     #[arg(long, value_name = "KEY", requires = "resume")]
     allow_changed: Vec<String>,
-    /// Show the run in rerun as it trains, as a recording written to this new file (`.rrd`, readable while it
-    /// grows): the losses per step, and at each validation pass the renders beside the truth, depth, dynamic
-    /// masks, cameras and Gaussians (`[viewer]` says what and how often; builds with the `rerun` feature).
-    #[arg(long, value_name = "FILE.rrd", conflicts_with = "rerun_connect")]
-    rerun: Option<PathBuf>,
-    /// Show the run in a running rerun viewer (`rerun`, of rerun-sdk 0.36.3) at this address, as
-    /// `rerun+http://127.0.0.1:9876/proxy`; a viewer that goes away never stops the run.
-    #[arg(long, value_name = "URL")]
-    rerun_connect: Option<String>,
+    /// The run shown live in rerun: at each validation pass the renders beside the truth, depth, dynamic
+    /// masks, cameras and Gaussians.
+    #[command(flatten)]
+    viewer: viewer::ViewerArgs,
 }
 
 /// The training curves `dggt train` draws into its run folder at the end of a run.
@@ -70,7 +65,7 @@ pub fn run(args: Args) -> Result<()> {
         None => DeviceList::from_names(&config.run.devices)
             .map_err(|e| anyhow::anyhow!("{}: run.devices: {e}", path.display()))?,
     };
-    let viewer = viewer::Viewer::from_flags(args.rerun, args.rerun_connect)?;
+    let viewer = viewer::Viewer::from_flags(args.viewer)?;
     let start = if args.resume { Start::Resume } else { Start::Fresh };
     // One process, or one rank of `mpirun -np P dggt train` (docs/DISTRIBUTED.md).
     let group = ProcessGroup::from_environment()?;

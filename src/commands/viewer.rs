@@ -1,11 +1,32 @@
-//! The live view of a training run (`dggt train --rerun FILE.rrd` or `--rerun-connect URL`): the destination
-//! checked before any work, the recording started once the run is built and finished after it, even when the
-//! run fails (what was recorded stays). Builds without the `rerun` feature refuse the flags up front.
+//! The live view of a training run (`dggt train` or `dggt refine-train` with `--rerun FILE.rrd` or
+//! `--rerun-connect URL`): the destination checked before any work, the recording started once the run is built
+//! and finished after it, even when the run fails (what was recorded stays). Builds without the `rerun` feature
+//! refuse the flags up front.
 
 use std::path::PathBuf;
 
 use anyhow::{Result, bail};
+use dggt_refine_train::RefineTrainer;
+use dggt_refine_train::trainer::Validation as RefinerValidation;
+use dggt_run::progress::Visibility;
 use dggt_train::{RunOptions, RunSummary, Trainer};
+
+/// The flags of a run shown live.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ViewerArgs {
+    /// Show the run in rerun as it trains, as a recording written to this new file (`.rrd`, readable while it
+    /// grows): the losses per step and pictures at each validation pass (`[viewer]` says what and how often;
+    /// builds with the `rerun` feature).
+    #[arg(long, value_name = "FILE.rrd", conflicts_with = "rerun_connect")]
+    rerun: Option<PathBuf>,
+    /// Show the run in a running rerun viewer (`rerun`, of rerun-sdk 0.36.3) at this address, as
+    /// `rerun+http://127.0.0.1:9876/proxy`; a viewer that goes away never stops the run.
+    #[arg(long, value_name = "URL")]
+    rerun_connect: Option<String>,
+}
+
+/// A refiner run's held-out scores before and after training, and the recording's line when watched.
+pub type RefinerRun = (RefinerValidation, RefinerValidation, Option<String>);
 
 /// Where a run is shown, if anywhere.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -22,8 +43,8 @@ enum Target {
 impl Viewer {
     /// The viewer `--rerun FILE` or `--rerun-connect URL` asks for: a file must be new (a recording is never
     /// replaced or appended to), an address must be a rerun proxy URL.
-    pub fn from_flags(file: Option<PathBuf>, url: Option<String>) -> Result<Self> {
-        match (file, url) {
+    pub fn from_flags(args: ViewerArgs) -> Result<Self> {
+        match (args.rerun, args.rerun_connect) {
             (Some(file), _) => {
                 check_rerun_build("--rerun")?;
                 if file.exists() {
@@ -53,18 +74,48 @@ impl Viewer {
             Some(target) => run_watched(target, trainer, options),
         }
     }
+
+    /// Validates, trains and validates again the refiner run `trainer` shown to this viewer.
+    pub fn run_refiner(self, trainer: &mut RefineTrainer, progress: Visibility) -> Result<RefinerRun> {
+        match self.0 {
+            None => Ok((trainer.validate()?, trainer.run(progress)?, None)),
+            Some(target) => run_refiner_watched(target, trainer, progress),
+        }
+    }
+}
+
+#[cfg(feature = "rerun")]
+fn destination(target: Target) -> dggt_rerun::Destination {
+    match target {
+        Target::File(path) => dggt_rerun::Destination::File(path),
+        Target::Connect(url) => dggt_rerun::Destination::Viewer(url),
+    }
+}
+
+#[cfg(feature = "rerun")]
+fn run_refiner_watched(target: Target, trainer: &mut RefineTrainer, progress: Visibility) -> Result<RefinerRun> {
+    let settings = trainer.config().viewer.clone();
+    let pairs = trainer.pairs().held_out_len();
+    let mut recording = dggt_rerun::RefinerRecording::start(destination(target), settings, pairs)?;
+    let validated = trainer
+        .validate_watched(&mut recording)
+        .and_then(|before| Ok((before, trainer.run_watched(progress, &mut recording)?)));
+    let report = recording.finish();
+    let (before, after) = validated?;
+    Ok((before, after, Some(report.line())))
+}
+
+#[cfg(not(feature = "rerun"))]
+fn run_refiner_watched(_: Target, _: &mut RefineTrainer, _: Visibility) -> Result<RefinerRun> {
+    Err(without_rerun("--rerun"))
 }
 
 #[cfg(feature = "rerun")]
 fn run_watched(target: Target, trainer: &mut Trainer, options: RunOptions) -> Result<(RunSummary, Option<String>)> {
-    use dggt_rerun::{Destination, TrainingRecording};
-    let destination = match target {
-        Target::File(path) => Destination::File(path),
-        Target::Connect(url) => Destination::Viewer(url),
-    };
     let config = trainer.config();
+    let views = trainer.validation_views();
     let mut recording =
-        TrainingRecording::start(destination, &trainer.validation_views(), config.viewer.clone(), config.optim.lr)?;
+        dggt_rerun::TrainingRecording::start(destination(target), &views, config.viewer.clone(), config.optim.lr)?;
     let summary = trainer.run_watched(options, &mut recording);
     let report = recording.finish();
     Ok((summary?, Some(report.line())))

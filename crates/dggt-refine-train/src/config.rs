@@ -9,8 +9,8 @@ use std::path::{Path, PathBuf};
 
 /// The LPIPS network of `loss.lpips_kind`.
 pub use dggt_losses::LpipsKind;
-use dggt_run::OptimSection;
 use dggt_run::divergence::{self, DEFAULT_MAX_FAILED_STEPS_IN_A_ROW};
+use dggt_run::{OptimSection, ViewerSection};
 use serde::{Deserialize, Serialize};
 
 use crate::error::RefineTrainError;
@@ -25,6 +25,9 @@ pub struct RefineTrainConfig {
     pub optim: OptimSettings,
     #[serde(default)]
     pub run: RunSection,
+    /// What a live view of the run shows and how often (`dggt refine-train --rerun`); ignored without one.
+    #[serde(default)]
+    pub viewer: ViewerSection,
 }
 
 /// The refiner trained from: a diffusers folder and a Difix checkpoint over it (its LoRA factors are the
@@ -271,6 +274,7 @@ impl RefineTrainConfig {
         check(self.optim.lr > 0.0, "optim.lr", "must be positive")?;
         check(self.optim.beta1 < 1.0 && self.optim.beta2 < 1.0, "optim.beta1/beta2", "must be below 1")?;
         divergence::validate_limit("optim.max_failed_steps_in_a_row", self.optim.max_failed_steps_in_a_row)?;
+        self.viewer.check().map_err(|detail| RefineTrainError::Setting { setting: "viewer", detail })?;
         let weights = [self.loss.l2, self.loss.lpips, self.loss.gram];
         check(weights.iter().all(|w| w.is_finite() && *w >= 0.0), "loss", "weights must be finite and >= 0")
     }

@@ -26,7 +26,9 @@ pub mod pair_files;
 pub mod pairs;
 pub mod render_pairs;
 pub mod trainer;
+pub mod watch;
 
 pub use config::RefineTrainConfig;
 pub use error::{PairKind, RefineTrainError};
 pub use trainer::RefineTrainer;
+pub use watch::{RefineWatcher, RefinedPicture};

@@ -38,6 +38,7 @@ use crate::loss::RefineLoss;
 use crate::model::TrainableRefiner;
 use crate::pair_files::PairFiles;
 use crate::pairs::{Image, Pair, PairSet, PairSource, batch, batch_pairs, read_images, step_indices, synthetic_pairs};
+use crate::watch::{RefineWatcher, RefinedPicture, Unwatched};
 
 /// What one step did.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -192,6 +193,15 @@ impl RefineTrainer {
     /// Trains to `run.steps` with a progress bar (drawn as `progress` says), validating and checkpointing on the
     /// configured cadence and at the end. Returns the last validation.
     pub fn run(&mut self, progress: Visibility) -> Result<Validation, RefineTrainError> {
+        self.run_watched(progress, &mut Unwatched)
+    }
+
+    /// [`RefineTrainer::run`], showing `watcher` every step and validation pass.
+    pub fn run_watched(
+        &mut self,
+        progress: Visibility,
+        watcher: &mut dyn RefineWatcher,
+    ) -> Result<Validation, RefineTrainError> {
         let run = self.config.run.clone();
         let bar = progress_bar(progress, self.state.step, run.steps);
         let started = Instant::now();
@@ -212,12 +222,13 @@ impl RefineTrainer {
             bar.set_message(format!("loss {:.4}", record.loss));
             bar.inc(1);
             metrics.append(RecordKind::Train, &record)?;
+            watcher.step(&record);
             // No checkpoint then: the weights are those the last one holds, and a new one could prune it.
             self.check_divergence()?;
             let step = self.state.step;
             self.state.elapsed_s = elapsed_before + started.elapsed().as_secs_f64();
             if run.validate_every > 0 && step.is_multiple_of(run.validate_every) && step < run.steps {
-                last = Some(self.validate_and_record(&mut metrics)?);
+                last = Some(self.validate_and_record(&mut metrics, watcher)?);
             }
             let due =
                 if step.is_multiple_of(run.checkpoint_every) { CheckpointDue::Periodic } else { CheckpointDue::No };
@@ -227,15 +238,19 @@ impl RefineTrainer {
         }
         bar.finish_and_clear();
         if last.is_none_or(|v: Validation| v.step != self.state.step) {
-            last = Some(self.validate_and_record(&mut metrics)?);
+            last = Some(self.validate_and_record(&mut metrics, watcher)?);
         }
         self.save_checkpoint()?;
         Ok(last.expect("validated above"))
     }
 
-    fn validate_and_record(&self, metrics: &mut MetricsLog) -> Result<Validation, RefineTrainError> {
+    fn validate_and_record(
+        &self,
+        metrics: &mut MetricsLog,
+        watcher: &mut dyn RefineWatcher,
+    ) -> Result<Validation, RefineTrainError> {
         let validation = self
-            .validate()
+            .validate_watched(watcher)
             .map_err(|source| RefineTrainError::Validation { step: self.state.step, source: Box::new(source) })?;
         tracing::info!(
             step = validation.step,
@@ -249,6 +264,13 @@ impl RefineTrainer {
 
     /// PSNR of the held-out pairs, refined from the posterior mean, and of the renders as they are.
     pub fn validate(&self) -> Result<Validation, RefineTrainError> {
+        self.validate_watched(&mut Unwatched)
+    }
+
+    /// [`RefineTrainer::validate`], shown to `watcher` with the first held-out pairs it asks for.
+    pub fn validate_watched(&self, watcher: &mut dyn RefineWatcher) -> Result<Validation, RefineTrainError> {
+        let wanted = watcher.pictures_wanted();
+        let mut pictures = Vec::with_capacity(wanted);
         let (mut refined_sum, mut render_sum) = (0.0, 0.0);
         let model = self.model.valid();
         let mut scored = 0;
@@ -266,12 +288,21 @@ impl RefineTrainer {
             let refined = host_f32(refined, "validation: refined image")?;
             refined_sum += psnr(&refined, &pair.target.values)?;
             render_sum += psnr(&pair.render.values, &pair.target.values)?;
+            if pictures.len() < wanted {
+                let (height, width) = (pair.target.height, pair.target.width);
+                let refined = Image { height, width, values: refined };
+                let Pair { render, target, .. } = pair.into_owned();
+                pictures.push(RefinedPicture { index, render, refined, target });
+            }
         }
         if scored == 0 && self.pairs.held_out_len() > 0 {
             return Err(RefineTrainError::NoHeldOutPairReadable);
         }
         let count = scored.max(1) as f64;
-        Ok(Validation { step: self.state.step, refined_psnr: refined_sum / count, render_psnr: render_sum / count })
+        let validation =
+            Validation { step: self.state.step, refined_psnr: refined_sum / count, render_psnr: render_sum / count };
+        watcher.validation(&validation, &pictures);
+        Ok(validation)
     }
 
     /// Writes the trained refiner to `path` as a Difix checkpoint for the refiner's loader

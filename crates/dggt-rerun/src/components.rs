@@ -1,5 +1,5 @@
 //! The project's values as rerun components, shared by every recording: camera poses and pinholes (OpenCV axes),
-//! 8-bit images and depth images in metres.
+//! 8-bit images and depth images in metres; and the layouts' tabs of one view's images.
 
 use dggt_geom::{ImageSize, PinholeIntrinsics, WorldFromCamera};
 
@@ -35,6 +35,28 @@ pub fn depth_image(size: ImageSize, depths: &[f32]) -> rerun::DepthImage {
     let bytes: Vec<u8> = depths.iter().flat_map(|d| d.to_le_bytes()).collect();
     rerun::DepthImage::from_data_type_and_bytes(bytes, [size.width, size.height], rerun::ChannelDatatype::F32)
         .with_meter(1.0)
+}
+
+/// An 8-bit RGB image as it is.
+pub fn rgb8_image(image: &image::RgbImage) -> rerun::Image {
+    rerun::Image::from_rgb24(image.as_raw().clone(), [image.width(), image.height()])
+}
+
+/// An 8-bit grey image as it is.
+pub fn grey8_image(image: &image::GrayImage) -> rerun::Image {
+    rerun::Image::from_l8(image.as_raw().clone(), [image.width(), image.height()])
+}
+
+/// Tabs of 2D views titled `TITLE: PART`, each showing the entity `ORIGIN/PART`.
+pub fn part_tabs(title: &str, origin: &str, parts: &[&str]) -> rerun::blueprint::ContainerLike {
+    use rerun::blueprint::{Spatial2DView, Tabs};
+    let tab = |part: &&str| {
+        Spatial2DView::new(format!("{title}: {part}"))
+            .with_origin(origin)
+            .with_contents([format!("$origin/{part}")])
+            .into()
+    };
+    Tabs::new(parts.iter().map(tab)).into()
 }
 
 fn byte(value: f32) -> u8 {

@@ -11,8 +11,9 @@
 //! - [`reconstruction`]: the folder read and logged ([`record_reconstruction`]);
 //! - [`splats`]: Gaussians in rerun's natural form (linear scales, RGBA colours with the opacity);
 //! - [`components`]: cameras, images and depth as rerun components;
-//! - [`training`]: a training run shown live ([`TrainingRecording`], `dggt train --rerun`), from what the
-//!   trainer hands its watcher.
+//! - [`live`]: a recording written while a run goes, which never makes the run wait;
+//! - [`training`]: a DGGT run shown live ([`TrainingRecording`], `dggt train --rerun`), from what the trainer
+//!   hands its watcher; [`refiner`]: the same for the refiner's training ([`RefinerRecording`]).
 //!
 //! Conventions in the recording: the world is the reconstruction's (the first input camera's frame, OpenCV axes:
 //! x right, y down, z forward, declared on `world`); each camera entity carries its world-from-camera transform
@@ -21,10 +22,14 @@
 
 pub mod components;
 mod error;
+pub mod live;
 pub mod reconstruction;
+pub mod refiner;
 pub mod splats;
 pub mod training;
 
 pub use error::RerunError;
+pub use live::{Destination, LiveReport};
 pub use reconstruction::{RecordingReport, record_reconstruction};
-pub use training::{Destination, TrainingRecording, TrainingRecordingReport};
+pub use refiner::RefinerRecording;
+pub use training::TrainingRecording;

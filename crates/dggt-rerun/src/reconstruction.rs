@@ -15,7 +15,7 @@ use dggt_formats::masks::read_mask_png;
 use dggt_formats::ply::read_ply;
 use serde::Deserialize;
 
-use crate::components::{camera_transform, depth_image, grey_image, pinhole, rgb_image};
+use crate::components::{camera_transform, depth_image, grey_image, part_tabs, pinhole, rgb_image};
 use crate::error::RerunError;
 use crate::splats::splats;
 
@@ -222,18 +222,13 @@ impl Logger<'_> {
 /// The default layout: the 3D scene beside, per camera, tabs of its image, render, depth and masks; the
 /// summary below.
 fn layout(cameras: &[usize]) -> rerun::blueprint::Blueprint {
-    use rerun::blueprint::{
-        Blueprint, ContainerLike, Horizontal, Spatial2DView, Spatial3DView, Tabs, TextDocumentView, Vertical,
-    };
-    let camera_tabs = |camera: usize| -> ContainerLike {
-        let origin = format!("world/camera_{camera}");
-        let tab = |part: &str| -> ContainerLike {
-            Spatial2DView::new(format!("camera {camera}: {part}"))
-                .with_origin(origin.clone())
-                .with_contents([format!("$origin/{part}")])
-                .into()
-        };
-        Tabs::new(["image", "render", "depth", "dynamic", "sky"].map(tab)).into()
+    use rerun::blueprint::{Blueprint, ContainerLike, Horizontal, Spatial3DView, TextDocumentView, Vertical};
+    let camera_tabs = |camera: usize| {
+        part_tabs(
+            &format!("camera {camera}"),
+            &format!("world/camera_{camera}"),
+            &["image", "render", "depth", "dynamic", "sky"],
+        )
     };
     let scene: ContainerLike = Spatial3DView::new("scene").with_origin("world").into();
     let cameras: ContainerLike = Vertical::new(cameras.iter().map(|&c| camera_tabs(c))).into();

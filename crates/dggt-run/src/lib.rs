@@ -1,5 +1,5 @@
 //! A training run, whatever it trains: the optimiser (AdamW with groups, clipping and a rollback of updates
-//! that leave non-finite values), the learning-rate schedule, a moving average of the weights, skipping loss spikes, checkpoint folders with their run state and the
+//! that leave non-finite values), the learning-rate schedule, a moving average of the weights, skipping loss spikes, what a viewer is shown (`[viewer]`), checkpoint folders with their run state and the
 //! `latest` pointer, the rules of a run's output folder and of resuming in it, divergence (steps that make no
 //! update, and when to give up), the progress bar and the metric records of `metrics.jsonl`.
 //!
@@ -19,8 +19,10 @@ pub mod progress;
 pub mod run_folder;
 pub mod schedule;
 pub mod spikes;
+pub mod viewer;
 
 pub use error::RunError;
 pub use optim_config::OptimSection;
 pub use optimizer::Optimizer;
 pub use run_folder::Start;
+pub use viewer::ViewerSection;

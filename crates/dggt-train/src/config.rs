@@ -8,8 +8,8 @@ use dggt_flow_head::FlowHeadShape;
 pub use dggt_infer::{CameraSource, ModelSection, RenderSection};
 use dggt_objective::LossTerm;
 pub use dggt_objective::LossWeights;
-pub use dggt_run::OptimSection;
 use dggt_run::divergence;
+pub use dggt_run::{OptimSection, ViewerSection};
 use dggt_scene::DynamicMotion;
 use serde::{Deserialize, Serialize};
 
@@ -134,26 +134,6 @@ impl Default for RunSection {
             time_limit_s: None,
             devices: vec!["cpu".into()],
         }
-    }
-}
-
-/// What a watched run (`dggt train --rerun FILE` or `--rerun-connect URL`) hands its viewer, and how often: the
-/// step's scalars are cheap; a validation snapshot copies the window's images and Gaussians to the host.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct ViewerSection {
-    /// Log a step's losses, learning rate and gradient norm every this many steps (at least 1).
-    pub scalars_every: u64,
-    /// Picture every this many validation passes (renders beside the truth and their difference, depth and
-    /// dynamic masks, the cameras, the Gaussians); 0 pictures none and logs the scores alone.
-    pub snapshot_every: u64,
-    /// At most this many of the validation window's Gaussians as splats (thinned evenly); 0 logs none.
-    pub max_splats: usize,
-}
-
-impl Default for ViewerSection {
-    fn default() -> Self {
-        Self { scalars_every: 1, snapshot_every: 1, max_splats: 100_000 }
     }
 }
 
@@ -337,9 +317,7 @@ impl TrainConfig {
         if self.run.devices.is_empty() {
             return Err(setting("run.devices", "must name at least one device"));
         }
-        if self.viewer.scalars_every == 0 {
-            return Err(setting("viewer.scalars_every", "must be at least 1, got 0"));
-        }
+        self.viewer.check().map_err(|detail| setting("viewer", detail))?;
         if self.run.keep_checkpoints == 0 {
             return Err(setting("run.keep_checkpoints", "must be at least 1, got 0"));
         }

@@ -31,4 +31,4 @@ pub use dggt_run::Start;
 pub use error::TrainError;
 pub use records::StepRecord;
 pub use trainer::{RunOptions, RunSummary, Trainer};
-pub use watch::{RunWatcher, SnapshotOptions, ValidationSnapshot};
+pub use watch::{RunWatcher, SnapshotOptions, ValidationSnapshot, ValidationViews};

@@ -56,7 +56,7 @@ use crate::records::{FailureRecord, LoggedStep, ScoredWeights, StepMeasures, Ste
 use crate::replicas::{Replica, Replicas};
 use crate::resume::{self, AllowedChanges, ConfiguredSections};
 use crate::validate::{Validation, Validator};
-use crate::watch::{RunWatcher, SnapshotOptions, Unwatched};
+use crate::watch::{RunWatcher, SnapshotOptions, Unwatched, ValidationViews};
 
 /// The cached scene index in a run's output folder. It is not among the run's own files
 /// ([`run_folder::RUN_ENTRIES`]): it is checked against the scenes on every use and rebuilt when stale, and a
@@ -265,11 +265,14 @@ impl Trainer {
         &self.sampling
     }
 
-    /// The target views a validation pass pictures for a watcher: `(frame, camera)` positions in the first
-    /// validation scene.
-    pub fn validation_views(&self) -> Vec<(usize, usize)> {
+    /// The views a validation pass pictures for a watcher, in the first validation scene.
+    pub fn validation_views(&self) -> ValidationViews {
         let cameras = self.validation_scenes.first().map_or(0, |scene| scene.cameras.len());
-        self.config.data.validation.targets.iter().flat_map(|&frame| (0..cameras).map(move |c| (frame, c))).collect()
+        let views = |frames: &[usize]| -> Vec<(usize, usize)> {
+            frames.iter().flat_map(|&frame| (0..cameras).map(move |c| (frame, c))).collect()
+        };
+        let frames = &self.config.data.validation;
+        ValidationViews { inputs: views(&frames.inputs), targets: views(&frames.targets) }
     }
 
     /// Scores the current weights on the validation frames.

@@ -49,6 +49,13 @@ impl RunWatcher for Unwatched {
     fn validation(&mut self, _: u64, _: &Validation) {}
 }
 
+/// The views a validation pass pictures: `(frame, camera)` positions in its first scene.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct ValidationViews {
+    pub inputs: Vec<(usize, usize)>,
+    pub targets: Vec<(usize, usize)>,
+}
+
 /// How a validation pass pictures its scene.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct SnapshotOptions {

@@ -59,6 +59,7 @@ pub fn tiny_config(out_dir: &Path, steps: u64) -> RefineTrainConfig {
             keep_checkpoints: 2,
             validate_every: 0,
         },
+        viewer: Default::default(),
     }
 }
 
