@@ -105,7 +105,8 @@ pub struct LiveRecording {
 
 impl LiveRecording {
     /// Opens the recording of application `application` at `destination` (a file is created; a viewer is
-    /// connected to in the background) with the layout `blueprint`.
+    /// connected to in the background) with the layout `blueprint`, its time panel on the `step` line following
+    /// the newest step.
     pub(crate) fn start(
         destination: Destination,
         application: &'static str,
@@ -115,7 +116,11 @@ impl LiveRecording {
             destination: destination.to_string(),
             detail: e.to_string(),
         };
-        let builder = rerun::RecordingStreamBuilder::new(application).with_blueprint(blueprint);
+        let following = rerun::blueprint::TimePanel::new()
+            .with_timeline("step")
+            .with_play_state(rerun::blueprint::components::PlayState::Following);
+        let builder =
+            rerun::RecordingStreamBuilder::new(application).with_blueprint(blueprint.with_time_panel(following));
         let recording = match &destination {
             Destination::File(path) => builder.save(path),
             Destination::Viewer(url) => builder.connect_grpc_opts(url.clone()),

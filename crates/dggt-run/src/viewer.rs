@@ -39,3 +39,24 @@ impl ViewerSection {
         self.snapshot_every > 0 && passes_before.is_multiple_of(self.snapshot_every)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scalars_every_zero_is_refused_naming_it() {
+        let section = ViewerSection { scalars_every: 0, ..ViewerSection::default() };
+        assert!(section.check().unwrap_err().contains("viewer.scalars_every"));
+        assert!(ViewerSection::default().check().is_ok());
+    }
+
+    #[test]
+    fn every_nth_pass_is_pictured_and_none_at_zero() {
+        let every = |n| ViewerSection { snapshot_every: n, ..ViewerSection::default() };
+        let pictured = |section: ViewerSection| (0..6).filter(|&k| section.pictures_pass(k)).collect::<Vec<u64>>();
+        assert_eq!(pictured(every(1)), [0, 1, 2, 3, 4, 5]);
+        assert_eq!(pictured(every(3)), [0, 3]);
+        assert_eq!(pictured(every(0)), Vec::<u64>::new());
+    }
+}
