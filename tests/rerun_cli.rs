@@ -387,3 +387,20 @@ fn a_refiner_recording_holds_its_steps_and_held_out_pairs_before_and_after() {
         assert_eq!(steps(entities, &format!("/validation/pair_0/{part}")), [0, 3], "{part}");
     }
 }
+
+/// Two MPI ranks (the `mpi` feature, which CI builds with): rank 0 alone records, so every step is in the
+/// recording once, and the other rank neither refuses the file rank 0 created nor writes one.
+#[cfg(feature = "mpi")]
+#[test]
+fn of_two_ranks_rank_zero_alone_records() {
+    let work = tempfile::tempdir().unwrap();
+    let config = watched_config(work.path(), "ranks", 2);
+    let (out, rrd) = (work.path().join("run"), work.path().join("ranks.rrd"));
+    let mut command = dggt_test_data::mpi_launcher(2, Path::new(env!("CARGO_BIN_EXE_dggt")));
+    command.args(["train", "--config", path(&config), "--out", path(&out), "--rerun", path(&rrd)]);
+    let text = succeeded(&command.output().expect("mpirun runs (install openmpi-bin and libopenmpi-dev)"));
+    assert_eq!(text.matches("recording: ").count(), 1, "one rank reports a recording:\n{text}");
+    let entities = read_back(&rrd)["entities"].as_object().unwrap().clone();
+    assert_eq!(steps(&entities, "/train/loss"), [0, 1], "each step once");
+    assert_eq!(steps(&entities, "/validation/scores/psnr"), [2]);
+}

@@ -65,14 +65,17 @@ pub fn run(args: Args) -> Result<()> {
         None => DeviceList::from_names(&config.run.devices)
             .map_err(|e| anyhow::anyhow!("{}: run.devices: {e}", path.display()))?,
     };
-    let viewer = viewer::Viewer::from_flags(args.viewer)?;
     let start = if args.resume { Start::Resume } else { Start::Fresh };
     // One process, or one rank of `mpirun -np P dggt train` (docs/DISTRIBUTED.md).
     let group = ProcessGroup::from_environment()?;
     if group.size() > 1 {
         tracing::info!(rank = group.rank(), ranks = group.size(), "training as one rank of an MPI job");
     }
-    // The writing rank owns the run folder; the other ranks only read the checkpoint it names.
+    // The writing rank owns the run folder and the live view; the other ranks only read the checkpoint it names.
+    let viewer = match group.is_writer() {
+        true => viewer::Viewer::from_flags(args.viewer)?,
+        false => viewer::Viewer::none(),
+    };
     let _lock = group.is_writer().then(|| output::lock(&config.run.out_dir, "dggt train")).transpose()?;
     let allowed = AllowedChanges::keys(args.allow_changed);
     let mut trainer = Trainer::in_group(config, devices.devices()?, start, group, &allowed).map_err(with_flags)?;
@@ -95,10 +98,7 @@ pub fn run(args: Args) -> Result<()> {
         return Ok(());
     }
     let options = RunOptions { progress: Visibility::on_terminal(), stop_after: None };
-    let (summary, recording) = match trainer.group().is_writer() {
-        true => viewer.run(&mut trainer, options)?,
-        false => (trainer.run(options)?, None),
-    };
+    let (summary, recording) = viewer.run(&mut trainer, options)?;
     if !trainer.group().is_writer() {
         return Ok(());
     }

@@ -41,6 +41,11 @@ enum Target {
 }
 
 impl Viewer {
+    /// No live view.
+    pub fn none() -> Self {
+        Self(None)
+    }
+
     /// The viewer `--rerun FILE` or `--rerun-connect URL` asks for: a file must be new (a recording is never
     /// replaced or appended to), an address must be a rerun proxy URL.
     pub fn from_flags(args: ViewerArgs) -> Result<Self> {
