@@ -7,10 +7,10 @@ use std::path::{Path, PathBuf};
 use anyhow::Result;
 use dggt_bench::knobs::parse_opacity;
 use dggt_bench::{
-    BenchOptions, Culling, Knobs, LpipsFiles, PoseSource, Precision, Skips, SweepSpec, parse_motion, report, run_bench,
+    BenchOptions, Culling, Knobs, LpipsFiles, Precision, Skips, SweepSpec, parse_motion, report, run_bench,
     write_outputs,
 };
-use dggt_infer::SkyChoice;
+use dggt_infer::{CameraSource, SkyChoice};
 
 use crate::backend::DeviceList;
 use crate::commands::output::{self, OutputKind, OverwriteArg};
@@ -189,7 +189,7 @@ impl SweepArgs {
             sweep,
             repeat: self.repeat,
             warmup: self.warmup,
-            poses: if self.predicted_poses { PoseSource::Predicted } else { PoseSource::Truth },
+            poses: if self.predicted_poses { CameraSource::Predicted } else { CameraSource::GroundTruth },
             lpips: match (&self.lpips_backbone, &self.lpips_linear) {
                 (Some(backbone), Some(linear)) => {
                     Some(LpipsFiles { backbone: backbone.clone(), linear: linear.clone() })

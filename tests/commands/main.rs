@@ -14,6 +14,7 @@ mod convert_train;
 mod crash_resume;
 mod fixture;
 mod gpu_buffer_limit;
+mod layering;
 mod parity_cli;
 mod refine_cli;
 mod refine_train_cli;

@@ -38,7 +38,7 @@ pub use curves::{RunCurves, draw_curves};
 pub use error::BenchError;
 pub use knobs::{Configuration, Culling, Knobs, Precision, Skips, SweepSpec, Varied, parse_motion};
 pub use pareto::pareto_front;
-pub use run::{BenchOptions, BenchReport, LpipsFiles, MeasuredRow, PoseSource, RefinedRow, RowOutcome, run_bench};
+pub use run::{BenchOptions, BenchReport, LpipsFiles, MeasuredRow, RefinedRow, RowOutcome, run_bench};
 
 /// The files [`write_outputs`] wrote.
 #[derive(Debug, Clone, PartialEq)]

@@ -17,7 +17,9 @@ use std::time::Instant;
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_data::{PreparedView, Preprocess, Scene, prepare_view};
 use dggt_geom::{ImageSize, PixelConvention, PosedCamera};
-use dggt_infer::{InputCameras, MotionPath, SceneOptions, SkyChoice, ViewSlot, fresh_model, input_views, load_network};
+use dggt_infer::{
+    CameraSource, InputCameras, MotionPath, SceneOptions, SkyChoice, ViewSlot, fresh_model, input_views, load_network,
+};
 use dggt_losses::{Lpips, LpipsKind};
 use dggt_metrics::ImageShape;
 use dggt_model::host::host_f32;
@@ -31,15 +33,6 @@ use crate::knobs::{Configuration, Culling, Knobs, Precision, SweepSpec, Varied};
 use crate::pareto::pareto_front;
 use crate::precision::{PrecisionUnsupported, cast_model, panic_message, precision_support};
 use crate::stages::{self, settle};
-
-/// Where the cameras that place the Gaussians and view the targets come from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum PoseSource {
-    /// The export's poses, re-expressed in the first input view's frame (how the tiny model is trained).
-    Truth,
-    /// The camera head's poses, targets interpolated between input views (as `dggt reconstruct` renders).
-    Predicted,
-}
 
 /// LPIPS-Alex weight files: the AlexNet backbone and the lpips linear layers (may be one file).
 #[derive(Debug, Clone, PartialEq)]
@@ -64,7 +57,10 @@ pub struct BenchOptions {
     pub repeat: usize,
     /// Untimed runs before them.
     pub warmup: usize,
-    pub poses: PoseSource,
+    /// Where the cameras that place the Gaussians and view the targets come from: the export's, re-expressed
+    /// in the first input view's frame (how the tiny model is trained), or the camera head's with targets
+    /// interpolated between input views (as `dggt reconstruct` renders).
+    pub poses: CameraSource,
     pub lpips: Option<LpipsFiles>,
     pub seed: u64,
     /// Frames per chunk of the dense heads.
@@ -84,7 +80,7 @@ impl BenchOptions {
             sweep: SweepSpec::default(),
             repeat: 3,
             warmup: 1,
-            poses: PoseSource::Truth,
+            poses: CameraSource::GroundTruth,
             lpips: None,
             seed: 0,
             chunk_frames: 4,
@@ -519,8 +515,8 @@ fn standing_notes(options: &BenchOptions, reference_size: ImageSize) -> Vec<Stri
             "vs truth: against the export's images of the target frames, preprocessed to {reference_size}; cameras \
              from {}",
             match options.poses {
-                PoseSource::Truth => "the export's poses (relative to the first input view)",
-                PoseSource::Predicted => "the camera head (targets interpolated between input views)",
+                CameraSource::GroundTruth => "the export's poses (relative to the first input view)",
+                CameraSource::Predicted => "the camera head (targets interpolated between input views)",
             }
         ),
         format!(
@@ -666,8 +662,8 @@ impl Runner<'_> {
         let forward_ms = lap(&mut clock);
 
         let cameras = match self.options.poses {
-            PoseSource::Truth => InputCameras::Given(setup.input_cameras.clone()),
-            PoseSource::Predicted => InputCameras::Predicted,
+            CameraSource::GroundTruth => InputCameras::Given(setup.input_cameras.clone()),
+            CameraSource::Predicted => InputCameras::Predicted,
         };
         let views = input_views(&prediction, &setup.input_slots, cameras, setup.size)?;
         let scene = prediction
@@ -676,8 +672,8 @@ impl Runner<'_> {
         let mut targets = Vec::new();
         for &(slot, camera) in &setup.target_truth {
             let camera = match self.options.poses {
-                PoseSource::Truth => camera,
-                PoseSource::Predicted => scene.camera_at(slot.rig_camera, slot.time)?,
+                CameraSource::GroundTruth => camera,
+                CameraSource::Predicted => scene.camera_at(slot.rig_camera, slot.time)?,
             };
             targets.push(TargetView { rig_camera: slot.rig_camera, time: slot.time, camera });
         }

@@ -387,6 +387,13 @@ pub fn learnt_flow_loss(pixels: &PixelGaussians, batch: &StepBatch) -> Result<Op
     let (frames, per_view) = (pixels.views.len(), pixels.size.area());
     let camera = pixels.rotate_rows(learnt.velocity, Axes::WorldToCamera).div_scalar(frames_per_time as f32);
     let cells = FlowCells::of(batch, frames, per_view, |row| learnt.measured[row]);
+    let moving = cells.moving.iter().filter(|&&m| m).count();
+    tracing::debug!(
+        queries = learnt.measured.iter().filter(|&&m| m).count(),
+        cells = cells.rows.len(),
+        moving,
+        "learnt flow supervision"
+    );
     Ok(cells.l1(camera))
 }
 
