@@ -387,11 +387,11 @@ pub fn learnt_flow_loss(pixels: &PixelGaussians, batch: &StepBatch) -> Result<Op
     let (frames, per_view) = (pixels.views.len(), pixels.size.area());
     let camera = pixels.rotate_rows(learnt.velocity, Axes::WorldToCamera).div_scalar(frames_per_time as f32);
     let cells = FlowCells::of(batch, frames, per_view, |row| learnt.measured[row]);
-    let moving = cells.moving.iter().filter(|&&m| m).count();
+    // The counts are taken only when the trace is on (tracing evaluates a field when its event is enabled).
     tracing::debug!(
         queries = learnt.measured.iter().filter(|&&m| m).count(),
         cells = cells.rows.len(),
-        moving,
+        moving = cells.moving.iter().filter(|&&m| m).count(),
         "learnt flow supervision"
     );
     Ok(cells.l1(camera))

@@ -70,10 +70,9 @@ pub struct ValidationSnapshot {
     pub scene: String,
     pub targets: Vec<TargetSnapshot>,
     pub inputs: Vec<InputSnapshot>,
-    /// The window's pixel Gaussians whose opacity reaches the rasteriser's threshold (the sky left out).
+    /// The window's pixel Gaussians whose opacity reaches the rasteriser's threshold (the sky left out), thinned
+    /// evenly to the snapshot's `max_splats`.
     pub gaussians: GaussianCloud,
-    /// How many such Gaussians there were before thinning.
-    pub gaussians_before_thinning: usize,
 }
 
 /// One rendered target view.
@@ -139,22 +138,20 @@ impl ValidationSnapshot {
                 depth: DepthMap { size, depths: host_f32(view.depth.clone(), "rendered depth")? },
             });
         }
-        let (gaussians, gaussians_before_thinning) = window_gaussians(forward, options.max_splats)?;
         Ok(Self {
             scene: scene.to_owned(),
             targets,
             inputs: input_snapshots(forward, batch)?,
-            gaussians,
-            gaussians_before_thinning,
+            gaussians: window_gaussians(forward, options.max_splats)?,
         })
     }
 }
 
 /// The window's pixel Gaussians whose opacity reaches the rasteriser's threshold, thinned evenly to at most
-/// `max_splats`, and how many there were before thinning.
-fn window_gaussians(forward: &Forward, max_splats: usize) -> Result<(GaussianCloud, usize), TrainError> {
+/// `max_splats`.
+fn window_gaussians(forward: &Forward, max_splats: usize) -> Result<GaussianCloud, TrainError> {
     if max_splats == 0 {
-        return Ok((GaussianCloud::default(), 0));
+        return Ok(GaussianCloud::default());
     }
     let pixels = &forward.scene.pixels;
     let opacity = host_f32(pixels.opacity.clone(), "opacity")?;
@@ -175,7 +172,7 @@ fn window_gaussians(forward: &Forward, max_splats: usize) -> Result<(GaussianClo
         opacities: kept.iter().map(|&i| opacity[i]).collect(),
         colors: kept.iter().map(|&i| triple(&colors, i)).collect(),
     };
-    Ok((cloud, visible.len()))
+    Ok(cloud)
 }
 
 /// Every input view of `batch`: the predicted camera (the camera head's last iteration), the export's, the
