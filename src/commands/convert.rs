@@ -11,6 +11,7 @@ use dggt_convert::batch::{self, ExistingScenes, FailurePolicy, Outcome, Progress
 use dggt_convert::masks::DynamicMaskStyle as MaskStyle;
 use dggt_convert::nuscenes::{FrameRate, NuScenesVersion};
 use dggt_convert::sky;
+use dggt_convert::undistort::Lens;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 
 /// The raw datasets `dggt convert` reads.
@@ -82,11 +83,24 @@ pub enum DynamicMasks {
     Drivestudio,
 }
 
+/// Argoverse 2's lens distortion.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ArgoverseLens {
+    /// Images resampled to the pinhole camera the export's intrinsics describe, so that masks and lidar agree
+    /// with the pixels to the image's edges (the lens moves an edge pixel by about 100 px).
+    Undistorted,
+    /// The release's data: the recorded images, the distortion dropped from the intrinsics.
+    AsRecorded,
+}
+
 impl Dataset {
-    fn converter(self, version: NuScenesVersion, rate: NuscenesRate) -> batch::Dataset {
+    fn converter(self, version: NuScenesVersion, rate: NuscenesRate, lens: ArgoverseLens) -> batch::Dataset {
         match self {
             Self::Waymo => batch::Dataset::Waymo,
-            Self::Argoverse2 => batch::Dataset::Argoverse2,
+            Self::Argoverse2 => batch::Dataset::Argoverse2(match lens {
+                ArgoverseLens::Undistorted => Lens::Undistorted,
+                ArgoverseLens::AsRecorded => Lens::AsRecorded,
+            }),
             Self::Nuscenes => batch::Dataset::NuScenes(version, rate.frame_rate()),
         }
     }
@@ -139,6 +153,9 @@ pub struct Args {
     /// displacement over a second (Waymo: its annotated speed).
     #[arg(long, default_value_t = dggt_convert::tracks::DEFAULT_MOVING_SPEED_M_S)]
     moving_speed: f64,
+    /// Argoverse 2: the images undistorted to the pinhole camera (recorded in the done marker), or as recorded.
+    #[arg(long, value_enum, default_value = "undistorted")]
+    argoverse_lens: ArgoverseLens,
     /// Convert the chosen scenes again even when their folders exist, replacing each once its new version is
     /// complete. Without it, a scene finished from the same source with the same options is skipped and any
     /// other folder in its place is refused.
@@ -161,12 +178,13 @@ pub fn run(args: Args) -> Result<()> {
         depth_flows,
         dynamic_masks,
         moving_speed,
+        argoverse_lens,
         overwrite,
     } = args;
     if !(moving_speed.is_finite() && moving_speed >= 0.0) {
         anyhow::bail!("--moving-speed: expected a finite speed of 0 m/s or more, found {moving_speed}");
     }
-    let dataset = dataset.converter(version, nuscenes_rate);
+    let dataset = dataset.converter(version, nuscenes_rate, argoverse_lens);
     let names = dataset.variant().camera_names();
     let cameras = cameras.unwrap_or_else(|| (0..names.len()).collect());
     if let Some(unknown) = cameras.iter().find(|&&c| c >= names.len()) {

@@ -131,6 +131,19 @@ fn convert_argoverse2_turns_a_split_folder_into_numbered_scenes() {
     assert_eq!(summary["frames"], 2);
     assert_eq!(summary["cameras"].as_array().unwrap().len(), 7);
     assert_eq!(summary["cameras"][0]["name"], "ring_front_center");
+    // By default the images are resampled to the pinhole camera (their own size, re-encoded), and the marker says so.
+    let marker: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("000").join(dggt_convert::DONE_MARKER)).unwrap()).unwrap();
+    assert_eq!(marker["provenance"]["dataset"], "argoverse2, images undistorted");
+    let source =
+        std::fs::read_dir(split.join("7fab2350-7eaf-3b7e-a39d-6937a4c1bede/sensors/cameras/ring_front_center"))
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .min()
+            .unwrap();
+    let exported = out.join("000/images/000_0.jpg");
+    assert_ne!(std::fs::read(&source).unwrap(), std::fs::read(&exported).unwrap());
+    assert_eq!(image::image_dimensions(&source).unwrap(), image::image_dimensions(&exported).unwrap());
     let unknown = dggt(&[
         "convert",
         "argoverse2",
@@ -220,7 +233,7 @@ fn convert_argoverse2_with_depth_flows_writes_maps_the_loader_reads_and_records_
     let log = real_data().join("av2/sensor/val/7fab2350-7eaf-3b7e-a39d-6937a4c1bede");
     let convert = |extra: &[&str]| {
         let args = ["convert", "argoverse2", "--input", log.to_str().unwrap(), "--out", out.to_str().unwrap()];
-        dggt(&[&args[..], &["--cameras", "1,2"], extra].concat())
+        dggt(&[&args[..], &["--cameras", "1,2", "--argoverse-lens", "as-recorded"], extra].concat())
     };
     let run = convert(&["--depth-flows", "boxes"]);
     assert!(run.status.success(), "{}", text(&run));
@@ -259,7 +272,7 @@ fn convert_skips_a_scene_only_when_its_marker_records_the_same_conversion() {
     let refusals = [
         (convert("waymo", &record, &out, &[]), "with cameras [0] (this run: [0, 1, 2, 3, 4])"),
         (convert("waymo", &copy, &out, &["--cameras", "0"]), "with source "),
-        (convert("argoverse2", &log, &out, &["--cameras", "0"]), "with source "),
+        (convert("argoverse2", &log, &out, &["--cameras", "0", "--argoverse-lens", "as-recorded"]), "with source "),
     ];
     for (refused, reason) in refusals {
         let report = text(&refused);

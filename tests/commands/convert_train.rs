@@ -68,7 +68,12 @@ fn a_waymo_export_without_sky_masks_trains_without_the_sky_term() {
 fn an_argoverse2_export_with_lidar_sky_masks_trains_with_the_sky_term() {
     let dir = tempfile::tempdir().unwrap();
     let log = real_data().join("av2/sensor/val/7fab2350-7eaf-3b7e-a39d-6937a4c1bede");
-    let scene = convert("argoverse2", &log, dir.path(), &["--sky-masks", "lidar", "--cameras", "0,1"]);
+    let scene = convert(
+        "argoverse2",
+        &log,
+        dir.path(),
+        &["--sky-masks", "lidar", "--cameras", "0,1", "--argoverse-lens", "as-recorded"],
+    );
     let summary = inspect(&scene);
     assert_eq!(summary["sky_masks"].as_bool(), Some(true), "{summary}");
     // ring_front_left sees sky along its top row and none along its bottom row (road and the ego car).

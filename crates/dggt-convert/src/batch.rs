@@ -20,6 +20,7 @@ use crate::marker::{DoneMarker, Found, Provenance, Refusal, examine, read_done, 
 use crate::masks::DynamicMaskStyle;
 use crate::nuscenes::{FrameRate, NuScenesOptions, NuScenesVersion, Tables};
 use crate::sky::SkyMasks;
+use crate::undistort::Lens;
 use crate::waymo::{WaymoOptions, convert_segment};
 
 /// The raw datasets the converters read.
@@ -27,8 +28,9 @@ use crate::waymo::{WaymoOptions, convert_segment};
 pub enum Dataset {
     /// Waymo Open Dataset v1: one `Frame` TFRecord per segment; input a `.tfrecord` file or a folder of them.
     Waymo,
-    /// Argoverse 2 sensor logs; input one log folder or a split folder of logs.
-    Argoverse2,
+    /// Argoverse 2 sensor logs, their images undistorted or as recorded; input one log folder or a split folder
+    /// of logs.
+    Argoverse2(Lens),
     /// nuScenes: input the data root; the segments are the rows of the version's `scene` table, in table order.
     NuScenes(NuScenesVersion, FrameRate),
 }
@@ -56,7 +58,8 @@ impl Dataset {
     pub fn describe(&self) -> String {
         match self {
             Self::Waymo => "waymo".into(),
-            Self::Argoverse2 => "argoverse2".into(),
+            Self::Argoverse2(Lens::AsRecorded) => "argoverse2".into(),
+            Self::Argoverse2(lens) => format!("argoverse2, images {}", lens.name()),
             Self::NuScenes(version, rate) => format!("nuscenes {}, {}", version.folder(), rate.describe()),
         }
     }
@@ -65,7 +68,7 @@ impl Dataset {
     pub fn variant(&self) -> dggt_data::ExportVariant {
         match self {
             Self::Waymo => dggt_data::ExportVariant::Waymo,
-            Self::Argoverse2 => dggt_data::ExportVariant::Argoverse2,
+            Self::Argoverse2(_) => dggt_data::ExportVariant::Argoverse2,
             Self::NuScenes(..) => dggt_data::ExportVariant::NuScenes,
         }
     }
@@ -74,7 +77,7 @@ impl Dataset {
     fn is_segment(&self, path: &Path) -> bool {
         match self {
             Self::Waymo => path.is_file() && path.extension().is_some_and(|ext| ext == "tfrecord"),
-            Self::Argoverse2 => path.join("calibration").is_dir(),
+            Self::Argoverse2(_) => path.join("calibration").is_dir(),
             Self::NuScenes(..) => false,
         }
     }
@@ -83,7 +86,7 @@ impl Dataset {
     fn prepare(&self, jobs: &[SegmentJob]) -> Result<Prepared> {
         Ok(match (self, jobs.first()) {
             (Self::Waymo, _) => Prepared::Waymo,
-            (Self::Argoverse2, _) => Prepared::Argoverse2,
+            (Self::Argoverse2(lens), _) => Prepared::Argoverse2(*lens),
             (Self::NuScenes(version, rate), Some(job)) => {
                 Prepared::NuScenes(Box::new(Tables::read(&job.input, version)?), *rate)
             }
@@ -95,7 +98,7 @@ impl Dataset {
 /// A dataset with what its segments share.
 enum Prepared {
     Waymo,
-    Argoverse2,
+    Argoverse2(Lens),
     NuScenes(Box<Tables>, FrameRate),
     /// No segments to convert.
     Nothing,
@@ -106,7 +109,7 @@ impl Prepared {
     fn progress_unit(&self) -> ProgressUnit {
         match self {
             Self::Waymo | Self::Nothing => ProgressUnit::Bytes,
-            Self::Argoverse2 => ProgressUnit::Sweeps,
+            Self::Argoverse2(_) => ProgressUnit::Sweeps,
             Self::NuScenes(..) => ProgressUnit::Frames,
         }
     }
@@ -115,7 +118,7 @@ impl Prepared {
     fn progress_total(&self, job: &SegmentJob) -> u64 {
         match self {
             Self::Waymo | Self::Nothing => std::fs::metadata(&job.input).map_or(0, |m| m.len()),
-            Self::Argoverse2 => {
+            Self::Argoverse2(_) => {
                 std::fs::read_dir(job.input.join("sensors/lidar")).map_or(0, |entries| entries.count() as u64)
             }
             Self::NuScenes(tables, rate) => {
@@ -143,8 +146,8 @@ impl Prepared {
                 let summary = convert_segment(input, scene, &waymo, progress)?;
                 (summary.frames, summary.instances)
             }
-            Self::Argoverse2 => {
-                let summary = crate::argoverse2::convert_log(input, scene, options, progress)?;
+            Self::Argoverse2(lens) => {
+                let summary = crate::argoverse2::convert_log(input, scene, (options, *lens), progress)?;
                 (summary.frames, summary.instances)
             }
             Self::NuScenes(tables, rate) => {
@@ -337,7 +340,7 @@ fn provenance(dataset: &Dataset, job: &SegmentJob, options: &ConvertOptions) -> 
     // scene is made of.
     let stamped = match dataset {
         Dataset::NuScenes(version, _) => job.input.join(version.folder()),
-        Dataset::Waymo | Dataset::Argoverse2 => job.input.clone(),
+        Dataset::Waymo | Dataset::Argoverse2(_) => job.input.clone(),
     };
     Provenance {
         source: std::fs::canonicalize(&job.input).unwrap_or_else(|_| job.input.clone()),

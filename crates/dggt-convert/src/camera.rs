@@ -19,7 +19,7 @@ pub struct Distortion {
 
 impl Distortion {
     /// Maps undistorted normalised coordinates to distorted ones.
-    fn apply(&self, xy: DVec2) -> DVec2 {
+    pub(crate) fn apply(&self, xy: DVec2) -> DVec2 {
         let (x, y) = (xy.x, xy.y);
         let r2 = x * x + y * y;
         let radial = 1.0 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3));

@@ -33,18 +33,35 @@ pub struct InstanceLog {
 }
 
 impl InstanceLog {
+    /// Gives each new object of `boxes` its key, in their order: called with a frame's boxes before its masks
+    /// are drawn ([`Self::key`]), it assigns the keys [`Self::add_frame`] would.
+    pub fn register(&mut self, boxes: &[AnnotatedBox]) {
+        for object in boxes {
+            self.key_or_new(object);
+        }
+    }
+
+    /// The key of the object with dataset id `id`, once registered.
+    pub fn key(&self, id: &str) -> Option<usize> {
+        self.key_of_id.get(id).copied()
+    }
+
+    fn key_or_new(&mut self, object: &AnnotatedBox) -> usize {
+        *self.key_of_id.entry(object.id.clone()).or_insert_with(|| {
+            self.instances.push(Instance {
+                id: object.id.clone(),
+                class_name: object.class_name,
+                frame_annotations: FrameAnnotations::default(),
+            });
+            self.instances.len() - 1
+        })
+    }
+
     /// Records the boxes of `frame` (frames are added in order, each once).
     pub fn add_frame(&mut self, frame: usize, world_from_ego: &Rigid<LogWorld, Ego>, boxes: &[AnnotatedBox]) {
         self.per_frame.resize_with(frame + 1, Vec::new);
         for object in boxes {
-            let key = *self.key_of_id.entry(object.id.clone()).or_insert_with(|| {
-                self.instances.push(Instance {
-                    id: object.id.clone(),
-                    class_name: object.class_name,
-                    frame_annotations: FrameAnnotations::default(),
-                });
-                self.instances.len() - 1
-            });
+            let key = self.key_or_new(object);
             let annotations = &mut self.instances[key].frame_annotations;
             annotations.frame_idx.push(frame);
             annotations.obj_to_world.push((*world_from_ego * object.ego_from_box).to_rows());

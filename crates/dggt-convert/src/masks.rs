@@ -152,11 +152,7 @@ impl DynamicMasks {
     /// sets its pixels, any other (a parked car) clears them, so that a still object in front of a moving one
     /// hides it as it does in the image.
     fn draw_outlines(&mut self, camera: &EgoCamera, boxes: &[AnnotatedBox], rule: MaskRule) {
-        let distance =
-            |object: &AnnotatedBox| camera.camera_from_ego.transform_point(object.ego_from_box.translation()).length();
-        let mut by_distance: Vec<(f64, &AnnotatedBox)> = boxes.iter().map(|b| (distance(b), b)).collect();
-        by_distance.sort_by(|a, b| b.0.total_cmp(&a.0));
-        for (_, object) in by_distance {
+        for object in farthest_first(camera, boxes) {
             let outline = projected_outline(camera, object);
             let value = if rule.draws(object) { 255 } else { 0 };
             if value == 255 {
@@ -180,6 +176,16 @@ impl DynamicMasks {
         }
         Ok(())
     }
+}
+
+/// The boxes in drawing order: the farthest first, by their centre's distance from the camera, so that what is
+/// drawn later (nearer) covers what it hides.
+pub fn farthest_first<'a>(camera: &EgoCamera, boxes: &'a [AnnotatedBox]) -> Vec<&'a AnnotatedBox> {
+    let distance =
+        |object: &AnnotatedBox| camera.camera_from_ego.transform_point(object.ego_from_box.translation()).length();
+    let mut by_distance: Vec<(f64, &AnnotatedBox)> = boxes.iter().map(|b| (distance(b), b)).collect();
+    by_distance.sort_by(|a, b| b.0.total_cmp(&a.0));
+    by_distance.into_iter().map(|(_, object)| object).collect()
 }
 
 /// The image-space bounding rectangle of a box, when every corner projects inside the image.

@@ -4,7 +4,10 @@ use std::io::Cursor;
 use std::path::Path;
 
 use dggt_geom::ImageSize;
-use image::{GrayImage, ImageFormat, RgbImage};
+use image::{DynamicImage, GrayImage, ImageBuffer, ImageFormat, Luma, RgbImage};
+
+/// A 16-bit single-channel image (an instance mask).
+pub type Gray16Image = ImageBuffer<Luma<u16>, Vec<u16>>;
 
 use crate::error::{DataError, Result};
 
@@ -43,6 +46,15 @@ pub fn read_gray(path: &Path) -> Result<GrayImage> {
     Ok(decode(path)?.to_luma8())
 }
 
+/// Reads a 16-bit grayscale PNG (an instance mask); any other colour type is an error naming the file, so that an
+/// 8-bit mask is not read as instance keys.
+pub fn read_gray16(path: &Path) -> Result<Gray16Image> {
+    match decode(path)? {
+        DynamicImage::ImageLuma16(image) => Ok(image),
+        other => Err(DataError::malformed(path, "a 16-bit grayscale PNG", format!("{:?}", other.color()))),
+    }
+}
+
 /// The size of an image, read from its header without decoding the pixels.
 pub fn read_size(path: &Path) -> Result<ImageSize> {
     let reader = image::ImageReader::open(path)
@@ -73,9 +85,39 @@ pub fn write_jpeg(path: &Path, image: &RgbImage, quality: u8) -> Result<()> {
 
 /// Encodes an 8-bit grayscale PNG and writes it atomically.
 pub fn write_png_gray(path: &Path, image: &GrayImage) -> Result<()> {
+    write_png(path, image)
+}
+
+/// Encodes a 16-bit grayscale PNG and writes it atomically.
+pub fn write_png_gray16(path: &Path, image: &Gray16Image) -> Result<()> {
+    write_png(path, image)
+}
+
+fn write_png<P>(path: &Path, image: &ImageBuffer<P, Vec<P::Subpixel>>) -> Result<()>
+where
+    P: image::PixelWithColorType,
+    [P::Subpixel]: image::EncodableLayout,
+{
     let mut bytes = Cursor::new(Vec::new());
     image
         .write_to(&mut bytes, ImageFormat::Png)
         .map_err(|source| DataError::Image { path: path.to_owned(), source })?;
     crate::io::write_atomically(path, &bytes.into_inner())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_16_bit_mask_reads_back_and_an_8_bit_one_is_refused_naming_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let (wide, narrow) = (dir.path().join("keys.png"), dir.path().join("gray.png"));
+        let keys = Gray16Image::from_fn(5, 3, |x, y| Luma([(x * 1000 + y) as u16 + 300]));
+        write_png_gray16(&wide, &keys).unwrap();
+        assert_eq!(read_gray16(&wide).unwrap(), keys);
+        write_png_gray(&narrow, &GrayImage::from_pixel(5, 3, Luma([7]))).unwrap();
+        let message = read_gray16(&narrow).unwrap_err().to_string();
+        assert!(message.contains("gray.png") && message.contains("16-bit grayscale"), "{message}");
+    }
 }

@@ -124,6 +124,12 @@ impl ExportLayout {
         self.root.join("instances").join("instances_info.json")
     }
 
+    /// `instances/masks/{t:03}_{cam}.png`: 16-bit, each pixel the key + 1 of the instance (of
+    /// `instances_info.json`) whose box outline covers it nearest the camera, 0 where none does.
+    pub fn instance_mask(&self, frame: usize, camera: usize) -> PathBuf {
+        self.root.join("instances").join("masks").join(format!("{frame:03}_{camera}.png"))
+    }
+
     /// `instances/frame_instances.json`.
     pub fn frame_instances(&self) -> PathBuf {
         self.root.join("instances").join("frame_instances.json")

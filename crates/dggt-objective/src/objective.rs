@@ -394,7 +394,46 @@ pub fn learnt_flow_loss(pixels: &PixelGaussians, batch: &StepBatch) -> Result<Op
         moving = cells.moving.iter().filter(|&&m| m).count(),
         "learnt flow supervision"
     );
+    if tracing::enabled!(tracing::Level::DEBUG) {
+        trace_flow_reach(pixels, &cells, frames_per_time)?;
+    }
     Ok(cells.l1(camera))
+}
+
+/// The neighbours the flow head attends to (the configuration's default `k`), for the reach trace.
+const TRACED_NEIGHBOURS: usize = 16;
+
+/// Traces how far the flow head would have to look for the true matches of its moving supervised queries
+/// ([`PixelGaussians::flow_reach`]): the export's flow (camera axes per log frame) turned into world axes per unit
+/// of scene time.
+fn trace_flow_reach(pixels: &PixelGaussians, cells: &FlowCells, frames_per_time: f64) -> Result<(), ObjectiveError> {
+    let per_view = pixels.size.area();
+    let truths: Vec<(usize, [f32; 3])> = cells
+        .rows
+        .iter()
+        .zip(&cells.velocities)
+        .zip(&cells.moving)
+        .filter(|&(_, &moving)| moving)
+        .map(|((&row, v), _)| {
+            let row = row as usize;
+            let rotation = pixels.views[row / per_view].camera.world_from_camera.rotation_matrix();
+            let camera = dggt_geom::glam::DVec3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2]));
+            let world = rotation * camera * frames_per_time;
+            (row, [world.x as f32, world.y as f32, world.z as f32])
+        })
+        .collect();
+    if let Some(reach) = pixels.flow_reach(&truths, TRACED_NEIGHBOURS)? {
+        tracing::debug!(
+            rows = reach.rows,
+            rank_median = reach.rank_median,
+            rank_p90 = reach.rank_p90,
+            within_neighbours = reach.within_neighbours,
+            displacement_median = reach.displacement_median,
+            miss_median = reach.miss_median,
+            "learnt flow reach"
+        );
+    }
+    Ok(())
 }
 
 /// The export's scene-flow cells of a batch's input views that a flow loss compares.

@@ -290,7 +290,7 @@ fn query_pixels(logits: &[f32], width: usize) -> Vec<PixelIndex> {
 }
 
 /// Each rig camera's views in time order, as pairs of adjacent views `(earlier, later)` (indices into `views`).
-fn adjacent_views(views: &[crate::timeline::InputView]) -> Vec<(usize, usize)> {
+pub(crate) fn adjacent_views(views: &[crate::timeline::InputView]) -> Vec<(usize, usize)> {
     let mut cameras: Vec<usize> = views.iter().map(|v| v.rig_camera).collect();
     cameras.sort_unstable();
     cameras.dedup();

@@ -4,7 +4,8 @@
 //!
 //! 1. [`timeline`]: the input views' rig cameras and scene times; target cameras interpolated from them.
 //! 2. [`pixels`]: the per-pixel Gaussians of every input view, means unprojected from the predicted depth;
-//!    [`learnt`]: the flow head's displacements of their dynamic pixels to the neighbouring inputs.
+//!    [`learnt`]: the flow head's displacements of their dynamic pixels to the neighbouring inputs;
+//!    [`reach`]: how far the head would have to look to find where its queries truly go (a diagnostic).
 //! 3. [`assemble`]: the static union faded by the lifespan to the target time, the dynamic Gaussians of the
 //!    view(s) nearest in time, and culling of what the rasteriser would skip.
 //! 4. [`compose`]: rasterising the assembled Gaussians and compositing them over the sky;
@@ -20,6 +21,7 @@ pub mod compose;
 mod error;
 pub mod learnt;
 pub mod pixels;
+pub mod reach;
 pub mod saved;
 pub mod scene4d;
 pub mod timeline;
@@ -33,6 +35,7 @@ pub use dggt_instances::{InstanceSettings, Instances};
 pub use error::SceneError;
 pub use learnt::{LearntFlow, LearntVelocity};
 pub use pixels::{Axes, MeansGradient, PixelGaussians};
+pub use reach::FlowReach;
 pub use saved::{SCENE_FILE, load_scene, save_scene, scene_file};
 pub use scene4d::Scene4d;
 pub use timeline::{

@@ -8,8 +8,8 @@
 //!
 //! | path | content |
 //! |---|---|
-//! | `images/{t:03}_{cam}.jpg` | the log's JPEG bytes, unchanged (drivestudio re-encodes them) |
-//! | `intrinsics/{cam}.txt` | `fx fy cx cy 0 0 0 0 0`: the radial distortion is dropped, as drivestudio does |
+//! | `images/{t:03}_{cam}.jpg` | [`Lens::Undistorted`]: the log's images resampled to the pinhole camera ([`crate::undistort`]), JPEG quality 95; [`Lens::AsRecorded`]: the log's JPEG bytes, unchanged (drivestudio re-encodes them) |
+//! | `intrinsics/{cam}.txt` | `fx fy cx cy 0 0 0 0 0`: the pinhole camera the images follow once undistorted; as recorded, the radial distortion is dropped, as drivestudio does |
 //! | `extrinsics/{cam}.txt` | 4x4 camera -> ego, OpenCV camera axes |
 //! | `ego_pose/{t:03}.txt` | 4x4 ego -> city at the sweep's time (shared by the cameras) |
 //! | `timestamps.txt` | `t seconds` per frame, seconds since the first kept sweep |
@@ -36,11 +36,16 @@ use crate::camera::{Distortion, EgoCamera};
 use crate::depth_flows::{DepthFlowWriter, DepthFlows, FrameSample, MapView};
 use crate::error::{ConvertError, Result};
 use crate::feather::Table;
+use crate::instance_masks;
 use crate::instances::InstanceLog;
 use crate::marker::{DoneMarker, write_done};
 use crate::masks::{DynamicMaskStyle, DynamicMasks, MaskRule};
 use crate::sky::{self, SkyMasks};
 use crate::tracks::Tracks;
+use crate::undistort::{Lens, Undistortion};
+
+/// JPEG quality of the resampled images.
+const UNDISTORTED_JPEG_QUALITY: u8 = 95;
 
 /// Largest offset between a sweep and the image paired with it (ns).
 pub const PAIRING_WINDOW_NS: i64 = 25_000_000;
@@ -69,7 +74,13 @@ impl LogCamera {
         log.join("sensors/cameras").join(self.name).join(format!("{time_ns}.jpg"))
     }
 
-    /// The pinhole camera drivestudio's export describes (no distortion).
+    /// The camera as recorded: the export's pinhole camera with the lens's radial distortion.
+    fn recorded_camera(&self, log: &Path) -> Result<EgoCamera> {
+        let [k1, k2, k3] = self.calibration.radial;
+        Ok(EgoCamera { distortion: Distortion { k1, k2, k3, p1: 0.0, p2: 0.0 }, ..self.export_camera(log)? })
+    }
+
+    /// The pinhole camera the export describes (no distortion).
     fn export_camera(&self, log: &Path) -> Result<EgoCamera> {
         let [fx, fy, cx, cy] = self.calibration.pinhole;
         let invalid = |e: dggt_geom::GeomError| ConvertError::Table {
@@ -147,7 +158,7 @@ fn chosen_cameras(log: &Path, cameras: &[usize]) -> Result<Vec<LogCamera>> {
 pub fn convert_log(
     log: &Path,
     scene: &Path,
-    options: &ConvertOptions,
+    (options, lens): (&ConvertOptions, Lens),
     progress: &(dyn Fn(u64) + Sync),
 ) -> Result<LogSummary> {
     let layout = ExportLayout::new(scene);
@@ -158,6 +169,13 @@ pub fn convert_log(
     let seconds = |time_ns: i64| (time_ns - sweeps.first().copied().unwrap_or_default()) as f64 * 1e-9;
     let tracks = log_tracks(&annotations, &poses, seconds);
     let projections = cameras.iter().map(|camera| camera.export_camera(log)).collect::<Result<Vec<_>>>()?;
+    let undistortions = match lens {
+        Lens::Undistorted => {
+            let recorded = cameras.iter().map(|camera| camera.recorded_camera(log)).collect::<Result<Vec<_>>>()?;
+            recorded.iter().map(|camera| Some(Undistortion::of(camera))).collect()
+        }
+        Lens::AsRecorded => vec![None; cameras.len()],
+    };
     let mut instances = InstanceLog::default();
     let annotations_file = log.join("annotations.feather");
     let mut depth_flows =
@@ -169,10 +187,11 @@ pub fn convert_log(
         let (Some(pairs), Some(world_from_ego)) = (pairs, poses.get(&sweep)) else { continue };
         let t = kept.len();
         let points = write_sweep(&log.join("sensors/lidar").join(format!("{sweep}.feather")), &layout.lidar(t))?;
-        for ((camera, projection), time) in cameras.iter().zip(&projections).zip(pairs) {
-            let source = camera.image_path(log, time);
-            let bytes = std::fs::read(&source).map_err(|e| ConvertError::io(&source, e))?;
-            io::write_atomically(&layout.image(t, camera.id), &bytes)?;
+        instances.register(annotations.get(&sweep).map(Vec::as_slice).unwrap_or_default());
+        for (((camera, projection), undistortion), time) in
+            cameras.iter().zip(&projections).zip(&undistortions).zip(pairs)
+        {
+            write_image(&camera.image_path(log, time), &layout.image(t, camera.id), undistortion.as_ref())?;
             let boxes = annotations.get(&sweep).map(Vec::as_slice).unwrap_or_default();
             let boxes: Vec<AnnotatedBox> = match options.dynamic_masks {
                 DynamicMaskStyle::MovingOutlines { .. } => {
@@ -184,6 +203,7 @@ pub fn convert_log(
             };
             let (rule, shape) = options.dynamic_masks.rule_and_shape(MaskRule::EveryBox);
             DynamicMasks::draw(projection, &boxes, rule, shape).write(&layout, t, camera.id)?;
+            instance_masks::write(&layout, (t, camera.id), projection, &boxes, &instances)?;
             if options.sky_masks == SkyMasks::Lidar {
                 let mask = sky::lidar_sky_mask(projection, points.iter().copied(), sky::TopBeam::Unknown);
                 sky::write_lidar_sky_mask(&layout, t, camera.id, &mask)?;
@@ -221,6 +241,7 @@ pub fn convert_log(
         writer.finish()?;
     }
     instances.write(&layout)?;
+    instance_masks::write_note(&layout)?;
     options.dynamic_masks.write_note(&layout)?;
     let marker = DoneMarker {
         converter: format!("dggt-convert {} (argoverse2)", env!("CARGO_PKG_VERSION")),
@@ -272,4 +293,19 @@ fn write_sweep(source: &Path, target: &Path) -> Result<Vec<DVec3>> {
     }
     io::write_atomically(target, &bytes)?;
     Ok((0..x.len()).map(|row| DVec3::new(x[row], y[row], z[row])).collect())
+}
+
+/// Writes the recorded image `source` to `target`: its bytes unchanged, or resampled by `undistortion`.
+fn write_image(source: &Path, target: &Path, undistortion: Option<&Undistortion>) -> Result<()> {
+    let Some(undistortion) = undistortion else {
+        let bytes = std::fs::read(source).map_err(|e| ConvertError::io(source, e))?;
+        return Ok(io::write_atomically(target, &bytes)?);
+    };
+    let recorded = dggt_data::images::read_rgb(source)?;
+    let pinhole = undistortion.apply(&recorded).ok_or_else(|| ConvertError::Table {
+        path: source.to_owned(),
+        expected: "an image of the size calibration/intrinsics.feather gives its camera".into(),
+        found: format!("{}x{}", recorded.width(), recorded.height()),
+    })?;
+    Ok(dggt_data::images::write_jpeg(target, &pinhole, UNDISTORTED_JPEG_QUALITY)?)
 }

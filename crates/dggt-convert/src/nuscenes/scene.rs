@@ -34,6 +34,7 @@ use crate::boxes::AnnotatedBox;
 use crate::camera::{Distortion, EgoCamera};
 use crate::depth_flows::{DepthFlowWriter, DepthFlows, FrameSample, MapView};
 use crate::error::{ConvertError, Result};
+use crate::instance_masks;
 use crate::instances::InstanceLog;
 use crate::marker::{DoneMarker, write_done};
 use crate::masks::{DynamicMaskStyle, DynamicMasks, MaskRule};
@@ -162,6 +163,7 @@ fn write_frame<'a>(
     (tracks, first_us): (&Tracks, i64),
     options: &NuScenesOptions,
     layout: &ExportLayout,
+    instances: &mut InstanceLog,
 ) -> Result<WrittenFrame> {
     let lidar = Reading::<Sweep>::of(tables, frame, LIDAR)?;
     let points = sweep_points(tables, &lidar)?;
@@ -169,7 +171,8 @@ fn write_frame<'a>(
     io::write_atomically(&layout.lidar(t), &rows)?;
     let global_from_lidar = lidar.global_from_sensor();
     text::write_rows(&layout.lidar_pose(t), &global_from_lidar.to_rows())?;
-    let boxes = &frame.boxes;
+    let boxes_in_ego: Vec<AnnotatedBox> = frame.boxes.iter().map(|b| b.in_ego(&lidar.global_from_ego)).collect();
+    instances.register(&boxes_in_ego);
     let names = ExportVariant::NuScenes.camera_names();
     let mut views = Vec::new();
     for &id in &options.cameras {
@@ -181,6 +184,7 @@ fn write_frame<'a>(
         let in_ego = view_boxes(frame, tracks, time_s, &reading.global_from_ego, options.dynamic_masks);
         let (rule, shape) = options.dynamic_masks.rule_and_shape(MaskRule::EveryBox);
         DynamicMasks::draw(&camera, &in_ego, rule, shape).write(layout, t, id)?;
+        instance_masks::write(layout, (t, id), &camera, &in_ego, instances)?;
         if options.sky_masks == SkyMasks::Lidar {
             let ego_from_lidar = reading.global_from_ego.inverse() * global_from_lidar;
             let in_ego = points
@@ -197,7 +201,7 @@ fn write_frame<'a>(
         views.push(MapView { camera: id, camera_from_world, intrinsics: camera.intrinsics, size: camera.size });
     }
     Ok(WrittenFrame {
-        boxes_in_ego: boxes.iter().map(|b| b.in_ego(&lidar.global_from_ego)).collect(),
+        boxes_in_ego,
         global_from_ego: lidar.global_from_ego,
         points_in_global: points
             .iter()
@@ -259,7 +263,7 @@ pub fn convert_scene(
     let tracks = frame_tracks(&frames, first);
     for (t, frame) in frames.iter().enumerate() {
         progress(t as u64);
-        let written = write_frame(tables, frame, t, (&tracks, first), options, &layout)?;
+        let written = write_frame(tables, frame, t, (&tracks, first), options, &layout, &mut instances)?;
         if let Some(writer) = &mut depth_flows {
             let boxes = frame.boxes.iter().map(GlobalBox::world_box);
             writer.push(FrameSample {
@@ -278,6 +282,7 @@ pub fn convert_scene(
         frames.iter().enumerate().map(|(t, f)| [t as f64, (f.time_us - first) as f64 * 1e-6]).collect();
     text::write_rows(&layout.timestamps(), &times)?;
     instances.write(&layout)?;
+    instance_masks::write_note(&layout)?;
     options.dynamic_masks.write_note(&layout)?;
     let marker = DoneMarker {
         converter: format!(

@@ -26,6 +26,7 @@ use super::lidar::{self, LaserCalibration, LidarRow};
 use super::{ground, proto};
 use crate::depth_flows::{DepthFlowWriter, DepthFlows, FrameSample, MapView};
 use crate::error::{ConvertError, RecordAt, Result};
+use crate::instance_masks;
 use crate::instances::InstanceLog;
 use crate::marker::{DoneMarker, write_done};
 use crate::masks::{DynamicMaskStyle, DynamicMasks, MaskRule};
@@ -110,12 +111,14 @@ pub fn convert_segment(
             lidar_frames += 1;
         }
         let boxes = frame::laser_boxes(at, &frame.laser_labels)?;
+        instances.register(&boxes);
         // A row's point: columns 3..6, vehicle frame.
         let point = |r: &LidarRow| DVec3::new(r[3].into(), r[4].into(), r[5].into());
         for camera in calibration.cameras.iter().filter(|c| options.cameras.contains(&c.id)) {
             let (rule, shape) = options.dynamic_masks.rule_and_shape(MaskRule::SeenAndFasterThan(MOVING_SPEED_M_S));
             let masks = DynamicMasks::draw(&camera.camera, &boxes, rule, shape);
             masks.write(&layout, record, camera.id)?;
+            instance_masks::write(&layout, (record, camera.id), &camera.camera, &boxes, &instances)?;
             if options.sky_masks == SkyMasks::Lidar {
                 // A frame without lidar gets a mask without sky.
                 let points = lidar_rows.iter().flatten().map(point);
@@ -148,6 +151,7 @@ pub fn convert_segment(
         writer.finish()?;
     }
     instances.write(&layout)?;
+    instance_masks::write_note(&layout)?;
     options.dynamic_masks.write_note(&layout)?;
     let marker = DoneMarker {
         converter: format!("dggt-convert {} (waymo)", env!("CARGO_PKG_VERSION")),

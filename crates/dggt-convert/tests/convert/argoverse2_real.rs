@@ -11,6 +11,7 @@ use dggt_convert::batch::ConvertOptions;
 use dggt_convert::depth_flows::DepthFlows;
 use dggt_convert::masks::DynamicMaskStyle;
 use dggt_convert::sky::SkyMasks;
+use dggt_convert::undistort::Lens;
 use dggt_data::{DynamicMaskKind, ExportLayout, ExportVariant, read_export};
 use image::RgbImage;
 
@@ -58,7 +59,8 @@ fn stamp(mask: &mut image::GrayImage, u: f64, v: f64, radius: i64) {
 fn the_log_converts_and_its_lidar_lands_on_the_drawn_pixels() {
     let out = tempfile::tempdir().unwrap();
     let scene_dir = out.path().join("000");
-    let summary = convert_log(&log(), &scene_dir, &cameras(&[0, 1, 2, 3, 4, 5, 6]), &|_| {}).unwrap();
+    let summary =
+        convert_log(&log(), &scene_dir, (&cameras(&[0, 1, 2, 3, 4, 5, 6]), Lens::AsRecorded), &|_| {}).unwrap();
     assert_eq!((summary.frames, summary.dropped_sweeps), (2, 0));
     assert!(summary.instances > 0);
     assert_eq!(ExportVariant::detect(&scene_dir).unwrap(), ExportVariant::Argoverse2);
@@ -174,7 +176,9 @@ fn a_non_unit_quaternion_and_a_missing_table_are_errors_naming_the_file() {
     writer.write(&damaged).unwrap();
     writer.finish().unwrap();
 
-    let message = convert_log(&copy, &dir.path().join("000"), &cameras(&[0]), &|_| {}).unwrap_err().to_string();
+    let message = convert_log(&copy, &dir.path().join("000"), (&cameras(&[0]), Lens::AsRecorded), &|_| {})
+        .unwrap_err()
+        .to_string();
     assert!(
         message.contains("egovehicle_SE3_sensor.feather")
             && message.contains("row 2")
@@ -188,7 +192,9 @@ fn a_non_unit_quaternion_and_a_missing_table_are_errors_naming_the_file() {
         copy.join("calibration/egovehicle_SE3_sensor.feather"),
     )
     .unwrap();
-    let message = convert_log(&copy, &dir.path().join("001"), &cameras(&[0]), &|_| {}).unwrap_err().to_string();
+    let message = convert_log(&copy, &dir.path().join("001"), (&cameras(&[0]), Lens::AsRecorded), &|_| {})
+        .unwrap_err()
+        .to_string();
     assert!(message.contains("city_SE3_egovehicle.feather"), "{message}");
 }
 
@@ -244,11 +250,12 @@ fn depth_flows_move_exactly_the_points_inside_tracked_boxes() {
     let out = tempfile::tempdir().unwrap();
     let scene_dir = out.path().join("000");
     let started = std::time::Instant::now();
-    convert_log(&log(), &out.path().join("plain"), &cameras(&[0, 1, 2, 3, 4, 5, 6]), &|_| {}).unwrap();
+    convert_log(&log(), &out.path().join("plain"), (&cameras(&[0, 1, 2, 3, 4, 5, 6]), Lens::AsRecorded), &|_| {})
+        .unwrap();
     let plain_s = started.elapsed().as_secs_f64();
     let options = ConvertOptions { depth_flows: DepthFlows::FromBoxes, ..cameras(&[0, 1, 2, 3, 4, 5, 6]) };
     let started = std::time::Instant::now();
-    convert_log(&log(), &scene_dir, &options, &|_| {}).unwrap();
+    convert_log(&log(), &scene_dir, (&options, Lens::AsRecorded), &|_| {}).unwrap();
     let folder_bytes = |folder: &std::path::Path| -> u64 {
         std::fs::read_dir(folder).unwrap().map(|e| e.unwrap().metadata().unwrap().len()).sum()
     };
@@ -361,7 +368,8 @@ fn a_box_of_zero_length_is_an_error_naming_the_annotations_with_depth_flows() {
     writer.finish().unwrap();
 
     let options = ConvertOptions { depth_flows: DepthFlows::FromBoxes, ..cameras(&[0]) };
-    let message = convert_log(&copy, &dir.path().join("000"), &options, &|_| {}).unwrap_err().to_string();
+    let message =
+        convert_log(&copy, &dir.path().join("000"), (&options, Lens::AsRecorded), &|_| {}).unwrap_err().to_string();
     assert!(
         message.contains("annotations.feather") && message.contains("frame 0") && message.contains("box size"),
         "{message}"

@@ -151,6 +151,8 @@ enum Sight {
 struct Coverage {
     views: HashMap<(Motion, Sight), usize>,
     dynamic: HashMap<(Motion, Sight), usize>,
+    /// Per sight, the views whose instance mask shows the vehicle's own key at its centre.
+    own_instance: HashMap<Sight, usize>,
 }
 
 impl Coverage {
@@ -161,6 +163,12 @@ impl Coverage {
 
     fn count(&self, motion: Motion, sight: Sight) -> usize {
         self.views.get(&(motion, sight)).copied().unwrap_or(0)
+    }
+
+    /// The share of views (moving and still) whose instance mask shows the vehicle itself at its centre.
+    fn own_instance(&self, sight: Sight) -> f64 {
+        let views: usize = [Motion::Moving, Motion::Still].iter().map(|&m| self.count(m, sight)).sum();
+        self.own_instance.get(&sight).copied().unwrap_or(0) as f64 / views as f64
     }
 
     /// The fraction over visible and hidden views together.
@@ -205,6 +213,8 @@ fn coverage(out: &Path) -> Coverage {
     }
     let mut coverage = Coverage::default();
     let mut masks = HashMap::new();
+    let mut instance_masks = HashMap::new();
+    let key_of = instance_keys(&layout);
     for camera in 0..6 {
         let k = text::read_numbers(&layout.intrinsics(camera), 9).unwrap();
         for a in &annotations {
@@ -232,9 +242,22 @@ fn coverage(out: &Path) -> Coverage {
             if mask.get_pixel(u as u32, v as u32).0[0] == 255 {
                 *coverage.dynamic.entry((a.motion, sight)).or_default() += 1;
             }
+            let instances = instance_masks
+                .entry((frame, camera))
+                .or_insert_with(|| images::read_gray16(&layout.instance_mask(frame, camera)).unwrap());
+            if usize::from(instances.get_pixel(u as u32, v as u32).0[0]) == key_of[&a.instance] + 1 {
+                *coverage.own_instance.entry(sight).or_default() += 1;
+            }
         }
     }
     coverage
+}
+
+/// The key of each object of `instances/instances_info.json`, by its dataset id.
+fn instance_keys(layout: &ExportLayout) -> HashMap<String, usize> {
+    let info: Value = serde_json::from_slice(&std::fs::read(layout.instances_info()).unwrap()).unwrap();
+    let info = info.as_object().expect("instances_info.json is an object");
+    info.iter().map(|(key, object)| (object["id"].as_str().unwrap().to_owned(), key.parse().unwrap())).collect()
 }
 
 #[test]
@@ -253,6 +276,10 @@ fn moving_cars_are_dynamic_at_their_centres_and_parked_ones_static() {
     );
     let note = std::fs::read_to_string(dir.path().join("dynamic_masks/SOURCE.txt")).unwrap();
     assert!(note.contains("moving-outlines"), "{note}");
+    // The instance masks show each vehicle, moving or parked, as itself where it is visible, and mostly the
+    // nearer vehicle where it is hidden.
+    assert!(outlines.own_instance(Sight::Visible) >= 0.95, "{outlines:?}");
+    assert!(outlines.own_instance(Sight::Hidden) <= 0.5, "{outlines:?}");
 
     // drivestudio's rectangles, for the record: every box, parked ones included, and none crossing the border.
     let dir = tempfile::tempdir().unwrap();
@@ -264,6 +291,11 @@ fn moving_cars_are_dynamic_at_their_centres_and_parked_ones_static() {
 }
 
 fn report(what: &str, coverage: &Coverage) {
+    println!(
+        "{what}: instance masks show the vehicle itself at its centre in {:.1} % of visible views, {:.1} % of hidden",
+        100.0 * coverage.own_instance(Sight::Visible),
+        100.0 * coverage.own_instance(Sight::Hidden),
+    );
     for (motion, name) in [(Motion::Moving, "moving"), (Motion::Still, "parked or stopped")] {
         println!(
             "{what}: {name} vehicles dynamic at their centre: {:.1} % of {} visible views, {:.1} % of {} hidden \

@@ -4,6 +4,7 @@
 mod common;
 
 mod assembly;
+mod flow_reach;
 mod instance_motion;
 mod learnt_flow;
 mod saved_scene;
