@@ -14,7 +14,7 @@ use crate::boxes::AnnotatedBox;
 use crate::camera::EgoCamera;
 use crate::error::Result;
 use crate::instances::InstanceLog;
-use crate::masks::{farthest_first, for_each_pixel_inside, projected_outline};
+use crate::masks::{DynamicMaskStyle, farthest_first, for_each_pixel_inside, projected_outline};
 
 /// What `instances/masks/SOURCE.txt` says.
 pub const NOTE: &str = "Instance masks: 16-bit PNGs, each pixel the key + 1 of the object of instances_info.json \
@@ -51,8 +51,14 @@ pub fn write(
     Ok(())
 }
 
-/// Writes [`NOTE`] beside the masks.
-pub fn write_note(layout: &ExportLayout) -> Result<()> {
+/// What every converter writes once a scene's frames are done: `instances/` with [`NOTE`] beside the instance
+/// masks, and the dynamic masks' note.
+pub fn write_instances_and_notes(
+    layout: &ExportLayout,
+    instances: &InstanceLog,
+    dynamic_masks: DynamicMaskStyle,
+) -> Result<()> {
+    instances.write(layout)?;
     dggt_data::io::write_atomically(&layout.root().join("instances/masks/SOURCE.txt"), NOTE.as_bytes())?;
-    Ok(())
+    dynamic_masks.write_note(layout)
 }

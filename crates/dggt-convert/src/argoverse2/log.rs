@@ -240,9 +240,7 @@ pub fn convert_log(
     if let Some(writer) = depth_flows {
         writer.finish()?;
     }
-    instances.write(&layout)?;
-    instance_masks::write_note(&layout)?;
-    options.dynamic_masks.write_note(&layout)?;
+    instance_masks::write_instances_and_notes(&layout, &instances, options.dynamic_masks)?;
     let marker = DoneMarker {
         converter: format!("dggt-convert {} (argoverse2)", env!("CARGO_PKG_VERSION")),
         source: log.to_owned(),

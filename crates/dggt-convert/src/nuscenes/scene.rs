@@ -281,9 +281,7 @@ pub fn convert_scene(
     let times: Vec<[f64; 2]> =
         frames.iter().enumerate().map(|(t, f)| [t as f64, (f.time_us - first) as f64 * 1e-6]).collect();
     text::write_rows(&layout.timestamps(), &times)?;
-    instances.write(&layout)?;
-    instance_masks::write_note(&layout)?;
-    options.dynamic_masks.write_note(&layout)?;
+    instance_masks::write_instances_and_notes(&layout, &instances, options.dynamic_masks)?;
     let marker = DoneMarker {
         converter: format!(
             "dggt-convert {} (nuscenes {}, {}, {})",
