@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use anyhow::{Result, bail};
 use dggt_refine_train::RefineTrainer;
-use dggt_refine_train::trainer::Validation as RefinerValidation;
+use dggt_refine_train::records::Validation as RefinerValidation;
 use dggt_run::progress::Visibility;
 use dggt_train::{RunOptions, RunSummary, Trainer};
 

@@ -1,6 +1,6 @@
 //! Errors of the process group; each says what was expected.
 
-use crate::group::Rank;
+use crate::rank::Rank;
 
 /// What went wrong in a collective operation or in setting the group up.
 #[derive(Debug, thiserror::Error)]

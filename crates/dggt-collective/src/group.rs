@@ -6,9 +6,7 @@
 //! write the same files) rather than silently ignoring its siblings.
 
 use crate::error::CollectiveError;
-
-/// A rank's number in its group, from 0.
-pub type Rank = usize;
+use crate::rank::Rank;
 
 /// The environment variables by which launchers tell a process its rank and the job's size: Open MPI's
 /// `mpirun`, MPICH's (and Slurm's PMI), and a Slurm job step started by `srun`. Slurm's job-wide
@@ -168,8 +166,8 @@ pub(crate) mod mpi_group {
     use mpi::topology::SimpleCommunicator;
     use mpi::traits::{Communicator, CommunicatorCollectives, Root};
 
-    use super::Rank;
     use crate::error::CollectiveError;
+    use crate::rank::Rank;
 
     /// The MPI world of this job; MPI is finalised when it is dropped.
     pub struct MpiGroup {

@@ -15,7 +15,9 @@ mod error;
 pub mod group;
 #[cfg(feature = "nccl")]
 pub mod nccl;
+mod rank;
 
 pub use bucket::{BucketPlan, all_reduce_bucketed};
 pub use error::CollectiveError;
-pub use group::{ProcessGroup, Rank};
+pub use group::ProcessGroup;
+pub use rank::Rank;

@@ -1,13 +1,10 @@
 //! The flow head's hyper-parameters, read from TOML or JSON (unknown keys refused, missing keys defaulted) and
 //! validated before a head is built.
 
-use burn::tensor::Device;
 use serde::{Deserialize, Serialize};
 
-use crate::head::FlowHead;
-
-/// Widths, neighbourhood and iteration counts of a [`FlowHead`]. Stored flat (the widths beside the shape's
-/// fields, unknown keys refused), as configurations and checkpoints have always written it.
+/// Widths, neighbourhood and iteration counts of a [`FlowHead`](crate::FlowHead). Stored flat (the widths beside
+/// the shape's fields, unknown keys refused), as configurations and checkpoints have always written it.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(from = "FlatConfig", into = "FlatConfig")]
 pub struct FlowHeadConfig {
@@ -51,7 +48,8 @@ impl From<FlowHeadConfig> for FlatConfig {
     }
 }
 
-/// A [`FlowHead`]'s own choices, whatever features it reads (a training configuration's `[model.flow]`).
+/// A [`FlowHead`](crate::FlowHead)'s own choices, whatever features it reads (a training configuration's
+/// `[model.flow]`).
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct FlowHeadShape {
@@ -69,7 +67,7 @@ pub struct FlowHeadShape {
     pub inputs: HeadInputs,
 }
 
-/// What a [`FlowHead`]'s tokens carry.
+/// What a [`FlowHead`](crate::FlowHead)'s tokens carry.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum HeadInputs {
@@ -142,13 +140,6 @@ impl FlowHeadConfig {
     pub fn feature_width(&self) -> usize {
         self.feature_widths.iter().sum()
     }
-
-    /// A fresh head on `device`: random weights, except the last layer of the update, which is zero, so that
-    /// the head predicts no motion until it is trained.
-    pub fn init(&self, device: &Device) -> Result<FlowHead, ConfigError> {
-        self.validate()?;
-        Ok(FlowHead::new(self, device))
-    }
 }
 
 #[cfg(test)]
@@ -193,7 +184,5 @@ mod tests {
         assert_eq!(bad(|c| c.shape.chunk = 0), ConfigError::Zero { field: "chunk" });
         assert_eq!(bad(|c| c.shape.heads = 0), ConfigError::Zero { field: "heads" });
         assert_eq!(bad(|c| c.shape.heads = 5), ConfigError::HeadsDoNotDivideHidden { hidden: 64, heads: 5 });
-        let shape = FlowHeadShape { heads: 5, ..FlowHeadShape::default() };
-        assert!(FlowHeadConfig { shape, ..FlowHeadConfig::default() }.init(&Device::flex()).is_err());
     }
 }

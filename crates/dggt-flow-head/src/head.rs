@@ -39,7 +39,7 @@ use burn::tensor::{Device, Int, Tensor, TensorData};
 
 use crate::attention::{self, AttentionKernel, AttentionTensors};
 use crate::cloud::{CloudRole, FlowError, FrameCloud, read_rows};
-use crate::config::{FlowHeadConfig, HeadInputs};
+use crate::config::{ConfigError, FlowHeadConfig, HeadInputs};
 use crate::mlp::{Mlp, OutputInit};
 use crate::neighbours::{NeighbourSearch, SearchPlace};
 use crate::scale::ScaleSource;
@@ -141,8 +141,17 @@ struct Queries {
     displacement: Tensor<2>,
 }
 
+impl FlowHeadConfig {
+    /// A fresh head on `device`: random weights, except the last layer of the update, which is zero, so that
+    /// the head predicts no motion until it is trained.
+    pub fn init(&self, device: &Device) -> Result<FlowHead, ConfigError> {
+        self.validate()?;
+        Ok(FlowHead::new(self, device))
+    }
+}
+
 impl FlowHead {
-    pub(crate) fn new(config: &FlowHeadConfig, device: &Device) -> Self {
+    fn new(config: &FlowHeadConfig, device: &Device) -> Self {
         let shape = &config.shape;
         let hidden = shape.hidden;
         let linear = |input: usize, output: usize| LinearConfig::new(input, output).init(device);
@@ -416,6 +425,7 @@ fn refuse_non_finite(displacement: &[[f32; 3]], first_row: usize, iteration: usi
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::config::FlowHeadShape;
 
     fn rows(values: &[f32]) -> Tensor<2> {
         Tensor::from_data(TensorData::new(values.to_vec(), [values.len() / 3, 3]), &Device::flex())
@@ -432,5 +442,11 @@ mod tests {
         assert_eq!(error, Err(FlowError::NonFiniteDisplacement { row: 17, iteration: 1 }));
         let error = check_finite(&[nan_first, infinite_second], 0);
         assert_eq!(error, Err(FlowError::NonFiniteDisplacement { row: 0, iteration: 0 }));
+    }
+
+    #[test]
+    fn an_invalid_configuration_builds_no_head() {
+        let shape = FlowHeadShape { heads: 5, ..FlowHeadShape::default() };
+        assert!(FlowHeadConfig { shape, ..FlowHeadConfig::default() }.init(&Device::flex()).is_err());
     }
 }

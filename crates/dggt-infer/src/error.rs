@@ -2,6 +2,8 @@
 
 use std::path::PathBuf;
 
+use crate::coverage::CoverageError;
+
 #[derive(Debug, thiserror::Error)]
 pub enum InferError {
     #[error(transparent)]
@@ -10,18 +12,14 @@ pub enum InferError {
     Input { path: PathBuf, detail: String },
     #[error("checkpoint {}: {detail}", path.display())]
     Checkpoint { path: PathBuf, detail: String },
-    /// A checkpoint folder whose files do not match its manifest ([`crate::checksums`]).
-    #[error(
-        "checkpoint {}: {damage}: the checkpoint is damaged and not used (an earlier checkpoint of the run may be \
-         intact)",
-        dir.display()
-    )]
-    DamagedCheckpoint { dir: PathBuf, damage: crate::checksums::Damage },
+    /// A checkpoint folder of this project's runs that cannot be read, or whose files do not match its manifest.
+    #[error(transparent)]
+    CheckpointFolder(#[from] dggt_checkpoint::CheckpointError),
     #[error("configuration {}: {detail}", path.display())]
     Config { path: PathBuf, detail: String },
     /// A checkpoint in the release's format that does not cover the network it is loaded into.
     #[error("checkpoint {}: {coverage}", path.display())]
-    ReleaseCoverage { path: PathBuf, coverage: crate::network::CoverageError },
+    ReleaseCoverage { path: PathBuf, coverage: CoverageError },
     /// The forward pass takes one scene at a time.
     #[error("images: batch of {found}, expected 1")]
     BatchSize { found: usize },

@@ -3,9 +3,9 @@
 //!
 //! In data-flow order:
 //!
-//! 1. [`network`]: a network from any checkpoint users have (this project's runs, the release's `.pt`,
-//!    VGGT-1B) with its configuration ([`settings`]: the `[model]` and `[render]` sections of a training
-//!    configuration; [`checkpoint`]: this project's checkpoint folders, [`checksums`]: their integrity), or a
+//! 1. [`network`]: a network from any checkpoint users have (this project's runs, whose folders
+//!    `dggt-checkpoint` reads; the release's `.pt`, VGGT-1B, whose cover of the network [`coverage`] checks) with
+//!    its configuration ([`settings`]: the `[model]` and `[render]` sections of a training configuration), or a
 //!    fresh one;
 //! 2. [`inputs`]: the views of an image folder, glob or scene export, preprocessed to the network's size;
 //! 3. [`forward`]: the forward pass, dense heads a few frames at a time;
@@ -19,8 +19,7 @@
 //! cameras are predicted; images RGB in `[0, 1]`; scene time as [`dggt_scene::Timeline`] maps frames.
 
 pub mod cameras;
-pub mod checkpoint;
-pub mod checksums;
+pub mod coverage;
 mod error;
 pub mod forward;
 pub mod inputs;

@@ -15,12 +15,12 @@ use burn::module::{Module, ModuleVisitor, Param};
 use burn::tensor::{Device, Tensor};
 use dggt_data::Preprocess;
 use dggt_model::sky::SkyModel;
-use dggt_model::weights::{Coverage, LoadReport, load_checkpoint_with, load_module_from};
+use dggt_model::weights::{Coverage, load_checkpoint_with, load_module_from};
 use dggt_model::{Dggt, ModelConfig, Preset};
 use dggt_scene::AssemblySettings;
 use serde::Serialize;
 
-use crate::checkpoint;
+use crate::coverage::check_release_coverage;
 use crate::error::InferError;
 use crate::settings::TrainedSettings;
 
@@ -34,11 +34,6 @@ pub enum Architecture {
 
 /// The default architecture of release-format checkpoints.
 pub const DEFAULT_PRESET: Preset = Preset::Dggt;
-
-/// Modules without which nothing can be reconstructed.
-const CORE_MODULES: [&str; 3] = ["aggregator", "camera_head", "depth_head"];
-/// Modules whose absence leaves the 4D outputs meaningless.
-const SCENE_MODULES: [&str; 3] = ["gs_head", "instance_head", "sky_model"];
 
 /// What was loaded, for the summary.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -101,18 +96,18 @@ pub fn load_network(
     let assembly = trained.as_ref().map_or(AssemblySettings::default(), |t| t.render.assembly());
     let mut warnings = Vec::new();
     if path.is_dir() {
-        let dir = checkpoint::checkpoint_dir(path)?;
-        let config = checkpoint::read_model_config(&dir)?;
+        let dir = dggt_checkpoint::checkpoint_dir(path)?;
+        let config = dggt_checkpoint::read_model_config(&dir)?;
         if config_from_arch.as_ref().is_some_and(|c| c != &config) {
             warnings
                 .push(format!("{} stores its own architecture; the one from {arch_name} is ignored", dir.display()));
         }
         let preprocess = trained_preprocess(&dir, preprocess, &arch_name, &mut warnings)?;
-        let model = checkpoint::load_model(&dir, Dggt::new(&config, device)?)?;
+        let model = dggt_checkpoint::load_model(&dir, Dggt::new(&config, device)?)?;
         let info = CheckpointInfo {
             path: dir.clone(),
             format: "trainer".into(),
-            architecture: format!("{}", dir.join(checkpoint::MODEL_CONFIG_FILE).display()),
+            architecture: format!("{}", dir.join(dggt_checkpoint::MODEL_CONFIG_FILE).display()),
             parameters: model.num_params(),
             fresh_modules: Vec::new(),
         };
@@ -152,7 +147,7 @@ fn trained_preprocess(
     arch_name: &str,
     warnings: &mut Vec<String>,
 ) -> Result<Option<Preprocess>, InferError> {
-    let recorded = checkpoint::read_preprocess(dir)?;
+    let recorded = dggt_checkpoint::read_preprocess(dir)?;
     match (recorded, configured) {
         (Some(recorded), Some(configured)) if configured != recorded => warnings.push(format!(
             "{} records the preprocessing it was trained with; the one from {arch_name} is ignored",
@@ -167,54 +162,6 @@ fn trained_preprocess(
         _ => {}
     }
     Ok(recorded.or(configured))
-}
-
-/// Why a checkpoint in the release's format cannot start the network.
-#[derive(Debug, thiserror::Error)]
-pub enum CoverageError {
-    #[error("no tensor in it matches the network of {architecture} (not a DGGT or VGGT checkpoint?)")]
-    NothingMatches { architecture: String },
-    /// Modules the network cannot do without (aggregator, camera and depth heads) left without weights.
-    #[error(
-        "lacks weights of {modules:?} that the architecture of {architecture} needs ({missing} tensors missing, e.g. \
-         {examples:?})"
-    )]
-    CoreMissing { modules: Vec<String>, architecture: String, missing: usize, examples: Vec<String> },
-}
-
-/// The top-level modules a release-format load left fresh; an error when it matched nothing or left the core
-/// without weights, a warning when the scene modules are untrained.
-fn check_release_coverage(
-    report: &LoadReport,
-    arch_name: &str,
-    warnings: &mut Vec<String>,
-) -> Result<Vec<String>, CoverageError> {
-    if report.applied.is_empty() {
-        return Err(CoverageError::NothingMatches { architecture: arch_name.to_string() });
-    }
-    let mut fresh: Vec<String> = report.missing.iter().map(|p| p.split('.').next().unwrap_or(p).to_string()).collect();
-    fresh.sort();
-    fresh.dedup();
-    let missing_core: Vec<&String> = fresh.iter().filter(|m| CORE_MODULES.contains(&m.as_str())).collect();
-    if !missing_core.is_empty() {
-        return Err(CoverageError::CoreMissing {
-            modules: missing_core.into_iter().cloned().collect(),
-            architecture: arch_name.to_string(),
-            missing: report.missing.len(),
-            examples: report.missing.iter().take(3).cloned().collect(),
-        });
-    }
-    let untrained: Vec<&String> = fresh.iter().filter(|m| SCENE_MODULES.contains(&m.as_str())).collect();
-    if !untrained.is_empty() {
-        warnings.push(format!(
-            "the checkpoint has no weights for {untrained:?} (a VGGT checkpoint?): these modules are untrained, so \
-             the Gaussians, dynamic maps, sky and renders are not meaningful; cameras and depth are"
-        ));
-    }
-    if !report.unused.is_empty() {
-        tracing::debug!(count = report.unused.len(), "checkpoint tensors not used by this architecture");
-    }
-    Ok(fresh)
 }
 
 /// The architecture `arch` names, the training settings it came from (if a `.toml`), and its name.
@@ -287,9 +234,9 @@ impl StartingSource {
         if !path.is_dir() {
             return Ok(Self::ReleaseFile);
         }
-        let dir = checkpoint::checkpoint_dir(path)?;
-        let blank = Dggt::new(&checkpoint::read_model_config(&dir)?, device)?;
-        Ok(Self::Trained(Box::new(checkpoint::load_model(&dir, blank)?)))
+        let dir = dggt_checkpoint::checkpoint_dir(path)?;
+        let blank = Dggt::new(&dggt_checkpoint::read_model_config(&dir)?, device)?;
+        Ok(Self::Trained(Box::new(dggt_checkpoint::load_model(&dir, blank)?)))
     }
 }
 

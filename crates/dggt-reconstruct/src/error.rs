@@ -2,6 +2,8 @@
 
 use std::path::PathBuf;
 
+use crate::volume::OutputTooLarge;
+
 #[derive(Debug, thiserror::Error)]
 pub enum ReconstructError {
     #[error("{}: {detail}", path.display())]
@@ -13,7 +15,7 @@ pub enum ReconstructError {
     #[error("camera {camera}: no input view")]
     NoInputView { camera: usize },
     #[error("{0}")]
-    OutputTooLarge(crate::volume::OutputTooLarge),
+    OutputTooLarge(OutputTooLarge),
     /// A value about to be written is not finite (NaN or infinite); nothing is written.
     #[error("{}: {what} element {element} is {value}, not finite: the file is not written", path.display())]
     NonFinite { path: PathBuf, what: String, element: usize, value: f64 },

@@ -5,13 +5,15 @@
 //! - [`align`]: similarity alignment of predicted to reference camera centres (the pose report);
 //! - [`finite`]: every value checked finite before its file is written;
 //! - [`summary`]: counts, times and peak memory, printed and saved as `summary.json`;
-//! - [`volume`]: the requested times and the largest output they could give, checked before any work.
+//! - [`times`]: the requested render times, and [`volume`]: the largest output they could give, both checked
+//!   before any work.
 
 pub mod align;
 mod error;
 pub mod finite;
 pub mod pipeline;
 pub mod summary;
+pub mod times;
 pub mod volume;
 
 pub use error::ReconstructError;

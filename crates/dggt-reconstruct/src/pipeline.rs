@@ -51,7 +51,8 @@ use crate::finite;
 use crate::summary::{
     GaussianCounts, InstanceAppearance, InstanceRecord, RenderRecord, StageTime, Summary, peak_memory_mib,
 };
-use crate::volume::{DEFAULT_MAX_OUTPUT_BYTES, OutputEstimate, check_every, check_times};
+use crate::times::{check_every, check_times};
+use crate::volume::{DEFAULT_MAX_OUTPUT_BYTES, OutputEstimate};
 
 /// Which times to render (and export dynamic Gaussians at).
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -151,7 +152,8 @@ pub fn reconstruct(options: &ReconstructOptions, device: &Device) -> Result<Summ
     let preprocess = network.input_preprocess(options.width);
     let network_size = preprocess.plan(inputs.size)?.output;
     OutputEstimate::new(inputs.views.len(), inputs.cameras.len(), times_s.len(), network_size)
-        .check(options.max_output_bytes)?;
+        .check(options.max_output_bytes)
+        .map_err(ReconstructError::OutputTooLarge)?;
     let (images, size) = inputs.load(&preprocess)?;
     tracing::info!(
         "{} views ({} frames x {} cameras) at {} -> {size}; {} times to render",

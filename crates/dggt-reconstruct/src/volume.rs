@@ -1,22 +1,18 @@
-//! How much a reconstruction may write, checked before any work: the requested times must lie within the
-//! input frames' time window, and the largest output they could give (every render as raw RGB, every input
-//! pixel's Gaussian in the static PLY, in each per-time dynamic PLY and in the saved scene, the per-view maps) must stay under a
-//! bound, so that a mistyped `--every` or `--times` is refused rather than filling a disk for minutes.
+//! How much a reconstruction may write, checked before any work: the largest output the requested times could
+//! give (every render as raw RGB, every input pixel's Gaussian in the static PLY, in each per-time dynamic PLY
+//! and in the saved scene, the per-view maps) must stay under a bound, so that a mistyped `--every` or
+//! `--times` is refused rather than filling a disk for minutes. The times themselves are checked by
+//! [`crate::times`].
 
 use std::fmt;
 
 use dggt_formats::ply::INRIA_PROPERTIES;
 use dggt_geom::ImageSize;
 
-use crate::error::ReconstructError;
-
 /// A gigabyte (10^9 bytes), the unit of the bound.
 pub const GB: u64 = 1_000_000_000;
 /// The bound unless told otherwise.
 pub const DEFAULT_MAX_OUTPUT_BYTES: u64 = 10 * GB;
-/// The most render times `--every` puts in each interval between input frames (a render every millisecond
-/// between frames of a 10 Hz log).
-pub const MAX_EVERY: usize = 100;
 
 /// Bytes per Gaussian in a PLY file (float32 properties).
 const PLY_VERTEX_BYTES: u64 = INRIA_PROPERTIES.len() as u64 * 4;
@@ -53,11 +49,11 @@ impl OutputEstimate {
     }
 
     /// Refused when over `max_bytes`.
-    pub fn check(self, max_bytes: u64) -> Result<(), ReconstructError> {
+    pub fn check(self, max_bytes: u64) -> Result<(), OutputTooLarge> {
         if self.bytes <= max_bytes {
             return Ok(());
         }
-        Err(ReconstructError::OutputTooLarge(OutputTooLarge { estimate: self, max_bytes }))
+        Err(OutputTooLarge { estimate: self, max_bytes })
     }
 }
 
@@ -99,55 +95,12 @@ pub fn gigabytes(bytes: u64) -> String {
     format!("{:.2} GB", bytes as f64 / GB as f64)
 }
 
-/// Checks requested times (seconds since the first chosen frame) against the input frames' times `inputs`
-/// (ascending): each must be finite and lie within them.
-pub fn check_times(times: &[f64], inputs: &[f64]) -> Result<(), ReconstructError> {
-    let (Some(&first), Some(&last)) = (inputs.first(), inputs.last()) else { return Ok(()) };
-    if times.is_empty() {
-        return Err(ReconstructError::option("--times", "no times given"));
-    }
-    let outside = times.iter().find(|t| !(t.is_finite() && (first..=last).contains(*t)));
-    match outside {
-        None => Ok(()),
-        Some(time) => Err(ReconstructError::option(
-            "--times",
-            format!(
-                "{time} s lies outside the input frames' time window: give seconds in {first:.3}..={last:.3} (the \
-                 chosen frames' times)"
-            ),
-        )),
-    }
-}
-
-/// Checks `--every K` against its range, `1..=MAX_EVERY`.
-pub fn check_every(every: usize) -> Result<(), ReconstructError> {
-    if (1..=MAX_EVERY).contains(&every) {
-        return Ok(());
-    }
-    Err(ReconstructError::option(
-        "--every",
-        format!("{every} is outside 1..={MAX_EVERY} (render times per interval between input frames)"),
-    ))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
-    fn times_past_the_inputs_and_outputs_over_the_bound_are_refused() {
-        let inputs = [0.0, 0.1, 0.2];
-        check_times(&[0.0, 0.15, 0.2], &inputs).unwrap();
-        let error = check_times(&[0.1, 1e9], &inputs).unwrap_err().to_string();
-        assert!(
-            error.contains("--times") && error.contains("1000000000") && error.contains("0.000..=0.200"),
-            "{error}"
-        );
-        assert!(check_times(&[f64::NAN], &inputs).is_err());
-        check_every(MAX_EVERY).unwrap();
-        let error = check_every(100_000).unwrap_err().to_string();
-        assert!(error.contains("--every") && error.contains("100000") && error.contains("1..=100"), "{error}");
-
+    fn outputs_over_the_bound_are_refused() {
         let size = ImageSize { width: 518, height: 294 };
         let estimate = OutputEstimate::new(6, 3, 100_001, size);
         assert!(estimate.bytes > 1000 * GB, "{estimate}");

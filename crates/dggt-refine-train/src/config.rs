@@ -9,7 +9,8 @@ use std::path::{Path, PathBuf};
 
 /// The LPIPS network of `loss.lpips_kind`.
 pub use dggt_losses::LpipsKind;
-use dggt_run::divergence::{self, DEFAULT_MAX_FAILED_STEPS_IN_A_ROW};
+use dggt_run::divergence;
+use dggt_run::optim_config::DEFAULT_MAX_FAILED_STEPS_IN_A_ROW;
 use dggt_run::{OptimSection, ViewerSection};
 use serde::{Deserialize, Serialize};
 

@@ -12,8 +12,9 @@ pub enum RefineTrainError {
     Run(#[from] dggt_run::RunError),
     #[error(transparent)]
     Safetensors(#[from] dggt_model::safetensors_file::SafetensorsError),
+    /// A checkpoint folder that cannot be read, or whose files do not match its manifest.
     #[error(transparent)]
-    Infer(#[from] dggt_infer::InferError),
+    CheckpointFolder(#[from] dggt_checkpoint::CheckpointError),
     #[error(transparent)]
     Objective(#[from] dggt_objective::ObjectiveError),
     #[error(transparent)]

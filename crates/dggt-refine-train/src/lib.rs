@@ -12,7 +12,8 @@
 //! - [`difix_checkpoint`]: the trained weights as a Difix checkpoint (LoRA factors in peft's names) that the
 //!   refiner's loader merges, written to and read from a safetensors file;
 //! - [`trainer`]: the loop, on `dggt-run`'s AdamW, checkpoints and exact resume, with the PSNR of the
-//!   refined held-out pairs as its metric;
+//!   refined held-out pairs as its metric; [`records`]: what it reports of each step and validation pass, and
+//!   [`watch`]: what it hands an observer;
 //! - [`config`]: the run's TOML configuration, defaulting to the paper's settings.
 
 pub mod config;
@@ -24,6 +25,7 @@ pub mod model;
 pub mod pair;
 pub mod pair_files;
 pub mod pairs;
+pub mod records;
 pub mod render_pairs;
 pub mod trainer;
 pub mod watch;

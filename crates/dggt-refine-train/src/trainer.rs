@@ -28,7 +28,6 @@ use dggt_run::metrics::{MetricsLog, RecordKind};
 use dggt_run::progress::{Visibility, progress_bar};
 use dggt_run::schedule::WarmupCosine;
 use dggt_run::{Optimizer, Start, run_folder};
-use serde::Serialize;
 
 use crate::config::{PairsSection, RefineTrainConfig};
 use crate::difix_checkpoint::{to_difix_checkpoint, write_difix_checkpoint};
@@ -38,31 +37,8 @@ use crate::loss::RefineLoss;
 use crate::model::TrainableRefiner;
 use crate::pair_files::PairFiles;
 use crate::pairs::{Image, Pair, PairSet, PairSource, batch, batch_pairs, read_images, step_indices, synthetic_pairs};
+use crate::records::{StepRecord, Validation};
 use crate::watch::{RefineWatcher, RefinedPicture, Unwatched};
-
-/// What one step did.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct StepRecord {
-    pub step: u64,
-    pub loss: f64,
-    pub l2: f64,
-    pub lpips: f64,
-    pub gram: f64,
-    /// `None` for a step skipped before its update (a non-finite loss or gradient).
-    pub grad_norm: Option<f64>,
-    /// Why the step made no update (skipped or rolled back), when it did not.
-    pub failure: Option<String>,
-}
-
-/// PSNR of the held-out pairs.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct Validation {
-    pub step: u64,
-    /// Mean PSNR (dB) of the refined renders against their targets.
-    pub refined_psnr: f64,
-    /// Mean PSNR (dB) of the renders as they are.
-    pub render_psnr: f64,
-}
 
 pub struct RefineTrainer {
     config: RefineTrainConfig,

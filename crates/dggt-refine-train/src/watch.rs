@@ -3,7 +3,7 @@
 //! latents never depend on it, so a watched run trains exactly as an unwatched one.
 
 use crate::pairs::Image;
-use crate::trainer::{StepRecord, Validation};
+use crate::records::{StepRecord, Validation};
 
 /// An observer of a refiner run. Its methods cannot fail: a watcher deals with its own troubles.
 pub trait RefineWatcher {

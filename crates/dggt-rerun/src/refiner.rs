@@ -7,7 +7,7 @@
 //! render before refining, after, and the truth.
 
 use dggt_refine_train::pairs::Image;
-use dggt_refine_train::trainer::{StepRecord, Validation};
+use dggt_refine_train::records::{StepRecord, Validation};
 use dggt_refine_train::{RefineWatcher, RefinedPicture};
 use dggt_run::ViewerSection;
 

@@ -9,7 +9,7 @@
 //! depth and dynamic probability) per input view, and
 //! `world/gaussians` (the window's Gaussians as splats). Steps are the values `metrics.jsonl` records (a
 //! training step by its index from 0, a validation pass by the steps trained before it); the world is the
-//! snapshot's (see `dggt_train::watch`).
+//! snapshot's (see `dggt_train::snapshot`).
 
 use dggt_train::config::ViewerSection;
 use dggt_train::records::LoggedStep;

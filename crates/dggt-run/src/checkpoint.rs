@@ -1,9 +1,9 @@
 //! Checkpoint folders: everything a run needs to continue exactly as if it had not stopped.
 //!
-//! The module's half (its weights and the `latest` pointer) is read by [`dggt_infer::checkpoint`], which
-//! inference shares; this module adds the optimiser and run state and writes all of it, for any trained
-//! module. A trainer adds its own files (the DGGT trainer: the network's configuration, preprocessing and
-//! configured sections).
+//! The folder's format (its file names, its checksums, the `latest` pointer, a module's weights written and
+//! read) is [`dggt_checkpoint`]'s, which inference shares; this module adds the optimiser and run state and
+//! writes all of it, for any trained module. A trainer adds its own files (the DGGT trainer: the network's
+//! configuration, preprocessing and configured sections).
 //!
 //! A checkpoint is a folder `checkpoints/step-NNNNNNNN/` holding the module (`model.bpk`, burnpack, parameter
 //! ids included so the optimiser state stays attached), the AdamW state (`optimizer.bpk`), the trainer's own
@@ -11,9 +11,9 @@
 //! function of the step and the samplers draw from `(seed, step)`, so no random-generator state needs saving.
 //! The weights and moments are written tensor by tensor (peak host memory is one tensor, not the 16 GB of a
 //! full-size model and its AdamW state). Every file is written through a temporary file and a rename;
-//! `checksums.json` records every file's size and CRC-32C ([`dggt_infer::checksums`]), `state.json` then marks
-//! the folder complete and the `checkpoints/latest` pointer is replaced last: a run killed at any moment, in
-//! the middle of a checkpoint included, resumes from the last complete one, and one whose newest checkpoint
+//! `checksums.json` records every file's size and CRC-32C ([`dggt_checkpoint::checksums`]), `state.json` then
+//! marks the folder complete and the `checkpoints/latest` pointer is replaced last: a run killed at any moment,
+//! in the middle of a checkpoint included, resumes from the last complete one, and one whose newest checkpoint
 //! was damaged afterwards from the newest intact one. No checkpoint is written with a non-finite weight or
 //! moment.
 //!
@@ -24,18 +24,18 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use burn::module::{Module, ModuleVisitor, Param};
-use burn::tensor::Tensor;
+use burn::module::Module;
+use dggt_checkpoint::checksums;
+pub use dggt_checkpoint::{
+    LATEST, MANIFEST_FILE, MODEL_FILE, Purpose, STATE_FILE, latest, load_model, load_module_file, save_model, verified,
+};
 use dggt_data::io::write_atomically;
-pub use dggt_infer::checkpoint::{LATEST, MODEL_FILE, STATE_FILE, latest, load_model, load_module_file, verified};
-use dggt_infer::checksums;
-pub use dggt_infer::checksums::{MANIFEST_FILE, Purpose};
 use serde::{Deserialize, Serialize};
 
 use crate::error::RunError;
 use crate::failpoint;
 use crate::finite::first_non_finite;
-use crate::optimizer::{Optimizer, deferred_tensor};
+use crate::optimizer::Optimizer;
 
 /// The counters of a run.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -169,38 +169,6 @@ pub fn save_folder<M: Module>(
     write_atomically(&root.join(LATEST), name.as_bytes()).map_err(|e| checkpoint_error(&root.join(LATEST), e))?;
     prune(root, keep.max(1))?;
     Ok(dir)
-}
-
-/// Writes a module's (the network's) parameters as a burnpack file readable by [`load_model`], one tensor at a time: each
-/// is read back from its device only when the writer reaches it, so saving never holds a host copy of the
-/// whole network.
-pub fn save_model<M: Module>(path: &Path, model: &M) -> Result<(), RunError> {
-    let mut collect = DeferredParameters::default();
-    model.visit(&mut collect);
-    burn_pack::Writer::new(collect.tensors).write_to_file(path).map_err(|e| checkpoint_error(path, e))
-}
-
-/// Every parameter of a module as a deferred burnpack entry named by its module path, as burn's module records
-/// name them.
-#[derive(Default)]
-struct DeferredParameters {
-    path: Vec<String>,
-    tensors: Vec<burn_pack::Tensor>,
-}
-
-impl ModuleVisitor for DeferredParameters {
-    fn enter_module(&mut self, name: &str, _container_type: &str) {
-        self.path.push(name.to_string());
-    }
-
-    fn exit_module(&mut self, _name: &str, _container_type: &str) {
-        self.path.pop();
-    }
-
-    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-        let saved = param.transform_for_save().val();
-        self.tensors.push(deferred_tensor(self.path.join("."), &saved, &param.id));
-    }
 }
 
 /// Removes all but the newest `keep` `step-*` folders under `root`.

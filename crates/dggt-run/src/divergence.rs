@@ -20,8 +20,6 @@ use crate::finite::NonFinite;
 use crate::optimizer::StepOutcome;
 use crate::spikes::Spike;
 
-/// `optim.max_failed_steps_in_a_row` when not configured.
-pub const DEFAULT_MAX_FAILED_STEPS_IN_A_ROW: u64 = 5;
 /// The values `optim.max_failed_steps_in_a_row` takes.
 pub const MAX_FAILED_STEPS_IN_A_ROW_RANGE: RangeInclusive<u64> = 1..=10_000;
 

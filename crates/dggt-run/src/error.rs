@@ -19,8 +19,9 @@ pub enum RunError {
     /// A configuration value out of its range.
     #[error("{setting}: {detail}")]
     Setting { setting: &'static str, detail: String },
+    /// A checkpoint folder that cannot be read or written, or whose files do not match its manifest.
     #[error(transparent)]
-    Infer(#[from] dggt_infer::InferError),
+    CheckpointFolder(#[from] dggt_checkpoint::CheckpointError),
     /// A fresh run asked to write where another run's files are.
     #[error("{} already holds a training run ({}); a new run would overwrite it", dir.display(), found.join(", "))]
     RunExists { dir: PathBuf, found: Vec<&'static str> },

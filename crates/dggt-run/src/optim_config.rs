@@ -6,7 +6,8 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::divergence::DEFAULT_MAX_FAILED_STEPS_IN_A_ROW;
+/// `optim.max_failed_steps_in_a_row` when not configured.
+pub const DEFAULT_MAX_FAILED_STEPS_IN_A_ROW: u64 = 5;
 
 /// AdamW, learning-rate schedule, clipping, accumulation, parameter groups and frozen modules.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -18,6 +18,7 @@ use std::path::Path;
 use burn::module::{Module, ModuleMapper, ModuleVisitor, Param, ParamId};
 use burn::optim::{AdamW, AdamWConfig, AdamWState, AdaptiveMomentumState, GradientsParams, Optimizer as _};
 use burn::tensor::{Device, Tensor, TensorData};
+use dggt_checkpoint::deferred_tensor;
 
 use crate::error::RunError;
 use crate::finite::{Moments, NonFinite, first_non_finite};
@@ -232,15 +233,6 @@ const STEPS: &str = "steps";
 
 fn optimizer_file_error(path: &Path, detail: impl ToString) -> RunError {
     RunError::Checkpoint { path: path.to_path_buf(), detail: detail.to_string() }
-}
-
-/// A burnpack entry whose bytes are read from `tensor`'s device only when the writer reaches it.
-pub(crate) fn deferred_tensor<const D: usize>(name: String, tensor: &Tensor<D>, id: &ParamId) -> burn_pack::Tensor {
-    let tensor = tensor.clone();
-    let byte_len = tensor.shape().num_elements() * tensor.dtype().size();
-    burn_pack::Tensor::deferred(name, tensor.dtype(), tensor.shape(), Some(id.val()), byte_len, move || {
-        Ok(tensor.to_data().into_bytes())
-    })
 }
 
 /// Steps every parameter that has a gradient, keeping its autodiff association.

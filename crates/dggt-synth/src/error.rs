@@ -1,7 +1,7 @@
 //! Errors of scene synthesis: a configuration the generator does not support, an edit that does not fit the
 //! scene, or a failure while writing the export. Invalid arguments are reported here instead of panicking, because they come from the command line.
 
-use crate::scene::ObjectId;
+use crate::object_id::ObjectId;
 
 /// Why a synthetic scene could not be generated or written.
 #[derive(Debug, thiserror::Error)]

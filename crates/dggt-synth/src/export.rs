@@ -42,12 +42,13 @@ use image::GrayImage;
 use rayon::prelude::*;
 use serde::Serialize;
 
+use crate::change::{ObjectEdit, Presence};
 use crate::config::{FRAME_INTERVAL_S, SynthConfig};
-use crate::edit::{ObjectEdit, Presence};
 use crate::error::{Result, SynthError};
 use crate::generate::generate;
+use crate::object_id::ObjectId;
 use crate::rig::HORIZONTAL_FOV_DEG;
-use crate::scene::{ObjectId, SynthScene};
+use crate::scene::SynthScene;
 
 /// JPEG quality of the colour images.
 pub const JPEG_QUALITY: u8 = 92;

@@ -11,13 +11,15 @@
 //! - [`config`]: the arguments and their validation.
 //! - [`generate()`]: the seeded layout, producing a [`SynthScene`].
 //! - [`scene`]: objects and ray casting ([`SynthScene::cast`], [`SceneAt`]).
-//! - [`edit`]: edited copies of a scene ([`SynthScene::edited`]), objects removed or rigidly moved, as ground
-//!   truth for scene editing.
+//! - [`change`]: what an edit does to one object ([`WorldChange`], [`ObjectEdit`]) and where the edited scene
+//!   draws it ([`Presence`]); [`edit`]: edited copies of a scene ([`SynthScene::edited`]), objects removed or
+//!   rigidly moved, as ground truth for scene editing.
 //! - [`motion`], [`rig`], [`street`]: ego and car trajectories, the camera rig, the street's cross-section.
 //! - [`render`]: one view's colours, masks and depth-flow; [`lidar`]: the ego vehicle's lidar sweeps.
 //! - [`export`]: the files written ([`synthesize`], [`write_export`]) in any export variant, and their
 //!   conventions.
 
+pub mod change;
 pub mod config;
 pub mod edit;
 mod error;
@@ -27,6 +29,7 @@ mod grid;
 pub mod lidar;
 pub mod motion;
 mod noise;
+mod object_id;
 pub mod render;
 pub mod rig;
 pub mod scene;
@@ -34,13 +37,15 @@ mod shading;
 mod shapes;
 pub mod street;
 
+pub use change::{ObjectEdit, Presence, WorldChange};
 pub use config::SynthConfig;
-pub use edit::{MoveFlag, ObjectEdit, Presence, WorldChange};
+pub use edit::MoveFlag;
 pub use error::{Result, SynthError};
 pub use export::{Sweeps, SynthSummary, largest_output_bytes, synthesize, write_export};
 pub use generate::generate;
 pub use motion::{CarMotion, CarState, EgoMotion, Object, Path, WorldFromObject};
+pub use object_id::ObjectId;
 pub use render::RenderedView;
 pub use rig::RigCamera;
-pub use scene::{Hit, ObjectId, ObjectKind, SceneAt, SceneObject, SynthScene};
+pub use scene::{Hit, ObjectKind, SceneAt, SceneObject, SynthScene};
 pub use shapes::Aabb;

@@ -23,7 +23,8 @@ use rayon::prelude::*;
 
 use crate::config::SynthConfig;
 use crate::error::{Result, SynthError};
-use crate::scene::{ObjectId, SceneAt, SynthScene};
+use crate::object_id::ObjectId;
+use crate::scene::{SceneAt, SynthScene};
 use crate::shapes::Aabb;
 
 /// Channels of a depth-flow sample: z-depth, then world velocity x, y, z.

@@ -3,23 +3,22 @@
 //! A [`SynthScene`] holds the static objects, the moving cars with their trajectories, the ego trajectory and
 //! the camera rig. [`SceneAt`] is the scene frozen at one instant (every object placed), which is what rays are
 //! cast against: [`SceneAt::cast`] returns the nearest surface with its distance, object, motion and colour.
-//! An object removed by an edit ([`crate::edit`]) is never placed; a moved one is placed where the edit puts it.
+//! An object removed by an edit ([`crate::edit`]) is never placed; a moved one is placed where the edit puts it
+//! ([`Presence`]).
 
 use dggt_geom::glam::DVec3;
 use dggt_geom::{ImageSize, PinholeIntrinsics, Rigid, World, WorldFromCamera, WorldFromEgo};
 use serde::Serialize;
 
+use crate::change::Presence;
 use crate::config::SynthConfig;
-use crate::edit::Presence;
 use crate::grid::StreetGrid;
 use crate::motion::{CarMotion, CarState, Object, WorldFromObject};
+use crate::object_id::ObjectId;
 use crate::rig::RigCamera;
 use crate::shading::{Material, Surface, albedo, lit, sky};
 use crate::shapes::{Aabb, Shape, T_MIN};
 use crate::street::Street;
-
-/// Identifies one object of a scene. The instance ids of the export are the ids of the cars.
-pub type ObjectId = u32;
 
 /// Speed above which an object counts as dynamic (m/s), as the export's dynamic masks define it.
 pub const MOVING_SPEED_THRESHOLD: f64 = 1.0;

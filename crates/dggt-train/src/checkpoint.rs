@@ -4,12 +4,12 @@
 //! configured (`training.json`, which a resume compares with its own: [`resume`](crate::resume)).
 //!
 //! The network's half (its weights, its configuration and the `latest` pointer) is read by
-//! [`dggt_infer::checkpoint`], which inference shares.
+//! [`dggt_checkpoint`], which inference shares.
 
 use std::path::{Path, PathBuf};
 
+pub use dggt_checkpoint::{MODEL_CONFIG_FILE, PREPROCESS_FILE, read_model_config, read_preprocess};
 use dggt_data::Preprocess;
-pub use dggt_infer::checkpoint::{MODEL_CONFIG_FILE, PREPROCESS_FILE, read_model_config, read_preprocess};
 use dggt_model::{Dggt, ModelConfig};
 use dggt_run::Optimizer;
 pub use dggt_run::checkpoint::Weights;

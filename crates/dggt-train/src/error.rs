@@ -27,6 +27,9 @@ pub enum TrainError {
     Setting { setting: &'static str, detail: String },
     #[error(transparent)]
     Infer(#[from] dggt_infer::InferError),
+    /// A checkpoint folder that cannot be read, or whose files do not match its manifest.
+    #[error(transparent)]
+    CheckpointFolder(#[from] dggt_checkpoint::CheckpointError),
     #[error(transparent)]
     Objective(#[from] dggt_objective::ObjectiveError),
     /// A run given no device to train on.

@@ -55,8 +55,9 @@ use crate::ranks;
 use crate::records::{FailureRecord, LoggedStep, ScoredWeights, StepMeasures, StepRecord, ValidationRecord};
 use crate::replicas::{Replica, Replicas};
 use crate::resume::{self, AllowedChanges, ConfiguredSections};
+use crate::snapshot::{SnapshotOptions, ValidationViews};
 use crate::validate::{Validation, Validator};
-use crate::watch::{RunWatcher, SnapshotOptions, Unwatched, ValidationViews};
+use crate::watch::{RunWatcher, Unwatched};
 
 /// The cached scene index in a run's output folder. It is not among the run's own files
 /// ([`run_folder::RUN_ENTRIES`]): it is checked against the scenes on every use and rebuilt when stale, and a

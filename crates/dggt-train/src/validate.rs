@@ -22,7 +22,7 @@ use serde::Serialize;
 
 use crate::config::ValidationSection;
 use crate::error::TrainError;
-use crate::watch::{SnapshotOptions, ValidationSnapshot, difference_image, rgb_image};
+use crate::snapshot::{SnapshotOptions, ValidationSnapshot, difference_image, rgb_image};
 
 /// Scores of one validation pass.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -94,7 +94,7 @@ pub struct Validator<'a> {
     pub preprocess: &'a Preprocess,
     /// A device without autodiff.
     pub device: &'a Device,
-    /// Picture the first scene for a watcher ([`crate::watch`]), and how.
+    /// Picture the first scene for a watcher ([`crate::snapshot`]), and how.
     pub snapshot: Option<SnapshotOptions>,
 }
 

@@ -32,7 +32,7 @@ fn the_loss_falls_and_the_held_out_psnr_rises() {
     let before = trainer.validate().unwrap();
     let records: Vec<_> = (0..20).map(|_| trainer.step().unwrap()).collect();
     let after = trainer.validate().unwrap();
-    let mean = |r: &[dggt_refine_train::trainer::StepRecord]| r.iter().map(|r| r.loss).sum::<f64>() / r.len() as f64;
+    let mean = |r: &[dggt_refine_train::records::StepRecord]| r.iter().map(|r| r.loss).sum::<f64>() / r.len() as f64;
     let (first, last) = (mean(&records[..5]), mean(&records[15..]));
     println!("loss {first:.4} -> {last:.4}; held-out PSNR {:.2} -> {:.2} dB", before.refined_psnr, after.refined_psnr);
     assert!(records.iter().all(|r| r.grad_norm.is_some()), "a step was skipped: {records:?}");

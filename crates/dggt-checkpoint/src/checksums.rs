@@ -20,11 +20,9 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use crate::checkpoint::{MODEL_CONFIG_FILE, MODEL_FILE, PREPROCESS_FILE, STATE_FILE};
-use crate::error::InferError;
+use crate::error::{CheckpointError, Damage};
+use crate::files::{MANIFEST_FILE, MODEL_CONFIG_FILE, MODEL_FILE, PREPROCESS_FILE, STATE_FILE};
 
-/// The manifest of a checkpoint folder.
-pub const MANIFEST_FILE: &str = "checksums.json";
 /// The checksum the manifest records.
 const ALGORITHM: &str = "crc32c";
 /// The files inference reads from a checkpoint folder.
@@ -48,21 +46,6 @@ pub enum Verified {
     Unrecorded,
 }
 
-/// A file of a checkpoint folder that does not match the manifest.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-pub enum Damage {
-    #[error("{file} is missing (the manifest lists it)")]
-    Missing { file: String },
-    #[error("{file}: checksum mismatch (the file has {found} bytes where the manifest records {recorded})")]
-    Size { file: String, recorded: u64, found: u64 },
-    #[error("{file}: checksum mismatch (CRC-32C {found:08x} where the manifest records {recorded:08x})")]
-    Checksum { file: String, recorded: u32, found: u32 },
-    #[error("{file} cannot be read: {detail}")]
-    Unreadable { file: String, detail: String },
-    #[error("{MANIFEST_FILE} cannot be read: {detail}")]
-    Manifest { detail: String },
-}
-
 /// The size and checksum of one file.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 struct FileSum {
@@ -79,11 +62,11 @@ struct Manifest {
 
 /// Writes the manifest of `dir`: the files `written` there and the `pending` ones (name, bytes), which the
 /// caller writes next.
-pub fn write_manifest(dir: &Path, written: &[&str], pending: &[(&str, &[u8])]) -> Result<(), InferError> {
+pub fn write_manifest(dir: &Path, written: &[&str], pending: &[(&str, &[u8])]) -> Result<(), CheckpointError> {
     let mut files = BTreeMap::new();
     for name in written {
         let path = dir.join(name);
-        let sum = file_sum(&path).map_err(|e| InferError::checkpoint(&path, e))?;
+        let sum = file_sum(&path).map_err(|e| CheckpointError::file(&path, e))?;
         files.insert(name.to_string(), sum);
     }
     for (name, bytes) in pending {
@@ -92,7 +75,7 @@ pub fn write_manifest(dir: &Path, written: &[&str], pending: &[(&str, &[u8])]) -
     let manifest = Manifest { algorithm: ALGORITHM.into(), files };
     let text = serde_json::to_string_pretty(&manifest).expect("manifests serialise");
     let path = dir.join(MANIFEST_FILE);
-    dggt_data::io::write_atomically(&path, text.as_bytes()).map_err(|e| InferError::checkpoint(&path, e))
+    dggt_data::io::write_atomically(&path, text.as_bytes()).map_err(|e| CheckpointError::file(&path, e))
 }
 
 /// Checks the files of `dir` that `purpose` reads against its manifest.
