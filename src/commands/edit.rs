@@ -7,9 +7,9 @@ use anyhow::{Result, bail};
 use dggt_edit::{Edit, EditOptions, prepare_edits};
 use dggt_refine::ReferenceView;
 
-use crate::backend::DeviceList;
-use crate::commands::output::{self, OutputBoundArg, OutputKind, OverwriteArg};
-use crate::commands::refine::{RefineArgs, RefineJob, load_refiner, refine_files};
+use crate::commands::output::{self, OutputKind};
+use crate::commands::refine::{RefineJob, load_refiner, refine_files};
+use crate::commands::render_output::RenderOutputArgs;
 
 /// An edit's folder; `edit.json` is written once everything else is.
 const OUTPUT: OutputKind = OutputKind { command: "edit", signature: "edit.json" };
@@ -49,18 +49,8 @@ pub struct Args {
     /// [default: the input views' times].
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     times: Option<Vec<f64>>,
-    /// Device: cpu, ndarray, wgpu[:N], cuda[:N].
-    #[arg(long, default_value = "cpu")]
-    device: DeviceList,
-    /// Output folder; must not exist or be empty.
-    #[arg(long)]
-    out: PathBuf,
     #[command(flatten)]
-    overwrite: OverwriteArg,
-    #[command(flatten)]
-    bound: OutputBoundArg,
-    #[command(flatten)]
-    refine: RefineArgs,
+    output: RenderOutputArgs,
 }
 
 /// Checks every edit against the scene before the output folder is touched, then writes; with `--refine`,
@@ -77,21 +67,24 @@ pub fn run(args: Args) -> Result<()> {
     if edits.is_empty() {
         bail!("nothing to edit: give --remove, --move, --insert or --remove-box");
     }
-    let named = [("--scene", Some(&args.scene))].into_iter().chain(args.refine.paths());
-    output::refuse_inside_output(&args.out, named.filter_map(|(flag, path)| Some((flag, path?.as_path()))))?;
-    let _lock = output::lock(&args.out, "dggt edit")?;
-    let refine = args.refine.spec()?;
+    let named = [("--scene", Some(&args.scene))].into_iter().chain(args.output.refine.paths());
+    output::refuse_inside_output(
+        &args.output.folder.out,
+        named.filter_map(|(flag, path)| Some((flag, path?.as_path()))),
+    )?;
+    let _lock = output::lock(&args.output.folder.out, "dggt edit")?;
+    let refine = args.output.refine.spec()?;
     if refine.as_ref().is_some_and(|spec| spec.reference != ReferenceView::None) {
         bail!("--refine-reference: an edit has no input images beside its renders; use none");
     }
-    let device = args.device.single()?;
+    let device = args.output.device.single()?;
     let options = EditOptions { scene: args.scene, edits, cameras: args.cameras, times: args.times };
     let job = prepare_edits(&options, &device)?;
     let what = format!("{} times x {} cameras", job.times.len(), job.cameras.len());
-    args.bound.check(job.largest_output_bytes(), &what)?;
+    args.output.bound.check(job.largest_output_bytes(), &what)?;
     let refiner = refine.as_ref().map(|spec| load_refiner(spec, &device)).transpose()?;
-    output::prepare(&args.out, OUTPUT, args.overwrite.existing())?;
-    let summary = job.write(&args.out)?;
+    output::prepare(&args.output.folder.out, OUTPUT, args.output.folder.overwrite.existing())?;
+    let summary = job.write(&args.output.folder.out)?;
     for render in &summary.renders {
         println!(
             "time {:.3} camera {}: {} pixels changed, {} uncovered with nothing behind",
@@ -103,14 +96,19 @@ pub fn run(args: Args) -> Result<()> {
             .renders
             .iter()
             .map(|render| RefineJob {
-                image: args.out.join(&render.file),
+                image: args.output.folder.out.join(&render.file),
                 reference: None,
-                out: args.out.join(REFINED_RENDERS).join(Path::new(&render.file).file_name().unwrap_or_default()),
+                out: args
+                    .output
+                    .folder
+                    .out
+                    .join(REFINED_RENDERS)
+                    .join(Path::new(&render.file).file_name().unwrap_or_default()),
             })
             .collect();
         refine_files(&refiner, &jobs, spec.latent, &device)?;
-        println!("refined {} renders into {}", jobs.len(), args.out.join(REFINED_RENDERS).display());
+        println!("refined {} renders into {}", jobs.len(), args.output.folder.out.join(REFINED_RENDERS).display());
     }
-    println!("{} edits written to {} (edit.json)", summary.edits.len(), args.out.display());
+    println!("{} edits written to {} (edit.json)", summary.edits.len(), args.output.folder.out.display());
     Ok(())
 }

@@ -16,6 +16,7 @@ pub mod reconstruct;
 pub mod refine;
 pub mod refine_pairs;
 pub mod refine_train;
+pub mod render_output;
 pub mod stress;
 pub mod synth;
 pub mod train;

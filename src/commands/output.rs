@@ -31,6 +31,16 @@ impl OverwriteArg {
     }
 }
 
+/// The output folder of a command that writes one (`--out`) and its `--overwrite` flag.
+#[derive(Debug, Clone, clap::Args)]
+pub struct OutputFolderArgs {
+    /// Output folder; must not exist or be empty.
+    #[arg(long)]
+    pub out: PathBuf,
+    #[command(flatten)]
+    pub overwrite: OverwriteArg,
+}
+
 /// The `--overwrite` flag of a command that writes one file.
 #[derive(Debug, Clone, Copy, Default, clap::Args)]
 pub struct OverwriteFileArg {

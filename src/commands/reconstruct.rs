@@ -9,10 +9,10 @@ use dggt_model::Preset;
 use dggt_reconstruct::{ReconstructOptions, TimeRequest, reconstruct};
 use dggt_refine::ReferenceView;
 
-use crate::backend::DeviceList;
-use crate::commands::output::{self, OutputBoundArg, OutputKind, OverwriteArg, StagedOutput};
+use crate::commands::output::{self, OutputKind, StagedOutput};
 use crate::commands::parse_range;
-use crate::commands::refine::{RefineArgs, RefineJob, load_refiner, refine_files};
+use crate::commands::refine::{RefineJob, load_refiner, refine_files};
+use crate::commands::render_output::RenderOutputArgs;
 use crate::commands::viewer::check_rerun_build;
 
 /// Reconstruct a driving scene from unposed images with one forward pass: cameras (JSON, COLMAP, nerfstudio),
@@ -53,18 +53,8 @@ pub struct Args {
     /// Frames per chunk of the dense heads (lower uses less memory).
     #[arg(long, default_value_t = 4)]
     chunk: usize,
-    /// Device: cpu, ndarray, wgpu[:N], cuda[:N].
-    #[arg(long, default_value = "cpu")]
-    device: DeviceList,
-    /// Output folder; must not exist or be empty.
-    #[arg(long)]
-    out: PathBuf,
     #[command(flatten)]
-    overwrite: OverwriteArg,
-    #[command(flatten)]
-    bound: OutputBoundArg,
-    #[command(flatten)]
-    refine: RefineArgs,
+    output: RenderOutputArgs,
     /// Also write the reconstruction as a rerun recording (`.rrd`: cameras, images, depth, masks, Gaussians,
     /// renders and objects on a time line; builds with the `rerun` feature). An existing file needs --overwrite.
     #[arg(long, value_name = "FILE.rrd")]
@@ -84,17 +74,17 @@ pub fn run(args: Args) -> Result<()> {
     let named = [("--images", Some(&args.images)), ("--checkpoint", Some(&args.checkpoint))]
         .into_iter()
         .chain([("--config", args.config.as_ref()), ("--rerun", args.rerun.as_ref())])
-        .chain(args.refine.paths())
+        .chain(args.output.refine.paths())
         .filter_map(|(flag, path)| Some((flag, path?.as_path())));
-    output::refuse_inside_output(&args.out, named)?;
-    let _lock = output::lock(&args.out, "dggt reconstruct")?;
+    output::refuse_inside_output(&args.output.folder.out, named)?;
+    let _lock = output::lock(&args.output.folder.out, "dggt reconstruct")?;
     if let Some(file) = &args.rerun {
         check_rerun_build("--rerun")?;
-        output::prepare_file(file, "--rerun", args.overwrite.existing())?;
+        output::prepare_file(file, "--rerun", args.output.folder.overwrite.existing())?;
     }
-    let staged = StagedOutput::begin(&args.out, OUTPUT, args.overwrite.existing())?;
-    let device = args.device.single()?;
-    let refine = args.refine.spec()?;
+    let staged = StagedOutput::begin(&args.output.folder.out, OUTPUT, args.output.folder.overwrite.existing())?;
+    let device = args.output.device.single()?;
+    let refine = args.output.refine.spec()?;
     let refiner = refine.as_ref().map(|spec| load_refiner(spec, &device)).transpose()?;
     let mut options = ReconstructOptions::new(args.images, args.checkpoint, staged.path());
     options.architecture = match (args.config, args.preset) {
@@ -111,7 +101,7 @@ pub fn run(args: Args) -> Result<()> {
     };
     options.width = args.width;
     options.chunk_frames = args.chunk;
-    options.max_output_bytes = args.bound.bytes();
+    options.max_output_bytes = args.output.bound.bytes();
     options.progress = dggt_run::progress::Visibility::on_terminal();
     tracing::info!("reconstructing {} with {} on {device:?}", options.images.display(), options.checkpoint.display());
     let summary = reconstruct(&options, &device)?;
@@ -136,14 +126,14 @@ pub fn run(args: Args) -> Result<()> {
         println!(
             "refined {} renders into {} (unrefined kept in renders/)",
             jobs.len(),
-            args.out.join(REFINED_RENDERS).display()
+            args.output.folder.out.join(REFINED_RENDERS).display()
         );
     }
     staged.finish()?;
     if let Some(file) = &args.rerun {
-        record(&args.out, file)?;
+        record(&args.output.folder.out, file)?;
     }
-    println!("outputs: {} (summary.json)", args.out.display());
+    println!("outputs: {} (summary.json)", args.output.folder.out.display());
     Ok(())
 }
 

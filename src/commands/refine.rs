@@ -15,7 +15,7 @@ use dggt_refine::{
 use dggt_run::progress::{Visibility, styled_bar};
 
 use crate::backend::DeviceList;
-use crate::commands::output::{self, OutputKind, OverwriteArg, OverwriteFileArg};
+use crate::commands::output::{self, OutputFolderArgs, OutputKind, OverwriteFileArg};
 
 /// The single-step diffusion refiner (Difix on sd-turbo): convert its checkpoint, refine images.
 #[derive(Debug, clap::Args)]
@@ -75,11 +75,8 @@ struct ImagesArgs {
     /// Device: cpu, ndarray, wgpu[:N], cuda[:N].
     #[arg(long, default_value = "cpu")]
     device: DeviceList,
-    /// Output folder; must not exist or be empty.
-    #[arg(long)]
-    out: PathBuf,
     #[command(flatten)]
-    overwrite: OverwriteArg,
+    output: OutputFolderArgs,
 }
 
 /// A folder of refined images; `refined.json` (what was refined, with which refiner) is written last.
@@ -116,7 +113,7 @@ fn images(args: ImagesArgs) -> Result<()> {
         args.references.len(),
         args.images.len()
     );
-    output::prepare(&args.out, REFINED_IMAGES, args.overwrite.existing())?;
+    output::prepare(&args.output.out, REFINED_IMAGES, args.output.overwrite.existing())?;
     let device = args.device.single()?;
     let latent = if args.sample_latent { Latent::Sampled { seed: args.seed } } else { Latent::PosteriorMean };
     let mut spec = refiner_spec(&args.model, args.checkpoint.as_deref(), args.prompt_ids, latent)?;
@@ -129,7 +126,7 @@ fn images(args: ImagesArgs) -> Result<()> {
         .map(|(i, image)| RefineJob {
             image: image.clone(),
             reference: args.references.get(i).cloned(),
-            out: args.out.join(image.file_name().unwrap_or(image.as_os_str())),
+            out: args.output.out.join(image.file_name().unwrap_or(image.as_os_str())),
         })
         .collect();
     refine_files(&refiner, &jobs, latent, &device)?;
@@ -139,10 +136,10 @@ fn images(args: ImagesArgs) -> Result<()> {
             "image": job.image, "reference": job.reference, "refined": job.out,
         })).collect::<Vec<_>>(),
     });
-    let path = args.out.join(REFINED_IMAGES.signature);
+    let path = args.output.out.join(REFINED_IMAGES.signature);
     std::fs::write(&path, serde_json::to_string_pretty(&record)?)
         .with_context(|| format!("writing {}", path.display()))?;
-    println!("{} refined images in {}", jobs.len(), args.out.display());
+    println!("{} refined images in {}", jobs.len(), args.output.out.display());
     Ok(())
 }
 

@@ -1,12 +1,10 @@
 //! `dggt synth`: a procedural driving scene in the scene-export layout, optionally edited (objects removed or
 //! moved) to give ground truth for scene editing.
 
-use std::path::PathBuf;
-
 use anyhow::{Context, Result};
 use dggt_synth::{MoveFlag, ObjectEdit, ObjectId, SynthScene, SynthSummary};
 
-use crate::commands::output::{self, OutputBoundArg, OutputKind, OverwriteArg};
+use crate::commands::output::{self, OutputBoundArg, OutputFolderArgs, OutputKind};
 
 /// A scene export written by `dggt synth`.
 const OUTPUT: OutputKind = OutputKind { command: "synth", signature: "synth.json" };
@@ -14,11 +12,8 @@ const OUTPUT: OutputKind = OutputKind { command: "synth", signature: "synth.json
 /// Write a procedural driving scene (ray-cast ground truth) in the scene-export layout.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Output folder; must not exist or be empty.
-    #[arg(long)]
-    out: PathBuf,
     #[command(flatten)]
-    overwrite: OverwriteArg,
+    output: OutputFolderArgs,
     #[arg(long, default_value_t = 0)]
     seed: u64,
     #[arg(long, default_value_t = 20)]
@@ -50,8 +45,19 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let Args { out, overwrite, seed, frames, cameras, width, height, layout, lidar, remove_object, move_object, bound } =
-        args;
+    let Args {
+        output: OutputFolderArgs { out, overwrite },
+        seed,
+        frames,
+        cameras,
+        width,
+        height,
+        layout,
+        lidar,
+        remove_object,
+        move_object,
+        bound,
+    } = args;
     let config = dggt_synth::SynthConfig { seed, frames, cameras, width, height };
     config.validate()?;
     let sweeps = if lidar { dggt_synth::Sweeps::Write } else { dggt_synth::Sweeps::Skip };

@@ -348,7 +348,7 @@ pub fn run_bench(options: &BenchOptions, device: &Device) -> Result<BenchReport,
     for &frame in &runner.plan.targets.clone() {
         for camera in 0..scene.cameras.len() {
             let view = runner.cache.get(reference_width, frame, camera)?;
-            targets.push(TargetImages { frame, camera, truth: interleaved(&view.image.data, view.image.size) });
+            targets.push(TargetImages { frame, camera, truth: view.image.interleaved() });
         }
     }
     let reference_size = runner.cache.get(reference_width, runner.plan.targets[0], 0)?.image.size;
@@ -612,7 +612,7 @@ impl Runner<'_> {
                     let candidates = input_slots.iter().map(|s| (s.rig_camera, s.time));
                     let position = nearest_in_time(candidates, slot.rig_camera, slot.time)
                         .ok_or_else(|| BenchError::NoReferenceView { camera: slot.rig_camera })?;
-                    Ok(interleaved(&input_views[position].image.data, size))
+                    Ok(input_views[position].image.interleaved())
                 })
                 .collect::<Result<Vec<_>, BenchError>>()?,
             Some(ReferenceView::None) | None => Vec::new(),
@@ -780,12 +780,6 @@ pub fn median(mut values: Vec<f64>) -> f64 {
     values.sort_by(f64::total_cmp);
     let n = values.len();
     if n % 2 == 1 { values[n / 2] } else { (values[n / 2 - 1] + values[n / 2]) / 2.0 }
-}
-
-/// Planar `[3, H, W]` to interleaved `[H, W, 3]`.
-fn interleaved(planar: &[f32], size: ImageSize) -> Vec<f32> {
-    let plane = size.area();
-    (0..plane).flat_map(|i| [planar[i], planar[plane + i], planar[2 * plane + i]]).collect()
 }
 
 /// `[H, W, 3]` `from` resized to `to` (full frame to full frame, triangle filter); a copy when equal.

@@ -47,6 +47,14 @@ pub struct PlanarImage {
     pub data: Vec<f32>,
 }
 
+impl PlanarImage {
+    /// The pixels interleaved, `[H, W, 3]` (what image files and the metrics take).
+    pub fn interleaved(&self) -> Vec<f32> {
+        let plane = self.size.area();
+        (0..plane).flat_map(|i| [self.data[i], self.data[plane + i], self.data[2 * plane + i]]).collect()
+    }
+}
+
 /// A binary mask `[H, W]`: 1 where the property holds (sky, dynamic), else 0.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BinaryMask {
@@ -162,6 +170,12 @@ impl PreprocessPlan {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_planar_image_interleaves_its_channels_per_pixel() {
+        let image = PlanarImage { size: ImageSize::new(2, 1).unwrap(), data: vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0] };
+        assert_eq!(image.interleaved(), [1.0, 3.0, 5.0, 2.0, 4.0, 6.0]);
+    }
 
     fn size(width: u32, height: u32) -> ImageSize {
         ImageSize::new(width, height).unwrap()

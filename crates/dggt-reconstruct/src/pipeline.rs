@@ -375,7 +375,7 @@ fn render_views(
         finite::check_f32(&sky_file, "rendered opacities (the sky mask's source)", &alpha)?;
         let sky_mask: Vec<bool> = alpha.iter().map(|&a| a < 0.5).collect();
         write_binary_png(&sky_file, size, &sky_mask)?;
-        input_psnr_db.push(psnr(&rgb, &interleaved(&request.images[i])));
+        input_psnr_db.push(psnr(&rgb, &request.images[i].interleaved()));
         at_inputs.insert((view.camera, view.time_s.to_bits()), (rgb, render.counts));
         bar.inc(1);
     }
@@ -462,12 +462,6 @@ fn quads(tensor: &Tensor<2>, name: &str) -> Result<Vec<[f32; 4]>, ReconstructErr
     Ok(host(tensor.clone(), name)?.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect())
 }
 
-/// Planar `[3, H, W]` to interleaved `[H, W, 3]`.
-fn interleaved(image: &PlanarImage) -> Vec<f32> {
-    let plane = image.size.area();
-    (0..plane).flat_map(|i| [image.data[i], image.data[plane + i], image.data[2 * plane + i]]).collect()
-}
-
 /// PSNR in dB of two images in `[0, 1]` (the render clamped as it is saved).
 fn psnr(rendered: &[f32], reference: &[f32]) -> f64 {
     let mse = rendered.iter().zip(reference).map(|(a, b)| ((a.clamp(0.0, 1.0) - b) as f64).powi(2)).sum::<f64>()
@@ -486,7 +480,7 @@ fn write_cameras(
     let (mut colmap_cameras, mut colmap_images, mut frames) = (Vec::new(), Vec::new(), Vec::new());
     for (i, ((view, image), camera)) in inputs.views.iter().zip(images).zip(cameras).enumerate() {
         let file = input_image_file(&view.name);
-        write_rgb_png(&written.path(&file), size, &interleaved(image))?;
+        write_rgb_png(&written.path(&file), size, &image.interleaved())?;
         records.push(CameraRecord {
             name: view.name.clone(),
             frame: view.frame,

@@ -25,8 +25,8 @@ use dggt_splat::constants::{
 use dggt_splat::{GaussianTensors, OpacityTensor};
 use rayon::prelude::*;
 
+use crate::displacements::LearntStep;
 use crate::error::SceneError;
-use crate::learnt::LearntStep;
 use crate::pixels::PixelGaussians;
 use crate::timeline::{DynamicBlend, TargetView, dynamic_sources};
 

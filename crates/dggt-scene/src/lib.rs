@@ -4,7 +4,8 @@
 //!
 //! 1. [`timeline`]: the input views' rig cameras and scene times; target cameras interpolated from them.
 //! 2. [`pixels`]: the per-pixel Gaussians of every input view, means unprojected from the predicted depth;
-//!    [`learnt`]: the flow head's displacements of their dynamic pixels to the neighbouring inputs;
+//!    [`learnt`]: the flow head run on their dynamic pixels, its displacements to the neighbouring inputs kept
+//!    as [`displacements`];
 //!    [`reach`]: how far the head would have to look to find where its queries truly go (a diagnostic).
 //! 3. [`assemble`]: the static union faded by the lifespan to the target time, the dynamic Gaussians of the
 //!    view(s) nearest in time, and culling of what the rasteriser would skip.
@@ -18,6 +19,7 @@
 
 pub mod assemble;
 pub mod compose;
+pub mod displacements;
 mod error;
 pub mod learnt;
 pub mod pixels;
@@ -32,8 +34,8 @@ pub use assemble::{
 };
 pub use compose::{ViewRender, camera_tensors, composite, render_assembled, render_flow, render_target, sky_splats};
 pub use dggt_instances::{InstanceSettings, Instances};
+pub use displacements::{LearntFlow, LearntVelocity};
 pub use error::SceneError;
-pub use learnt::{LearntFlow, LearntVelocity};
 pub use pixels::{Axes, MeansGradient, PixelGaussians};
 pub use reach::FlowReach;
 pub use saved::{SCENE_FILE, load_scene, save_scene, scene_file};

@@ -78,7 +78,7 @@ pub struct PixelGaussians {
     pub(crate) instances: Option<Arc<Instances>>,
     /// The learnt displacements to the neighbouring inputs ([`PixelGaussians::with_learnt_flow`]); `None` until
     /// computed.
-    pub(crate) learnt: Option<Arc<crate::learnt::LearntFlow>>,
+    pub(crate) learnt: Option<Arc<crate::displacements::LearntFlow>>,
     pub(crate) host_means: Vec<[f32; 3]>,
     pub(crate) host_velocity: Option<Vec<[f32; 3]>>,
     pub(crate) host_max_scale: Vec<f32>,
