@@ -21,7 +21,7 @@ pub mod runner;
 pub mod sources;
 
 pub use error::EvalError;
-pub use motion::MotionSource;
+pub use motion::motion_label;
 pub use protocol::{Protocol, ProtocolKind, TargetKind};
 pub use report::{
     EvalReport, MOTION_HELD, MOTION_INSTANCES, MOTION_LEARNT, MOTION_VELOCITY, SceneReport, SourceFlowMetrics,

@@ -1,10 +1,10 @@
 //! The predicted scene flow of the surface seen at an input view, in the export's units, for scoring motion,
-//! from each [`MotionSource`] a reconstruction can move its dynamic Gaussians with.
+//! from each [`DynamicMotion`] a reconstruction can move its dynamic Gaussians with (the source a table names).
 //!
 //! A pixel's Gaussian splits into a static part (opacity `o · (1 - p)`) and a dynamic part (`o · p`, `p` the
 //! sigmoid of the dynamic logit) that moves with velocity `v`, so the surface point's expected flow is `p · v`.
-//! The velocity is the network's prediction ([`MotionSource::Velocity`]), or the velocity of the point on its
-//! object's trajectory at the view's time ([`MotionSource::Instances`]: the twist of the step starting there,
+//! The velocity is the network's prediction ([`DynamicMotion::Velocity`]), or the velocity of the point on its
+//! object's trajectory at the view's time ([`DynamicMotion::Instances`]: the twist of the step starting there,
 //! the predicted velocity for a pixel of no object). At an input view the reconstruction's pixel grid is the
 //! view's own: the flow of the surface at a lidar cell is read at the cell's centre (bilinearly, as the depth
 //! is). At any other view the same expectation is rasterised from the assembled Gaussians
@@ -22,43 +22,18 @@
 
 use dggt_geom::glam::{DMat3, DVec3};
 use dggt_model::host::host_f32;
-use dggt_scene::PixelGaussians;
+use dggt_scene::{DynamicMotion, PixelGaussians};
 
 use crate::error::EvalError;
 use crate::report::{MOTION_HELD, MOTION_INSTANCES, MOTION_LEARNT, MOTION_VELOCITY};
 
-/// Where the predicted 3D motion of a surface point comes from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
-pub enum MotionSource {
-    /// Every Gaussian held in place: the predicted flow is zero.
-    Held,
-    /// The network's predicted velocities.
-    Velocity,
-    /// The objects found among the dynamic pixels, each moving rigidly along its trajectory.
-    Instances,
-    /// The flow head's learnt displacements between adjacent inputs.
-    Learnt,
-}
-
-impl MotionSource {
-    /// The description written to the reports for the source a reconstruction renders with.
-    pub fn label(self) -> &'static str {
-        match self {
-            Self::Held => MOTION_HELD,
-            Self::Velocity => MOTION_VELOCITY,
-            Self::Instances => MOTION_INSTANCES,
-            Self::Learnt => MOTION_LEARNT,
-        }
-    }
-
-    /// The short name of the source in the side-by-side tables.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Held => "held",
-            Self::Velocity => "velocity",
-            Self::Instances => "instances",
-            Self::Learnt => "learnt",
-        }
+/// The description written to the reports for the motion a reconstruction renders with.
+pub fn motion_label(motion: DynamicMotion) -> &'static str {
+    match motion {
+        DynamicMotion::Held => MOTION_HELD,
+        DynamicMotion::Velocity => MOTION_VELOCITY,
+        DynamicMotion::Instances => MOTION_INSTANCES,
+        DynamicMotion::Learnt => MOTION_LEARNT,
     }
 }
 
@@ -72,20 +47,20 @@ pub struct InputFlow {
 }
 
 impl InputFlow {
-    /// The expected flow of `pixels` under `source`; `None` for [`MotionSource::Held`], when the source has
+    /// The expected flow of `pixels` under `source`; `None` for [`DynamicMotion::Held`], when the source has
     /// nothing to move them with (no velocity, no instances found), or when the time base is unknown (one input
     /// frame, or a log without a frame interval).
     pub fn of(
         pixels: &PixelGaussians,
-        source: MotionSource,
+        source: DynamicMotion,
         frames_per_time: f64,
         seconds_per_frame: Option<f64>,
     ) -> Result<Option<Self>, EvalError> {
         let velocity = match source {
-            MotionSource::Held => None,
-            MotionSource::Velocity => pixels.host_velocity().map(<[_]>::to_vec),
-            MotionSource::Instances => instance_velocities(pixels),
-            MotionSource::Learnt => pixels.learnt_velocities(),
+            DynamicMotion::Held => None,
+            DynamicMotion::Velocity => pixels.host_velocity().map(<[_]>::to_vec),
+            DynamicMotion::Instances => instance_velocities(pixels),
+            DynamicMotion::Learnt => pixels.learnt_velocities(),
         };
         let Some(velocity) = velocity else { return Ok(None) };
         let seconds_per_time = frames_per_time * seconds_per_frame.unwrap_or(0.0);

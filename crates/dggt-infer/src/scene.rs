@@ -5,9 +5,7 @@
 
 use burn::tensor::Tensor;
 use dggt_model::Dggt;
-use dggt_scene::{
-    AssemblySettings, DynamicMotion, InputView, MeansGradient, PixelGaussians, Scene4d, SceneError, Timeline,
-};
+use dggt_scene::{AssemblySettings, InputView, MeansGradient, PixelGaussians, Scene4d, Timeline};
 
 use crate::error::InferError;
 use crate::forward::Prediction;
@@ -55,14 +53,11 @@ impl Prediction {
             Some(velocity) => pixels.with_motion(velocity.clone(), timeline.frames_per_time())?,
             None => pixels,
         };
-        let pixels = match options.assembly.dynamic_motion {
-            DynamicMotion::Instances => pixels.with_instances(&options.assembly.instances)?,
-            DynamicMotion::Learnt => match (&model.flow_head, &self.flow_features) {
-                (Some(head), Some(features)) => pixels.with_learnt_flow(head, features)?,
-                _ => return Err(SceneError::NoFlowHead.into()),
-            },
-            DynamicMotion::Velocity | DynamicMotion::Held => pixels,
+        let flow = match (&model.flow_head, &self.flow_features) {
+            (Some(head), Some(features)) => Some((head, features.as_slice())),
+            _ => None,
         };
+        let pixels = pixels.with_motion_found(&options.assembly, flow)?;
         let sky = match (&model.sky_model, options.sky) {
             (Some(sky_model), SkyChoice::Render) => {
                 let [_, s, c, h, w] = images.dims();

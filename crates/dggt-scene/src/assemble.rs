@@ -27,6 +27,7 @@ use rayon::prelude::*;
 
 use crate::displacements::LearntStep;
 use crate::error::SceneError;
+use crate::motion::DynamicMotion;
 use crate::pixels::PixelGaussians;
 use crate::timeline::{DynamicBlend, TargetView, dynamic_sources};
 
@@ -57,40 +58,6 @@ pub struct AssemblySettings {
     pub eps2d: f32,
     /// Whether the sky behind a view that the foreground covers is rendered at all.
     pub hidden_sky: HiddenSky,
-}
-
-/// How a dynamic Gaussian moves from the time of the view it came from to the target time.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum DynamicMotion {
-    /// Held where it was predicted, even when the model predicts velocities (the reference every moving
-    /// source is scored against).
-    Held,
-    /// By its predicted velocity when the model predicts one, held where it was predicted otherwise.
-    #[default]
-    Velocity,
-    /// Rigidly along its object's trajectory when it belongs to one of the instances found
-    /// ([`PixelGaussians::with_instances`]; means and rotations move, scales and colours do not); as under
-    /// `Velocity` otherwise. A target at the view's own time leaves every Gaussian exactly where it was.
-    Instances,
-    /// Along the learnt scene flow ([`PixelGaussians::with_learnt_flow`]): its learnt displacement to the
-    /// neighbouring input toward the target, times the fraction of that step the target has reached; held where
-    /// none was learnt and outside the inputs' span. Predicted velocities are not used.
-    Learnt,
-}
-
-impl DynamicMotion {
-    pub const ALL: [DynamicMotion; 4] = [Self::Held, Self::Velocity, Self::Instances, Self::Learnt];
-
-    /// `held`, `velocity`, `instances` or `learnt`, as in configurations.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Held => "held",
-            Self::Velocity => "velocity",
-            Self::Instances => "instances",
-            Self::Learnt => "learnt",
-        }
-    }
 }
 
 /// Whether the sky is rendered behind a view whose foreground covers it everywhere.

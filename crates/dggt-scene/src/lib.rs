@@ -7,8 +7,9 @@
 //!    [`learnt`]: the flow head run on their dynamic pixels, its displacements to the neighbouring inputs kept
 //!    as [`displacements`];
 //!    [`reach`]: how far the head would have to look to find where its queries truly go (a diagnostic).
-//! 3. [`assemble`]: the static union faded by the lifespan to the target time, the dynamic Gaussians of the
-//!    view(s) nearest in time, and culling of what the rasteriser would skip.
+//! 3. [`motion`]: how the dynamic Gaussians move between the inputs (the setting, its demands on a model,
+//!    what it needs found first); [`assemble`]: the static union faded by the lifespan to the target time, the
+//!    dynamic Gaussians of the view(s) nearest in time, and culling of what the rasteriser would skip.
 //! 4. [`compose`]: rasterising the assembled Gaussians and compositing them over the sky;
 //! 5. [`scene4d`]: all of it as one value, [`Scene4d`], that renders any target view at any time;
 //! 6. [`saved`]: a [`Scene4d`] in one file and back, so that it renders (and is edited) without the network.
@@ -22,6 +23,7 @@ pub mod compose;
 pub mod displacements;
 mod error;
 pub mod learnt;
+pub mod motion;
 pub mod pixels;
 pub mod reach;
 pub mod saved;
@@ -29,13 +31,14 @@ pub mod scene4d;
 pub mod timeline;
 
 pub use assemble::{
-    AssembledGaussians, AssemblyCounts, AssemblySettings, DynamicMotion, HiddenSky, MIN_OPACITY, assemble,
-    assemble_with_velocities, assembled_velocities,
+    AssembledGaussians, AssemblyCounts, AssemblySettings, HiddenSky, MIN_OPACITY, assemble, assemble_with_velocities,
+    assembled_velocities,
 };
 pub use compose::{ViewRender, camera_tensors, composite, render_assembled, render_flow, render_target, sky_splats};
 pub use dggt_instances::{InstanceSettings, Instances};
 pub use displacements::{LearntFlow, LearntVelocity};
 pub use error::SceneError;
+pub use motion::{DynamicMotion, FlowHeadMismatch};
 pub use pixels::{Axes, MeansGradient, PixelGaussians};
 pub use reach::FlowReach;
 pub use saved::{SCENE_FILE, load_scene, save_scene, scene_file};

@@ -31,8 +31,9 @@ use dggt_model::sky::SkyGaussians;
 use safetensors::{Dtype, SafeTensors};
 use serde::{Deserialize, Serialize};
 
-use crate::assemble::{AssemblySettings, DynamicMotion};
+use crate::assemble::AssemblySettings;
 use crate::error::SceneError;
+use crate::motion::DynamicMotion;
 use crate::pixels::PixelGaussians;
 use crate::scene4d::Scene4d;
 use crate::timeline::{DynamicBlend, InputView};

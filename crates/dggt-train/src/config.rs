@@ -10,7 +10,7 @@ use dggt_objective::LossTerm;
 pub use dggt_objective::LossWeights;
 use dggt_run::divergence;
 pub use dggt_run::{OptimSection, ViewerSection};
-use dggt_scene::DynamicMotion;
+use dggt_scene::FlowHeadMismatch;
 use serde::{Deserialize, Serialize};
 
 use crate::error::TrainError;
@@ -260,17 +260,16 @@ impl TrainConfig {
         if !self.model.flow_head && self.model.flow != FlowHeadShape::default() {
             return Err(setting("model.flow", "shapes the flow head: it needs model.flow_head = true"));
         }
-        let learnt = self.render.dynamic_motion == DynamicMotion::Learnt;
-        match (self.model.flow_head, learnt) {
-            (false, true) => Err(setting(
+        match self.render.dynamic_motion.flow_head_mismatch(self.model.flow_head) {
+            Some(FlowHeadMismatch::LearntWithoutHead) => Err(setting(
                 "render.dynamic_motion",
                 "\"learnt\" moves the dynamic Gaussians along the flow head's flow: it needs model.flow_head = true",
             )),
-            (true, false) => Err(setting(
+            Some(FlowHeadMismatch::HeadWithoutLearnt) => Err(setting(
                 "model.flow_head",
                 "the flow head learns from renders along its flow: it needs render.dynamic_motion = \"learnt\"",
             )),
-            _ => Ok(()),
+            None => Ok(()),
         }
     }
 

@@ -11,13 +11,13 @@ use dggt_geom::{ImageSize, PosedCamera};
 use dggt_infer::{
     CameraSource, GroundTruth, InputCameras, InputSet, MotionPath, SceneOptions, ViewSlot, forward_chunked, input_views,
 };
-use dggt_scene::{Scene4d, TargetView, Timeline};
+use dggt_scene::{DynamicMotion, Scene4d, TargetView, Timeline};
 
 use super::setup::SceneContext;
 use super::stages::{ASSEMBLY, FORWARD, LOAD, Stopwatch};
 use crate::error::EvalError;
 use crate::grid::CellMapping;
-use crate::motion::{InputFlow, MotionSource};
+use crate::motion::InputFlow;
 use crate::protocol::Protocol;
 
 /// One scene's forward pass: its inputs, their network size and the scene to render.
@@ -31,9 +31,9 @@ pub(super) struct ForwardScene {
     pub(super) mapping: CellMapping,
     pub(super) timeline: Timeline,
     pub(super) scene: Scene4d,
-    /// Every motion source scored, [`MotionSource::Held`] first, with the input pixels' expected flow under it
+    /// Every motion source scored, [`DynamicMotion::Held`] first, with the input pixels' expected flow under it
     /// (`None` for held, or without a time base).
-    pub(super) flows: Vec<(MotionSource, Option<InputFlow>)>,
+    pub(super) flows: Vec<(DynamicMotion, Option<InputFlow>)>,
 }
 
 impl ForwardScene {
@@ -43,7 +43,7 @@ impl ForwardScene {
     }
 
     /// The expected flow under `source`, when it was computed.
-    pub(super) fn flow(&self, source: MotionSource) -> Option<&InputFlow> {
+    pub(super) fn flow(&self, source: DynamicMotion) -> Option<&InputFlow> {
         self.flows.iter().find(|(s, _)| *s == source).and_then(|(_, flow)| flow.as_ref())
     }
 }
@@ -128,20 +128,20 @@ pub(super) fn motion_flows(
     forward: &mut ForwardScene,
     context: &SceneContext<'_>,
     seconds_per_frame: Option<f64>,
-) -> Result<Vec<(MotionSource, Option<InputFlow>)>, EvalError> {
+) -> Result<Vec<(DynamicMotion, Option<InputFlow>)>, EvalError> {
     let pixels = &forward.scene.pixels;
-    let mut sources = vec![MotionSource::Held];
+    let mut sources = vec![DynamicMotion::Held];
     if pixels.host_velocity().is_some() {
-        sources.push(MotionSource::Velocity);
+        sources.push(DynamicMotion::Velocity);
     }
     if pixels.dynamic_logit.is_some() {
         if pixels.instances().is_none() {
             forward.scene.pixels = pixels.clone().with_instances(&context.network.assembly.instances)?;
         }
-        sources.push(MotionSource::Instances);
+        sources.push(DynamicMotion::Instances);
     }
     if forward.scene.pixels.learnt().is_some() {
-        sources.push(MotionSource::Learnt);
+        sources.push(DynamicMotion::Learnt);
     }
     let frames_per_time = forward.timeline.frames_per_time();
     sources

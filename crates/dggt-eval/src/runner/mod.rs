@@ -15,12 +15,12 @@
 //! `dggt-metrics`), and the predicted motion against the export's scene flow.
 //!
 //! Motion: without predicted velocities, dynamic Gaussians are held where they were predicted and the
-//! predicted motion of every surface point is zero ([`MotionSource::Held`]); its metrics are computed anyway
+//! predicted motion of every surface point is zero ([`DynamicMotion::Held`]); its metrics are computed anyway
 //! and labelled. With predicted velocities (a motion head, or the Gaussian head's velocity channels) the
 //! renders use them, and the expected flow of the surface seen at each lidar cell of an input view is scored
-//! in the export's axes and units ([`MotionSource::Velocity`], [`crate::motion`]). With
+//! in the export's axes and units ([`DynamicMotion::Velocity`], [`crate::motion`]). With
 //! `render.dynamic_motion = "instances"` the renders move each object found among the dynamic pixels along its
-//! trajectory, and that motion is scored ([`MotionSource::Instances`]). Every source the reconstruction has
+//! trajectory, and that motion is scored ([`DynamicMotion::Instances`]). Every source the reconstruction has
 //! (held; velocities when predicted; instances whenever there is a dynamic head) is also scored at the same
 //! cells side by side; at a view between the inputs each source's expected flow is rasterised from the
 //! Gaussians assembled its way ([`dggt_scene::render_flow`]). As STORM does, motion is
@@ -109,7 +109,7 @@ pub fn evaluate(options: &EvalOptions, device: &Device) -> Result<EvalReport, Ev
         checkpoint: network.info.clone(),
         preprocess,
         device: format!("{device:?}"),
-        motion_source: motion.label().into(),
+        motion_source: crate::motion::motion_label(motion).into(),
         poses: options.poses,
         depth_protocol: "rendered expected depth vs lidar depth (depth_flows_4, else the lidar sweep binned on the same grid), least-squares scale and shift, at \
                          cells with lidar depth > 0, no sky pixel and the centre (4 col + 2, 4 row + 2) inside the \

@@ -6,6 +6,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use dggt_data::{DepthSource, Scene};
+use dggt_scene::DynamicMotion;
 
 use super::cells::FlowSeen;
 use super::forward::{forward_scene, motion_flows};
@@ -16,7 +17,6 @@ use super::setup::SceneContext;
 use super::stages::{METRICS, RENDER, Stopwatch};
 use super::views::{host, nearest_input, rendered_flows, target_view};
 use crate::error::EvalError;
-use crate::motion::MotionSource;
 use crate::report::{SceneReport, summarise_views};
 use crate::sources::{ImageSource, clamped_colours, render_sources};
 
@@ -87,7 +87,7 @@ pub(super) fn evaluate_scene(root: &Path, scene: &Scene, context: &SceneContext<
         notes.push("the export has neither depth_flows_4 nor lidar: no D-RMSE or motion metrics".into());
     } else if scene.depth_source() == Some(DepthSource::Lidar) {
         notes.push("depth from the projected lidar sweeps, which carry no scene flow: no motion metrics".into());
-    } else if context.motion != MotionSource::Held && forward.flow(context.motion).is_none() {
+    } else if context.motion != DynamicMotion::Held && forward.flow(context.motion).is_none() {
         notes.push("one input frame or no frame interval: predicted motion has no time base, motion not scored".into());
     } else if seen.largest_flow <= MOTION_GATE {
         for record in &mut records {

@@ -9,13 +9,14 @@ use dggt_data::{BinaryMask, Scene, prepare_view};
 use dggt_geom::ImageSize;
 use dggt_geom::glam::DMat3;
 use dggt_metrics::{ImageShape, MetricError, masked_psnr, psnr, ssim};
+use dggt_scene::DynamicMotion;
 
 use super::cells::{CellFlow, FlowSeen, collect_cells, read_sky_mask, score_depth, score_flow};
 use super::forward::ForwardScene;
 use super::setup::SceneContext;
 use super::views::{RenderedFlow, host};
 use crate::error::EvalError;
-use crate::motion::{MotionSource, log_from_reconstruction};
+use crate::motion::log_from_reconstruction;
 use crate::protocol::TargetKind;
 use crate::report::{ImageScores, SourceFlowMetrics, SourcePsnr, ViewRecord};
 use crate::sources::{ImageSource, crop_box, write_crop_strip};
@@ -31,7 +32,7 @@ pub(super) struct ScoredView<'a> {
     pub(super) split: TargetKind,
     pub(super) time: f64,
     /// At a view between the inputs, the rendered expected flow of every moving source.
-    pub(super) rendered_flows: Vec<(MotionSource, RenderedFlow)>,
+    pub(super) rendered_flows: Vec<(DynamicMotion, RenderedFlow)>,
     /// At a view between the inputs with a dynamic mask, the view rendered under every image source
     /// (interleaved, clamped).
     pub(super) source_renders: Vec<(ImageSource, Vec<f32>)>,
@@ -195,7 +196,7 @@ fn moving_region_psnr(
 fn predicted_flow<'a>(
     scene: &Scene,
     forward: &'a ForwardScene,
-    source: MotionSource,
+    source: DynamicMotion,
     view: &'a ScoredView,
 ) -> CellFlow<'a> {
     let input_position = forward.inputs.frames.iter().position(|&f| f == view.frame);
@@ -204,7 +205,7 @@ fn predicted_flow<'a>(
         |predicted: DMat3| log_from_reconstruction(scene.world_from_log.rotation_matrix(), truth, predicted);
     let rendered = view.rendered_flows.iter().find(|(s, _)| *s == source).map(|(_, rendered)| rendered);
     match (source, forward.flow(source), input_position, rendered) {
-        (MotionSource::Held, _, _, _) => CellFlow::Held,
+        (DynamicMotion::Held, _, _, _) => CellFlow::Held,
         (_, Some(flow), Some(position), _) => {
             let input_view = position * forward.inputs.cameras.len() + view.camera_position;
             let predicted = forward.scene.views()[input_view].camera.world_from_camera.rotation_matrix();

@@ -12,7 +12,6 @@ use dggt_refine::{Refiner, RefinerSpec};
 use dggt_scene::DynamicMotion;
 
 use crate::error::EvalError;
-use crate::motion::MotionSource;
 use crate::protocol::Protocol;
 use crate::sources::CropImages;
 
@@ -78,7 +77,7 @@ pub(super) struct SceneContext<'a> {
     pub(super) preprocess: Preprocess,
     pub(super) lpips: Option<&'a Lpips>,
     pub(super) refiner: Option<&'a Refiner>,
-    pub(super) motion: MotionSource,
+    pub(super) motion: DynamicMotion,
     pub(super) device: &'a Device,
 }
 
@@ -131,11 +130,6 @@ pub(super) fn load_lpips(options: &EvalOptions, device: &Device) -> Result<(Opti
 }
 
 /// The motion source that the network's renders move with.
-pub(super) fn motion_source(network: &LoadedNetwork) -> MotionSource {
-    match network.assembly.dynamic_motion {
-        DynamicMotion::Instances => MotionSource::Instances,
-        DynamicMotion::Velocity if network.config.predicts_motion() => MotionSource::Velocity,
-        DynamicMotion::Learnt => MotionSource::Learnt,
-        DynamicMotion::Velocity | DynamicMotion::Held => MotionSource::Held,
-    }
+pub(super) fn motion_source(network: &LoadedNetwork) -> DynamicMotion {
+    network.assembly.dynamic_motion.in_effect(network.config.predicts_motion())
 }

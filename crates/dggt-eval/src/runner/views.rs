@@ -12,7 +12,6 @@ use dggt_scene::{AssemblySettings, DynamicMotion, TargetView, nearest_in_time, r
 use super::forward::{ForwardScene, export_camera};
 use super::setup::SceneContext;
 use crate::error::EvalError;
-use crate::motion::MotionSource;
 
 /// The expected flow rasterised at one target view ([`dggt_scene::render_flow`]).
 pub(super) struct RenderedFlow {
@@ -59,17 +58,15 @@ pub(super) fn nearest_input(forward: &ForwardScene, target: &TargetView) -> Opti
 pub(super) fn rendered_flows(
     forward: &ForwardScene,
     target: &TargetView,
-) -> Result<Vec<(MotionSource, RenderedFlow)>, EvalError> {
+) -> Result<Vec<(DynamicMotion, RenderedFlow)>, EvalError> {
     if forward.at_input(target) {
         return Ok(Vec::new());
     }
     let mut rendered = Vec::new();
     for &(source, ref flow) in &forward.flows {
         let dynamic_motion = match (source, flow) {
-            (MotionSource::Velocity, Some(_)) => DynamicMotion::Velocity,
-            (MotionSource::Instances, Some(_)) => DynamicMotion::Instances,
-            (MotionSource::Learnt, Some(_)) => DynamicMotion::Learnt,
-            _ => continue,
+            (DynamicMotion::Held, _) | (_, None) => continue,
+            (moving, Some(_)) => moving,
         };
         let assembly = AssemblySettings { dynamic_motion, ..forward.scene.assembly };
         let flow = host(render_flow(&forward.scene.pixels, target, &assembly)?, "rendered flow")?;
