@@ -57,7 +57,7 @@ impl Prediction {
             (Some(head), Some(features)) => Some((head, features.as_slice())),
             _ => None,
         };
-        let pixels = pixels.with_motion_found(&options.assembly, flow)?;
+        let pixels = pixels.with_motion_found(options.assembly.dynamic_motion, &options.assembly.instances, flow)?;
         let sky = match (&model.sky_model, options.sky) {
             (Some(sky_model), SkyChoice::Render) => {
                 let [_, s, c, h, w] = images.dims();

@@ -6,8 +6,8 @@
 
 use burn::tensor::Tensor;
 use dggt_flow_head::FlowHead;
+use dggt_instances::InstanceSettings;
 
-use crate::assemble::AssemblySettings;
 use crate::error::SceneError;
 use crate::pixels::PixelGaussians;
 
@@ -75,16 +75,17 @@ impl DynamicMotion {
 }
 
 impl PixelGaussians {
-    /// What `settings.dynamic_motion` needs before assembly: [`DynamicMotion::Instances`] finds the moving
-    /// objects (`settings.instances`), [`DynamicMotion::Learnt`] runs the flow head on `flow` (the head and the
-    /// Gaussian head's feature maps; an error without them); the others need nothing.
+    /// What `motion` needs before assembly: [`DynamicMotion::Instances`] finds the moving objects (as
+    /// `instances` says), [`DynamicMotion::Learnt`] runs the flow head on `flow` (the head and the Gaussian head's
+    /// feature maps; an error without them); the others need nothing.
     pub fn with_motion_found(
         self,
-        settings: &AssemblySettings,
+        motion: DynamicMotion,
+        instances: &InstanceSettings,
         flow: Option<(&FlowHead, &[Tensor<4>])>,
     ) -> Result<Self, SceneError> {
-        match settings.dynamic_motion {
-            DynamicMotion::Instances => self.with_instances(&settings.instances),
+        match motion {
+            DynamicMotion::Instances => self.with_instances(instances),
             DynamicMotion::Learnt => match flow {
                 Some((head, features)) => self.with_learnt_flow(head, features),
                 None => Err(SceneError::NoFlowHead),
