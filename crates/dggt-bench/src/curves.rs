@@ -206,7 +206,7 @@ pub fn draw_curves(runs: &[RunCurves], out: &Path) -> Result<(), BenchError> {
     if !with_text {
         static WARNED: Once = Once::new();
         WARNED.call_once(|| {
-            tracing::warn!("no font file found (set DGGT_PLOT_FONT to a .ttf): training curves are drawn without text")
+            tracing::warn!("no font file found (set DGGT_PLOT_FONT to a .ttf): training curves are drawn without text");
         });
     }
     if let Some(folder) = out.parent().filter(|folder| !folder.as_os_str().is_empty()) {

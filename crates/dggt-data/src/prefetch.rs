@@ -343,7 +343,7 @@ mod tests {
                         assert!(
                             message.contains("job 5 panicked") && message.contains("job five exploded"),
                             "{message}"
-                        )
+                        );
                     }
                     (_, Ok(value)) => assert_eq!(*value, job),
                     other => panic!("unexpected item {other:?}"),

@@ -209,7 +209,7 @@ pub fn parse_ply(bytes: &[u8]) -> Result<PlyVertices, PlyError> {
             ["format", ..] => return unsupported("a format other than binary_little_endian 1.0"),
             ["comment", ..] | ["obj_info", ..] | ["end_header"] => {}
             ["element", "vertex", n] if count.is_none() => {
-                count = Some(n.parse::<usize>().map_err(|_| PlyError::VertexCount(n.to_string()))?)
+                count = Some(n.parse::<usize>().map_err(|_| PlyError::VertexCount(n.to_string()))?);
             }
             ["element", ..] => return unsupported("an element besides the one `vertex` element"),
             ["property", "float", name] if count.is_some() => properties.push(name.to_string()),

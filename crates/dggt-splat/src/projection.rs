@@ -359,7 +359,7 @@ mod tests {
         let h = 1e-3f32;
         let fd = |plus: f64, minus: f64| (plus - minus) / (2.0 * h as f64);
         let close = |fd: f64, a: f64, what: &str| {
-            assert!((fd - a).abs() <= 2e-3 * (1.0 + a.abs()), "{what}: finite difference {fd}, analytic {a}")
+            assert!((fd - a).abs() <= 2e-3 * (1.0 + a.abs()), "{what}: finite difference {fd}, analytic {a}");
         };
         for k in 0..3 {
             let (mut p, mut m) = (mean, mean);

@@ -205,7 +205,7 @@ fn write_view(
             images::write_png_gray(&layout.dynamic_mask(DynamicMaskKind::Human, frame, camera), &nobody)?;
         }
         DynamicMaskFolders::Flat => {
-            images::write_png_gray(&layout.flat_dynamic_mask(frame, camera), &view.dynamic_box_mask)?
+            images::write_png_gray(&layout.flat_dynamic_mask(frame, camera), &view.dynamic_box_mask)?;
         }
     }
     images::write_png_gray(&layout.dynamic_mask(DynamicMaskKind::FineAll, frame, camera), &view.dynamic_mask)?;
@@ -226,10 +226,10 @@ fn write_geometry(scene: &SynthScene, layout: &ExportLayout, variant: ExportVari
         text::write_rows(&layout.intrinsics(camera.id), &intrinsic_rows)?;
         match (variant.camera_mounting(), variant.camera_axes()) {
             (CameraMounting::FixedOnEgo, CameraAxes::Waymo) => {
-                text::write_rows(&layout.extrinsics(camera.id), &camera.extrinsic_rows)?
+                text::write_rows(&layout.extrinsics(camera.id), &camera.extrinsic_rows)?;
             }
             (CameraMounting::FixedOnEgo, CameraAxes::OpenCv) => {
-                text::write_rows(&layout.extrinsics(camera.id), &camera.ego_from_camera.to_rows())?
+                text::write_rows(&layout.extrinsics(camera.id), &camera.ego_from_camera.to_rows())?;
             }
             (CameraMounting::PerFrameInWorld, _) => {
                 for frame in 0..scene.config().frames {
@@ -244,7 +244,7 @@ fn write_geometry(scene: &SynthScene, layout: &ExportLayout, variant: ExportVari
             FramePoses::Ego => text::write_rows(&layout.ego_pose(frame), rows)?,
             FramePoses::Lidar => {
                 let world_from_lidar = scene.world_from_ego[frame] * nuscenes_lidar_from_ego().inverse();
-                text::write_rows(&layout.lidar_pose(frame), &world_from_lidar.to_rows())?
+                text::write_rows(&layout.lidar_pose(frame), &world_from_lidar.to_rows())?;
             }
         }
     }

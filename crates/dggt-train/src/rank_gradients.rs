@@ -192,7 +192,7 @@ fn register(grads: &mut GradientsParams, slot: &Slot, sum: Tensor<1>) {
             }
         };
     }
-    as_rank!(1, 2, 3, 4, 5, 6)
+    as_rank!(1, 2, 3, 4, 5, 6);
 }
 
 /// Takes every gradient out of a [`GradientsParams`] in the module's parameter order, flattened; a parameter

@@ -88,7 +88,7 @@ fn an_absolute_file_name_is_refused() {
 fn a_symbolic_link_out_of_the_data_root_is_refused() {
     let link = |root: &Path| {
         std::os::unix::fs::symlink(root.parent().unwrap().join("secret.jpg"), root.join("samples/CAM_FRONT/link.jpg"))
-            .unwrap()
+            .unwrap();
     };
     let error = refused(FRONT_CAMERA_ROW, |_| "samples/CAM_FRONT/link.jpg".into(), link);
     assert!(error.contains("leads outside"), "{error}");

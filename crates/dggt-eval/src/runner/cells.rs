@@ -97,7 +97,7 @@ pub(super) fn score_depth(record: &mut ViewRecord, cells: &Cells, seen: &mut Flo
             record.depth_shift = Some(alignment.shift);
         }
         Err(MetricError::Empty { .. }) => {
-            record.depth_note = Some("no lidar cell outside the sky inside the view".into())
+            record.depth_note = Some("no lidar cell outside the sky inside the view".into());
         }
         Err(other) => return Err(other.into()),
     }

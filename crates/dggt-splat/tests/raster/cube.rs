@@ -148,7 +148,7 @@ pub fn assert_close_to_host_with(
     }
     assert_eq!(result.stats.len(), forward.stats.len());
     let grad = |name: &str, ours: &[f32], theirs: &[f32]| {
-        check(case, &format!("{name} vs host"), compare(ours, theirs, all), GRADIENT)
+        check(case, &format!("{name} vs host"), compare(ours, theirs, all), GRADIENT);
     };
     grad("grad means", &result.grads.means, &host.means);
     grad("grad quats", &result.grads.quats, &host.quats);

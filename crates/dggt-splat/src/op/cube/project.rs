@@ -8,7 +8,7 @@
 use burn_cubecl::cubecl;
 use cubecl::prelude::*;
 
-use super::math::*;
+use super::math::{M3, V3, apply, cross, dot, finite, product, rotation, scale_columns, sum3, transpose, v3};
 use crate::constants::{ALPHA_THRESHOLD, GUARD_BAND_F32, MAX_BOX_SIGMAS_F32, QUAT_MIN_NORM_F32};
 
 pub const CULL_NON_FINITE: u32 = 1;

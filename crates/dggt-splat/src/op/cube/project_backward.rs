@@ -4,8 +4,10 @@
 use burn_cubecl::cubecl;
 use cubecl::prelude::*;
 
-use super::math::*;
-use super::project::*;
+use super::math::{
+    M3, V3, apply, dot, mat_scaled, mat_sum, outer, product, scale_columns, scaled, sum3, transpose, v3,
+};
+use super::project::{Camera, Covariance, Ewa, camera, covariance, ewa};
 
 /// `dL/du` for `R(u)` given `dL/dR` (rows), the quaternion `w x y z` treated as unconstrained.
 #[cube]
