@@ -6,10 +6,10 @@ use std::path::Path;
 use dggt_geom::ImageSize;
 use image::{DynamicImage, GrayImage, ImageBuffer, ImageFormat, Luma, RgbImage};
 
+use crate::error::{DataError, Result};
+
 /// A 16-bit single-channel image (an instance mask).
 pub type Gray16Image = ImageBuffer<Luma<u16>, Vec<u16>>;
-
-use crate::error::{DataError, Result};
 
 fn decode(path: &Path) -> Result<image::DynamicImage> {
     let bytes = std::fs::read(path).map_err(|e| DataError::io(path, e))?;
