@@ -77,13 +77,13 @@ fn run(command: Command) -> Result<()> {
         Command::Train(args) => train::run(args),
         Command::Reconstruct(args) => reconstruct::run(args),
         Command::Edit(args) => edit::run(args),
-        Command::RefinePairs(args) => refine_pairs::run(args),
+        Command::RefinePairs(args) => refine_pairs::run(&args),
         Command::RefineTrain(args) => refine_train::run(args),
         Command::Stress(args) => stress::run(args),
-        Command::Eval(args) => eval::run(args),
+        Command::Eval(args) => eval::run(&args),
         Command::Bench(args) => bench::run(args),
         Command::Curves(args) => curves::run(args),
-        Command::Devices(args) => devices::run(args),
+        Command::Devices(args) => devices::run(&args),
         Command::Refine(args) => refine::run(args),
     }
 }

@@ -52,8 +52,8 @@ fn text(output: &Output) -> String {
     format!("{}{}", String::from_utf8_lossy(&output.stdout), String::from_utf8_lossy(&output.stderr))
 }
 
-fn succeeded(output: Output) -> String {
-    let text = text(&output);
+fn succeeded(output: &Output) -> String {
+    let text = text(output);
     assert!(output.status.success(), "the run failed:\n{text}");
     text
 }
@@ -90,10 +90,10 @@ fn weights(out: &Path, step: u64) -> Vec<(String, Vec<f32>)> {
 
 /// The largest difference between two sets of weights of the same tensors.
 fn largest_difference(a: &[(String, Vec<f32>)], b: &[(String, Vec<f32>)]) -> f32 {
-    assert_eq!(a.len(), b.len());
+    assert_eq!(a.len(), b.len(), "the same number of tensors");
     let mut largest = 0.0f32;
     for ((name, x), (other, y)) in a.iter().zip(b) {
-        assert_eq!(name, other);
+        assert_eq!(name, other, "tensors in the same order");
         assert_eq!(x.len(), y.len(), "{name}");
         for (u, v) in x.iter().zip(y) {
             largest = largest.max((u - v).abs());
@@ -114,7 +114,7 @@ fn two_ranks_train_as_one_process_at_twice_the_accumulation_and_survive_losing_a
 
     let started = Instant::now();
     let ranks = dir.path().join("ranks");
-    let log = succeeded(train(2, &per_rank, &ranks, false, None));
+    let log = succeeded(&train(2, &per_rank, &ranks, false, None));
     let two_ranks_s = started.elapsed().as_secs_f64();
     assert!(log.contains("every rank holds the same weights"), "no agreement of the ranks logged:\n{log}");
     assert!(log.contains(&format!("trained steps 0..{STEPS}")), "rank 0 reports the run:\n{log}");
@@ -123,7 +123,7 @@ fn two_ranks_train_as_one_process_at_twice_the_accumulation_and_survive_losing_a
     assert_eq!(train_records(&ranks), STEPS as usize, "one metrics record per step, rank 0's");
 
     let single = dir.path().join("single");
-    succeeded(train(1, &single_config, &single, false, None));
+    succeeded(&train(1, &single_config, &single, false, None));
     let difference = largest_difference(&weights(&ranks, STEPS), &weights(&single, STEPS));
     assert!(difference <= 1e-5, "two ranks and one process at twice the accumulation differ by {difference}");
     eprintln!("two ranks: {two_ranks_s:.1} s; largest weight difference to one process: {difference:e}");
@@ -142,7 +142,7 @@ fn two_ranks_train_as_one_process_at_twice_the_accumulation_and_survive_losing_a
     assert_eq!(checkpoint_folders(&killed), ["step-00000002"].map(String::from), "{log}");
     assert!(killed.join("checkpoints/step-00000002/state.json").exists(), "the checkpoint is complete");
 
-    let log = succeeded(train(2, &per_rank, &killed, true, None));
+    let log = succeeded(&train(2, &per_rank, &killed, true, None));
     assert!(log.contains(&format!("trained steps 2..{STEPS}")), "the resume starts at step 2:\n{log}");
     assert_eq!(weights(&killed, STEPS), weights(&ranks, STEPS), "the resumed run differs from the uninterrupted one");
     assert_eq!(train_records(&killed), STEPS as usize, "the metrics continue where the checkpoint was");

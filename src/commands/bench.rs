@@ -43,10 +43,10 @@ enum Suite {
 /// Runs the suite the arguments name.
 pub fn run(args: Args) -> Result<()> {
     match args.suite {
-        Some(Suite::Compute(compute)) => bench_compute::run(compute),
-        Some(Suite::Table(table)) => bench_compute::run_table(table),
-        Some(Suite::Refiner(refiner)) => bench_refiner::run(refiner),
-        None => run_sweep(args.sweep),
+        Some(Suite::Compute(compute)) => bench_compute::run(&compute),
+        Some(Suite::Table(table)) => bench_compute::run_table(&table),
+        Some(Suite::Refiner(refiner)) => bench_refiner::run(&refiner),
+        None => run_sweep(&args.sweep),
     }
 }
 
@@ -207,7 +207,7 @@ impl SweepArgs {
 const SWEEP_OUTPUT: OutputKind = OutputKind { command: "bench", signature: "bench-notes.txt" };
 
 /// Runs the sweep, writes the outputs and prints the table, the notes and where the files are.
-fn run_sweep(args: SweepArgs) -> Result<()> {
+fn run_sweep(args: &SweepArgs) -> Result<()> {
     let (Some(scene), Some(out)) = (&args.scene, &args.out) else {
         anyhow::bail!("dggt bench needs --scene and --out (the sweep), or a suite (`compute`, `table`, `refiner`)");
     };

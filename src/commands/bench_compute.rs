@@ -117,7 +117,7 @@ fn build_flavour() -> &'static str {
     }
 }
 
-pub fn run(args: Args) -> Result<()> {
+pub fn run(args: &Args) -> Result<()> {
     let device = args.device.single()?;
     let options = args.options()?;
     let references = read_all(&args.reference)?;
@@ -173,7 +173,7 @@ pub struct TableArgs {
     overwrite: OverwriteFileArg,
 }
 
-pub fn run_table(args: TableArgs) -> Result<()> {
+pub fn run_table(args: &TableArgs) -> Result<()> {
     if let Some(path) = &args.out {
         output::prepare_file(path, "--out", args.overwrite.existing())?;
     }

@@ -62,7 +62,7 @@ fn mib(value: Option<f64>) -> String {
 }
 
 /// Builds the refiner, times it and prints one line per figure.
-pub fn run(args: Args) -> Result<()> {
+pub fn run(args: &Args) -> Result<()> {
     anyhow::ensure!(args.repeat > 0, "--repeat must be at least 1");
     let device = args.device.single()?;
     let (configs, origin) = match &args.model {
@@ -73,7 +73,7 @@ pub fn run(args: Args) -> Result<()> {
         return write_model(&configs, dir, args.overwrite.existing(), &device);
     }
     let started = Instant::now();
-    let refiner = build_refiner(&args, &configs, &origin, &device)?;
+    let refiner = build_refiner(args, &configs, &origin, &device)?;
     let build_s = started.elapsed().as_secs_f64();
     let (memory_built, resident_built) = (peak_memory_mib(), resident_memory_mib());
     let mode = if args.reference_view { RefinerMode::ReferenceView } else { RefinerMode::SingleView };

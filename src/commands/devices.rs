@@ -12,7 +12,7 @@ pub struct Args {
     device: Option<DeviceChoice>,
 }
 
-pub fn run(args: Args) -> Result<()> {
+pub fn run(args: &Args) -> Result<()> {
     let choices = args.device.map_or(DeviceChoice::ALL.to_vec(), |d| vec![d]);
     let mut failed = false;
     for choice in choices {

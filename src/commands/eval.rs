@@ -74,6 +74,11 @@ pub struct Args {
     /// frame of the window].
     #[arg(long, value_delimiter = ',')]
     pub score_frames: Option<Vec<usize>>,
+    /// At most this many input frames per forward pass: a long window is evaluated in overlapping passes (each
+    /// sharing its last input with the next), each frame scored by the pass whose inputs bracket it. Give the
+    /// number of inputs the model was trained on [default: every input in one pass].
+    #[arg(long)]
+    pub inputs_per_pass: Option<usize>,
     /// Where the cameras come from: `predicted` (unposed) or `export`.
     #[arg(long, value_enum, default_value = "predicted")]
     pub poses: PosesChoice,
@@ -127,7 +132,8 @@ impl Args {
                 Protocol::interpolation(start, length, self.every.unwrap_or(PAPER_EVERY), cameras)
             }
         };
-        let protocol = Protocol { scored: self.score_frames.clone(), ..protocol };
+        let protocol =
+            Protocol { scored: self.score_frames.clone(), inputs_per_pass: self.inputs_per_pass, ..protocol };
         protocol.validate()?;
         Ok(protocol)
     }
@@ -173,7 +179,7 @@ fn check_distinct(scenes: &[PathBuf]) -> Result<()> {
 }
 
 /// Runs the evaluation; prints the Markdown report followed by where the files are.
-pub fn run(args: Args) -> Result<()> {
+pub fn run(args: &Args) -> Result<()> {
     let device = args.device.single()?;
     let options = args.options()?;
     let named = args.scenes.iter().map(|scene| ("--scene", Some(scene)));
@@ -223,6 +229,11 @@ mod tests {
             parse(&["--protocol", "interpolation", "--every", "3", "--frames", "4..11", "--cameras", "2"]).unwrap();
         assert_eq!(options.protocol.input_frames(), vec![4, 7, 10]);
         assert_eq!(options.protocol.cameras, vec![2]);
+        assert!(parse(&["--inputs-per-pass", "3"]).unwrap_err().contains("the paper protocol is one pass"));
+        let long = ["--protocol", "interpolation", "--every", "4", "--frames", "0..40", "--inputs-per-pass"];
+        assert!(parse(&[&long[..], &["1"]].concat()).unwrap_err().contains("two inputs or more"));
+        let passes = parse(&[&long[..], &["3"]].concat()).unwrap().protocol.passes();
+        assert_eq!(passes.len(), 5, "inputs 0, 4, ..., 36 in passes of three sharing their ends");
         let paper = parse(&["--width", "84", "--preset", "tiny"]).unwrap();
         assert_eq!(paper.protocol, Protocol::paper());
         assert_eq!(paper.width, Some(84));

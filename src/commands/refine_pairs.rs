@@ -65,7 +65,7 @@ struct Tally {
     failed: Vec<u64>,
 }
 
-pub fn run(args: Args) -> Result<()> {
+pub fn run(args: &Args) -> Result<()> {
     let existing = args.overwrite.existing();
     let _lock = output::lock(&args.out, "dggt refine-pairs")?;
     if !args.shards {
@@ -116,7 +116,7 @@ pub fn run(args: Args) -> Result<()> {
         bar.inc(1);
     }
     bar.finish_and_clear();
-    finish(&args, &run, &tally, &collected)
+    finish(args, &run, &tally, &collected)
 }
 
 /// What shards rendered by the run in `run` at checkpoint step `step` record.

@@ -116,7 +116,7 @@ fn the_real_log_converts_and_trains_on_frames_it_never_sees() {
     let validation = shipped.data.validation.clone();
     assert!(validation.targets.iter().all(|t| shipped.sampler.held_out.contains(t)), "{:?}", shipped.sampler);
     let mut config = shipped.unattended(&dir.path().join("run"));
-    config.data.scene = scene.clone();
+    config.data.scene = scene;
     config.data.validation = validation;
     config.sampler.cameras = vec![0, 1, 2];
     config.run.steps = 30;

@@ -93,7 +93,7 @@ fn write_perturbed(source: &Path, target: &Path, name: &str, delta: f32, extra: 
         .map(|(key, view)| {
             let mut data = view.data().to_vec();
             if key == name {
-                assert_eq!(view.dtype(), Dtype::F32);
+                assert_eq!(view.dtype(), Dtype::F32, "{key} stored as f32");
                 for chunk in data.chunks_exact_mut(4) {
                     let value = f32::from_le_bytes(chunk.try_into().unwrap()) + delta;
                     chunk.copy_from_slice(&value.to_le_bytes());

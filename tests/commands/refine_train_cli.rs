@@ -111,7 +111,7 @@ fn refine_pairs_survives_a_damaged_image_and_names_it() {
     let bytes = std::fs::read(&damaged).unwrap();
     std::fs::write(&damaged, &bytes[..400]).unwrap();
     let mut overfit = TrainConfig::load(&repo.join("configs/tiny-overfit.toml")).unwrap();
-    overfit.data.scene = scene.clone();
+    overfit.data.scene = scene;
     // 5-6 inputs and one target per input: most samples leave frame 12 out, so the damaged sample's retry loads.
     (overfit.sampler.min_inputs, overfit.sampler.max_inputs) = (5, 6);
     (overfit.sampler.targets_per_input, overfit.sampler.target_margin) = (1, 0);

@@ -21,13 +21,13 @@ fn text(output: &Output) -> String {
     format!("{}{}", String::from_utf8_lossy(&output.stdout), String::from_utf8_lossy(&output.stderr))
 }
 
-fn succeeded(output: Output) -> String {
-    assert!(output.status.success(), "{}", text(&output));
-    text(&output)
+fn succeeded(output: &Output) -> String {
+    assert!(output.status.success(), "{}", text(output));
+    text(output)
 }
 
-fn failed(output: Output) -> String {
-    assert!(!output.status.success(), "succeeded:\n{}", text(&output));
+fn failed(output: &Output) -> String {
+    assert!(!output.status.success(), "succeeded:\n{}", text(output));
     String::from_utf8_lossy(&output.stderr).into_owned()
 }
 
@@ -73,11 +73,11 @@ fn train_refuses_a_folder_holding_a_run_and_leaves_it_untouched() {
     let dir = tempfile::tempdir().unwrap();
     let config = write_config(dir.path(), "train.toml", |c| c.run.steps = 3);
     let run = dir.path().join("run");
-    succeeded(train(&config, &run, &[]));
+    succeeded(&train(&config, &run, &[]));
     let before = snapshot(&run);
     assert!(before.contains_key(Path::new("checkpoints/step-00000003/model.bpk")), "{:?}", before.keys());
 
-    let stderr = failed(train(&config, &run, &["--steps", "2"]));
+    let stderr = failed(&train(&config, &run, &["--steps", "2"]));
     for expected in [path(&run), "already holds a training run", "--resume", "--out"] {
         assert!(stderr.contains(expected), "{expected} missing from\n{stderr}");
     }
@@ -86,8 +86,8 @@ fn train_refuses_a_folder_holding_a_run_and_leaves_it_untouched() {
     assert!(before == after, "a file of the run changed");
 
     let fresh = dir.path().join("fresh");
-    succeeded(train(&config, &fresh, &["--dry-run"]));
-    let trained = succeeded(train(&config, &fresh, &["--steps", "1"]));
+    succeeded(&train(&config, &fresh, &["--dry-run"]));
+    let trained = succeeded(&train(&config, &fresh, &["--steps", "1"]));
     assert!(trained.contains("trained steps 0..1"), "{trained}");
 }
 
@@ -95,7 +95,7 @@ fn train_refuses_a_folder_holding_a_run_and_leaves_it_untouched() {
 fn trained_run(dir: &Path, steps: u64) -> PathBuf {
     let config = write_config(dir, "train.toml", |c| c.run.steps = steps);
     let run = dir.join("run");
-    succeeded(train(&config, &run, &[]));
+    succeeded(&train(&config, &run, &[]));
     run
 }
 
@@ -124,17 +124,17 @@ fn reconstruct_and_eval_refuse_a_used_output_folder_unless_told_to_replace_it() 
     let dir = tempfile::tempdir().unwrap();
     let run = trained_run(dir.path(), 1);
     let out = dir.path().join("reconstruction");
-    succeeded(reconstruct(&run, &out, &["--frames", "0..3", "--width", "56"]));
+    succeeded(&reconstruct(&run, &out, &["--frames", "0..3", "--width", "56"]));
     let first = snapshot(&out);
     let renders = |out: &Path| std::fs::read_dir(out.join("renders")).unwrap().count();
     assert_eq!(renders(&out), 3);
 
-    let stderr = failed(reconstruct(&run, &out, &["--frames", "0..2", "--width", "56"]));
+    let stderr = failed(&reconstruct(&run, &out, &["--frames", "0..2", "--width", "56"]));
     for expected in [path(&out), "is not empty", "--overwrite"] {
         assert!(stderr.contains(expected), "{expected} missing from\n{stderr}");
     }
     assert!(snapshot(&out) == first, "the refused run changed the folder");
-    succeeded(reconstruct(&run, &out, &["--frames", "0..2", "--width", "56", "--overwrite"]));
+    succeeded(&reconstruct(&run, &out, &["--frames", "0..2", "--width", "56", "--overwrite"]));
     assert_eq!(renders(&out), 2, "a render of the first run stayed");
     let summary = json(&out.join("summary.json"));
     let files: Vec<&str> = summary["files"].as_array().unwrap().iter().map(|f| f.as_str().unwrap()).collect();
@@ -144,15 +144,15 @@ fn reconstruct_and_eval_refuse_a_used_output_folder_unless_told_to_replace_it() 
     }
 
     let evaluation = dir.path().join("evaluation");
-    succeeded(evaluate(&run, &evaluation, &["--width", "56"]));
-    let stderr = failed(evaluate(&run, &evaluation, &["--width", "56"]));
+    succeeded(&evaluate(&run, &evaluation, &["--width", "56"]));
+    let stderr = failed(&evaluate(&run, &evaluation, &["--width", "56"]));
     assert!(stderr.contains(path(&evaluation)) && stderr.contains("--overwrite"), "{stderr}");
-    succeeded(evaluate(&run, &evaluation, &["--width", "56", "--overwrite"]));
+    succeeded(&evaluate(&run, &evaluation, &["--width", "56", "--overwrite"]));
 
     let notes = dir.path().join("notes");
     std::fs::create_dir(&notes).unwrap();
     std::fs::write(notes.join("todo.txt"), "the user's").unwrap();
-    let stderr = failed(evaluate(&run, &notes, &["--width", "56", "--overwrite"]));
+    let stderr = failed(&evaluate(&run, &notes, &["--width", "56", "--overwrite"]));
     assert!(stderr.contains("holds no earlier `dggt eval` output"), "{stderr}");
     assert_eq!(std::fs::read_to_string(notes.join("todo.txt")).unwrap(), "the user's");
 }
@@ -165,12 +165,12 @@ fn reconstruct_refuses_outputs_over_the_bound_before_any_work() {
     let dir = tempfile::tempdir().unwrap();
     let run = trained_run(dir.path(), 1);
     let out = dir.path().join("reconstruction");
-    let stderr = failed(reconstruct(&run, &out, &["--frames", "0..2", "--every", "100", "--max-output-gb", "0.001"]));
+    let stderr = failed(&reconstruct(&run, &out, &["--frames", "0..2", "--every", "100", "--max-output-gb", "0.001"]));
     for expected in ["101 render times x 1 cameras and 2 input views", "over the bound of 0.00 GB", "--max-output-gb"] {
         assert!(stderr.contains(expected), "{expected} missing from\n{stderr}");
     }
     assert!(!out.exists(), "a refused reconstruction wrote {}", out.display());
-    succeeded(reconstruct(&run, &out, &["--frames", "0..2", "--every", "3"]));
+    succeeded(&reconstruct(&run, &out, &["--frames", "0..2", "--every", "3"]));
     assert_eq!(std::fs::read_dir(out.join("renders")).unwrap().count(), 4);
 }
 
@@ -192,13 +192,13 @@ fn resume_refuses_another_architecture_and_reports_changed_optimiser_settings() 
         ),
     ];
     for (config, expected) in changed {
-        let stderr = failed(train(&config, &run, &["--resume", "--steps", "3"]));
+        let stderr = failed(&train(&config, &run, &["--resume", "--steps", "3"]));
         assert!(stderr.contains(expected) && stderr.contains(path(&run)), "{expected} missing from\n{stderr}");
         assert!(snapshot(&run) == before, "a refused resume changed the run");
     }
 
     let lower = write_config(dir.path(), "lower-lr.toml", |c| c.optim.lr = 1e-3);
-    let resumed = succeeded(train(&lower, &run, &["--resume", "--steps", "3"]));
+    let resumed = succeeded(&train(&lower, &run, &["--resume", "--steps", "3"]));
     assert!(resumed.contains("trained steps 2..3"), "{resumed}");
     assert!(resumed.contains("optim.lr is 0.006 in the checkpoint, 0.001 in the configuration"), "{resumed}");
 }
@@ -212,15 +212,15 @@ fn resume_refuses_changed_inputs_unless_allowed() {
     let run = trained_run(dir.path(), 2);
     let before = snapshot(&run);
     let wider = write_config(dir.path(), "wider.toml", |c| c.data.preprocess.target_width = 70);
-    let stderr = failed(train(&wider, &run, &["--resume", "--steps", "3"]));
+    let stderr = failed(&train(&wider, &run, &["--resume", "--steps", "3"]));
     let expected = "data.preprocess.target_width is 56 in the checkpoint, 70 in the configuration";
     assert!(stderr.contains(expected) && stderr.contains("--allow-changed"), "{stderr}");
     let more = write_config(dir.path(), "more-targets.toml", |c| c.sampler.targets_per_input += 1);
-    let stderr = failed(train(&more, &run, &["--resume", "--steps", "3", "--allow-changed", "data.preprocess"]));
+    let stderr = failed(&train(&more, &run, &["--resume", "--steps", "3", "--allow-changed", "data.preprocess"]));
     assert!(stderr.contains("sampler.targets_per_input is"), "{stderr}");
     assert!(snapshot(&run) == before, "a refused resume changed the run");
 
-    let resumed = succeeded(train(&more, &run, &["--resume", "--steps", "3", "--allow-changed", "sampler"]));
+    let resumed = succeeded(&train(&more, &run, &["--resume", "--steps", "3", "--allow-changed", "sampler"]));
     assert!(resumed.contains("trained steps 2..3") && resumed.contains("sampler.targets_per_input is"), "{resumed}");
 }
 
@@ -233,13 +233,13 @@ fn reconstruct_and_eval_default_to_the_width_the_run_trained_at() {
     let run = trained_run(dir.path(), 1);
     let width = |out: &Path| json(&out.join("summary.json"))["network_size"][0].as_u64();
     let trained = dir.path().join("trained");
-    succeeded(reconstruct(&run, &trained, &["--frames", "0..2"]));
+    succeeded(&reconstruct(&run, &trained, &["--frames", "0..2"]));
     assert_eq!(width(&trained), Some(56));
     let wider = dir.path().join("wider");
-    succeeded(reconstruct(&run, &wider, &["--frames", "0..2", "--width", "70"]));
+    succeeded(&reconstruct(&run, &wider, &["--frames", "0..2", "--width", "70"]));
     assert_eq!(width(&wider), Some(70));
     let evaluation = dir.path().join("evaluation");
-    succeeded(evaluate(&run, &evaluation, &[]));
+    succeeded(&evaluate(&run, &evaluation, &[]));
     assert_eq!(json(&evaluation.join("eval.json"))["preprocess"]["target_width"].as_u64(), Some(56));
 
     // An older version's checkpoint: neither the preprocessing nor the checksums that list it.
@@ -247,7 +247,7 @@ fn reconstruct_and_eval_default_to_the_width_the_run_trained_at() {
     std::fs::remove_file(checkpoint.join("preprocess.json")).expect("the checkpoint records its preprocessing");
     std::fs::remove_file(checkpoint.join("checksums.json")).expect("the checkpoint lists its files' checksums");
     let older = dir.path().join("older");
-    let text = succeeded(reconstruct(&run, &older, &["--frames", "0..1"]));
+    let text = succeeded(&reconstruct(&run, &older, &["--frames", "0..1"]));
     assert!(text.contains("does not record the input preprocessing"), "{text}");
     assert_eq!(width(&older), Some(518));
 }

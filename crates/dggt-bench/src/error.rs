@@ -57,6 +57,8 @@ pub enum BenchError {
 }
 
 impl BenchError {
+    // Takes any error by value, like `impl Into<String>`, so `map_err(|e| ..(path, e))` reads plainly.
+    #[allow(clippy::needless_pass_by_value)]
     pub(crate) fn file(path: impl Into<PathBuf>, detail: impl ToString) -> Self {
         Self::File { path: path.into(), detail: detail.to_string() }
     }

@@ -21,6 +21,8 @@ pub enum CheckpointError {
 }
 
 impl CheckpointError {
+    // Takes any error by value, like `impl Into<String>`, so `map_err(|e| ..(path, e))` reads plainly.
+    #[allow(clippy::needless_pass_by_value)]
     pub(crate) fn file(path: impl Into<PathBuf>, detail: impl ToString) -> Self {
         Self::File { path: path.into(), detail: detail.to_string() }
     }

@@ -73,7 +73,7 @@ impl NcclCommunicator {
         // passes the same id and size and its own rank.
         let comm = unsafe {
             nccl::comm_init_rank(comm.as_mut_ptr(), group.size() as i32, id, group.rank() as i32)
-                .map_err(|error| nccl_error("joining the communicator", error))?;
+                .map_err(|error| nccl_error("joining the communicator", &error))?;
             comm.assume_init()
         };
         let stream = cuda::stream::create(cuda::stream::StreamKind::NonBlocking)
@@ -83,6 +83,8 @@ impl NcclCommunicator {
 
     /// The element-wise sum of `values` over every rank, a new tensor on the same device. Every rank calls it
     /// with a tensor of the same length, in the same order of calls.
+    // The handle clones keep `source` and `summed` owning their buffers while NCCL uses the raw pointers.
+    #[allow(clippy::redundant_clone)]
     pub fn all_reduce_sum(&self, values: Tensor<1>) -> Result<Tensor<1>, CollectiveError> {
         let count = values.dims()[0];
         let target = Tensor::<1>::zeros([count], &values.device());
@@ -114,7 +116,7 @@ impl NcclCommunicator {
                 handles.comm,
                 handles.stream as _,
             )
-            .map_err(|error| nccl_error("summing the gradients", error))?;
+            .map_err(|error| nccl_error("summing the gradients", &error))?;
             cuda::stream::synchronize(handles.stream).map_err(|error| cuda_error("waiting for the sum", error))?;
         }
         drop((read, write, handles));
@@ -172,7 +174,7 @@ fn make_current(index: usize) -> Result<(), CollectiveError> {
 fn shared_unique_id(group: &ProcessGroup) -> Result<ncclUniqueId, CollectiveError> {
     let mut bytes = [0u8; 128];
     if group.is_writer() {
-        let id = nccl::get_uniqueid().map_err(|error| nccl_error("creating the communicator's id", error))?;
+        let id = nccl::get_uniqueid().map_err(|error| nccl_error("creating the communicator's id", &error))?;
         for (byte, value) in bytes.iter_mut().zip(id.internal) {
             *byte = value as u8;
         }
@@ -194,7 +196,7 @@ fn device_tensor(values: Tensor<1>) -> Result<CubeTensor, CollectiveError> {
     Ok(primitive)
 }
 
-fn nccl_error(doing: &'static str, error: nccl::NcclError) -> CollectiveError {
+fn nccl_error(doing: &'static str, error: &nccl::NcclError) -> CollectiveError {
     CollectiveError::Nccl { doing, code: format!("{error:?}") }
 }
 

@@ -44,7 +44,7 @@ fn main() {
     let started = Instant::now();
     let summary = convert_segment(&segment, &dir.path().join("000"), &WaymoOptions::default(), &|_| {}).unwrap();
     let seconds = started.elapsed().as_secs_f64();
-    assert_eq!(summary.frames, frames);
+    assert_eq!(summary.frames, frames, "every frame of the segment converted");
     println!(
         "waymo segment: {frames} frames ({:.0} MiB) in {seconds:.2} s = {:.1} frames/s; peak memory {:.0} MiB \
          (before converting: {:.0} MiB)",

@@ -163,7 +163,7 @@ where
         while let Some((index, job)) = self.take_job() {
             let result = job.and_then(|job| {
                 panic::catch_unwind(AssertUnwindSafe(|| (self.load)(job)))
-                    .unwrap_or_else(|payload| Err(panicked(index, "loading", payload)))
+                    .unwrap_or_else(|payload| Err(panicked(index, "loading", &*payload)))
             });
             if self.results.send((index, result)).is_err() {
                 return;
@@ -201,14 +201,14 @@ where
                 admission.taken += 1;
                 admission.exhausted = true;
                 self.shared.changed.notify_all();
-                Some((index, Err(panicked(index, "producing the job", payload))))
+                Some((index, Err(panicked(index, "producing the job", &*payload))))
             }
         }
     }
 }
 
 /// The error reported in place of a job whose code panicked.
-fn panicked(index: usize, during: &str, payload: Box<dyn Any + Send>) -> DataError {
+fn panicked(index: usize, during: &str, payload: &(dyn Any + Send)) -> DataError {
     let message = payload
         .downcast_ref::<&str>()
         .copied()

@@ -57,3 +57,56 @@ pub fn cell_has_sky(mask: &[u8], width: usize, height: usize, row: usize, col: u
     (stride * row..(stride * row + stride).min(height))
         .any(|r| (stride * col..(stride * col + stride).min(width)).any(|c| mask[r * width + c] >= 128))
 }
+
+/// A lidar cell lies at a depth edge when the rendered expected depth's 3x3 neighbourhood around it spans more
+/// than this factor (largest over smallest): there the render blends a near and a far surface.
+pub const DEPTH_EDGE_SPAN: f32 = 1.3;
+
+/// Per pixel, the largest over the smallest expected depth of its 3x3 neighbourhood (clamped at the border);
+/// an empty pixel (depth 0) beside a drawn one spans without bound.
+pub fn depth_span(depth: &[f32], width: usize, height: usize) -> Vec<f32> {
+    let mut span = Vec::with_capacity(depth.len());
+    for y in 0..height {
+        for x in 0..width {
+            let (mut low, mut high) = (f32::INFINITY, 0.0f32);
+            for ny in y.saturating_sub(1)..(y + 2).min(height) {
+                for nx in x.saturating_sub(1)..(x + 2).min(width) {
+                    let d = depth[ny * width + nx];
+                    (low, high) = (low.min(d), high.max(d));
+                }
+            }
+            span.push(high / low.max(1e-6));
+        }
+    }
+    span
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{DEPTH_EDGE_SPAN, depth_span};
+
+    #[test]
+    fn a_depth_step_spans_its_ratio_on_both_sides_and_nothing_away_from_it() {
+        // 5 x 3: depth 4 in columns 0-1, 10 in columns 2-4.
+        let depth: Vec<f32> = (0..15).map(|i| if i % 5 < 2 { 4.0 } else { 10.0 }).collect();
+        let span = depth_span(&depth, 5, 3);
+        for row in 0..3 {
+            let at = |col: usize| span[row * 5 + col];
+            assert_eq!(at(0), 1.0, "column 0 sees only the near surface");
+            assert_eq!((at(1), at(2)), (2.5, 2.5), "both sides of the step span 10 / 4");
+            assert_eq!((at(3), at(4)), (1.0, 1.0), "columns 3-4 see only the far surface");
+        }
+        assert!(at_edge(2.5) && !at_edge(1.0), "a 2.5x step is an edge, a flat surface is not");
+    }
+
+    #[test]
+    fn an_empty_pixel_beside_a_drawn_one_is_an_edge() {
+        let span = depth_span(&[0.0, 5.0, 5.0], 3, 1);
+        assert!(span[0] > 1e6 && span[1] > 1e6, "empty beside drawn: {span:?}");
+        assert_eq!(span[2], 1.0, "the far end sees only the surface");
+    }
+
+    fn at_edge(span: f32) -> bool {
+        span > DEPTH_EDGE_SPAN
+    }
+}

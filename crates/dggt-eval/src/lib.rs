@@ -24,8 +24,8 @@ pub use error::EvalError;
 pub use motion::motion_label;
 pub use protocol::{Protocol, ProtocolKind, TargetKind};
 pub use report::{
-    EvalReport, MOTION_HELD, MOTION_INSTANCES, MOTION_LEARNT, MOTION_VELOCITY, SceneReport, SourceFlowMetrics,
-    SourcePsnr, SourceSummary, SplitSummary, ViewRecord,
+    DepthParts, EvalReport, MOTION_HELD, MOTION_INSTANCES, MOTION_LEARNT, MOTION_VELOCITY, SceneReport,
+    SourceFlowMetrics, SourcePsnr, SourceSummary, SplitSummary, ViewRecord,
 };
 pub use runner::{EvalOptions, LpipsWeights, evaluate};
 pub use sources::{CropImages, ImageSource};

@@ -14,6 +14,12 @@
 //! `scored` narrows the frames scored besides the inputs to a list (the frames a training run held out, say, so
 //! that every scored frame between the inputs is one the model never trained on); the inputs are always scored.
 //!
+//! `inputs_per_pass` evaluates a long window in overlapping forward passes of at most that many input frames
+//! each (a model trained on windows of three inputs sees three at a time): pass `k` takes the inputs
+//! `k (n - 1) ..= k (n - 1) + n - 1` and scores the frames from its first input up to (not including) the next
+//! pass's first input, the last pass up to the window's end; so every scored frame is scored once, by the pass
+//! whose inputs bracket it, and the report's splits are those of the whole window.
+//!
 //! Frames are the export's frame indices; the window is `start..start + length` (end exclusive). Cameras are
 //! export camera ids (0 = FRONT, 1 = FRONT_LEFT, 2 = FRONT_RIGHT in Waymo exports).
 
@@ -87,6 +93,14 @@ impl fmt::Display for TargetKind {
     }
 }
 
+/// One forward pass of a protocol: its own protocol (its inputs and window) and the frames whose scores it
+/// reports (the frames it shares with the next pass are the next pass's).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Pass {
+    pub protocol: Protocol,
+    pub scores: std::ops::Range<usize>,
+}
+
 /// One protocol with its window and cameras.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
 pub struct Protocol {
@@ -102,6 +116,10 @@ pub struct Protocol {
     /// The frames scored besides the inputs; every other frame of the window when absent.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub scored: Option<Vec<usize>>,
+    /// At most this many input frames per forward pass (see the module documentation); all in one pass when
+    /// absent.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub inputs_per_pass: Option<usize>,
 }
 
 impl Protocol {
@@ -114,17 +132,26 @@ impl Protocol {
             every: PAPER_EVERY,
             cameras: DEFAULT_CAMERAS.to_vec(),
             scored: None,
+            inputs_per_pass: None,
         }
     }
 
     /// The release's reconstruction mode: frames `start..start + length` are inputs and are scored.
     pub fn reconstruction(start: usize, length: usize, cameras: Vec<usize>) -> Self {
-        Self { kind: ProtocolKind::Reconstruction, start, length, every: 1, cameras, scored: None }
+        Self {
+            kind: ProtocolKind::Reconstruction,
+            start,
+            length,
+            every: 1,
+            cameras,
+            scored: None,
+            inputs_per_pass: None,
+        }
     }
 
     /// The release's interpolation mode: every `every`-th frame of the window is an input.
     pub fn interpolation(start: usize, length: usize, every: usize, cameras: Vec<usize>) -> Self {
-        Self { kind: ProtocolKind::Interpolation, start, length, every, cameras, scored: None }
+        Self { kind: ProtocolKind::Interpolation, start, length, every, cameras, scored: None, inputs_per_pass: None }
     }
 
     /// Checks the settings themselves (not yet against a scene).
@@ -152,6 +179,21 @@ impl Protocol {
         }
         if self.cameras.is_empty() {
             return Err(EvalError::option("--cameras", "no camera chosen"));
+        }
+        match (self.inputs_per_pass, self.kind) {
+            (Some(n), _) if n < 2 => {
+                return Err(EvalError::option(
+                    "--inputs-per-pass",
+                    format!("a pass needs two inputs or more, got {n}"),
+                ));
+            }
+            (Some(_), ProtocolKind::Paper) => {
+                return Err(EvalError::option(
+                    "--inputs-per-pass",
+                    "the paper protocol is one pass of its four inputs",
+                ));
+            }
+            _ => {}
         }
         let inputs = self.input_frames();
         let outside = |f: &&usize| !self.window().contains(*f) || inputs.contains(*f);
@@ -202,6 +244,33 @@ impl Protocol {
     /// The input frame indices, ascending.
     pub fn input_frames(&self) -> Vec<usize> {
         self.window().step_by(self.every).collect()
+    }
+
+    /// The forward passes this protocol runs: itself, or with [`Protocol::inputs_per_pass`] the overlapping
+    /// passes of at most that many inputs, each a protocol of its own, with the frames it alone scores.
+    pub fn passes(&self) -> Vec<Pass> {
+        let inputs = self.input_frames();
+        let per_pass = match self.inputs_per_pass {
+            Some(n) if n < inputs.len() => n,
+            _ => return vec![Pass { protocol: self.clone(), scores: self.window() }],
+        };
+        let last = inputs.len() - 1;
+        (0..last)
+            .step_by(per_pass - 1)
+            .map(|first| {
+                let final_input = (first + per_pass - 1).min(last);
+                let is_last = final_input == last;
+                let start = inputs[first];
+                let end = if is_last { self.start + self.length } else { inputs[final_input] + 1 };
+                let scores = start..if is_last { end } else { inputs[final_input] };
+                let window = start..end;
+                let scored = self.scored.as_ref().map(|frames| {
+                    frames.iter().copied().filter(|f| window.contains(f) && !inputs.contains(f)).collect()
+                });
+                let protocol = Protocol { start, length: end - start, scored, inputs_per_pass: None, ..self.clone() };
+                Pass { protocol, scores }
+            })
+            .collect()
     }
 
     /// Every scored frame with its split, ascending.

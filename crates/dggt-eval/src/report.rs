@@ -16,6 +16,7 @@ use dggt_data::Preprocess;
 use dggt_infer::CheckpointInfo;
 use serde::Serialize;
 
+use crate::grid::DEPTH_EDGE_SPAN;
 use crate::protocol::{Protocol, TargetKind};
 use dggt_metrics::{FlowMetrics, mean_present};
 
@@ -74,6 +75,9 @@ pub struct ViewRecord {
     pub depth_cells: usize,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub depth_note: Option<String>,
+    /// Where the depth error lies and what the median depth scores; absent without D-RMSE.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub depth_parts: Option<DepthParts>,
     /// Scene-flow metrics of the predicted motion; absent when not evaluated (see the scene's notes).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub motion: Option<FlowMetrics>,
@@ -93,6 +97,33 @@ pub struct ViewRecord {
     /// camera nearest in time, copied unchanged (no LPIPS); absent at input views.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub nearest_input: Option<ImageScores>,
+}
+
+/// The depth error's parts at one view (or their means over a split's views, or scenes): AbsRel of the expected
+/// depth under the view's alignment over the lidar cells at a depth edge (the render's 3x3 neighbourhood spans
+/// more than [`DEPTH_EDGE_SPAN`]) and over the rest, the share of cells at an edge, and
+/// D-RMSE (m) and AbsRel of the median depth ([`dggt_scene::DepthStatistic::Median`]) under its own alignment.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct DepthParts {
+    pub abs_rel_at_edges: Option<f64>,
+    pub abs_rel_elsewhere: Option<f64>,
+    pub edge_fraction: Option<f64>,
+    pub median_d_rmse: Option<f64>,
+    pub median_abs_rel: Option<f64>,
+}
+
+impl DepthParts {
+    /// The means of each part over `parts` (those that have it); `None` when none has parts.
+    fn mean(parts: &[Option<&DepthParts>]) -> Option<DepthParts> {
+        let mean = |f: fn(&DepthParts) -> Option<f64>| mean_present(parts.iter().map(|p| p.and_then(f))).0;
+        parts.iter().any(Option::is_some).then(|| DepthParts {
+            abs_rel_at_edges: mean(|p| p.abs_rel_at_edges),
+            abs_rel_elsewhere: mean(|p| p.abs_rel_elsewhere),
+            edge_fraction: mean(|p| p.edge_fraction),
+            median_d_rmse: mean(|p| p.median_d_rmse),
+            median_abs_rel: mean(|p| p.median_abs_rel),
+        })
+    }
 }
 
 /// The scene-flow metrics of one motion source at one view.
@@ -154,6 +185,9 @@ pub struct SplitSummary {
     /// Views (or scenes) with a D-RMSE.
     pub d_rmse_count: usize,
     pub abs_rel: Option<f64>,
+    /// The depth error's parts ([`ViewRecord::depth_parts`]), absent without D-RMSE.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub depth_parts: Option<DepthParts>,
     pub epe3d: Option<f64>,
     pub acc5: Option<f64>,
     pub acc10: Option<f64>,
@@ -254,6 +288,7 @@ pub fn summarise_views(views: &[ViewRecord], split: TargetKind) -> SplitSummary 
         d_rmse,
         d_rmse_count,
         abs_rel: mean_present(views.iter().map(|v| v.abs_rel)).0,
+        depth_parts: DepthParts::mean(&views.iter().map(|v| v.depth_parts.as_ref()).collect::<Vec<_>>()),
         epe3d,
         acc5: motion(|m| Some(m.acc5)).0,
         acc10: motion(|m| Some(m.acc10)).0,
@@ -276,7 +311,9 @@ pub fn summarise_views(views: &[ViewRecord], split: TargetKind) -> SplitSummary 
                 }
             })
             .collect(),
-        dynamic_psnr_by_source: mean_by_source(views.iter().flat_map(|v| &v.dynamic_psnr_by_source)),
+        dynamic_psnr_by_source: mean_by_source(
+            &views.iter().flat_map(|v| &v.dynamic_psnr_by_source).collect::<Vec<_>>(),
+        ),
         refined: view_means(&views, |v| v.refined.as_ref()),
         nearest_input: view_means(&views, |v| v.nearest_input.as_ref()),
     }
@@ -317,6 +354,7 @@ pub fn summarise_scenes(scenes: &[SceneReport], splits: &[TargetKind]) -> Vec<Sp
                 d_rmse: mean(|r| r.d_rmse).0,
                 d_rmse_count: mean(|r| r.d_rmse).1,
                 abs_rel: mean(|r| r.abs_rel).0,
+                depth_parts: DepthParts::mean(&rows.iter().map(|r| r.depth_parts.as_ref()).collect::<Vec<_>>()),
                 epe3d: mean(|r| r.epe3d).0,
                 acc5: mean(|r| r.acc5).0,
                 acc10: mean(|r| r.acc10).0,
@@ -341,7 +379,9 @@ pub fn summarise_scenes(scenes: &[SceneReport], splits: &[TargetKind]) -> Vec<Sp
                         }
                     })
                     .collect(),
-                dynamic_psnr_by_source: mean_by_source(rows.iter().flat_map(|r| &r.dynamic_psnr_by_source)),
+                dynamic_psnr_by_source: mean_by_source(
+                    &rows.iter().flat_map(|r| &r.dynamic_psnr_by_source).collect::<Vec<_>>(),
+                ),
                 refined: split_means(&rows, |r| r.refined.as_ref()),
                 nearest_input: split_means(&rows, |r| r.nearest_input.as_ref()),
             }
@@ -350,12 +390,12 @@ pub fn summarise_scenes(scenes: &[SceneReport], splits: &[TargetKind]) -> Vec<Sp
 }
 
 /// Per source (in order of first appearance), the mean of its PSNRs among `scores` and how many there are.
-fn mean_by_source<'a>(scores: impl Iterator<Item = &'a SourcePsnr> + Clone) -> Vec<SourcePsnr> {
-    source_names(scores.clone().map(|s| &s.source))
+fn mean_by_source(scores: &[&SourcePsnr]) -> Vec<SourcePsnr> {
+    source_names(scores.iter().map(|s| &s.source))
         .into_iter()
         .map(|source| {
             let (mean, count) =
-                mean_present(scores.clone().filter(|s| s.source == source).map(|s| Some(s.dynamic_psnr)));
+                mean_present(scores.iter().filter(|s| s.source == source).map(|s| Some(s.dynamic_psnr)));
             SourcePsnr { source, dynamic_psnr: mean.unwrap_or(f64::NAN), count }
         })
         .collect()
@@ -380,7 +420,7 @@ fn percent(value: Option<f64>) -> String {
     value.map_or_else(|| "-".into(), |v| format!("{:.2}", 100.0 * v))
 }
 
-fn row(label: &str, count: String, s: &SplitSummary) -> String {
+fn row(label: &str, count: &str, s: &SplitSummary) -> String {
     format!(
         "| {label} | {count} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
         cell(s.psnr, 2),
@@ -413,10 +453,39 @@ impl EvalReport {
         );
         for scene in &self.scenes {
             if let Some(s) = scene.splits.iter().find(|s| s.split == summary.split) {
-                md.push_str(&paired_row(&scene.name, s.count.to_string(), s, other(s)));
+                md.push_str(&paired_row(&scene.name, &s.count.to_string(), s, other(s)));
             }
         }
-        md.push_str(&paired_row("**mean over scenes**", scenes.to_string(), summary, other(summary)));
+        md.push_str(&paired_row("**mean over scenes**", scenes, summary, other(summary)));
+        md
+    }
+}
+
+impl EvalReport {
+    /// The table of one split's depth error parts: each scene's and the mean over scenes.
+    fn depth_parts_table(&self, summary: &SplitSummary, scenes: &str) -> String {
+        let mut md = format!(
+            "\n### depth at depth edges (3x3 span > {DEPTH_EDGE_SPAN}) and elsewhere; the median depth\n\n\
+             | scene | views | AbsRel | AbsRel at edges | AbsRel elsewhere | cells at edges (%) | median D-RMSE (m) | \
+             median AbsRel |\n|---|---|---|---|---|---|---|---|\n"
+        );
+        let rows = self.scenes.iter().filter_map(|scene| {
+            let s = scene.splits.iter().find(|s| s.split == summary.split)?;
+            Some((scene.name.as_str(), s.count.to_string(), s))
+        });
+        for (label, count, s) in rows.chain([("**mean over scenes**", scenes.to_string(), summary)]) {
+            let parts = s.depth_parts.as_ref();
+            let _ = writeln!(
+                md,
+                "| {label} | {count} | {} | {} | {} | {} | {} | {} |",
+                cell(s.abs_rel, 3),
+                cell(parts.and_then(|p| p.abs_rel_at_edges), 3),
+                cell(parts.and_then(|p| p.abs_rel_elsewhere), 3),
+                percent(parts.and_then(|p| p.edge_fraction)),
+                cell(parts.and_then(|p| p.median_d_rmse), 3),
+                cell(parts.and_then(|p| p.median_abs_rel), 3),
+            );
+        }
         md
     }
 }
@@ -425,7 +494,7 @@ impl EvalReport {
 type OtherImages = fn(&SplitSummary) -> Option<&ImageMeans>;
 
 /// A row of a table of the renders beside other images (`other`: the refined renders, the nearest inputs).
-fn paired_row(label: &str, count: String, s: &SplitSummary, other: Option<&ImageMeans>) -> String {
+fn paired_row(label: &str, count: &str, s: &SplitSummary, other: Option<&ImageMeans>) -> String {
     format!(
         "| {label} | {count} | {} | {} | {} | {} | {} | {} |\n",
         cell(s.psnr, 2),
@@ -484,11 +553,14 @@ impl EvalReport {
             md.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
             for scene in &self.scenes {
                 if let Some(s) = scene.splits.iter().find(|s| s.split == summary.split) {
-                    md.push_str(&row(&scene.name, s.count.to_string(), s));
+                    md.push_str(&row(&scene.name, &s.count.to_string(), s));
                 }
             }
             let scenes = if summary.count == 1 { "1 scene".to_string() } else { format!("{} scenes", summary.count) };
-            md.push_str(&row("**mean over scenes**", scenes.clone(), summary));
+            md.push_str(&row("**mean over scenes**", &scenes, summary));
+            if summary.depth_parts.is_some() {
+                md.push_str(&self.depth_parts_table(summary, &scenes));
+            }
             if !summary.motion_by_source.is_empty() {
                 md.push_str("\n### motion by source (mean over scenes)\n\n");
                 md.push_str(

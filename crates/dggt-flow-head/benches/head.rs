@@ -113,7 +113,7 @@ fn peak_mib() -> f64 {
 fn main() {
     let chunk = std::env::args().skip(1).find_map(|a| a.parse::<usize>().ok());
     let default = FlowHeadShape::default();
-    let release_shape = FlowHeadShape { chunk: chunk.unwrap_or(default.chunk), ..default.clone() };
+    let release_shape = FlowHeadShape { chunk: chunk.unwrap_or(default.chunk), ..default };
     if chunk.is_none() {
         fixture_cases(&default);
     }

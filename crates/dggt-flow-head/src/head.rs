@@ -438,7 +438,7 @@ mod tests {
         assert_eq!(check_finite(&[finite.clone(), finite.clone()], 0), Ok(()));
         let infinite_second = rows(&[0.0, 1.0, 2.0, 3.0, f32::INFINITY, 5.0]);
         let nan_first = rows(&[f32::NAN, 1.0, 2.0, 3.0, 4.0, 5.0]);
-        let error = check_finite(&[finite.clone(), infinite_second.clone(), nan_first.clone()], 16);
+        let error = check_finite(&[finite, infinite_second.clone(), nan_first.clone()], 16);
         assert_eq!(error, Err(FlowError::NonFiniteDisplacement { row: 17, iteration: 1 }));
         let error = check_finite(&[nan_first, infinite_second], 0);
         assert_eq!(error, Err(FlowError::NonFiniteDisplacement { row: 0, iteration: 0 }));

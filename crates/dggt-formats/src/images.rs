@@ -17,7 +17,7 @@ pub fn write_rgb_png(path: &Path, size: ImageSize, rgb: &[f32]) -> Result<(), Fo
         rgb.iter().map(|&v| if v.is_finite() { (v.clamp(0.0, 1.0) * 255.0).round() as u8 } else { 0 }).collect();
     let image = RgbImage::from_raw(size.width, size.height, bytes)
         .ok_or_else(|| FormatError::invalid(path, "RGB buffer does not fill the image"))?;
-    crate::write_png(path, image.into())
+    crate::write_png(path, &image.into())
 }
 
 /// Reads an image as interleaved RGB in `[0, 1]`.

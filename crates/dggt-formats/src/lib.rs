@@ -28,7 +28,7 @@ pub(crate) fn write_file(path: &std::path::Path, bytes: &[u8]) -> Result<(), For
 }
 
 /// Encodes `image` as PNG and writes it to `path` ([`write_file`]).
-pub(crate) fn write_png(path: &std::path::Path, image: image::DynamicImage) -> Result<(), FormatError> {
+pub(crate) fn write_png(path: &std::path::Path, image: &image::DynamicImage) -> Result<(), FormatError> {
     let mut encoded = std::io::Cursor::new(Vec::new());
     image
         .write_to(&mut encoded, image::ImageFormat::Png)

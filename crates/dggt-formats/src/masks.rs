@@ -25,7 +25,7 @@ fn write_gray(path: &Path, size: ImageSize, values: Vec<u8>) -> Result<(), Forma
     }
     let image = GrayImage::from_raw(size.width, size.height, values)
         .ok_or_else(|| FormatError::invalid(path, "mask buffer does not fill the image"))?;
-    crate::write_png(path, image.into())
+    crate::write_png(path, &image.into())
 }
 
 /// Reads an 8-bit grayscale PNG as values in `[0, 1]`.

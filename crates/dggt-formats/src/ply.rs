@@ -257,7 +257,7 @@ mod tests {
         assert!(v[10].abs() < 1e-6 && (v[11] - 1.0).abs() < 1e-6 && (v[12] - 0.5f32.ln()).abs() < 1e-6);
         assert_eq!(&v[13..], &[1.0, 0.0, 0.0, 0.0]);
         // Opacity 0 and 1 stay finite.
-        let mut edge = cloud.clone();
+        let mut edge = cloud;
         edge.opacities = vec![0.0];
         assert!(edge.stored_values(0)[9].is_finite());
         edge.opacities = vec![1.0];

@@ -51,6 +51,8 @@ impl InferError {
         Self::Input { path: path.into(), detail: detail.into() }
     }
 
+    // Takes any error by value, like `impl Into<String>`, so `map_err(|e| ..(path, e))` reads plainly.
+    #[allow(clippy::needless_pass_by_value)]
     pub fn checkpoint(path: impl Into<PathBuf>, detail: impl ToString) -> Self {
         Self::Checkpoint { path: path.into(), detail: detail.to_string() }
     }

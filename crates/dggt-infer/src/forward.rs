@@ -86,6 +86,8 @@ pub fn forward_chunked(
 /// The camera head and the dense heads on the aggregator's tokens, the dense heads `chunk` frames at a time;
 /// `images` are the aggregator's input (the Gaussian head's colour skip reads them). The outputs are `f32`
 /// whatever the model's float type; the tokens are dropped once the heads are done.
+// Tensors by value, burn's convention (a clone is a handle), as `forward_chunked` passes them on.
+#[allow(clippy::needless_pass_by_value)]
 pub fn heads_chunked(
     model: &Dggt,
     aggregator: AggregatorOutput,

@@ -55,3 +55,15 @@ pub fn aligned_depth_rmse(predicted: &[f32], truth: &[f32]) -> Result<DepthAlign
     let (squared, relative) = errors.fold((0.0, 0.0), |(sq, rel), (e, g)| (sq + e * e, rel + e.abs() / g));
     Ok(DepthAlignment { rmse: (squared / n).sqrt(), abs_rel: relative / n, scale, shift, cells: truth.len() })
 }
+
+impl DepthAlignment {
+    /// AbsRel of the cells `(predicted, truth)` under this alignment (a part of the cells it was fitted on, such
+    /// as those at depth edges); `None` for no cells.
+    pub fn abs_rel_of(&self, cells: impl Iterator<Item = (f32, f32)>) -> Option<f64> {
+        let (sum, count) = cells.fold((0.0, 0usize), |(sum, count), (p, g)| {
+            let g = f64::from(g);
+            (sum + (self.scale * f64::from(p) + self.shift - g).abs() / g, count + 1)
+        });
+        (count > 0).then(|| sum / count as f64)
+    }
+}

@@ -28,6 +28,14 @@ fn depth_residuals_give_the_expected_rmse() {
     // Residuals -1, +1, -1, +1 against 9, 11, 19, 21.
     let abs_rel = (1.0 / 9.0 + 1.0 / 11.0 + 1.0 / 19.0 + 1.0 / 21.0) / 4.0;
     assert!(close(fit.abs_rel, abs_rel, 1e-9), "{fit:?}");
+    // The parts of the cells under the same fit: the first two, the last two, none.
+    let cells = || predicted.iter().copied().zip(truth.iter().copied());
+    let near = fit.abs_rel_of(cells().take(2)).unwrap();
+    let far = fit.abs_rel_of(cells().skip(2)).unwrap();
+    assert!(close(near, (1.0 / 9.0 + 1.0 / 11.0) / 2.0, 1e-9), "AbsRel of the near cluster: {near}");
+    assert!(close(far, (1.0 / 19.0 + 1.0 / 21.0) / 2.0, 1e-9), "AbsRel of the far cluster: {far}");
+    assert!(close((near + far) / 2.0, fit.abs_rel, 1e-9), "equal parts average to the whole");
+    assert_eq!(fit.abs_rel_of(cells().skip(4)), None, "no cells, no AbsRel");
     // A constant prediction explains nothing: the RMSE is the truth's standard deviation.
     let fit = aligned_depth_rmse(&[0.0; 4], &truth).unwrap();
     assert_eq!(fit.scale, 0.0);

@@ -290,8 +290,8 @@ impl DptHead {
             [h, w]
         };
         let x = sc.refinenet4.forward(l4, None, Some(size(&l3)));
-        let x = sc.refinenet3.forward(x, Some(l3.clone()), Some(size(&l2)));
-        let x = sc.refinenet2.forward(x, Some(l2.clone()), Some(size(&l1)));
+        let x = sc.refinenet3.forward(x, Some(l3), Some(size(&l2)));
+        let x = sc.refinenet2.forward(x, Some(l2), Some(size(&l1)));
         let x = sc.refinenet1.forward(x, Some(l1), None);
         let fused = conv::conv2d(&sc.output_conv1, x);
 

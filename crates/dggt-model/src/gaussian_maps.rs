@@ -51,7 +51,7 @@ impl GaussianMaps {
             rotation: rotation / norm,
             lifespan: relu(lifespan_raw.clone()).add_scalar(1e-6).recip(),
             lifespan_raw,
-            velocity: (channels_in > GAUSSIAN_CHANNELS).then(|| channels(GAUSSIAN_CHANNELS, 3)),
+            velocity: (channels_in > GAUSSIAN_CHANNELS).then(|| raw.narrow(4, GAUSSIAN_CHANNELS, 3)),
         }
     }
 

@@ -214,6 +214,8 @@ impl Dggt {
     }
 
     /// [`Dggt::forward`] running the point and semantic heads only where `extra` asks.
+    // Burn's convention: a forward pass takes its input tensor (a ref-counted handle) by value, as `forward` does.
+    #[allow(clippy::needless_pass_by_value)]
     pub fn forward_with(&self, images: Tensor<5>, extra: ExtraHeads) -> Result<DggtOutput, ModelError> {
         let aggregator = self.aggregator.forward(images.clone())?;
         let last = aggregator.output_list.last().expect("aggregator depth is at least one").clone();

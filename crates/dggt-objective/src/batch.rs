@@ -61,12 +61,16 @@ pub struct StepBatch {
     pub targets: Vec<ViewTruth>,
 }
 
-/// Whether a batch reads the export's depth-and-flow maps (`depth_flows_4`) of its input views: only the depth
-/// and flow losses use them.
+/// Which views of a batch read the export's depth-and-flow maps (`depth_flows_4`): only the depth and flow
+/// losses use them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum DepthFlowMaps {
-    Read,
+    /// None.
     Skip,
+    /// The input views (the network's depth, its velocities, the learnt flow).
+    Inputs,
+    /// The inputs and the targets (the rendered depth too).
+    InputsAndTargets,
 }
 
 impl StepBatch {
@@ -103,13 +107,16 @@ impl StepBatch {
                 sky: view.sky_mask.as_ref().map(|m| mask_tensor(&m.data, size, device)),
                 dynamic: view.dynamic_mask.as_ref().map(|m| mask_tensor(&m.data, size, device)),
                 depth_flow: match maps {
-                    DepthFlowMaps::Read => depth_flow_samples(scene, preprocess, view)?,
+                    DepthFlowMaps::Inputs | DepthFlowMaps::InputsAndTargets => {
+                        depth_flow_samples(scene, preprocess, view)?
+                    }
                     DepthFlowMaps::Skip => None,
                 },
             })
         };
         let inputs = sample.inputs.iter().map(|v| truth(v, maps)).collect::<Result<Vec<_>, _>>()?;
-        let targets = sample.targets.iter().map(|v| truth(v, DepthFlowMaps::Skip)).collect::<Result<Vec<_>, _>>()?;
+        let target_maps = if maps == DepthFlowMaps::InputsAndTargets { maps } else { DepthFlowMaps::Skip };
+        let targets = sample.targets.iter().map(|v| truth(v, target_maps)).collect::<Result<Vec<_>, _>>()?;
         let (h, w) = (size.height as usize, size.width as usize);
         let planar: Vec<f32> = sample.inputs.iter().flat_map(|v| v.image.data.iter().copied()).collect();
         let images = Tensor::from_data(TensorData::new(planar, [1, sample.inputs.len(), 3, h, w]), device);

@@ -10,6 +10,7 @@
 //! - `lifespan_l1`: mean `1 / lifespan` over Gaussians predicted static;
 //! - `camera`: L1 of every camera-head iteration's encoding against the ground truth (relative to input 0);
 //! - `depth`: L1 of log depth against the export's depth;
+//! - `rendered_depth`: the same of the target views' rendered expected depth (where drawn);
 //! - `flow`: L1 of the predicted velocities against the export's scene flow, moving and still cells weighed
 //!   equally;
 //! - `learnt_flow`: the same of the flow head's learnt velocities, at the query pixels it moved.
@@ -165,13 +166,13 @@ impl Objective {
     /// The weighted loss of one sample.
     pub fn loss(&self, model: &Dggt, batch: &StepBatch) -> Result<SampleLoss, ObjectiveError> {
         let forward = Forward::run(model, batch, &self.render)?;
-        self.loss_of(forward, batch)
+        self.loss_of(&forward, batch)
     }
 
     /// The weighted loss of a forward pass's outputs (from the network, or built by hand) on `batch`.
-    pub fn loss_of(&self, forward: Forward, batch: &StepBatch) -> Result<SampleLoss, ObjectiveError> {
+    pub fn loss_of(&self, forward: &Forward, batch: &StepBatch) -> Result<SampleLoss, ObjectiveError> {
         let w = &self.weights;
-        let views = self.render_views(&forward, batch, ViewsToRender::for_training(&self.render))?;
+        let views = self.render_views(forward, batch, ViewsToRender::for_training(&self.render))?;
         let device = batch.images.device();
         let truth = |view: &RenderedView| -> &ViewTruth {
             if view.is_target { &batch.targets[view.truth_index] } else { &batch.inputs[view.truth_index] }
@@ -194,7 +195,7 @@ impl Objective {
             add(LossTerm::Lpips, lpips.train_style(rendered.clone(), expected.clone())?.mean(), &mut terms)?;
         }
         if let Some(gram) = &self.gram {
-            add(LossTerm::Gram, gram.forward(rendered.clone(), expected.clone())?.value.mean(), &mut terms)?;
+            add(LossTerm::Gram, gram.forward(rendered, expected)?.value.mean(), &mut terms)?;
         }
         let with_sky: Vec<&RenderedView> = views.iter().filter(|v| truth(v).sky.is_some()).collect();
         if w.opacity_bce > 0.0 && !with_sky.is_empty() {
@@ -239,6 +240,16 @@ impl Objective {
             && let Some(loss) = depth_loss(&forward.depth, batch)?
         {
             add(LossTerm::Depth, loss, &mut terms)?;
+        }
+        if w.rendered_depth > 0.0 {
+            let targets: Vec<(&RenderedView, &DepthFlowSamples)> = views
+                .iter()
+                .filter(|v| v.is_target)
+                .filter_map(|v| truth(v).depth_flow.as_ref().map(|samples| (v, samples)))
+                .collect();
+            if let Some(loss) = rendered_depth_loss(&targets)? {
+                add(LossTerm::RenderedDepth, loss, &mut terms)?;
+            }
         }
         if w.flow > 0.0
             && let Some(velocity) = &forward.velocity
@@ -363,6 +374,35 @@ fn depth_loss(depth: &Tensor<4>, batch: &StepBatch) -> Result<Option<Tensor<1>>,
     let picked = predicted.select(0, Tensor::<1, Int>::from_data(TensorData::new(index, [count]), &device));
     let truth = Tensor::<1>::from_data(TensorData::new(values, [count]), &device);
     Ok(Some((picked - truth).abs().mean()))
+}
+
+/// L1 of log depth of each view's rendered depth `[H, W]` at its samples where the render drew something (a
+/// positive depth); `None` when no such sample exists.
+fn rendered_depth_loss(views: &[(&RenderedView, &DepthFlowSamples)]) -> Result<Option<Tensor<1>>, ObjectiveError> {
+    let (mut picked, mut truth) = (Vec::new(), Vec::new());
+    for (view, samples) in views {
+        let [h, w] = view.depth.dims();
+        let flat = view.depth.clone().reshape([h * w]);
+        let drawn = host_f32(flat.clone(), "rendered depth")?;
+        let (pixels, depths): (Vec<i64>, Vec<f32>) = samples
+            .pixels
+            .iter()
+            .zip(&samples.depths)
+            .filter(|&(&p, _)| drawn.get(p as usize).is_some_and(|&d| d > 0.0))
+            .map(|(&p, &d)| (p, d.ln()))
+            .unzip();
+        if pixels.is_empty() {
+            continue;
+        }
+        let device = flat.device();
+        let count = pixels.len();
+        picked.push(flat.select(0, Tensor::<1, Int>::from_data(TensorData::new(pixels, [count]), &device)).log());
+        truth.push(Tensor::<1>::from_data(TensorData::new(depths, [count]), &device));
+    }
+    if picked.is_empty() {
+        return Ok(None);
+    }
+    Ok(Some((Tensor::cat(picked, 0) - Tensor::cat(truth, 0)).abs().mean()))
 }
 
 /// L1 of the predicted velocities against the export's scene flow at the cells with a measurement: the mean
@@ -531,6 +571,37 @@ mod tests {
             inputs: vec![view],
             targets: Vec::new(),
         }
+    }
+
+    #[test]
+    fn the_rendered_depth_loss_compares_log_depth_where_the_render_drew() {
+        let device = Device::flex();
+        let samples = DepthFlowSamples {
+            pixels: vec![0, 1, 3],
+            depths: vec![2.0, 4.0, 8.0],
+            velocities: None,
+            moving: Vec::new(),
+        };
+        let view = |depth: [f32; 4]| RenderedView {
+            truth_index: 0,
+            is_target: true,
+            rgb: Tensor::zeros([2, 2, 3], &device),
+            alpha: Tensor::ones([2, 2], &device),
+            depth: Tensor::from_data(TensorData::new(depth.to_vec(), [2, 2]), &device),
+            counts: AssemblyCounts::default(),
+        };
+        let loss = |depth: [f32; 4]| {
+            let rendered = view(depth);
+            rendered_depth_loss(&[(&rendered, &samples)]).unwrap().map(|l| scalar(&l).unwrap())
+        };
+        assert!(loss([2.0, 4.0, 9.0, 8.0]).unwrap().abs() < 1e-6, "the sampled pixels exact: no loss");
+        // Twice too deep at every sample: ln 2 each.
+        let doubled = loss([4.0, 8.0, 0.0, 16.0]).unwrap();
+        assert!((doubled - 2f64.ln()).abs() < 1e-6, "ln 2 per sample, got {doubled}");
+        // Pixel 1 left empty: only pixels 0 and 3 count.
+        let empty = loss([2.0, 0.0, 0.0, 16.0]).unwrap();
+        assert!((empty - 2f64.ln() / 2.0).abs() < 1e-6, "the empty pixel is left out, got {empty}");
+        assert_eq!(loss([0.0; 4]), None, "nothing drawn: no term");
     }
 
     #[test]

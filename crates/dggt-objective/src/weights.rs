@@ -28,12 +28,14 @@ pub enum LossTerm {
     Lpips,
     /// Rendered foreground alpha against `1 - sky`.
     OpacityBce,
+    /// L1 of the target views' rendered log depth against the export's depth.
+    RenderedDepth,
     /// Mean squared error of the final colours.
     RgbL2,
 }
 
 impl LossTerm {
-    pub const ALL: [Self; 10] = [
+    pub const ALL: [Self; 11] = [
         Self::Camera,
         Self::Depth,
         Self::DynamicBce,
@@ -43,6 +45,7 @@ impl LossTerm {
         Self::LifespanL1,
         Self::Lpips,
         Self::OpacityBce,
+        Self::RenderedDepth,
         Self::RgbL2,
     ];
 
@@ -58,6 +61,7 @@ impl LossTerm {
             Self::LifespanL1 => "lifespan_l1",
             Self::Lpips => "lpips",
             Self::OpacityBce => "opacity_bce",
+            Self::RenderedDepth => "rendered_depth",
             Self::RgbL2 => "rgb_l2",
         }
     }
@@ -74,6 +78,7 @@ impl LossTerm {
             Self::LifespanL1 => weights.lifespan_l1,
             Self::Lpips => weights.lpips,
             Self::OpacityBce => weights.opacity_bce,
+            Self::RenderedDepth => weights.rendered_depth,
             Self::RgbL2 => weights.rgb_l2,
         }
     }
@@ -120,6 +125,10 @@ pub struct LossWeights {
     pub camera: f64,
     /// L1 on log depth against the export's depth maps.
     pub depth: f64,
+    /// L1 of log depth against the export's depth maps at the target views, on the rendered expected depth
+    /// (what evaluation scores) rather than the network's: through the rasteriser it reaches the Gaussians of
+    /// every input that draws there; pixels the render leaves empty are left out.
+    pub rendered_depth: f64,
     /// L1 of the predicted velocities against the export's scene flow (`depth_flows_4`), both in the input
     /// camera's axes and world units per log frame, the mean over moving cells plus the mean over still ones;
     /// needs `model.motion_head` or `model.gaussian_velocity`.
@@ -146,6 +155,7 @@ impl Default for LossWeights {
             gram_backbone: None,
             camera: 0.0,
             depth: 0.0,
+            rendered_depth: 0.0,
             flow: 0.0,
             learnt_flow: 0.0,
         }

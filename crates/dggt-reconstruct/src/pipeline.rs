@@ -229,7 +229,7 @@ pub fn reconstruct(options: &ReconstructOptions, device: &Device) -> Result<Summ
         views: inputs.views.len(),
         input_size: [inputs.size.width, inputs.size.height],
         network_size: [size.width, size.height],
-        checkpoint: network.info.clone(),
+        checkpoint: network.info,
         device: format!("{device:?}"),
         gaussians: counts,
         times_s,

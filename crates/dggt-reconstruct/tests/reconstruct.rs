@@ -108,7 +108,7 @@ fn reconstructs_the_fixture_from_a_trained_checkpoint() {
 /// its centres, its first pose the identity, one residual per step; the same list in `summary.json`.
 fn check_instances(summary: &Summary, out: &Path) {
     for (position, instance) in summary.instances.iter().enumerate() {
-        assert_eq!(instance.id as usize, position);
+        assert_eq!(instance.id as usize, position, "instance ids number their positions");
         assert_eq!(instance.residuals.len() + 1, instance.appearances.len(), "{instance:?}");
         let first = &instance.appearances[0];
         assert_eq!((first.rotation_wxyz, first.translation), ([1.0, 0.0, 0.0, 0.0], [0.0; 3]), "{instance:?}");
@@ -125,7 +125,11 @@ fn check_instances(summary: &Summary, out: &Path) {
         }
     }
     let on_disk: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
-    assert_eq!(on_disk["instances"].as_array().map(Vec::len), Some(summary.instances.len()));
+    assert_eq!(
+        on_disk["instances"].as_array().map(Vec::len),
+        Some(summary.instances.len()),
+        "summary.json lists every instance"
+    );
     eprintln!("{} moving objects", summary.instances.len());
 }
 
@@ -133,8 +137,12 @@ fn check_instances(summary: &Summary, out: &Path) {
 /// shows it (8-bit rounding apart).
 fn check_saved_scene(summary: &Summary, out: &Path) {
     let scene = dggt_scene::load_scene(&out.join("scene.safetensors"), &Device::flex()).unwrap();
-    assert_eq!(scene.views().len(), summary.views);
-    assert_eq!(scene.pixels.instances().map_or(0, |found| found.len()), summary.instances.len());
+    assert_eq!(scene.views().len(), summary.views, "the scene holds every view of the summary");
+    assert_eq!(
+        scene.pixels.instances().map_or(0, |found| found.len()),
+        summary.instances.len(),
+        "the scene holds every instance of the summary"
+    );
     let first = scene.views()[0];
     let target = dggt_scene::TargetView { rig_camera: first.rig_camera, time: first.time, camera: first.camera };
     let rgb: Vec<f32> = scene.render(&target).unwrap().rgb.into_data().try_into_vec().unwrap();
@@ -170,7 +178,7 @@ fn check_files(summary: &Summary, out: &Path, names: &[String]) {
         }
     }
     // Every(2) over 8 input frames: 7 intervals x 2 + the last = 15 times.
-    assert_eq!(summary.times_s.len(), 15);
+    assert_eq!(summary.times_s.len(), 15, "two times per interval and the last");
     for k in 0..15 {
         expected.push(format!("gaussians/dynamic_t{k:04}.ply"));
         expected.push(format!("renders/t{k:04}_cam0.png"));
@@ -180,29 +188,33 @@ fn check_files(summary: &Summary, out: &Path, names: &[String]) {
     }
     assert_eq!(summary.files.len(), expected.len(), "{:?}", summary.files);
     let on_disk: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
-    assert_eq!(on_disk["frames"], FRAMES);
-    assert_eq!(on_disk["checkpoint"]["format"], "trainer");
-    assert!(on_disk["peak_memory_mib"].as_f64().unwrap() > 0.0);
-    assert!(on_disk["stages"].as_array().unwrap().len() >= 5);
+    assert_eq!(on_disk["frames"], FRAMES, "summary.json counts the input frames");
+    assert_eq!(on_disk["checkpoint"]["format"], "trainer", "the run's checkpoint is the trainer's");
+    assert!(on_disk["peak_memory_mib"].as_f64().unwrap() > 0.0, "a peak memory is recorded");
+    assert!(on_disk["stages"].as_array().unwrap().len() >= 5, "at least the five stages timed");
 }
 
 /// PLY headers are INRIA's and vertex counts are the Gaussians kept.
 fn check_gaussians(summary: &Summary, out: &Path) {
     let g = &summary.gaussians;
-    assert_eq!(g.per_pixel, 8 * 56 * 42);
+    assert_eq!(g.per_pixel, 8 * 56 * 42, "one Gaussian per pixel of 8 frames of 56 x 42");
     let ply = |file: &str| read_ply(&out.join(file)).unwrap();
     let statics = ply("gaussians/static.ply");
-    assert_eq!(statics.properties, INRIA_PROPERTIES.map(String::from).to_vec());
-    assert_eq!(statics.count, g.static_kept);
+    assert_eq!(statics.properties, INRIA_PROPERTIES.map(String::from).to_vec(), "the INRIA PLY properties");
+    assert_eq!(statics.count, g.static_kept, "static.ply holds the kept static Gaussians");
     // How many culling keeps depends on what the few steps learnt; the counts must be those of the files.
     assert!(g.static_kept <= g.per_pixel, "{g:?}");
     let cloud = statics.to_cloud().unwrap();
-    assert!(cloud.opacities.iter().all(|&o| (1.0 / 255.0 - 1e-6..=1.0).contains(&o)));
-    assert!(cloud.means.iter().flatten().all(|v| v.is_finite()));
-    assert_eq!(ply("gaussians/sky.ply").count, g.sky_kept);
+    assert!(cloud.opacities.iter().all(|&o| (1.0 / 255.0 - 1e-6..=1.0).contains(&o)), "opacities in [1/255, 1]");
+    assert!(cloud.means.iter().flatten().all(|v| v.is_finite()), "finite means");
+    assert_eq!(ply("gaussians/sky.ply").count, g.sky_kept, "sky.ply holds the kept sky Gaussians");
     assert!(g.sky_kept <= 60 * 60, "the overfit configuration's 60 x 60 sky Gaussians at most: {g:?}");
     for (k, &count) in g.dynamic_kept.iter().enumerate() {
-        assert_eq!(ply(&format!("gaussians/dynamic_t{k:04}.ply")).count, count);
+        assert_eq!(
+            ply(&format!("gaussians/dynamic_t{k:04}.ply")).count,
+            count,
+            "dynamic_t{k:04}.ply holds the frame's kept dynamic Gaussians"
+        );
         assert!(count <= 56 * 42, "one view's pixels at most");
     }
 }
@@ -211,20 +223,34 @@ fn check_gaussians(summary: &Summary, out: &Path) {
 fn check_cameras(out: &Path, names: &[String]) -> Vec<CameraRecord> {
     // Cameras: the three formats agree with each other.
     let (convention, records) = read_cameras_json(&out.join("cameras.json")).unwrap();
-    assert!(convention.axes.contains("OpenCV"));
-    assert_eq!(records.iter().map(|r| r.name.clone()).collect::<Vec<_>>(), names);
+    assert!(convention.axes.contains("OpenCV"), "cameras.json in the OpenCV convention");
+    assert_eq!(
+        records.iter().map(|r| r.name.clone()).collect::<Vec<_>>(),
+        names,
+        "cameras.json names the views in order"
+    );
     let colmap_cameras = read_cameras_txt(&out.join("sparse/0/cameras.txt")).unwrap();
     let colmap_images = read_images_txt(&out.join("sparse/0/images.txt")).unwrap();
     let transforms = read_transforms(&out.join("transforms.json")).unwrap();
-    assert_eq!((colmap_cameras.len(), colmap_images.len(), transforms.len()), (8, 8, 8));
+    assert_eq!(
+        (colmap_cameras.len(), colmap_images.len(), transforms.len()),
+        (8, 8, 8),
+        "8 cameras, images and transforms"
+    );
     for (i, record) in records.iter().enumerate() {
-        assert_eq!(colmap_images[i].name, format!("{}.png", record.name));
+        assert_eq!(colmap_images[i].name, format!("{}.png", record.name), "COLMAP image {i} named after its view");
         let camera = colmap_cameras.iter().find(|c| c.id == colmap_images[i].camera_id).unwrap();
         let (a, b) = (camera.intrinsics, record.intrinsics);
         assert!([a.fx - b.fx, a.fy - b.fy, a.cx - b.cx, a.cy - b.cy].iter().all(|d| d.abs() < 1e-9), "{a:?} {b:?}");
-        assert!(colmap_images[i].camera_from_world.max_abs_difference(&record.world_from_camera.inverse()) < 1e-6);
-        assert!(transforms[i].world_from_camera.max_abs_difference(&record.world_from_camera) < 1e-6);
-        assert!(out.join(&transforms[i].file_path).is_file());
+        assert!(
+            colmap_images[i].camera_from_world.max_abs_difference(&record.world_from_camera.inverse()) < 1e-6,
+            "COLMAP pose {i} inverts the view's"
+        );
+        assert!(
+            transforms[i].world_from_camera.max_abs_difference(&record.world_from_camera) < 1e-6,
+            "transforms.json pose {i} is the view's"
+        );
+        assert!(out.join(&transforms[i].file_path).is_file(), "transforms.json image {i} exists");
     }
     records
 }
@@ -243,7 +269,8 @@ fn check_poses(summary: &Summary, records: &[CameraRecord]) {
     let reported = summary.pose_error.as_ref().expect("scene exports report pose errors");
     assert!(
         (reported.centre_rmse - error.centre_rmse).abs() < 1e-9
-            && (reported.rotation_max_deg - error.rotation_max_deg).abs() < 1e-6
+            && (reported.rotation_max_deg - error.rotation_max_deg).abs() < 1e-6,
+        "the summary reports the pose error of the written cameras"
     );
 }
 
@@ -252,8 +279,8 @@ fn check_maps(out: &Path, names: &[String]) {
     // Depth in both formats agrees; maps have the network's size.
     for name in names {
         let (size, npy) = read_depth_npy(&out.join(format!("depth/{name}.npy"))).unwrap();
-        assert_eq!((size.width, size.height), (56, 42));
-        assert!(npy.iter().all(|d| d.is_finite() && *d > 0.0));
+        assert_eq!((size.width, size.height), (56, 42), "depth .npy of the 56 x 42 network size");
+        assert!(npy.iter().all(|d| d.is_finite() && *d > 0.0), "positive finite depths");
         let (_, png, meta) = read_depth_png16(&out.join(format!("depth/{name}.png"))).unwrap();
         // Rounded to the scale's multiples, and the smallest non-zero value where a depth is below half the scale
         // (a network trained briefly may span more than 16 bits of depth).
@@ -262,7 +289,7 @@ fn check_maps(out: &Path, names: &[String]) {
         let off = npy.iter().zip(&png).find(|(a, b)| f64::from((**a - **b).abs()) > tolerance(f64::from(**a)));
         assert!(off.is_none(), "depth/{name}.png: {off:?} at scale {}", meta.scale);
         let (size, _) = read_mask_png(&out.join(format!("dynamic/{name}.png"))).unwrap();
-        assert_eq!((size.width, size.height), (56, 42));
+        assert_eq!((size.width, size.height), (56, 42), "dynamic mask of the 56 x 42 network size");
         read_mask_png(&out.join(format!("sky/{name}.png"))).unwrap();
     }
 }
@@ -297,7 +324,7 @@ fn check_renders(summary: &Summary, out: &Path, validation: &Path) {
         let mse = rgb.iter().zip(&input).map(|(a, b)| ((a - b) as f64).powi(2)).sum::<f64>() / rgb.len() as f64;
         psnrs.push(-10.0 * mse.log10());
     }
-    assert_eq!(psnrs.len(), FRAMES);
+    assert_eq!(psnrs.len(), FRAMES, "one PSNR per frame");
     let mean_psnr = psnrs.iter().sum::<f64>() / psnrs.len() as f64;
     let reported = summary.input_psnr_db.iter().sum::<f64>() / summary.input_psnr_db.len() as f64;
     assert!((mean_psnr - reported).abs() < 0.5, "summary says {reported:.2} dB, the files {mean_psnr:.2} dB");

@@ -208,7 +208,7 @@ fn burn_factors(
     let (out, rest) = (up.shape[0], down.shape[1..].iter().product::<usize>());
     let up_ok = up.shape.len() >= 2 && up.shape[1] == rank && up.shape[2..].iter().all(|&d| d == 1);
     if down.shape.first() != Some(&rank) || !up_ok {
-        return Err(FactorFault::Rank { down: down.shape.clone(), up: up.shape.clone(), rank });
+        return Err(FactorFault::Rank { down: down.shape, up: up.shape, rank });
     }
     let tensor =
         |t: &HostTensor, shape: [usize; 2]| Tensor::<2>::from_data(TensorData::new(t.values.clone(), shape), device);

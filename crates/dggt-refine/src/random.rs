@@ -100,14 +100,14 @@ pub fn write_random_model(configs: &RefinerConfigs, dir: &Path, device: &Device)
     check_vae(&configs.vae, dir)?;
     let mut weights = Weights::random_kept(device);
     drop(Vae::load(&mut weights, &configs.vae)?);
-    write_component(dir, "vae", "diffusion_pytorch_model", &configs.vae, weights.into_made())?;
+    write_component(dir, "vae", "diffusion_pytorch_model", &configs.vae, &weights.into_made())?;
     let mut weights = Weights::random_kept(device);
     drop(Unet::load(&mut weights, &configs.unet, dir)?);
-    write_component(dir, "unet", "diffusion_pytorch_model", &configs.unet, weights.into_made())?;
+    write_component(dir, "unet", "diffusion_pytorch_model", &configs.unet, &weights.into_made())?;
     let mut weights = Weights::random_kept(device);
     drop(TextEncoder::load(&mut weights, &configs.text_encoder, dir)?);
-    write_component(dir, "text_encoder", "model", &configs.text_encoder, weights.into_made())?;
-    write_component(dir, "scheduler", "", &configs.scheduler, NamedTensors::new())
+    write_component(dir, "text_encoder", "model", &configs.text_encoder, &weights.into_made())?;
+    write_component(dir, "scheduler", "", &configs.scheduler, &NamedTensors::new())
 }
 
 /// `dir/component/`: its configuration (`config.json`, the scheduler's `scheduler_config.json`) and, when there
@@ -117,7 +117,7 @@ fn write_component(
     component: &str,
     stem: &str,
     config: &impl serde::Serialize,
-    tensors: NamedTensors,
+    tensors: &NamedTensors,
 ) -> Result<(), RefineError> {
     let folder = dir.join(component);
     std::fs::create_dir_all(&folder).map_err(|e| RefineError::io(&folder, e))?;
@@ -127,7 +127,7 @@ fn write_component(
     if tensors.is_empty() {
         return Ok(());
     }
-    write_safetensors(&folder.join(format!("{stem}.safetensors")), &tensors, HashMap::new())
+    write_safetensors(&folder.join(format!("{stem}.safetensors")), tensors, HashMap::new())
 }
 
 #[cfg(test)]

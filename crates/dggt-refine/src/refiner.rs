@@ -299,6 +299,8 @@ impl Refiner {
     /// `reference` `[n, 3, h, w]` is given, frame `i` attending to reference `i`), calling `progress` with the
     /// number of frames done after each batch. A sampled latent draws batch `k`'s noise from `seed + k`, so
     /// results are reproducible for the same seed and batch size.
+    // Burn's convention: frames in, frames out, tensors (ref-counted handles) taken by value as `refine` does.
+    #[allow(clippy::needless_pass_by_value)]
     pub fn refine_frames(
         &self,
         frames: Tensor<4>,

@@ -90,18 +90,29 @@ const OPTIMIZER_FILE: &str = "optimizer.bpk";
 /// The trained weights in a checkpoint folder whose `model.bpk` holds their average.
 pub const TRAINED_FILE: &str = "trained.bpk";
 
+// Takes any error by value, like `impl Into<String>`, so `map_err(|e| ..(path, e))` reads plainly.
+#[allow(clippy::needless_pass_by_value)]
 fn checkpoint_error(path: &Path, detail: impl ToString) -> RunError {
     RunError::Checkpoint { path: path.to_path_buf(), detail: detail.to_string() }
 }
 
 /// The weights a checkpoint holds.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug)]
 pub enum Weights<'a, M> {
     /// The trained weights alone (`model.bpk`).
     Trained(&'a M),
     /// The average of the weights (`model.bpk`) and the trained ones (`trained.bpk`).
     Averaged { trained: &'a M, average: &'a M },
 }
+
+// By hand: references are copied whatever `M` is (the derive would ask `M: Copy`).
+impl<M> Clone for Weights<'_, M> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<M> Copy for Weights<'_, M> {}
 
 impl<M: Module> Weights<'_, M> {
     /// Each module with the file it is written to.

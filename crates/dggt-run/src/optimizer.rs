@@ -231,6 +231,8 @@ const MOMENT_1: &str = "moment_1";
 const MOMENT_2: &str = "moment_2";
 const STEPS: &str = "steps";
 
+// Takes any error by value, like `impl Into<String>`, so `map_err(|e| ..(path, e))` reads plainly.
+#[allow(clippy::needless_pass_by_value)]
 fn optimizer_file_error(path: &Path, detail: impl ToString) -> RunError {
     RunError::Checkpoint { path: path.to_path_buf(), detail: detail.to_string() }
 }

@@ -14,7 +14,8 @@ use dggt_geom::{CameraFromWorld, ImageSize, PinholeIntrinsics, PosedCamera};
 use dggt_model::host::host_f32;
 use dggt_model::sky::SkyGaussians;
 use dggt_splat::{
-    CameraTensors, GaussianTensors, OpacityTensor, RasterSettings, RenderSettings, RenderTensors, render,
+    CameraTensors, DepthStatistic, GaussianTensors, OpacityTensor, RasterSettings, RenderSettings, RenderTensors,
+    render,
 };
 
 use crate::assemble::{
@@ -86,6 +87,26 @@ pub fn render_assembled(
     };
     let squeeze3 = |t: Tensor<4>| t.squeeze_dim::<3>(0);
     Ok(ViewRender { rgb: squeeze3(rgb), alpha, depth, sky: sky.map(squeeze3), counts })
+}
+
+/// `[H, W]` the foreground's depth of Gaussians already assembled for `target`, as `statistic` says (the
+/// median: the surface each pixel sees rather than the blend [`ViewRender::depth`] holds; no gradient). No sky:
+/// the depth is the foreground's.
+pub fn render_depth(
+    assembled: &AssembledGaussians,
+    target: &TargetView,
+    size: ImageSize,
+    assembly: &AssemblySettings,
+    statistic: DepthStatistic,
+) -> Result<Tensor<3>, SceneError> {
+    let gaussians = &assembled.gaussians;
+    let cameras = camera_tensors(&[target.camera], size, &gaussians.means.device())?;
+    let mut settings = foreground_settings(assembly);
+    settings.raster.depth = statistic;
+    let what = || format!("the depth of camera {} at t = {}", target.rig_camera, target.time);
+    let rendered =
+        render(gaussians, &cameras, &settings).map_err(|source| SceneError::Render { what: what(), source })?;
+    Ok(rendered.depth)
 }
 
 /// How the foreground is rasterised under `assembly`: its planes and low-pass, over no background.

@@ -34,8 +34,11 @@ pub use assemble::{
     AssembledGaussians, AssemblyCounts, AssemblySettings, HiddenSky, MIN_OPACITY, assemble, assemble_with_velocities,
     assembled_velocities,
 };
-pub use compose::{ViewRender, camera_tensors, composite, render_assembled, render_flow, render_target, sky_splats};
+pub use compose::{
+    ViewRender, camera_tensors, composite, render_assembled, render_depth, render_flow, render_target, sky_splats,
+};
 pub use dggt_instances::{InstanceSettings, Instances};
+pub use dggt_splat::DepthStatistic;
 pub use displacements::{LearntFlow, LearntVelocity};
 pub use error::SceneError;
 pub use motion::{DynamicMotion, FlowHeadMismatch};

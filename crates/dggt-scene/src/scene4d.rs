@@ -2,11 +2,13 @@
 //! when the network predicts them), the sky Gaussians, and the assembly settings; any target view at any time
 //! renders from it. Building it from a network's outputs is `dggt-infer`'s (`Prediction::scene`).
 
+use burn::tensor::Tensor;
 use dggt_geom::PosedCamera;
 use dggt_model::sky::SkyGaussians;
+use dggt_splat::DepthStatistic;
 
 use crate::assemble::{AssembledGaussians, AssemblySettings, assemble};
-use crate::compose::{ViewRender, render_assembled, render_target};
+use crate::compose::{ViewRender, render_assembled, render_depth, render_target};
 use crate::error::SceneError;
 use crate::pixels::PixelGaussians;
 use crate::timeline::{InputView, TargetView, interpolate_camera};
@@ -48,5 +50,15 @@ impl Scene4d {
         target: &TargetView,
     ) -> Result<ViewRender, SceneError> {
         render_assembled(assembled, self.sky.as_ref(), target, self.pixels.size, &self.assembly)
+    }
+
+    /// The foreground's depth of Gaussians assembled for `target`, as `statistic` says ([`render_depth`]).
+    pub fn render_depth(
+        &self,
+        assembled: &AssembledGaussians,
+        target: &TargetView,
+        statistic: DepthStatistic,
+    ) -> Result<Tensor<3>, SceneError> {
+        render_depth(assembled, target, self.pixels.size, &self.assembly, statistic)
     }
 }

@@ -15,7 +15,7 @@ use crate::error::{SplatError, expect_len};
 use crate::forward::Rasterized;
 use crate::gaussians::{Gaussians, Opacities};
 use crate::projection::{FootprintGrad, GeometryGrad, project_backward};
-use crate::settings::RasterSettings;
+use crate::settings::{DepthStatistic, RasterSettings};
 use crate::tiles::split_by_offsets;
 use crate::view::ViewBatch;
 
@@ -26,7 +26,7 @@ pub struct ImageGrads<'a> {
     pub colors: Option<&'a [f32]>,
     /// `[V, H, W]`.
     pub alpha: Option<&'a [f32]>,
-    /// `[V, H, W]` (of the expected depth).
+    /// `[V, H, W]` (of the expected depth: a render of the median depth takes none).
     pub depth: Option<&'a [f32]>,
 }
 
@@ -56,7 +56,8 @@ pub struct GaussianGrads {
 /// Gradients of the inputs of [`rasterize`](crate::rasterize) given gradients of its images.
 ///
 /// `gaussians`, `views` and `settings` must be those the forward pass ran with (sizes are checked, values are
-/// not). Non-finite image gradients are an error.
+/// not). Non-finite image gradients are an error, and so is a depth gradient of a median-depth render (the median
+/// depth is a constant of the render).
 pub fn rasterize_backward(
     gaussians: &Gaussians,
     views: &ViewBatch,
@@ -70,6 +71,11 @@ pub fn rasterize_backward(
     check_image_grad("grad colors", grads.colors, layout.views * pixels, channels, "[V, H, W, K]")?;
     check_image_grad("grad alpha", grads.alpha, layout.views * pixels, 1, "[V, H, W]")?;
     check_image_grad("grad depth", grads.depth, layout.views * pixels, 1, "[V, H, W]")?;
+    if settings.depth == DepthStatistic::Median && grads.depth.is_some() {
+        return Err(SplatError::InvalidSettings {
+            detail: "the median depth carries no gradient: render the expected depth to train on depth".into(),
+        });
+    }
 
     let grid = layout.grid();
     let background = settings.background_or_black(channels);
@@ -81,8 +87,15 @@ pub fn rasterize_backward(
 
     for v in 0..layout.views {
         let bins = &forward.bins[v];
-        let scene =
-            ViewScene { gaussians, projection: &forward.projection, bins, grid, view: v, background: &background };
+        let scene = ViewScene {
+            gaussians,
+            projection: &forward.projection,
+            bins,
+            grid,
+            view: v,
+            background: &background,
+            depth: settings.depth,
+        };
         let pixel_range = v * pixels..(v + 1) * pixels;
         let view_pixels = ForwardPixels {
             alpha: &forward.images.alpha[pixel_range.clone()],

@@ -4,7 +4,9 @@
 //! `sigma = ½(a dx² + c dy²) + b dx dy`, `alpha = min(0.999, o exp(-sigma))`; skipped if `sigma < 0` or
 //! `alpha < 1/255`; if the next transmittance `T (1 - alpha)` would be `<= 1e-4` the pixel stops *without*
 //! this footprint; otherwise colours and depth accumulate with weight `alpha T`. Outputs: colour
-//! `Σ w c + T bg`, alpha `1 - T`, expected depth `Σ w z / max(alpha, 1e-10)`.
+//! `Σ w c + T bg`, alpha `1 - T`, expected depth `Σ w z / max(alpha, 1e-10)`, or with
+//! [`DepthStatistic::Median`] the depth of the footprint that first brings `T` to one half or below (the
+//! expected depth where `T` stays above one half).
 //!
 //! The forward runs in `f32` like a GPU kernel. It records per pixel the final transmittance and where in the
 //! tile list it stopped; the backward walks the list back to front from there, recovering each `T` by division
@@ -12,9 +14,10 @@
 //! passes evaluate alpha with the same function, so their skip decisions agree exactly.
 
 use crate::blocks::{BlockLists, Reach};
-use crate::constants::{ALPHA_THRESHOLD, MAX_ALPHA, MIN_DEPTH_ALPHA, MIN_TRANSMITTANCE};
+use crate::constants::{ALPHA_THRESHOLD, MAX_ALPHA, MEDIAN_TRANSMITTANCE, MIN_DEPTH_ALPHA, MIN_TRANSMITTANCE};
 use crate::gaussians::Gaussians;
 use crate::projection::Projection;
+use crate::settings::DepthStatistic;
 use crate::tiles::{TileBins, TileGrid};
 
 /// Layout of one row of per-footprint gradients: `[mean2d x y, conic a b c, opacity, depth, colour 0..K]`.
@@ -37,6 +40,7 @@ pub(crate) struct ViewScene<'a> {
     pub grid: TileGrid,
     pub view: usize,
     pub background: &'a [f32],
+    pub depth: DepthStatistic,
 }
 
 /// The output rows `[y0, y1)` of one view that one band of tiles writes, each `[rows, W, ...]`.
@@ -137,7 +141,7 @@ impl TileSplats {
 }
 
 /// Composites tile row `tile_row` of the view into `out`.
-pub(crate) fn composite_band(scene: &ViewScene, tile_row: usize, out: BandOutput) {
+pub(crate) fn composite_band(scene: &ViewScene, tile_row: usize, out: &mut BandOutput) {
     let grid = &scene.grid;
     let channels = scene.gaussians.channels();
     let row0 = tile_row * grid.tile_size;
@@ -151,6 +155,7 @@ pub(crate) fn composite_band(scene: &ViewScene, tile_row: usize, out: BandOutput
                 let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
                 accumulated.fill(0.0);
                 let mut depth = 0.0f32;
+                let mut median_depth = None;
                 let mut transmittance = 1.0f32;
                 let mut end = 0usize;
                 for &j in splats.blocks.at(x, y) {
@@ -166,16 +171,23 @@ pub(crate) fn composite_band(scene: &ViewScene, tile_row: usize, out: BandOutput
                         *sum += c * weight;
                     }
                     depth += splats.depths[j] * weight;
+                    if median_depth.is_none() && next <= MEDIAN_TRANSMITTANCE {
+                        median_depth = Some(splats.depths[j]);
+                    }
                     transmittance = next;
                     end = j + 1;
                 }
                 let alpha = 1.0 - transmittance;
+                let expected_depth = depth / alpha.max(MIN_DEPTH_ALPHA);
                 let colors = &mut out.colors[pixel * channels..(pixel + 1) * channels];
                 for ((o, sum), bg) in colors.iter_mut().zip(&accumulated).zip(scene.background) {
                     *o = sum + transmittance * bg;
                 }
                 out.alpha[pixel] = alpha;
-                out.depth[pixel] = depth / alpha.max(MIN_DEPTH_ALPHA);
+                out.depth[pixel] = match scene.depth {
+                    DepthStatistic::Expected => expected_depth,
+                    DepthStatistic::Median => median_depth.unwrap_or(expected_depth),
+                };
                 out.transmittance[pixel] = transmittance;
                 out.list_ends[pixel] = end as u32;
             }

@@ -13,6 +13,8 @@ pub const MAX_ALPHA: f32 = 0.999;
 pub const MIN_TRANSMITTANCE: f32 = 1e-4;
 /// The expected depth divides by the accumulated alpha, floored at this.
 pub const MIN_DEPTH_ALPHA: f32 = 1e-10;
+/// The median depth is the depth of the footprint after which the transmittance is at or below this.
+pub const MEDIAN_TRANSMITTANCE: f32 = 0.5;
 
 /// How far beyond the field of view, as a fraction of the image's extent, the projection's `x/z` and `y/z` are
 /// clamped before the Jacobian is formed (the guard band: `lim = (W - cx) / fx + GUARD_BAND · W / fx`).

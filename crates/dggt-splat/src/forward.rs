@@ -18,7 +18,7 @@ use crate::view::ViewBatch;
 /// |---|---|---|
 /// | `colors` | `[V, H, W, K]` | composited colours plus `T_final · background` |
 /// | `alpha` | `[V, H, W]` | `1 - T_final` |
-/// | `depth` | `[V, H, W]` | expected depth `Σ w z / max(alpha, 1e-10)` (camera-space z; 0 where nothing is drawn) |
+/// | `depth` | `[V, H, W]` | expected depth `Σ w z / max(alpha, 1e-10)`, or the median depth (see [`DepthStatistic`](crate::DepthStatistic)); camera-space z, 0 where nothing is drawn |
 #[derive(Debug, Clone, PartialEq)]
 pub struct Images {
     pub colors: Vec<f32>,
@@ -148,12 +148,13 @@ pub fn rasterize(
             grid,
             view: v,
             background: &background,
+            depth: settings.depth,
         })
         .collect();
     (colors, alpha, depth, transmittances, ends).into_par_iter().enumerate().for_each(
         |(band, (colors, alpha, depth, transmittance, list_ends))| {
             let (v, tile_row) = (band / grid.tiles_y, band % grid.tiles_y);
-            composite_band(&scenes[v], tile_row, BandOutput { colors, alpha, depth, transmittance, list_ends });
+            composite_band(&scenes[v], tile_row, &mut BandOutput { colors, alpha, depth, transmittance, list_ends });
         },
     );
 

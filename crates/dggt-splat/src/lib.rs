@@ -63,6 +63,6 @@ pub use projection::Projection;
 pub use render::{
     CameraTensors, GaussianTensors, OpacityTensor, RenderSettings, RenderTensors, render, render_with_stats,
 };
-pub use settings::RasterSettings;
+pub use settings::{DepthStatistic, RasterSettings};
 pub use tiles::TileBins;
 pub use view::{PinholeView, ViewBatch};

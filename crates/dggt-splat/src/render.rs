@@ -9,7 +9,7 @@ use dggt_geom::ImageSize;
 use crate::cull::CullStats;
 use crate::error::SplatError;
 use crate::op::{SplatInputs, SplatOps};
-use crate::settings::RasterSettings;
+use crate::settings::{DepthStatistic, RasterSettings};
 use crate::view::ViewBatch;
 
 /// Opacities in `[0, 1]`, shared by all views or one row per view (DGGT's lifespan fades Gaussians with the
@@ -61,7 +61,8 @@ pub struct RenderTensors {
     pub colors: Tensor<4>,
     /// `[V, H, W]` `1 - T_final`.
     pub alpha: Tensor<3>,
-    /// `[V, H, W]` expected camera-space depth (0 where nothing is drawn).
+    /// `[V, H, W]` camera-space depth (0 where nothing is drawn): expected, or the median as the settings say
+    /// (detached: no gradient flows through a median depth).
     pub depth: Tensor<3>,
 }
 
@@ -122,7 +123,10 @@ fn dispatch(
     let images = RenderTensors {
         colors: images.clone().narrow(3, 0, channels),
         alpha: images.clone().narrow(3, channels, 1).squeeze_dim(3),
-        depth: images.narrow(3, channels + 1, 1).squeeze_dim(3),
+        depth: match settings.raster.depth {
+            DepthStatistic::Expected => images.narrow(3, channels + 1, 1).squeeze_dim(3),
+            DepthStatistic::Median => images.narrow(3, channels + 1, 1).squeeze_dim(3).detach(),
+        },
     };
     Ok((images, Tensor::from_dispatch(stats)))
 }

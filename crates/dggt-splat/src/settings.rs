@@ -1,10 +1,28 @@
-//! Rasteriser settings: clipping planes, the 2D blur, the tile size and the background colour.
+//! Rasteriser settings: clipping planes, the 2D blur, the tile size, the background colour and which depth a
+//! pixel reports.
 
 use crate::constants::{DEFAULT_EPS2D, DEFAULT_FAR_PLANE, DEFAULT_NEAR_PLANE, DEFAULT_TILE_SIZE, MAX_TILE_SIZE};
 use crate::error::SplatError;
 
+/// Which depth each pixel reports.
+///
+/// The release renders (and trains on) the expected depth. At a depth edge a pixel sees a near and a far surface
+/// through one another, and their blend lies on neither: the median depth is the depth of a surface the pixel
+/// sees. Both are camera-space `z`, 0 where nothing is drawn.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum DepthStatistic {
+    /// `Σ w z / max(alpha, 1e-10)`: differentiable, the release's.
+    #[default]
+    Expected,
+    /// The depth of the footprint whose blending first brings the pixel's transmittance to one half or below
+    /// (the median of the blending weights along the ray); the expected depth where the pixel never gets that
+    /// opaque. A constant of the render: it carries no gradient (the host backward refuses a depth gradient
+    /// with it; [`render`](crate::render) returns it detached).
+    Median,
+}
+
 /// How a batch is rasterised. The defaults are gsplat's (and DGGT's): near 0.01, far 1e10, eps2d 0.3,
-/// 16x16 tiles, black background.
+/// 16x16 tiles, black background, expected depth.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RasterSettings {
     /// Gaussians with camera-space `z <= near_plane` are culled.
@@ -22,6 +40,8 @@ pub struct RasterSettings {
     /// limit (the lower of the two applies). Views whose tile intersections would not fit one buffer are
     /// rendered in batches of views that do. The host ignores it. Lowering it is for tests of the batching.
     pub max_buffer_bytes: Option<u64>,
+    /// Which depth the depth image holds.
+    pub depth: DepthStatistic,
 }
 
 impl Default for RasterSettings {
@@ -33,6 +53,7 @@ impl Default for RasterSettings {
             tile_size: DEFAULT_TILE_SIZE,
             background: None,
             max_buffer_bytes: None,
+            depth: DepthStatistic::Expected,
         }
     }
 }

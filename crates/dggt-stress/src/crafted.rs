@@ -169,7 +169,7 @@ pub fn run(
         encodings: vec![],
         velocity: velocity.clone(),
     };
-    let grads = render_and_differentiate(probe, objective, forward, &batch)?;
+    let grads = render_and_differentiate(probe, objective, &forward, &batch)?;
     probe_gradient(probe, &grads, "raw Gaussian head output", &raw);
     probe_gradient(probe, &grads, "depth", &depth);
     probe_gradient(probe, &grads, "dynamic logits", &logit);

@@ -33,7 +33,7 @@ pub fn run(
     for (i, encoding) in forward.encodings.iter().enumerate() {
         probe.tensor(Stage::Network, &format!("camera encoding, iteration {i}"), encoding);
     }
-    let grads = render_and_differentiate(probe, objective, forward, &batch)?;
+    let grads = render_and_differentiate(probe, objective, &forward, &batch)?;
     let reached = probe_parameter_gradients(probe, model, &grads);
     probe.require(Stage::Gradients, "parameters", reached > 0, "no parameter received a gradient");
     Ok(())

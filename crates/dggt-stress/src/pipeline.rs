@@ -40,11 +40,11 @@ pub(crate) fn probe_gaussians(probe: &mut Probe, forward: &Forward) {
 pub(crate) fn render_and_differentiate(
     probe: &mut Probe,
     objective: &Objective,
-    forward: Forward,
+    forward: &Forward,
     batch: &StepBatch,
 ) -> Result<Gradients, StressError> {
-    probe_gaussians(probe, &forward);
-    let views = objective.render_views(&forward, batch, ViewsToRender::TargetsAndInputs)?;
+    probe_gaussians(probe, forward);
+    let views = objective.render_views(forward, batch, ViewsToRender::TargetsAndInputs)?;
     for view in &views {
         let kind = if view.is_target { "target" } else { "input" };
         probe.tensor(Stage::Render, &format!("{kind} {} rgb", view.truth_index), &view.rgb);

@@ -56,7 +56,7 @@ fn main() {
     reset_peak();
     let started = Instant::now();
     let settings =
-        checkpoint::Settings { model: config.clone(), preprocess: Default::default(), configured: Default::default() };
+        checkpoint::Settings { model: config, preprocess: Default::default(), configured: Default::default() };
     let written = checkpoint::save(dir.path(), checkpoint::Weights::Trained(&model), &settings, &optimizer, &state, 1)
         .expect("the checkpoint writes");
     let seconds = started.elapsed().as_secs_f64();

@@ -247,7 +247,7 @@ mod tests {
     fn an_allowed_change_by_name_or_section_is_reported_and_the_others_still_refused() {
         let config = TrainConfig::default();
         let dir = checkpoint(&ConfiguredSections::of(&config));
-        let mut changed = config.clone();
+        let mut changed = config;
         changed.data.preprocess.target_width = 280;
         changed.sampler.window += 2;
         changed.optim.lr *= 0.5;
@@ -274,7 +274,7 @@ mod tests {
         let sampler = fewer.inputs.as_mut().unwrap()["sampler"].as_object_mut().unwrap();
         sampler.remove("window");
         let dir = checkpoint(&fewer);
-        let mut later = config.clone();
+        let mut later = config;
         later.sampler.window += 2;
         assert_eq!(compared(dir.path(), &later, &[]).unwrap(), [], "a setting the record lacks is not compared");
     }

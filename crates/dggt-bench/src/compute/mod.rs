@@ -220,6 +220,8 @@ impl Record {
         }
     }
 
+    // Takes any error by value, like `impl Into<String>`, so `Err(e) => Record::failed(key, e)` reads plainly.
+    #[allow(clippy::needless_pass_by_value)]
     fn failed(key: impl Into<String>, error: impl ToString) -> Self {
         Self { error: Some(error.to_string()), ..Self::new(key) }
     }

@@ -35,7 +35,7 @@ fn convert(root: &Path, out: &Path, existing: ExistingScenes) -> Outcome {
     };
     let jobs = jobs(&dataset, root, out, None).unwrap();
     let mut outcomes = convert_segments(&dataset, &jobs, &options, 1, FailurePolicy::Stop, existing, &Silent).unwrap();
-    assert_eq!(outcomes.len(), 1);
+    assert_eq!(outcomes.len(), 1, "one outcome for the one segment");
     outcomes.remove(0)
 }
 

@@ -100,7 +100,7 @@ fn a_synthetic_scene_converts_to_the_hand_computed_poses_points_and_masks() {
     let cols = u0 as u32..u0 as u32 + (u1 - u0) as u32;
     let rows = v0 as u32..v0 as u32 + (v1 - v0) as u32;
     let expected: Vec<(u32, u32)> = rows.flat_map(|r| cols.clone().map(move |c| (c, r))).collect();
-    let mut sorted = set.clone();
+    let mut sorted = set;
     sorted.sort_by_key(|&(c, r)| (r, c));
     assert_eq!(sorted, expected);
     let all = image::open(layout.dynamic_mask(DynamicMaskKind::All, 0, 0)).unwrap().to_luma8();
@@ -173,7 +173,11 @@ fn a_moving_car_is_masked_by_its_outline_and_a_slow_one_not_at_all() {
 
 fn assert_front_depth_flows(out: &Path, frames: usize) {
     let scene = dggt_data::read_export(out, &Default::default()).unwrap();
-    assert_eq!(scene.depth_source(), Some(dggt_data::DepthSource::DepthFlows4));
+    assert_eq!(
+        scene.depth_source(),
+        Some(dggt_data::DepthSource::DepthFlows4),
+        "depth from the four-channel depth-flow maps"
+    );
     assert_eq!(
         scene.flow_origin().unwrap(),
         dggt_data::FlowOrigin::TrackedBoxes,
@@ -182,7 +186,7 @@ fn assert_front_depth_flows(out: &Path, frames: usize) {
     let front = scene.cameras.iter().position(|c| c.id == 0).unwrap();
     for frame in 0..frames {
         let map = scene.depth_map(frame, front).unwrap().unwrap();
-        assert_eq!((map.size.width, map.size.height), (20, 15));
+        assert_eq!((map.size.width, map.size.height), (20, 15), "depth maps of the 20 x 15 camera size");
         let flow = map.flow.as_ref().unwrap();
         // The car point is 10.5 m ahead of CAM_FRONT (the car 12 m ahead of the ego, the camera 1.5 m forward),
         // 0.3 m to its right and 0.5 m below it: pixel (40 + 50 · 0.3 / 10.5, 30 + 50 · 0.5 / 10.5) =

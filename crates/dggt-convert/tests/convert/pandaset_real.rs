@@ -190,7 +190,7 @@ fn convert(style: DynamicMaskStyle, out: &Path) {
         rate: FrameRate::KeyFrames,
     };
     let summary = convert_scene(&tables, 0, out, &options, &|_| {}).unwrap();
-    assert_eq!(summary.frames, 40);
+    assert_eq!(summary.frames, 40, "the sequence's 40 frames converted");
 }
 
 /// The dynamic-mask coverage at every vehicle's centre, at each camera's own time, over the 40 x 6 views.

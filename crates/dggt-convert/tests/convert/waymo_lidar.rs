@@ -81,9 +81,9 @@ fn convert_rows(frame: &proto::Frame) -> Vec<[f32; 14]> {
     let scene = dir.path().join("000");
     let options = WaymoOptions { cameras: vec![0], ..Default::default() };
     let summary = convert_segment(&input, &scene, &options, &|_| {}).unwrap();
-    assert_eq!(summary.lidar_frames, 1);
+    assert_eq!(summary.lidar_frames, 1, "the one frame's lidar written");
     let bytes = std::fs::read(ExportLayout::new(&scene).lidar(0)).unwrap();
-    assert_eq!(bytes.len() % (14 * 4), 0);
+    assert_eq!(bytes.len() % (14 * 4), 0, "whole points of 14 f32 values each");
     bytes
         .chunks_exact(14 * 4)
         .map(|row| std::array::from_fn(|i| f32::from_le_bytes(row[i * 4..i * 4 + 4].try_into().unwrap())))

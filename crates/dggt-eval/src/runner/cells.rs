@@ -1,6 +1,7 @@
 //! Depth and motion scored at a view's lidar cells: the cells paired with the render (positive lidar depth, no
-//! sky, inside the view), the aligned depth RMSE over them, and the scene-flow metrics of a predicted flow
-//! against the export's.
+//! sky, inside the view), the aligned depth RMSE over them (split into the cells at depth edges and the rest, and
+//! of the median depth beside the expected one), and the scene-flow metrics of a predicted flow against the
+//! export's.
 
 use std::path::Path;
 
@@ -10,15 +11,32 @@ use dggt_geom::glam::DMat3;
 use dggt_metrics::{FlowMetrics, MetricError, aligned_depth_rmse, scene_flow_metrics};
 
 use crate::error::EvalError;
-use crate::grid::{CellMapping, cell_has_sky};
+use crate::grid::{CellMapping, DEPTH_EDGE_SPAN, cell_has_sky, depth_span};
 use crate::motion::{InputFlow, metres_per_unit};
-use crate::report::ViewRecord;
+use crate::report::{DepthParts, ViewRecord};
+
+/// The depths of one rendered view, each `[H, W]` row-major: the expected depth (scored as D-RMSE and AbsRel),
+/// the median depth (the surface each pixel sees) and each pixel's 3x3 span of the expected depth.
+pub(super) struct RenderedDepth {
+    expected: Vec<f32>,
+    median: Vec<f32>,
+    span: Vec<f32>,
+}
+
+impl RenderedDepth {
+    pub(super) fn new(expected: Vec<f32>, median: Vec<f32>, size: ImageSize) -> Self {
+        let span = depth_span(&expected, size.width as usize, size.height as usize);
+        Self { expected, median, span }
+    }
+}
 
 /// The scored cells of one view: rendered depth, lidar depth and true flow, paired, and at an input view of a
 /// moving reconstruction the expected flow of its pixels ([`InputFlow::planes`]).
 #[derive(Debug, Default)]
 pub(super) struct Cells {
     predicted_depth: Vec<f32>,
+    median_depth: Vec<f32>,
+    at_edge: Vec<bool>,
     true_depth: Vec<f32>,
     true_flow: Vec<[f32; 3]>,
     predicted_flow: Vec<[f32; 3]>,
@@ -50,7 +68,7 @@ pub(super) fn collect_cells(
     sky: Option<&[u8]>,
     original: ImageSize,
     mapping: &CellMapping,
-    depth: &[f32],
+    depth: &RenderedDepth,
     planes: Option<&[Vec<f32>; 3]>,
 ) -> Cells {
     let mut cells = Cells::default();
@@ -62,8 +80,10 @@ pub(super) fn collect_cells(
             if map.depth[i] <= 0.0 || sky.is_some_and(|mask| cell_has_sky(mask, w, h, row, col)) {
                 continue;
             }
-            if let Some(predicted) = mapping.sample(depth, row, col) {
+            if let Some(predicted) = mapping.sample(&depth.expected, row, col) {
                 cells.predicted_depth.push(predicted);
+                cells.median_depth.push(mapping.sample(&depth.median, row, col).unwrap_or(predicted));
+                cells.at_edge.push(mapping.sample(&depth.span, row, col).is_some_and(|span| span > DEPTH_EDGE_SPAN));
                 cells.true_depth.push(map.depth[i]);
                 if let Some(flow) = &map.flow {
                     cells.true_flow.push(flow[i]);
@@ -86,7 +106,7 @@ pub(super) fn read_sky_mask(path: Option<&Path>, original: ImageSize) -> Result<
     Ok(Some(mask.into_raw()))
 }
 
-/// D-RMSE of `cells` into `record`, and the longest true flow among them into `seen`.
+/// D-RMSE of `cells` into `record` (with its parts), and the longest true flow among them into `seen`.
 pub(super) fn score_depth(record: &mut ViewRecord, cells: &Cells, seen: &mut FlowSeen) -> Result<(), EvalError> {
     record.depth_cells = cells.true_depth.len();
     match aligned_depth_rmse(&cells.predicted_depth, &cells.true_depth) {
@@ -95,6 +115,19 @@ pub(super) fn score_depth(record: &mut ViewRecord, cells: &Cells, seen: &mut Flo
             record.abs_rel = Some(alignment.abs_rel);
             record.depth_scale = Some(alignment.scale);
             record.depth_shift = Some(alignment.shift);
+            let median = aligned_depth_rmse(&cells.median_depth, &cells.true_depth)?;
+            let part = |edge: bool| {
+                let paired = cells.predicted_depth.iter().zip(&cells.true_depth).zip(&cells.at_edge);
+                alignment.abs_rel_of(paired.filter(|(_, at)| **at == edge).map(|((&p, &g), _)| (p, g)))
+            };
+            let edges = cells.at_edge.iter().filter(|at| **at).count();
+            record.depth_parts = Some(DepthParts {
+                abs_rel_at_edges: part(true),
+                abs_rel_elsewhere: part(false),
+                edge_fraction: Some(edges as f64 / cells.at_edge.len() as f64),
+                median_d_rmse: Some(median.rmse),
+                median_abs_rel: Some(median.abs_rel),
+            });
         }
         Err(MetricError::Empty { .. }) => {
             record.depth_note = Some("no lidar cell outside the sky inside the view".into());

@@ -1,7 +1,8 @@
 //! The evaluation run: scene exports + checkpoint + protocol + device -> per-view records, per-scene and
 //! overall means, stage times, written as `eval.json` and `eval.md`.
 //!
-//! Per scene: the protocol's input frames (all chosen cameras) go through one forward pass exactly as in
+//! Per scene: the protocol's input frames (all chosen cameras) go through one forward pass (or, with
+//! `inputs_per_pass`, overlapping passes of that many inputs: [`crate::Protocol::passes`]) exactly as in
 //! `dggt reconstruct` (same preprocessing, chunked heads, predicted cameras; the world is the first input
 //! view's camera frame). Every target view is rendered at the release's scene time of its frame: an input
 //! view from its own predicted camera, any other from the camera interpolated between the predicted poses of
@@ -32,11 +33,13 @@
 //! every scene's window checked, LPIPS, the motion source), `forward` (one scene's forward pass and
 //! assembly), `views` (a target view's camera, nearest input and rendered flows), `refinement` (the refiner),
 //! `cells` and `scoring` (a view scored: its images, then depth and motion at the lidar cells), `outputs`
-//! (reports and crops folders), `scene` (one scene's loop over its target views); this file runs the scenes.
+//! (reports and crops folders), `scene` (one scene's loop over its target views), `passes` (a scene in
+//! overlapping passes, joined); this file runs the scenes.
 
 mod cells;
 mod forward;
 mod outputs;
+mod passes;
 mod refinement;
 mod scene;
 mod scoring;
@@ -53,11 +56,12 @@ use dggt_refine::RefinerSpec;
 
 use crate::error::EvalError;
 use crate::report::{EvalReport, summarise_scenes};
+use passes::evaluate_in_passes;
 use refinement::load_refiner;
-use scene::evaluate_scene;
 use setup::{SceneContext, load_lpips, motion_source};
 use stages::{LOAD, Stopwatch};
 
+use crate::grid::DEPTH_EDGE_SPAN;
 pub use outputs::write_report;
 pub use scene::MOTION_GATE;
 pub use scoring::NEAREST_INPUT;
@@ -98,7 +102,7 @@ pub fn evaluate(options: &EvalOptions, device: &Device) -> Result<EvalReport, Ev
             motion,
             device,
         };
-        let report = evaluate_scene(root, scene, &context).map_err(|e| e.in_scene(root))?;
+        let report = evaluate_in_passes(root, scene, protocol, &context).map_err(|e| e.in_scene(root))?;
         total.add_times(&report.stages);
         reports.push(report);
     }
@@ -106,15 +110,18 @@ pub fn evaluate(options: &EvalOptions, device: &Device) -> Result<EvalReport, Ev
     let report = EvalReport {
         protocol: protocol.clone(),
         input_frames: protocol.input_frames(),
-        checkpoint: network.info.clone(),
+        checkpoint: network.info,
         preprocess,
         device: format!("{device:?}"),
         motion_source: crate::motion::motion_label(motion).into(),
         poses: options.poses,
-        depth_protocol: "rendered expected depth vs lidar depth (depth_flows_4, else the lidar sweep binned on the same grid), least-squares scale and shift, at \
+        depth_protocol: format!(
+            "rendered expected depth vs lidar depth (depth_flows_4, else the lidar sweep binned on the same grid), least-squares scale and shift, at \
                          cells with lidar depth > 0, no sky pixel and the centre (4 col + 2, 4 row + 2) inside the \
-                         view, the render sampled bilinearly there"
-            .into(),
+                         view, the render sampled bilinearly there; its AbsRel also split into the cells at a depth edge \
+                         (the render's 3x3 neighbourhood spans more than {DEPTH_EDGE_SPAN} in depth) and the rest, under the same \
+                         fit; and the median depth (the surface each pixel sees) scored alike under its own fit"
+        ),
         motion_protocol: format!(
             "STORM's EPE3D / Acc5 (EPE < 0.05 or relative < 5 %) / Acc10 (EPE < 0.1 or relative < 10 %) / angle \
              (true flow > 0.1) on the export's stored flow at the same cells, in windows with some true flow > \

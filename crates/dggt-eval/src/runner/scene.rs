@@ -6,9 +6,9 @@ use std::path::Path;
 use std::time::Instant;
 
 use dggt_data::{DepthSource, Scene};
-use dggt_scene::DynamicMotion;
+use dggt_scene::{DepthStatistic, DynamicMotion};
 
-use super::cells::FlowSeen;
+use super::cells::{FlowSeen, RenderedDepth};
 use super::forward::{forward_scene, motion_flows};
 use super::outputs::{crops_folder, scene_name};
 use super::refinement::{reference_view, refine_render};
@@ -43,9 +43,15 @@ pub(super) fn evaluate_scene(root: &Path, scene: &Scene, context: &SceneContext<
         for camera_position in 0..protocol.cameras.len() {
             let started = Instant::now();
             let target = target_view(&forward, scene, context, frame, camera_position)?;
-            let render = forward.scene.render(&target)?;
+            let assembled = forward.scene.assemble(&target)?;
+            let render = forward.scene.render_assembled(&assembled, &target)?;
             let rgb = clamped_colours(render.rgb)?;
-            let depth = host(render.depth, "rendered depth")?;
+            let median = forward.scene.render_depth(&assembled, &target, DepthStatistic::Median)?;
+            let depth = RenderedDepth::new(
+                host(render.depth, "rendered depth")?,
+                host(median, "rendered median depth")?,
+                forward.size,
+            );
             let refined = match context.refiner {
                 Some(refiner) => {
                     let reference = reference_view(&forward, &target, context)?;

@@ -11,7 +11,7 @@ use dggt_geom::glam::DMat3;
 use dggt_metrics::{ImageShape, MetricError, masked_psnr, psnr, ssim};
 use dggt_scene::DynamicMotion;
 
-use super::cells::{CellFlow, FlowSeen, collect_cells, read_sky_mask, score_depth, score_flow};
+use super::cells::{CellFlow, FlowSeen, RenderedDepth, collect_cells, read_sky_mask, score_depth, score_flow};
 use super::forward::ForwardScene;
 use super::setup::SceneContext;
 use super::views::{RenderedFlow, host};
@@ -69,7 +69,7 @@ fn image_scores(
     Ok(ImageScores { psnr: psnr(rgb, truth)?, ssim: ssim(rgb, truth, ImageShape::new(h, w, 3))?.value, lpips })
 }
 
-/// Scores one rendered view (its images `[H, W, 3]` clamped, `depth` `[H, W]`) against the export: PSNR, SSIM,
+/// Scores one rendered view (its images `[H, W, 3]` clamped, its depths) against the export: PSNR, SSIM,
 /// LPIPS of the render (and of the refined render), and at the lidar cells D-RMSE and scene flow.
 pub(super) fn score_view(
     scene: &Scene,
@@ -77,7 +77,7 @@ pub(super) fn score_view(
     context: &SceneContext<'_>,
     view: &ScoredView<'_>,
     images: RenderedImages<'_>,
-    depth: &[f32],
+    depth: &RenderedDepth,
     seen: &mut FlowSeen,
 ) -> Result<ViewRecord, EvalError> {
     let prepared = prepare_view(scene, view.frame_position, view.camera_position, &context.preprocess)?;
@@ -103,6 +103,7 @@ pub(super) fn score_view(
         depth_shift: None,
         depth_cells: 0,
         depth_note: None,
+        depth_parts: None,
         motion: None,
         motion_by_source: Vec::new(),
         dynamic_psnr_by_source: Vec::new(),

@@ -71,6 +71,7 @@ impl EvalOptions {
 }
 
 /// What every scene of an evaluation is evaluated with.
+#[derive(Clone, Copy)]
 pub(super) struct SceneContext<'a> {
     pub(super) options: &'a EvalOptions,
     pub(super) network: &'a LoadedNetwork,

@@ -91,6 +91,38 @@ fn protocols_plan_their_frames() {
     assert_eq!(paper.kind, ProtocolKind::Paper);
 }
 
+#[test]
+fn passes_of_a_long_window_score_every_frame_once_with_the_window_s_splits() {
+    // Inputs 0, 4, ..., 36 of frames 0..39 in passes of three inputs sharing their ends; frames 2, 6, ... held out.
+    let held_out: Vec<usize> = (2..40).step_by(4).collect();
+    let whole =
+        Protocol { scored: Some(held_out), inputs_per_pass: Some(3), ..Protocol::interpolation(0, 39, 4, vec![0, 1]) };
+    whole.validate().unwrap();
+    let passes = whole.passes();
+    let inputs: Vec<Vec<usize>> = passes.iter().map(|p| p.protocol.input_frames()).collect();
+    assert_eq!(inputs, [vec![0, 4, 8], vec![8, 12, 16], vec![16, 20, 24], vec![24, 28, 32], vec![32, 36]]);
+    for pass in &passes {
+        pass.protocol.validate().unwrap();
+        assert_eq!(pass.protocol.cameras, [0, 1], "a pass keeps the cameras");
+        assert_eq!(pass.protocol.inputs_per_pass, None, "a pass is one forward pass");
+    }
+    // Each frame the whole window scores is reported by exactly one pass, under the same split.
+    let mut reported: Vec<(usize, TargetKind)> = passes
+        .iter()
+        .flat_map(|p| p.protocol.targets().into_iter().filter(|(frame, _)| p.scores.contains(frame)))
+        .collect();
+    reported.sort_unstable();
+    assert_eq!(reported, whole.targets(), "the passes report the window's targets once each");
+    assert!(reported.contains(&(38, TargetKind::Extrapolated)), "the last pass reaches the window's end");
+    // One pass when the inputs fit.
+    let short = Protocol { inputs_per_pass: Some(12), ..whole.clone() };
+    assert_eq!(short.passes().len(), 1, "ten inputs fit a pass of twelve");
+    assert_eq!(short.passes()[0].protocol, short, "the one pass is the protocol itself");
+    let error = |p: Protocol| p.validate().unwrap_err().to_string();
+    assert!(error(Protocol { inputs_per_pass: Some(1), ..whole }).contains("two inputs or more"));
+    assert!(error(Protocol { inputs_per_pass: Some(3), ..Protocol::paper() }).contains("paper"));
+}
+
 fn record(split: TargetKind, psnr: f64, d_rmse: Option<f64>) -> ViewRecord {
     ViewRecord {
         frame: 0,
@@ -109,6 +141,7 @@ fn record(split: TargetKind, psnr: f64, d_rmse: Option<f64>) -> ViewRecord {
         depth_shift: None,
         depth_cells: 0,
         depth_note: None,
+        depth_parts: None,
         motion: None,
         motion_by_source: Vec::new(),
         dynamic_psnr_by_source: Vec::new(),

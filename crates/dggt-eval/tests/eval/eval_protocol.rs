@@ -172,18 +172,29 @@ fn paper_protocol_scores_every_view_of_the_fixture() {
         MOTION_HELD,
         "LPIPS: not computed",
         "true scene flow of synth-s0: exact",
+        "### depth at depth edges (3x3 span > 1.3) and elsewhere; the median depth",
     ] {
         assert!(markdown.contains(heading), "{heading} missing from\n{markdown}");
     }
-    // Each split's table, and the novel views' table against the nearest input copied.
-    assert_eq!(markdown.matches("| synth-s0 |").count(), 3, "{markdown}");
-    assert_eq!(markdown.matches("| **mean over scenes** |").count(), 3, "{markdown}");
+    // Each split's table and its depth parts, and the novel views' table against the nearest input copied.
+    assert_eq!(markdown.matches("| synth-s0 |").count(), 5, "{markdown}");
+    assert_eq!(markdown.matches("| **mean over scenes** |").count(), 5, "{markdown}");
     assert!(markdown.contains("| PSNR (dB) | PSNR copied |"), "{markdown}");
     for view in views {
         let at_input = view["split"] == "reconstruction";
         assert_eq!(view.get("nearest_input").is_none(), at_input, "the copy baseline at every non-input view: {view}");
         let abs_rel = number(view, "abs_rel");
         assert!(abs_rel.is_finite() && abs_rel >= 0.0, "{view}");
+        let parts = &view["depth_parts"];
+        for key in ["median_d_rmse", "median_abs_rel", "edge_fraction"] {
+            let value = number(parts, key);
+            assert!(value.is_finite() && value >= 0.0, "depth part {key} of {view}");
+        }
+        let (edges, elsewhere) = (parts["abs_rel_at_edges"].as_f64(), parts["abs_rel_elsewhere"].as_f64());
+        let share = number(parts, "edge_fraction");
+        // The parts average to the whole, weighted by their cells.
+        let whole = share * edges.unwrap_or(0.0) + (1.0 - share) * elsewhere.unwrap_or(0.0);
+        assert!((whole - abs_rel).abs() < 1e-9 * abs_rel.max(1.0), "parts {whole} against AbsRel {abs_rel}: {view}");
     }
     assert_export_poses_on_held_out_frames(run_dir.path());
 
@@ -269,8 +280,8 @@ fn assert_export_poses_on_held_out_frames(run: &Path) {
     options.out = out.path().join("held-out");
     let held_out = evaluate(&options, &Device::flex()).unwrap();
     let frames = |report: &dggt_eval::EvalReport| report.scenes[0].views.iter().map(|v| v.frame).collect::<Vec<_>>();
-    assert_eq!(frames(&all), (0..9).collect::<Vec<_>>());
-    assert_eq!(frames(&held_out), vec![0, 2, 4, 6, 8]);
+    assert_eq!(frames(&all), (0..9).collect::<Vec<_>>(), "every frame of the window scored");
+    assert_eq!(frames(&held_out), vec![0, 2, 4, 6, 8], "the inputs and the held-out frames scored");
     for view in &held_out.scenes[0].views {
         let same = all.scenes[0].views.iter().find(|v| v.frame == view.frame).unwrap();
         assert_eq!((view.psnr, view.ssim, view.d_rmse), (same.psnr, same.ssim, same.d_rmse), "frame {}", view.frame);
@@ -281,6 +292,24 @@ fn assert_export_poses_on_held_out_frames(run: &Path) {
     assert!(copied.psnr.is_finite() && copied.psnr != all.scenes[0].views[1].psnr, "{copied:?}");
     let markdown = held_out.markdown();
     assert!(markdown.contains("- cameras: the export's poses"), "{markdown}");
+
+    // In passes of two inputs, [0, 4] and [4, 8]: every frame once, and the second pass's frames scored as an
+    // evaluation of that pass alone scores them.
+    options.protocol = Protocol { scored: None, inputs_per_pass: Some(2), ..Protocol::interpolation(0, 9, 4, vec![0]) };
+    options.out = out.path().join("passes");
+    let passes = evaluate(&options, &Device::flex()).unwrap();
+    assert_eq!(frames(&passes), (0..9).collect::<Vec<_>>(), "each frame scored once, by its pass");
+    assert_eq!(passes.scenes[0].input_frames, vec![0, 4, 8], "the window's inputs");
+    options.protocol = Protocol::interpolation(4, 5, 4, vec![0]);
+    options.out = out.path().join("second-pass");
+    let second = evaluate(&options, &Device::flex()).unwrap();
+    for view in &second.scenes[0].views {
+        let joined = passes.scenes[0].views.iter().find(|v| v.frame == view.frame).unwrap();
+        assert_eq!((joined.psnr, joined.d_rmse), (view.psnr, view.d_rmse), "frame {} as its pass alone", view.frame);
+    }
+    let first_pass_frame = passes.scenes[0].views.iter().find(|v| v.frame == 2).unwrap();
+    let one_pass_frame = all.scenes[0].views.iter().find(|v| v.frame == 2).unwrap();
+    assert_ne!(first_pass_frame.psnr, one_pass_frame.psnr, "frame 2 rendered from inputs 0 and 4 alone differs");
 }
 
 fn error_of(options: &EvalOptions) -> String {

@@ -107,9 +107,10 @@ impl HostCall {
         let Dims { neighbours, heads, width, hidden, .. } = dims;
         let (mut scratch, mut shared) = (Scratch::new(&dims), SharedGrads::zeros(&dims));
         let row = heads * dims.out_channels();
-        let rows = own.offsets.chunks_exact_mut(neighbours * 3);
+        let OwnGrads { offsets: own_offsets, queries: own_queries, turned: own_turned } = own;
+        let rows = own_offsets.chunks_exact_mut(neighbours * 3);
         let rows =
-            rows.zip(own.queries.chunks_exact_mut(heads * width)).zip(own.turned.chunks_exact_mut(heads * hidden));
+            rows.zip(own_queries.chunks_exact_mut(heads * width)).zip(own_turned.chunks_exact_mut(heads * hidden));
         for (local, ((offsets, queries), turned)) in rows.enumerate() {
             let query = first + local;
             let grad = &grad_out[query * row..(query + 1) * row];

@@ -265,6 +265,8 @@ impl SharedGrads {
     }
 
     /// The sum of two workers' gradients.
+    // The shape of rayon's `reduce` operator, which hands both sides over by value.
+    #[allow(clippy::needless_pass_by_value)]
     pub fn sum(mut self, other: Self) -> Self {
         for (into, from) in [
             (&mut self.keys_values, &other.keys_values),

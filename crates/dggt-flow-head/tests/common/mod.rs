@@ -53,7 +53,7 @@ pub struct Host {
 
 impl Host {
     pub fn new(rows: usize, cols: usize, values: Vec<f64>) -> Self {
-        assert_eq!(rows * cols, values.len());
+        assert_eq!(rows * cols, values.len(), "one value per entry of a {rows} x {cols} matrix");
         Self { rows, cols, values }
     }
 

@@ -118,7 +118,7 @@ fn check(inputs: HeadInputs, seed: u64) {
     let found = run(&|query, target| head.forward(query, target).unwrap());
     let moved = expected[0].1.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     assert!(moved > 1e-2, "the head moves the points: {moved}");
-    assert_eq!(found.len(), expected.len());
+    assert_eq!(found.len(), expected.len(), "a gradient for every expected parameter");
     for ((name, found), (_, expected)) in found.iter().zip(&expected) {
         let largest = expected.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         if largest == 0.0 {

@@ -36,7 +36,7 @@ fn points(n: usize, rng: &mut Rng) -> Vec<[f32; 3]> {
 fn device_rows(queries: &[[f32; 3]], targets: &[[f32; 3]], k: usize) -> Vec<usize> {
     let device = wgpu();
     let rows = k_nearest(upload(queries, &device), upload(targets, &device), k);
-    assert_eq!(rows.dims(), [queries.len(), k]);
+    assert_eq!(rows.dims(), [queries.len(), k], "k neighbour rows per query");
     rows.into_data().convert::<i64>().try_to_vec::<i64>().unwrap().into_iter().map(|r| r as usize).collect()
 }
 
@@ -83,6 +83,6 @@ fn a_query_that_is_not_a_number_keeps_the_first_rows() {
 fn the_head_searches_on_the_points_device() {
     let device = wgpu();
     assert_eq!(SearchPlace::for_points(&upload(&[[0.0; 3]], &device)), SearchPlace::Device);
-    assert_eq!(SearchPlace::for_points(&upload(&[[0.0; 3]], &device.clone().autodiff())), SearchPlace::Device);
+    assert_eq!(SearchPlace::for_points(&upload(&[[0.0; 3]], &device.autodiff())), SearchPlace::Device);
     assert_eq!(SearchPlace::for_points(&upload(&[[0.0; 3]], &Device::flex())), SearchPlace::Host);
 }

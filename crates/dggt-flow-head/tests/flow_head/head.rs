@@ -253,7 +253,7 @@ fn a_prepared_cloud_serves_both_roles() {
     }
     let mut points = values(b.points.clone());
     points[3 * 4 + 1] = f64::NAN;
-    let broken = FrameCloud::new(Host::new(13, 3, points).tensor(&device), b.features.clone());
+    let broken = FrameCloud::new(Host::new(13, 3, points).tensor(&device), b.features);
     let error = head.prepare(&broken, CloudRole::View(1)).err().expect("a non-finite point is refused");
     assert!(matches!(error, FlowError::NonFinitePoint { cloud: CloudRole::View(1), row: 4, .. }), "{error}");
     assert!(error.to_string().contains("point 4 of the cloud of input view 1"), "{error}");

@@ -6,7 +6,7 @@ use dggt_infer::{MotionPath, forward_chunked, is_still};
 use dggt_model::{Dggt, ModelConfig};
 
 fn max_difference<const D: usize>(a: Tensor<D>, b: Tensor<D>) -> f32 {
-    assert_eq!(a.dims(), b.dims());
+    assert_eq!(a.dims(), b.dims(), "the two tensors compared have one shape");
     let a = a.into_data().convert::<f32>().try_into_vec::<f32>().unwrap();
     let b = b.into_data().convert::<f32>().try_into_vec::<f32>().unwrap();
     a.iter().zip(&b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
@@ -64,7 +64,7 @@ fn the_motion_head_is_skipped_only_on_frames_without_possibly_dynamic_pixels() {
     // A fresh instance head's logits are near 0: every pixel may be dynamic, the motion head runs.
     let (always, planned) = (run(&model, MotionPath::Always), run(&model, MotionPath::WhereDynamic));
     assert_eq!((always.motion_skipped_frames, planned.motion_skipped_frames), (0, 0));
-    assert_eq!(max_difference(always.velocity.clone().unwrap(), planned.velocity.unwrap()), 0.0);
+    assert_eq!(max_difference(always.velocity.unwrap(), planned.velocity.unwrap()), 0.0, "velocities alike");
 
     // Logits of -6 everywhere: sigmoid below 1/255, no dynamic Gaussian can be drawn, the head is skipped.
     constant_output(model.instance_head.as_mut().unwrap(), -6.0);

@@ -31,7 +31,7 @@ pub struct Host {
 
 impl Host {
     pub fn new(shape: Vec<usize>, values: Vec<f32>) -> Self {
-        assert_eq!(shape.iter().product::<usize>(), values.len());
+        assert_eq!(shape.iter().product::<usize>(), values.len(), "one value per element of shape {shape:?}");
         Self { shape, values }
     }
 
@@ -108,7 +108,7 @@ pub fn rel_err(a: f64, b: f64, floor: f64) -> f64 {
 
 /// Largest `|a - b|` over two equally long slices, divided by the largest `|b|`.
 pub fn max_err_rel_to_max(a: &[f32], b: &[f32]) -> f64 {
-    assert_eq!(a.len(), b.len());
+    assert_eq!(a.len(), b.len(), "values compared pairwise have equal lengths");
     let max_ref = b.iter().fold(0.0f64, |m, v| m.max(v.abs() as f64));
     let max_diff = a.iter().zip(b).fold(0.0f64, |m, (x, y)| m.max((x - y).abs() as f64));
     max_diff / max_ref.max(f64::MIN_POSITIVE)

@@ -106,7 +106,7 @@ fn photometric_gradients() {
     let x = random(&[1, 2, 2, 3], 0.0, 1.0, 2);
     let t = target.clone();
     check_coordinates("l2", &|x: Tensor<4>| l2(x, t.tensor(&device())).unwrap(), &x);
-    let t = target.clone();
+    let t = target;
     check_coordinates("l1", &|x: Tensor<4>| l1(x, t.tensor(&device())).unwrap(), &x);
 }
 
@@ -123,7 +123,7 @@ fn bce_gradients() {
     let sky = Host::new(vec![2, 2, 3], targets.values.iter().map(|v| (*v > 0.5) as u8 as f32).collect());
     check_coordinates("opacity_loss", &|p: Tensor<3>| opacity_loss(p, sky.tensor(&device())).unwrap(), &probabilities);
     let logits = random(&[2, 2, 3], -4.0, 4.0, 5);
-    let t = targets.clone();
+    let t = targets;
     check_coordinates("bce_with_logits", &|x: Tensor<3>| bce_with_logits(x, t.tensor(&device())).unwrap(), &logits);
 }
 

@@ -147,7 +147,7 @@ fn pth_files_load_like_safetensors() {
     let b = values(from_safetensors.eval(img0.tensor(&device), img1.tensor(&device)).unwrap());
     assert_eq!(a, b);
     // A wrongly shaped tensor in a .pth file is reported like in safetensors.
-    let mut bad = convs.clone();
+    let mut bad = convs;
     bad[0].1 = Host::new(vec![64, 3, 3, 3], vec![0.0; 64 * 27]);
     let bad_path = dir.path().join("bad.pth");
     common::write_pth(&bad_path, &bad);

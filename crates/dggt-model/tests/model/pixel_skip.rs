@@ -14,7 +14,7 @@ fn values(tensor: Tensor<5>) -> Vec<f32> {
 
 /// The depth head's raw output for `images` and for `images` with pixel `(row, col)` of frame 0 changed, on the
 /// same tokens: `[B, S, H, W, C]` values of each.
-fn outputs_with_one_pixel_changed(model: &Dggt, images: Tensor<5>, [row, col]: [usize; 2]) -> [Vec<f32>; 2] {
+fn outputs_with_one_pixel_changed(model: &Dggt, images: &Tensor<5>, [row, col]: [usize; 2]) -> [Vec<f32>; 2] {
     let device = images.device();
     let out = model.forward_with(images.clone(), ExtraHeads::NONE).unwrap();
     let tokens = |i: usize| out.aggregator.output_list[i].clone();
@@ -23,7 +23,7 @@ fn outputs_with_one_pixel_changed(model: &Dggt, images: Tensor<5>, [row, col]: [
         [0..1, 0..1, 0..3, row..row + 1, col..col + 1],
         Tensor::from_data(TensorData::new(vec![0.0f32, 1.0, 0.5], [1, 1, 3, 1, 1]), &device),
     );
-    let before = model.depth_head.forward(tokens, start, grid, &images).raw;
+    let before = model.depth_head.forward(tokens, start, grid, images).raw;
     let after = model.depth_head.forward(tokens, start, grid, &changed).raw;
     [values(before), values(after)]
 }
@@ -36,7 +36,7 @@ fn the_release_architecture_has_no_pixel_skip() {
     assert!(model.depth_head.pixel_skip.is_none() && model.gs_head.as_ref().unwrap().pixel_skip.is_none());
 
     let images = Tensor::<5>::random([1, 2, 3, H, W], Distribution::Uniform(0.0, 1.0), &device);
-    let [before, after] = outputs_with_one_pixel_changed(&model, images, [10, 20]);
+    let [before, after] = outputs_with_one_pixel_changed(&model, &images, [10, 20]);
     assert_eq!(before, after, "without the skip, the head reads only the tokens");
 }
 
@@ -53,7 +53,7 @@ fn a_pixel_skip_reaches_two_pixels_around_each_pixel_and_learns() {
 
     let images = Tensor::<5>::random([1, 2, 3, H, W], Distribution::Uniform(0.0, 1.0), &device);
     let (row, col) = (10usize, 20usize);
-    let [before, after] = outputs_with_one_pixel_changed(&model, images.clone(), [row, col]);
+    let [before, after] = outputs_with_one_pixel_changed(&model, &images, [row, col]);
     let channels = before.len() / (2 * H * W);
     for r in 0..H {
         for c in 0..W {

@@ -28,8 +28,8 @@ fn both_modes_match_the_reference(device: &Device, checkpoint: Option<&Path>) {
     let (load, report) = (&run.load, &run.report);
     println!("{report}{}", report.summary());
     assert_eq!(load.unet_from_checkpoint.len(), 208, "the checkpoint's full UNet");
-    assert_eq!(load.unet_from_base, 0);
-    assert_eq!(load.vae.merged.len(), 35);
+    assert_eq!(load.unet_from_base, 0, "no UNet weight taken from the base model");
+    assert_eq!(load.vae.merged.len(), 35, "the VAE's 35 merged tensors");
     assert_eq!(load.vae.replaced.len(), 4, "{:?}", load.vae.replaced);
     assert!(load.unused.is_empty(), "unused tensors: {:?}", load.unused);
     let outputs = read_vectors(&dir.join("outputs.safetensors")).unwrap();
@@ -40,7 +40,7 @@ fn both_modes_match_the_reference(device: &Device, checkpoint: Option<&Path>) {
     }
     let failed: Vec<&str> = report.failed().map(|row| row.name.as_str()).collect();
     assert!(failed.is_empty(), "outside the tolerance: {failed:?}");
-    assert!(report.passed());
+    assert!(report.passed(), "the parity report passes");
 }
 
 #[test]

@@ -205,11 +205,11 @@ fn bad_checkpoints_and_pair_files_are_errors_naming_the_file_and_the_part() {
     let path = out.path().join("broken.safetensors");
     write_difix_checkpoint(&checkpoint, &path).unwrap();
     let mut broken = config.clone();
-    broken.model.checkpoint = Some(path.clone());
+    broken.model.checkpoint = Some(path);
     let error = RefineTrainer::new(broken, device(), Start::Fresh).err().expect("a missing factor").to_string();
     assert!(error.contains("broken.safetensors") && error.contains(target), "{error}");
 
-    let images = config.pairs.images.clone().unwrap();
+    let images = config.pairs.images.unwrap();
     let error = dggt_refine_train::pair_files::PairFiles::open(&images).unwrap_err().to_string();
     assert!(error.contains("inputs.safetensors") && error.contains("views"), "{error}");
 }

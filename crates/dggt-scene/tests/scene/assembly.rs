@@ -221,7 +221,7 @@ fn gaussians_beyond_the_far_plane_are_dropped_and_draw_nothing() {
     assert_eq!(assembled.counts.kept(), 0, "{:?}", assembled.counts);
     assert!(assembled.counts.off_screen > 0, "{:?}", assembled.counts);
     let view = render_target(&pixels, None, &target, &near).unwrap();
-    assert!(host(view.alpha.clone()).iter().all(|a| *a == 0.0));
+    assert!(host(view.alpha).iter().all(|a| *a == 0.0), "nothing drawn");
     let far = AssemblySettings { far_plane: 100.0, ..AssemblySettings::default() };
     assert_eq!(
         assemble(&pixels, &target, &far).unwrap().counts,
@@ -241,7 +241,7 @@ fn eps2d_sets_how_far_each_footprint_spreads() {
     let target = TargetView { rig_camera: 0, time: 0.0, camera: views()[0].camera };
     let own: Vec<f32> = {
         let opacity = host(maps.opacity.clone().narrow(1, 0, 1).reshape([H, W, 1]));
-        let rgb = host(maps.rgb.clone().narrow(1, 0, 1).reshape([H, W, 3]));
+        let rgb = host(maps.rgb.narrow(1, 0, 1).reshape([H, W, 3]));
         rgb.iter().enumerate().map(|(i, c)| c * opacity[i / 3]).collect()
     };
     let mean_error = |eps2d: f32| {

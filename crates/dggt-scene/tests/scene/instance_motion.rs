@@ -57,7 +57,7 @@ fn at_an_input_time_nothing_moves_and_between_inputs_the_instance_moves_rigidly(
     let between = target(&held, 0.125);
     let assembled = assemble(&moving, &between, &rigid).unwrap().gaussians;
     let (means, quats) = (host(assembled.means), host(assembled.quats_wxyz));
-    let (original_means, original_quats) = (host(held.means.clone()), host(held.quats_wxyz.clone()));
+    let (original_means, original_quats) = (host(held.means.clone()), host(held.quats_wxyz));
     let motion = moving.instances().unwrap().motion(0, 0.0, 0.125);
     assert!(motion.translation.length() > 0.1, "the patch moves: {motion:?}");
     let patch: Vec<usize> = (0..H * W).filter(|&p| in_patch(0, p % W, p / W)).collect();

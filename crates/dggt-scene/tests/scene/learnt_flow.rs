@@ -149,7 +149,7 @@ fn the_learnt_velocity_tensor_is_the_host_velocities_and_marks_the_rows_the_head
     assert!(host(weight).iter().any(|&v| v != 0.0));
 
     // Without dynamic pixels in view 1 neither of its pairs runs: no row is measured.
-    let mut still = pixels.clone();
+    let mut still = pixels;
     let mut logits = host(still.dynamic_logit.clone().unwrap());
     logits[H * W..2 * H * W].fill(-8.0);
     still.dynamic_logit = Some(Tensor::from_data(TensorData::new(logits, [S * H * W]), &device));

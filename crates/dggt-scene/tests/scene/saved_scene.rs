@@ -85,7 +85,7 @@ fn a_placement_moves_the_instance_at_every_time() {
     // At view 1's time its own rows are drawn: the patch's moved by the placement alone, the others held.
     let at_input = target(&scene, 0.5);
     let means = host(dggt_scene::assemble(&placed, &at_input, &settings).unwrap().gaussians.means);
-    let original = host(scene.pixels.means.clone());
+    let original = host(scene.pixels.means);
     let statics = S * H * W;
     let patch: Vec<usize> = (0..H * W).filter(|&p| in_patch(1, p % W, p / W)).collect();
     let others: Vec<usize> = (0..H * W).filter(|&p| !in_patch(1, p % W, p / W)).collect();

@@ -17,7 +17,7 @@ use crate::backward::{ImageGrads, rasterize_backward};
 use crate::cull::CullStats;
 use crate::forward::{Rasterized, rasterize};
 use crate::gaussians::{Gaussians, Opacities};
-use crate::settings::RasterSettings;
+use crate::settings::{DepthStatistic, RasterSettings};
 use crate::view::ViewBatch;
 
 /// What the host backward pass reads: the inputs of the forward pass as host buffers and its result.
@@ -113,8 +113,12 @@ fn backward<B: Backend>(saved: &HostForward, grad_images: FloatTensor<B>) -> Spl
     let device = grad_images.device();
     let channels = saved.channels;
     let (colors, alpha, depth) = unpack(&read::<B>(grad_images, "image gradient"), channels);
-    let image_grads =
-        ImageGrads { colors: Some(colors.as_slice()), alpha: Some(alpha.as_slice()), depth: Some(depth.as_slice()) };
+    // A median depth is detached by `render`: its channel of the gradient is zero, and the backward takes none.
+    let depth = match saved.settings.depth {
+        DepthStatistic::Expected => Some(depth.as_slice()),
+        DepthStatistic::Median => None,
+    };
+    let image_grads = ImageGrads { colors: Some(colors.as_slice()), alpha: Some(alpha.as_slice()), depth };
     let grads = rasterize_backward(&saved.gaussians(), &saved.views, &saved.settings, &saved.forward, &image_grads)
         .unwrap_or_else(|e| panic!("splat backward: {e}"));
     let count = saved.means.len() / 3;

@@ -44,7 +44,7 @@ fn assert_smooth(forward: &Rasterized, scene: &Scene, size: ImageSize) {
             }
         }
     }
-    assert!(forward.transmittance.iter().all(|t| *t > 1e-2));
+    assert!(forward.transmittance.iter().all(|t| *t > 1e-2), "no pixel near the early stop");
 }
 
 /// Selects one input buffer of the scene or the settings.

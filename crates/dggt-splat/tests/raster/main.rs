@@ -8,6 +8,7 @@ mod batches;
 mod cube;
 mod empty;
 mod finite_difference;
+mod median_depth;
 mod parity;
 mod per_view;
 #[cfg(feature = "wgpu")]

@@ -5,7 +5,7 @@
 //! variable names the shared `parity` folder). Their README describes how they were computed.
 
 use std::collections::HashMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use dggt_geom::ImageSize;
 use dggt_splat::{
@@ -19,8 +19,8 @@ pub fn parity_dir() -> PathBuf {
 pub struct Tensors(HashMap<String, (Vec<usize>, Vec<f32>)>);
 
 impl Tensors {
-    pub fn load(path: PathBuf) -> Self {
-        let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
+    pub fn load(path: &Path) -> Self {
+        let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
         let file = safetensors::SafeTensors::deserialize(&bytes)
             .unwrap_or_else(|e| panic!("{} is not a safetensors file: {e}", path.display()));
         let tensors = file
@@ -47,7 +47,7 @@ impl Tensors {
 
 /// Largest absolute difference and the reference's largest magnitude, over the entries `keep` selects.
 pub fn compare(actual: &[f32], expected: &[f32], keep: impl Fn(usize) -> bool) -> (f64, f64) {
-    assert_eq!(actual.len(), expected.len());
+    assert_eq!(actual.len(), expected.len(), "compared buffers of one length");
     let mut max_error = 0.0f64;
     let mut max_reference = 0.0f64;
     for (k, (a, e)) in actual.iter().zip(expected).enumerate() {
@@ -92,8 +92,8 @@ pub fn check_both(case: &str, name: &str, actual: &[f32], outputs: &Tensors, tol
 
 fn run_case(case: &str) {
     let dir = parity_dir().join(case);
-    let inputs = Tensors::load(dir.join("inputs.safetensors"));
-    let outputs = Tensors::load(dir.join("outputs.safetensors"));
+    let inputs = Tensors::load(&dir.join("inputs.safetensors"));
+    let outputs = Tensors::load(&dir.join("outputs.safetensors"));
     let shape = inputs.shape("W1");
     let (views_count, height, width) = (shape[0], shape[1], shape[2]);
     let count = inputs.shape("means")[0];
@@ -164,10 +164,14 @@ fn run_case(case: &str) {
     );
     for (v, stats) in forward.stats.iter().enumerate() {
         let reasons = &projection.culled[v * count..(v + 1) * count];
-        assert_eq!(stats.gaussians, count);
-        assert_eq!(stats.kept, reasons.iter().filter(|r| r.is_none()).count());
-        assert_eq!(stats.near_plane, reasons.iter().filter(|r| **r == Some(CullReason::NearPlane)).count());
-        assert_eq!(stats.tile_intersections, forward.bins[v].len());
+        assert_eq!(stats.gaussians, count, "{case}: view {v} counts every Gaussian");
+        assert_eq!(stats.kept, reasons.iter().filter(|r| r.is_none()).count(), "{case}: view {v} kept");
+        assert_eq!(
+            stats.near_plane,
+            reasons.iter().filter(|r| **r == Some(CullReason::NearPlane)).count(),
+            "{case}: view {v} behind the near plane"
+        );
+        assert_eq!(stats.tile_intersections, forward.bins[v].len(), "{case}: view {v} tile intersections");
         eprintln!("{case:<28} view {v}: {stats}");
     }
     if case.starts_with("case_b") {

@@ -2,8 +2,8 @@
 
 use dggt_geom::ImageSize;
 use dggt_splat::{
-    GaussianGrads, Gaussians, ImageGrads, Opacities, PinholeView, RasterSettings, Rasterized, ViewBatch, rasterize,
-    rasterize_backward,
+    DepthStatistic, GaussianGrads, Gaussians, ImageGrads, Opacities, PinholeView, RasterSettings, Rasterized,
+    ViewBatch, rasterize, rasterize_backward,
 };
 
 /// The seeded generator of the test scenes.
@@ -85,6 +85,14 @@ impl LossWeights {
         ImageGrads { colors: Some(&self.colors), alpha: Some(&self.alpha), depth: Some(&self.depth) }
     }
 
+    /// The gradients a render with `depth` takes: a median depth takes none (it is a constant of the render).
+    pub fn image_grads_for(&self, depth: DepthStatistic) -> ImageGrads<'_> {
+        match depth {
+            DepthStatistic::Expected => self.image_grads(),
+            DepthStatistic::Median => ImageGrads { depth: None, ..self.image_grads() },
+        }
+    }
+
     pub fn loss(&self, r: &Rasterized) -> f64 {
         let dot = |a: &[f32], b: &[f32]| a.iter().zip(b).map(|(x, y)| *x as f64 * *y as f64).sum::<f64>();
         dot(&r.images.colors, &self.colors) + dot(&r.images.alpha, &self.alpha) + dot(&r.images.depth, &self.depth)
@@ -100,6 +108,7 @@ pub fn render_with_grads(
 ) -> (Rasterized, GaussianGrads) {
     let gaussians = scene.gaussians();
     let forward = rasterize(&gaussians, views, settings).unwrap();
-    let grads = rasterize_backward(&gaussians, views, settings, &forward, &weights.image_grads()).unwrap();
+    let grads =
+        rasterize_backward(&gaussians, views, settings, &forward, &weights.image_grads_for(settings.depth)).unwrap();
     (forward, grads)
 }

@@ -87,17 +87,17 @@ fn assert_matches_host(
     let background = background.map(|b| tensor(&b, [b.len()], device).require_grad());
     let settings = RenderSettings { raster: RasterSettings::default(), background: background.clone() };
     let (images, stats) = render_with_stats(&gaussians, &camera_tensors(views, device), &settings).unwrap();
-    assert_eq!(stats, forward.stats);
-    assert_eq!(values(images.colors.clone()), forward.images.colors);
-    assert_eq!(values(images.alpha.clone()), forward.images.alpha);
-    assert_eq!(values(images.depth.clone()), forward.images.depth);
+    assert_eq!(stats, forward.stats, "statistics as the host's");
+    assert_eq!(values(images.colors.clone()), forward.images.colors, "colours as the host's");
+    assert_eq!(values(images.alpha.clone()), forward.images.alpha, "alpha as the host's");
+    assert_eq!(values(images.depth.clone()), forward.images.depth, "depth as the host's");
 
     let grads = weighted_loss(&images, weights, device).backward();
     let opacities = match &gaussians.opacities {
         OpacityTensor::Shared(t) => Opacities::Shared(values(t.grad(&grads).unwrap())),
         OpacityTensor::PerView(t) => {
             let grad = t.grad(&grads).unwrap();
-            assert_eq!(grad.dims(), [views.len(), scene.len()]);
+            assert_eq!(grad.dims(), [views.len(), scene.len()], "one opacity gradient row per view");
             Opacities::PerView(values(grad))
         }
     };
@@ -109,7 +109,7 @@ fn assert_matches_host(
         colors: values(gaussians.colors.grad(&grads).unwrap()),
         background: background.map_or_else(|| host.background.clone(), |b| values(b.grad(&grads).unwrap())),
     };
-    assert_eq!(tensor_grads, host);
+    assert_eq!(tensor_grads, host, "the op's gradients are the host's");
     tensor_grads
 }
 
@@ -136,8 +136,8 @@ pub fn three_views(size: ImageSize) -> ViewBatch {
 fn flex_op_equals_the_host_rasteriser_on_the_gsplat_parity_case() {
     let case = "case_b_300g_64x48_2cam";
     let dir = parity_dir().join(case);
-    let inputs = Tensors::load(dir.join("inputs.safetensors"));
-    let outputs = Tensors::load(dir.join("outputs.safetensors"));
+    let inputs = Tensors::load(&dir.join("inputs.safetensors"));
+    let outputs = Tensors::load(&dir.join("outputs.safetensors"));
     let shape = inputs.shape("W1");
     let size = ImageSize::new(shape[2] as u32, shape[1] as u32).unwrap();
     let views = ViewBatch::from_matrices(inputs.get("viewmats"), inputs.get("Ks"), size).unwrap();

@@ -121,7 +121,8 @@ fn assert_depth_flow_changes_only_inside(before: &RenderedView, after: &Rendered
         if outside(rect, col, row) {
             assert_eq!(
                 a.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
-                b.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+                b.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                "sample {i} outside the edited box unchanged"
             );
         } else if a != b {
             assert!(b[0] == 0.0 || b[0] > a[0], "sample {i}: depth {} -> {}", a[0], b[0]);
@@ -320,11 +321,11 @@ fn the_same_edits_render_byte_identical_views() {
 }
 
 fn assert_views_identical(a: &RenderedView, b: &RenderedView) {
-    assert_eq!(a.image, b.image);
-    assert_eq!(masks(a), masks(b));
+    assert_eq!(a.image, b.image, "identical images");
+    assert_eq!(masks(a), masks(b), "identical masks");
     let bits = |v: &RenderedView| v.depth_flow.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-    assert_eq!(bits(a), bits(b));
-    assert_eq!(a.visible_instances, b.visible_instances);
+    assert_eq!(bits(a), bits(b), "bit-identical depth and flow");
+    assert_eq!(a.visible_instances, b.visible_instances, "the same visible instances");
 }
 
 #[test]

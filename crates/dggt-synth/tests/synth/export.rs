@@ -57,7 +57,7 @@ fn read_camera_pose(layout: &ExportLayout, frame: usize, camera: usize) -> World
 fn read_depth_flow(layout: &ExportLayout, frame: usize, camera: usize) -> Vec<(DVec2, f32, [f32; 3])> {
     let array = npy::read_npy_f32(&layout.depth_flow(frame, camera)).unwrap();
     let [rows, cols, channels] = array.shape[..] else { panic!("shape {:?}", array.shape) };
-    assert_eq!(channels, 4);
+    assert_eq!(channels, 4, "depth and a 3D flow per sample");
     (0..rows * cols)
         .map(|i| {
             let v = &array.data[i * 4..i * 4 + 4];
@@ -235,8 +235,8 @@ fn read_moving_instances(layout: &ExportLayout) -> Vec<Annotated> {
     let mut moving = Vec::new();
     for (key, instance) in info.as_object().unwrap() {
         let id = instance["id"].as_u64().unwrap();
-        assert_eq!(key, &id.to_string());
-        assert_eq!(instance["class_name"], "vehicle");
+        assert_eq!(key, &id.to_string(), "instances keyed by their id");
+        assert_eq!(instance["class_name"], "vehicle", "every instance a vehicle");
         let annotations = &instance["frame_annotations"];
         let frame_idx: Vec<usize> =
             annotations["frame_idx"].as_array().unwrap().iter().map(|f| f.as_u64().unwrap() as usize).collect();

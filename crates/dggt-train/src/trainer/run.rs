@@ -91,8 +91,10 @@ impl Trainer {
             checkpoint: None,
         };
         let loss = &self.config.loss;
-        let maps = if loss.depth > 0.0 || loss.flow > 0.0 || loss.learnt_flow > 0.0 {
-            DepthFlowMaps::Read
+        let maps = if loss.rendered_depth > 0.0 {
+            DepthFlowMaps::InputsAndTargets
+        } else if loss.depth > 0.0 || loss.flow > 0.0 || loss.learnt_flow > 0.0 {
+            DepthFlowMaps::Inputs
         } else {
             DepthFlowMaps::Skip
         };

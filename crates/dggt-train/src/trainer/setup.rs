@@ -64,6 +64,8 @@ impl Trainer {
     /// [`Trainer::new`] as one rank of `group`: every rank calls it with the same configuration; rank 0 checks
     /// and prepares the output folder and names the checkpoint every rank resumes. A resume may change the
     /// settings of what the network sees that `allowed` names ([`resume`]).
+    // The public constructors' style (`Trainer::new(config, devices, start)`): a run is handed its devices.
+    #[allow(clippy::needless_pass_by_value)]
     pub fn in_group(
         config: TrainConfig,
         devices: Vec<Device>,

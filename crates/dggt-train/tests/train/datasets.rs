@@ -182,7 +182,7 @@ fn a_run_of_this_project_starts_a_network_with_an_added_head() {
     assert_eq!(common::parameters(&started), trained, "the run's weights, bit for bit");
 
     // With a flow head: refused naming it, then accepted with the head fresh and the rest as trained.
-    let mut with_head = config.model.clone();
+    let mut with_head = config.model;
     with_head.flow_head = true;
     let with_head = with_head.architecture();
     let init = dggt_infer::StartingWeights { path: out.path(), may_lack: &[] };
@@ -277,7 +277,7 @@ fn exports_without_depth_maps_supervise_depth_with_their_projected_lidar() {
     let sample = trainer.sample(0).unwrap();
     let preprocess = &trainer.config().data.preprocess;
     let batch =
-        StepBatch::new(&sample, &sample.scene, preprocess, DepthFlowMaps::Read, &Device::flex().autodiff()).unwrap();
+        StepBatch::new(&sample, &sample.scene, preprocess, DepthFlowMaps::Inputs, &Device::flex().autodiff()).unwrap();
     for view in &batch.inputs {
         let depth = view.depth_flow.as_ref().expect("lidar depth for every input view");
         assert!(depth.pixels.len() > 20, "{} lidar cells", depth.pixels.len());

@@ -321,7 +321,7 @@ fn the_flow_head_starts_holding_and_waits_for_the_dynamic_head() {
     let error = without_head.validate().unwrap_err().to_string();
     assert!(error.contains("render.dynamic_motion") && error.contains("model.flow_head"), "{error}");
     // So are the head's supervision and its shape without a head.
-    let mut supervised = without_head.clone();
+    let mut supervised = without_head;
     supervised.render.dynamic_motion = dggt_scene::DynamicMotion::Velocity;
     supervised.loss.learnt_flow = 0.1;
     let error = supervised.validate().unwrap_err().to_string();

@@ -1,5 +1,5 @@
-//! Compositing: each pixel's tile list blended front to back into colour, alpha and expected depth, with the
-//! early stop at the transmittance floor.
+//! Compositing: each pixel's tile list blended front to back into colour, alpha and depth (expected, or the
+//! median: [`DepthStatistic`](crate::DepthStatistic)), with the early stop at the transmittance floor.
 //!
 //! One cube per tile, one unit per pixel of it. The tile's footprints are staged through shared memory in
 //! batches of up to `stage` footprints, each loaded by one unit, so that every footprint is read from global
@@ -12,7 +12,7 @@ use burn_cubecl::cubecl;
 use cubecl::prelude::*;
 
 use super::stage::{FootprintStage, load_footprint};
-use crate::constants::{ALPHA_THRESHOLD, MAX_ALPHA, MIN_DEPTH_ALPHA, MIN_TRANSMITTANCE};
+use crate::constants::{ALPHA_THRESHOLD, MAX_ALPHA, MEDIAN_TRANSMITTANCE, MIN_DEPTH_ALPHA, MIN_TRANSMITTANCE};
 
 /// The range `[start, end)` of the cube's tile list, the same value in every unit of the cube.
 #[cube]
@@ -30,10 +30,11 @@ pub fn tile_range(ranges: &Tensor<u32>, list: usize) -> (u32, u32) {
 /// Front-to-back compositing, one cube per tile (`CUBE_POS_X/Y` the tile, `CUBE_POS_Z` the view within the
 /// batch of views starting at `first_view`), `tile_size²` units, footprints staged `stage` at a time.
 ///
-/// Writes the packed image `[V, H, W, K + 2]` (colours, alpha, expected depth), the final transmittance and the
-/// list end (entries of the list up to the last one blended) per pixel.
+/// Writes the packed image `[V, H, W, K + 2]` (colours, alpha, depth: the median where `median_depth`, else the
+/// expected), the final transmittance and the list end (entries of the list up to the last one blended) per pixel.
 #[cube(launch)]
-#[allow(clippy::too_many_arguments)]
+// The median's tests are runtime conditions inside comptime ones, which the expansion removes whole when off.
+#[allow(clippy::too_many_arguments, clippy::collapsible_if)]
 pub fn composite_kernel(
     ids: &Tensor<u32>,
     ranges: &Tensor<u32>,
@@ -56,6 +57,7 @@ pub fn composite_kernel(
     #[comptime] tile_size: u32,
     #[comptime] stage: u32,
     #[comptime] channels: usize,
+    #[comptime] median_depth: bool,
 ) {
     let units = comptime!(tile_size * tile_size);
     let slots = comptime!(stage as usize);
@@ -85,6 +87,8 @@ pub fn composite_kernel(
         accumulated[ch] = 0.0;
     }
     let mut depth = 0.0f32;
+    // Zero until the transmittance first falls to one half (a drawn footprint lies beyond the near plane, z > 0).
+    let mut median = 0.0f32;
     let mut transmittance = 1.0f32;
     let mut last = 0u32;
     let mut batch_start = start;
@@ -134,6 +138,11 @@ pub fn composite_kernel(
                         accumulated[ch] += staged.colors[channels * s + ch] * weight;
                     }
                     depth += staged.depths[s] * weight;
+                    if comptime!(median_depth) {
+                        if median == 0.0 && next <= MEDIAN_TRANSMITTANCE {
+                            median = staged.depths[s];
+                        }
+                    }
                     transmittance = next;
                     last = batch_start + i - start + 1;
                 }
@@ -152,7 +161,13 @@ pub fn composite_kernel(
             images[out + ch] = accumulated[ch] + transmittance * background[ch];
         }
         images[out + channels] = alpha;
-        images[out + channels + 1] = depth / alpha.max(MIN_DEPTH_ALPHA);
+        let expected = depth / alpha.max(MIN_DEPTH_ALPHA);
+        images[out + channels + 1] = expected;
+        if comptime!(median_depth) {
+            if median > 0.0 {
+                images[out + channels + 1] = median;
+            }
+        }
         transmittances[pixel] = transmittance;
         list_ends[pixel] = last;
     }

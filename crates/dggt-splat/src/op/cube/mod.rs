@@ -93,7 +93,7 @@ use dggt_geom::ImageSize;
 
 use super::{PACKED_EXTRA_CHANNELS, SplatGrads, SplatInputs, SplatKernels, SplatOutputs};
 use crate::cull::CullStats;
-use crate::settings::RasterSettings;
+use crate::settings::{DepthStatistic, RasterSettings};
 use composite_backward::GradientSum;
 use dggt_cube::atomic::{FloatAtomics, NativeAdd, SwapAdd};
 use lists::{FootprintBuffers, ListBatch};
@@ -119,6 +119,7 @@ struct Layout {
     near: f32,
     far: f32,
     eps2d: f32,
+    depth: DepthStatistic,
 }
 
 impl Layout {
@@ -260,6 +261,7 @@ fn layout(inputs: &SplatInputs<CubeBackend>, settings: &RasterSettings, size: Im
         near: settings.near_plane,
         far: settings.far_plane,
         eps2d: settings.eps2d,
+        depth: settings.depth,
     }
 }
 
@@ -407,6 +409,7 @@ fn composite_batch(
         layout.tile_size,
         stage,
         layout.channels,
+        layout.depth == DepthStatistic::Median,
     );
 }
 
