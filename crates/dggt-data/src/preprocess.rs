@@ -3,10 +3,10 @@
 //! binarised; intrinsics are adjusted to match.
 //!
 //! Resampling is bicubic (Catmull-Rom, `a = -0.5`) with the kernel widened when downscaling, as PIL's
-//! `BICUBIC` resize that the release uses.
+//! `BICUBIC` resize that the release uses ([`dggt_resize`]).
 
 use dggt_geom::{ImageSize, PinholeIntrinsics};
-use fast_image_resize::{FilterType, PixelType, ResizeAlg, ResizeOptions, Resizer, images::Image};
+use dggt_resize::{Pixels, resize};
 use image::{GrayImage, RgbImage};
 use serde::{Deserialize, Serialize};
 
@@ -129,7 +129,7 @@ impl PreprocessPlan {
     /// Resizes, crops and converts an RGB image.
     pub fn image(&self, image: &RgbImage) -> Result<PlanarImage> {
         self.check_input("an image", ImageSize { width: image.width(), height: image.height() })?;
-        let resized = self.resize(image.as_raw().clone(), PixelType::U8x3)?;
+        let resized = self.resize(image.as_raw().clone(), Pixels::Rgb)?;
         let (w, h) = (self.output.width as usize, self.output.height as usize);
         let plane = w * h;
         let mut data = vec![0f32; 3 * plane];
@@ -145,25 +145,20 @@ impl PreprocessPlan {
     /// Resizes and crops a mask with the image's filter, then binarises at one half.
     pub fn mask(&self, mask: &GrayImage) -> Result<BinaryMask> {
         self.check_input("a mask", ImageSize { width: mask.width(), height: mask.height() })?;
-        let resized = self.resize(mask.as_raw().clone(), PixelType::U8)?;
+        let resized = self.resize(mask.as_raw().clone(), Pixels::Gray)?;
         let w = self.output.width as usize;
         let start = self.crop_top as usize * w;
         let data = resized[start..start + self.output.area()].iter().map(|&v| u8::from(v >= 128)).collect();
         Ok(BinaryMask { size: self.output, data })
     }
 
-    fn resize(&self, pixels: Vec<u8>, pixel_type: PixelType) -> Result<Vec<u8>> {
+    fn resize(&self, pixels: Vec<u8>, layout: Pixels) -> Result<Vec<u8>> {
         if self.resized == self.original {
             return Ok(pixels);
         }
-        let source = Image::from_vec_u8(self.original.width, self.original.height, pixels, pixel_type)
-            .map_err(|e| DataError::Config(format!("image buffer of {}: {e}", self.original)))?;
-        let mut target = Image::new(self.resized.width, self.resized.height, pixel_type);
-        let options = ResizeOptions::new().resize_alg(ResizeAlg::Convolution(FilterType::CatmullRom));
-        Resizer::new()
-            .resize(&source, &mut target, &options)
-            .map_err(|e| DataError::Config(format!("resizing {} to {}: {e}", self.original, self.resized)))?;
-        Ok(target.into_vec())
+        let (from, to) = (self.original, self.resized);
+        resize(pixels, layout, (from.width, from.height), (to.width, to.height))
+            .map_err(|e| DataError::Config(e.to_string()))
     }
 }
 
