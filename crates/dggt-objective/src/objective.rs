@@ -377,32 +377,36 @@ fn depth_loss(depth: &Tensor<4>, batch: &StepBatch) -> Result<Option<Tensor<1>>,
 }
 
 /// L1 of log depth of each view's rendered depth `[H, W]` at its samples where the render drew something (a
-/// positive depth); `None` when no such sample exists.
+/// positive depth); `None` when no such sample exists. The views' depths are read to the host once, together.
 fn rendered_depth_loss(views: &[(&RenderedView, &DepthFlowSamples)]) -> Result<Option<Tensor<1>>, ObjectiveError> {
-    let (mut picked, mut truth) = (Vec::new(), Vec::new());
+    let Some((first, _)) = views.first() else { return Ok(None) };
+    let flat = |view: &RenderedView| {
+        let [h, w] = view.depth.dims();
+        view.depth.clone().reshape([h * w])
+    };
+    let all = Tensor::cat(views.iter().map(|(view, _)| flat(view)).collect(), 0);
+    let drawn = host_f32(all.clone(), "rendered depth")?;
+    let (mut pixels, mut truth) = (Vec::new(), Vec::new());
+    let mut offset = 0;
     for (view, samples) in views {
         let [h, w] = view.depth.dims();
-        let flat = view.depth.clone().reshape([h * w]);
-        let drawn = host_f32(flat.clone(), "rendered depth")?;
-        let (pixels, depths): (Vec<i64>, Vec<f32>) = samples
-            .pixels
-            .iter()
-            .zip(&samples.depths)
-            .filter(|&(&p, _)| drawn.get(p as usize).is_some_and(|&d| d > 0.0))
-            .map(|(&p, &d)| (p, d.ln()))
-            .unzip();
-        if pixels.is_empty() {
-            continue;
+        let own = &drawn[offset..offset + h * w];
+        for (&p, &d) in samples.pixels.iter().zip(&samples.depths) {
+            if own.get(p as usize).is_some_and(|&value| value > 0.0) {
+                pixels.push(p + offset as i64);
+                truth.push(d.ln());
+            }
         }
-        let device = flat.device();
-        let count = pixels.len();
-        picked.push(flat.select(0, Tensor::<1, Int>::from_data(TensorData::new(pixels, [count]), &device)).log());
-        truth.push(Tensor::<1>::from_data(TensorData::new(depths, [count]), &device));
+        offset += h * w;
     }
-    if picked.is_empty() {
+    if pixels.is_empty() {
         return Ok(None);
     }
-    Ok(Some((Tensor::cat(picked, 0) - Tensor::cat(truth, 0)).abs().mean()))
+    let device = first.depth.device();
+    let count = pixels.len();
+    let picked = all.select(0, Tensor::<1, Int>::from_data(TensorData::new(pixels, [count]), &device)).log();
+    let truth = Tensor::<1>::from_data(TensorData::new(truth, [count]), &device);
+    Ok(Some((picked - truth).abs().mean()))
 }
 
 /// L1 of the predicted velocities against the export's scene flow at the cells with a measurement: the mean
@@ -602,6 +606,11 @@ mod tests {
         let empty = loss([2.0, 0.0, 0.0, 16.0]).unwrap();
         assert!((empty - 2f64.ln() / 2.0).abs() < 1e-6, "the empty pixel is left out, got {empty}");
         assert_eq!(loss([0.0; 4]), None, "nothing drawn: no term");
+        // Two views read together: each view's samples index its own depth.
+        let (exact, doubled) = (view([2.0, 4.0, 0.0, 8.0]), view([4.0, 8.0, 0.0, 0.0]));
+        let both = rendered_depth_loss(&[(&exact, &samples), (&doubled, &samples)]).unwrap().expect("samples drawn");
+        let mean = scalar(&both).unwrap();
+        assert!((mean - 2.0 * 2f64.ln() / 5.0).abs() < 1e-6, "five drawn samples, two off by ln 2: {mean}");
     }
 
     #[test]
