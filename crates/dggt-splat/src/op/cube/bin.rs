@@ -6,20 +6,14 @@
 use burn_cubecl::cubecl;
 use cubecl::prelude::*;
 
+use super::args::Grid;
+
 /// Tiles `[x0, x1) x [y0, y1)` touched by the box `mean2d ± radius`, clipped to the grid.
 #[cube]
-pub fn tile_rect(
-    mx: f32,
-    my: f32,
-    rx: u32,
-    ry: u32,
-    tile_size: u32,
-    tiles_x: u32,
-    tiles_y: u32,
-) -> (u32, u32, u32, u32) {
-    let size = tile_size as f32;
+pub fn tile_rect(mx: f32, my: f32, rx: u32, ry: u32, grid: &Grid) -> (u32, u32, u32, u32) {
+    let size = grid.tile_size as f32;
     let (rxf, ryf) = (rx as f32, ry as f32);
-    let (tilesx, tilesy) = (tiles_x as f32, tiles_y as f32);
+    let (tilesx, tilesy) = (grid.tiles_x as f32, grid.tiles_y as f32);
     let x0 = ((mx - rxf) / size).floor().max(0.0).min(tilesx);
     let x1 = ((mx + rxf) / size).ceil().max(0.0).min(tilesx);
     let y0 = ((my - ryf) / size).floor().max(0.0).min(tilesy);
@@ -30,22 +24,17 @@ pub fn tile_rect(
 /// Counts the tiles each (view, Gaussian) pair touches into `pair_counts` (zero when culled) and fills the
 /// statistics rows `[V, 9]` (see `CullStats::to_counts`).
 #[cube(launch)]
-#[allow(clippy::too_many_arguments)]
 pub fn count_kernel(
     means2d: &Tensor<f32>,
     radii: &Tensor<u32>,
     reasons: &Tensor<u32>,
     pair_counts: &mut Tensor<u32>,
     stats: &Tensor<Atomic<i32>>,
-    count: u32,
-    views: u32,
-    tile_size: u32,
-    tiles_x: u32,
-    tiles_y: u32,
+    grid: Grid,
 ) {
     let k = ABSOLUTE_POS;
-    let count = count as usize;
-    if k >= count * (views as usize) {
+    let count = grid.count as usize;
+    if k >= count * (grid.views as usize) {
         terminate!();
     }
     let v = k / count;
@@ -57,8 +46,7 @@ pub fn count_kernel(
         stats[row + 1 + reason as usize].fetch_add(1i32);
     } else {
         stats[row + 1].fetch_add(1i32);
-        let (x0, x1, y0, y1) =
-            tile_rect(means2d[2 * k], means2d[2 * k + 1], radii[2 * k], radii[2 * k + 1], tile_size, tiles_x, tiles_y);
+        let (x0, x1, y0, y1) = tile_rect(means2d[2 * k], means2d[2 * k + 1], radii[2 * k], radii[2 * k + 1], &grid);
         touched = (x1 - x0) * (y1 - y0);
         stats[row + 8].fetch_add(touched as i32);
     }
@@ -68,14 +56,14 @@ pub fn count_kernel(
 /// `view_starts[v] = pair_offsets[v · count]` for `v` in `0..=views`: where each view's intersections start
 /// (entry `views` is the total), the only values read back to size the intersection buffers.
 #[cube(launch)]
-pub fn view_starts_kernel(pair_offsets: &Tensor<u32>, view_starts: &mut Tensor<u32>, count: u32, views: u32) {
+pub fn view_starts_kernel(pair_offsets: &Tensor<u32>, view_starts: &mut Tensor<u32>, grid: Grid) {
     let v = ABSOLUTE_POS;
-    if v <= views as usize {
-        view_starts[v] = pair_offsets[v * count as usize];
+    if v <= grid.views as usize {
+        view_starts[v] = pair_offsets[v * grid.count as usize];
     }
 }
 
-/// Writes the sort entries of the views `first_view..first_view + views` (the pairs `k` from
+/// Writes the sort entries of the views `first_view..first_view + batch_views` (the pairs `k` from
 /// `first_view · count`), each pair at its own offset `pair_offsets[k] - base` in pair order, its tiles in
 /// row-major order: the list `(v - first_view) · tiles + tile`, the depth's `f32` bits (positive, so they
 /// order as unsigned integers) and the Gaussian index.
@@ -90,30 +78,26 @@ pub fn fill_kernel(
     entry_lists: &mut Tensor<u32>,
     entry_depths: &mut Tensor<u32>,
     entry_ids: &mut Tensor<u32>,
-    count: u32,
+    grid: Grid,
     first_view: u32,
-    views: u32,
+    batch_views: u32,
     base: u32,
-    tile_size: u32,
-    tiles_x: u32,
-    tiles_y: u32,
 ) {
     let local = ABSOLUTE_POS;
-    let count = count as usize;
-    if local >= count * (views as usize) {
+    let count = grid.count as usize;
+    if local >= count * (batch_views as usize) {
         terminate!();
     }
     let k = first_view as usize * count + local;
     if reasons[k] == 0 {
-        let list_base = (local / count) as u32 * (tiles_x * tiles_y);
+        let list_base = (local / count) as u32 * (grid.tiles_x * grid.tiles_y);
         let n = (k % count) as u32;
         let depth = depths[k].to_bits();
-        let (x0, x1, y0, y1) =
-            tile_rect(means2d[2 * k], means2d[2 * k + 1], radii[2 * k], radii[2 * k + 1], tile_size, tiles_x, tiles_y);
+        let (x0, x1, y0, y1) = tile_rect(means2d[2 * k], means2d[2 * k + 1], radii[2 * k], radii[2 * k + 1], &grid);
         let mut slot = (pair_offsets[k] - base) as usize;
         for ty in y0..y1 {
             for tx in x0..x1 {
-                entry_lists[slot] = list_base + ty * tiles_x + tx;
+                entry_lists[slot] = list_base + ty * grid.tiles_x + tx;
                 entry_depths[slot] = depth;
                 entry_ids[slot] = n;
                 slot += 1;

@@ -11,8 +11,9 @@
 use burn_cubecl::cubecl;
 use cubecl::prelude::*;
 
-use super::stage::{FootprintStage, load_footprint};
-use crate::constants::{ALPHA_THRESHOLD, MAX_ALPHA, MEDIAN_TRANSMITTANCE, MIN_DEPTH_ALPHA, MIN_TRANSMITTANCE};
+use super::args::{BlendInputs, Grid};
+use super::stage::{FootprintStage, footprint_at, load_footprint};
+use crate::constants::{MEDIAN_TRANSMITTANCE, MIN_DEPTH_ALPHA, MIN_TRANSMITTANCE};
 
 /// The range `[start, end)` of the cube's tile list, the same value in every unit of the cube.
 #[cube]
@@ -27,8 +28,49 @@ pub fn tile_range(ranges: &Tensor<u32>, list: usize) -> (u32, u32) {
     (start, end)
 }
 
-/// Front-to-back compositing, one cube per tile (`CUBE_POS_X/Y` the tile, `CUBE_POS_Z` the view within the
-/// batch of views starting at `first_view`), `tile_size²` units, footprints staged `stage` at a time.
+/// Where a compositing unit works, the same in both passes: one cube per tile (`CUBE_POS_X/Y` the tile,
+/// `CUBE_POS_Z` the view within the batch of views starting at `first_view`), one unit per pixel of it.
+#[derive(CubeType)]
+pub struct TilePixel {
+    /// Where the view's (view, Gaussian) pairs start: `v · N`.
+    pub base: usize,
+    /// The pixel's index `(v · H + y) · W + x`, valid only `inside`.
+    pub pixel: usize,
+    /// Whether the pixel lies in the image (the last row and column of tiles can overhang it).
+    pub inside: bool,
+    /// The pixel's centre, x.
+    pub px: f32,
+    /// The pixel's centre, y.
+    pub py: f32,
+    /// Start of the tile list's range of the batch's sorted ids.
+    pub start: u32,
+    /// End (exclusive) of the tile list's range.
+    pub end: u32,
+}
+
+/// The unit's [`TilePixel`]; every unit of the cube calls it (it reads the list range through shared memory).
+#[cube]
+pub fn tile_pixel(grid: &Grid, ranges: &Tensor<u32>, first_view: u32) -> TilePixel {
+    let batch_view = CUBE_POS_Z as usize;
+    let v = first_view as usize + batch_view;
+    let x = CUBE_POS_X * grid.tile_size + UNIT_POS_X;
+    let y = CUBE_POS_Y * grid.tile_size + UNIT_POS_Y;
+    let tiles = (grid.tiles_x * grid.tiles_y) as usize;
+    let list = batch_view * tiles + (CUBE_POS_Y * grid.tiles_x + CUBE_POS_X) as usize;
+    let (start, end) = tile_range(ranges, list);
+    TilePixel {
+        base: v * grid.count as usize,
+        pixel: (v * grid.height as usize + y as usize) * grid.width as usize + x as usize,
+        inside: x < grid.width && y < grid.height,
+        px: x as f32 + 0.5,
+        py: y as f32 + 0.5,
+        start,
+        end,
+    }
+}
+
+/// Front-to-back compositing, one cube per tile and one unit per pixel ([`TilePixel`]), footprints staged
+/// `stage` at a time.
 ///
 /// Writes the packed image `[V, H, W, K + 2]` (colours, alpha, depth: the median where `median_depth`, else the
 /// expected), the final transmittance and the list end (entries of the list up to the last one blended) per pixel.
@@ -36,39 +78,20 @@ pub fn tile_range(ranges: &Tensor<u32>, list: usize) -> (u32, u32) {
 // The median's tests are runtime conditions inside comptime ones, which the expansion removes whole when off.
 #[allow(clippy::too_many_arguments, clippy::collapsible_if)]
 pub fn composite_kernel(
-    ids: &Tensor<u32>,
-    ranges: &Tensor<u32>,
-    means2d: &Tensor<f32>,
-    conics: &Tensor<f32>,
-    depths: &Tensor<f32>,
-    opacities: &Tensor<f32>,
-    colors: &Tensor<f32>,
-    background: &Tensor<f32>,
+    inputs: &BlendInputs,
     images: &mut Tensor<f32>,
     transmittances: &mut Tensor<f32>,
     list_ends: &mut Tensor<u32>,
-    count: u32,
+    grid: Grid,
     first_view: u32,
-    per_view: u32,
-    width: u32,
-    height: u32,
-    tiles_x: u32,
-    tiles_y: u32,
-    #[comptime] tile_size: u32,
     #[comptime] stage: u32,
     #[comptime] channels: usize,
     #[comptime] median_depth: bool,
 ) {
-    let units = comptime!(tile_size * tile_size);
+    let units = CUBE_DIM;
     let slots = comptime!(stage as usize);
-    let batch_view = CUBE_POS_Z as usize;
-    let v = first_view as usize + batch_view;
-    let x = CUBE_POS_X * tile_size + UNIT_POS_X;
-    let y = CUBE_POS_Y * tile_size + UNIT_POS_Y;
-    let list = batch_view * (tiles_x * tiles_y) as usize + (CUBE_POS_Y * tiles_x + CUBE_POS_X) as usize;
-    let (start, end) = tile_range(ranges, list);
-    let base = v * count as usize;
-    let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
+    let t = tile_pixel(&grid, &inputs.ranges, first_view);
+    let (start, end) = (t.start, t.end);
 
     let mut staged = FootprintStage::new(slots, channels);
     let finished = Shared::<[Atomic<u32>]>::new_slice(1usize);
@@ -77,8 +100,7 @@ pub fn composite_kernel(
     }
     sync_cube();
 
-    let inside = x < width && y < height;
-    let mut done = !inside;
+    let mut done = !t.inside;
     if done {
         finished[0].fetch_add(1u32);
     }
@@ -102,32 +124,16 @@ pub fn composite_kernel(
         let entry = batch_start + UNIT_POS;
         if UNIT_POS < stage && entry < end {
             let e = entry as usize;
-            load_footprint(
-                &mut staged,
-                slot,
-                ids,
-                means2d,
-                conics,
-                depths,
-                opacities,
-                colors,
-                e,
-                base,
-                per_view,
-                channels,
-            );
+            load_footprint(&mut staged, slot, inputs, e, t.base, grid.per_view, channels);
         }
         sync_cube();
         let batch = (end - batch_start).min(stage);
         if !done {
             for i in 0..batch {
                 let s = i as usize;
-                let dx = staged.means[2 * s] - px;
-                let dy = staged.means[2 * s + 1] - py;
-                let (a, b, c) = (staged.conics[3 * s], staged.conics[3 * s + 1], staged.conics[3 * s + 2]);
-                let sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy;
-                let alpha = (staged.opacities[s] * (-sigma).exp()).min(MAX_ALPHA);
-                if !(sigma.is_nan() || sigma < 0.0 || alpha < ALPHA_THRESHOLD) {
+                let f = footprint_at(&staged, s, t.px, t.py);
+                let alpha = f.alpha;
+                if f.visible {
                     let next = transmittance * (1.0 - alpha);
                     if next <= MIN_TRANSMITTANCE {
                         done = true;
@@ -153,12 +159,12 @@ pub fn composite_kernel(
         }
         batch_start += stage;
     }
-    if inside {
-        let pixel = (v * height as usize + y as usize) * width as usize + x as usize;
+    if t.inside {
+        let pixel = t.pixel;
         let alpha = 1.0 - transmittance;
         let out = pixel * (channels + 2);
         for ch in 0..channels {
-            images[out + ch] = accumulated[ch] + transmittance * background[ch];
+            images[out + ch] = accumulated[ch] + transmittance * inputs.background[ch];
         }
         images[out + channels] = alpha;
         let expected = depth / alpha.max(MIN_DEPTH_ALPHA);

@@ -10,9 +10,10 @@
 use burn_cubecl::cubecl;
 use cubecl::prelude::*;
 
-use super::composite::tile_range;
-use super::stage::{FootprintStage, load_footprint};
-use crate::constants::{ALPHA_THRESHOLD, MAX_ALPHA, MIN_DEPTH_ALPHA};
+use super::args::{BlendInputs, Grid};
+use super::composite::tile_pixel;
+use super::stage::{FootprintStage, footprint_at, load_footprint};
+use crate::constants::{MAX_ALPHA, MIN_DEPTH_ALPHA};
 use dggt_cube::atomic::FloatAdd;
 
 /// How the units of a cube add their gradients.
@@ -52,7 +53,6 @@ struct PixelGrads {
 
 /// The output gradients of `pixel` (zeros for a pixel that blended nothing or lies outside the image).
 #[cube]
-#[allow(clippy::too_many_arguments)]
 fn pixel_grads(
     images: &Tensor<f32>,
     transmittances: &Tensor<f32>,
@@ -94,51 +94,29 @@ fn pixel_grads(
 /// Backward of compositing, one cube per tile and one unit per pixel (as `composite_kernel`): walks the tile's
 /// list back to front from the end of its longest pixel list and adds each footprint's gradient into one
 /// buffer holding, in this order, the per-(view, Gaussian) gradients of `means2d [V, N, 2]`, `conics [V, N, 3]`
-/// and `depths [V, N]`, then the input gradients of the opacities (`[N]` or `[V, N]`, starting at
-/// `opacity_offset`) and the colours (`[N, K]`, at `color_offset`). One buffer keeps the kernel within the
+/// and `depths [V, N]`, then the input gradients of the opacities (`[N]` or `[V, N]`, from `6 V N`) and
+/// the colours (`[N, K]`, after the opacities). One buffer keeps the kernel within the
 /// storage-buffer bindings every wgpu adapter offers.
 #[cube(launch)]
 #[allow(clippy::too_many_arguments)]
 pub fn composite_backward_kernel<A: FloatAdd>(
-    ids: &Tensor<u32>,
-    ranges: &Tensor<u32>,
-    means2d: &Tensor<f32>,
-    conics: &Tensor<f32>,
-    depths: &Tensor<f32>,
-    opacities: &Tensor<f32>,
-    colors: &Tensor<f32>,
-    background: &Tensor<f32>,
+    inputs: &BlendInputs,
     images: &Tensor<f32>,
     transmittances: &Tensor<f32>,
     list_ends: &Tensor<u32>,
     grad_images: &Tensor<f32>,
     grads: &Tensor<Atomic<A::Slot>>,
-    count: u32,
+    grid: Grid,
     first_view: u32,
-    views: u32,
-    opacity_offset: u32,
-    color_offset: u32,
-    per_view: u32,
-    width: u32,
-    height: u32,
-    tiles_x: u32,
-    tiles_y: u32,
-    #[comptime] tile_size: u32,
     #[comptime] stage: u32,
     #[comptime] channels: usize,
     #[comptime] sum: GradientSum,
 ) {
     let slots = comptime!(stage as usize);
-    let batch_view = CUBE_POS_Z as usize;
-    let v = first_view as usize + batch_view;
-    let x = CUBE_POS_X * tile_size + UNIT_POS_X;
-    let y = CUBE_POS_Y * tile_size + UNIT_POS_Y;
-    let list = batch_view * (tiles_x * tiles_y) as usize + (CUBE_POS_Y * tiles_x + CUBE_POS_X) as usize;
-    let (start, _) = tile_range(ranges, list);
-    let inside = x < width && y < height;
-    let pixel = (v * height as usize + y as usize) * width as usize + x as usize;
+    let t = tile_pixel(&grid, &inputs.ranges, first_view);
+    let (start, base, pixel) = (t.start, t.base, t.pixel);
     let mut last = 0u32;
-    if inside {
+    if t.inside {
         last = list_ends[pixel];
     }
     let longest = Shared::<[Atomic<u32>]>::new_slice(1usize);
@@ -149,15 +127,17 @@ pub fn composite_backward_kernel<A: FloatAdd>(
     longest[0].fetch_max(last);
     let tile_last = workgroup_uniform_load_atomic(&longest[0]);
 
-    let base = v * count as usize;
-    let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
-    let pairs = views as usize * count as usize;
+    // The sections of `grads`, in order: means, conics, depths, opacities, colours.
+    let pairs = grid.views as usize * grid.count as usize;
     let conic_offset = 2 * pairs;
     let depth_offset = 5 * pairs;
-    let opacity_offset = opacity_offset as usize;
-    let color_offset = color_offset as usize;
+    let opacity_offset = 6 * pairs;
+    let mut color_offset = opacity_offset + grid.count as usize;
+    if grid.per_view == 1 {
+        color_offset = opacity_offset + pairs;
+    }
 
-    let out = pixel_grads(images, transmittances, grad_images, background, pixel, last > 0, channels);
+    let out = pixel_grads(images, transmittances, grad_images, &inputs.background, pixel, last > 0, channels);
     let mut behind = Array::<f32>::new(channels);
     for ch in 0..channels {
         behind[ch] = 0.0;
@@ -179,20 +159,7 @@ pub fn composite_backward_kernel<A: FloatAdd>(
         sync_cube();
         if UNIT_POS < batch {
             let e = (batch_end - 1 - UNIT_POS) as usize;
-            load_footprint(
-                &mut staged,
-                slot,
-                ids,
-                means2d,
-                conics,
-                depths,
-                opacities,
-                colors,
-                e,
-                base,
-                per_view,
-                channels,
-            );
+            load_footprint(&mut staged, slot, inputs, e, base, grid.per_view, channels);
         }
         sync_cube();
         for i in 0..batch {
@@ -200,19 +167,14 @@ pub fn composite_backward_kernel<A: FloatAdd>(
             let id = staged.ids[s] as usize;
             let k = base + id;
             let mut opacity_slot = id;
-            if per_view == 1 {
+            if grid.per_view == 1 {
                 opacity_slot = k;
             }
             // This pixel blended entry `batch_end - 1 - i` only if it lies before its own list end.
             let entry = batch_end - 1 - i;
-            let dx = staged.means[2 * s] - px;
-            let dy = staged.means[2 * s + 1] - py;
-            let (a, b, c) = (staged.conics[3 * s], staged.conics[3 * s + 1], staged.conics[3 * s + 2]);
-            let sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy;
-            let falloff = (-sigma).exp();
-            let raw = staged.opacities[s] * falloff;
-            let alpha = raw.min(MAX_ALPHA);
-            let blended = entry < start + last && !(sigma.is_nan() || sigma < 0.0 || alpha < ALPHA_THRESHOLD);
+            let f = footprint_at(&staged, s, t.px, t.py);
+            let (dx, dy, a, b, c, alpha) = (f.dx, f.dy, f.a, f.b, f.c, f.alpha);
+            let blended = entry < start + last && f.visible;
             // Zero unless blended, so that a footprint this pixel did not blend adds nothing (not even a
             // NaN from an extreme offset times a zero gradient).
             let mut grad_colors = Array::<f32>::new(channels);
@@ -244,8 +206,8 @@ pub fn composite_backward_kernel<A: FloatAdd>(
                 grad_alpha += out.sum_depth * (depth - depth_behind);
                 depth_behind = alpha * depth + remaining * depth_behind;
                 grad_alpha = grad_alpha * transmittance - out.final_transmittance * out.transmittance / remaining;
-                if raw <= MAX_ALPHA {
-                    grad_opacity = grad_alpha * falloff;
+                if f.raw <= MAX_ALPHA {
+                    grad_opacity = grad_alpha * f.falloff;
                     // alpha = o exp(-sigma): dalpha/dsigma = -alpha.
                     let grad_sigma = -grad_alpha * alpha;
                     grad_conic[0] = grad_sigma * 0.5 * dx * dx;

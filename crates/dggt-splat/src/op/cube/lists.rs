@@ -78,15 +78,7 @@ pub fn view_starts(device: &CubeDevice, layout: &Layout, pair_offsets: &CubeTens
     let client = device.client();
     let starts = buffer(device, layout.views + 1, DType::U32);
     let (cubes, dim) = element_launch(&client, layout.views + 1);
-    bin::view_starts_kernel::launch(
-        &client,
-        cubes,
-        dim,
-        arg(pair_offsets),
-        arg(&starts),
-        layout.count as u32,
-        layout.views as u32,
-    );
+    bin::view_starts_kernel::launch(&client, cubes, dim, arg(pair_offsets), arg(&starts), layout.grid());
     into_data_sync(starts).iter::<u32>().take(layout.views + 1).collect()
 }
 
@@ -142,13 +134,10 @@ pub fn sorted_batch(
         arg(&entry_lists),
         arg(&entry_depths),
         arg(&entry_ids),
-        layout.count as u32,
+        layout.grid(),
         views.start as u32,
         views.len() as u32,
         base,
-        layout.tile_size,
-        layout.tiles_x,
-        layout.tiles_y,
     );
     let (sorted_lists, ids) =
         radix::sort_by_two_keys(device, entry_lists, entry_depths, entry_ids, entries, bits_for(lists), 32);

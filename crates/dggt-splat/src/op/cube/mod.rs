@@ -1,13 +1,14 @@
 //! [`SplatKernels`] for burn's CubeCL backend: the host pipeline's stages as CubeCL kernels, so that one kernel
 //! set runs on every CubeCL runtime (wgpu/Vulkan/Metal, CUDA, ROCm).
 //!
-//! The kernels, one module per stage, all in `f32`: [`math`] (shared device math and the atomic float add),
-//! [`project`], tile binning ([`bin`]: count, fill, list ranges; [`scan`]: prefix sums; [`radix`]: the sort;
-//! [`lists`]: batching them under the buffer cap), [`composite`], and the backward kernels
-//! [`composite_backward`] and [`project_backward`]. Every kernel reads and writes flat, contiguous buffers with
-//! the layouts of the host pipeline (`Projection`, `TileBins`, `Images`): index `k = v * N + n` for
-//! per-(view, Gaussian) values, pixel `p = (v * H + y) * W + x` for per-pixel values. Sizes arrive as runtime
-//! `u32` scalars; only the number of colour channels is a compile-time constant (one compiled kernel per `K`),
+//! The kernels, one module per stage, all in `f32`: [`args`] (the arguments launches share), [`math`] (shared device
+//! math and the atomic float add), [`project`], tile binning ([`bin`]: count, fill, list ranges; [`scan`]: prefix sums;
+//! [`radix`]: the sort; [`lists`]: batching them under the buffer cap), [`composite`], and the backward kernels
+//! [`composite_backward`] and [`project_backward`]. Every kernel reads and writes flat, contiguous buffers with the
+//! layouts of the host pipeline (`Projection`, `TileBins`, `Images`): index `k = v * N + n` for per-(view, Gaussian)
+//! values, pixel `p = (v * H + y) * W + x` for per-pixel values. Sizes arrive as runtime `u32` scalars, grouped in one
+//! [`args::Grid`] argument built by `Layout::grid`, and the buffers both compositing passes read in one
+//! [`args::BlendInputs`]; only the number of colour channels is a compile-time constant (one compiled kernel per `K`),
 //! so that per-pixel colour accumulators live in registers. Their constants are [`crate::constants`].
 //!
 //! Forward, for `V` views:
@@ -63,6 +64,7 @@
 //! with tolerances, not bit for bit. A footprint radius or tile boundary that falls within rounding of an
 //! integer can differ by one between the two, which changes `tile_intersections` (never a pixel value).
 
+mod args;
 mod bin;
 mod composite;
 mod composite_backward;
@@ -94,6 +96,7 @@ use dggt_geom::ImageSize;
 use super::{PACKED_EXTRA_CHANNELS, SplatGrads, SplatInputs, SplatKernels, SplatOutputs};
 use crate::cull::CullStats;
 use crate::settings::{DepthStatistic, RasterSettings};
+use args::{BlendInputsLaunch, GridLaunch};
 use composite_backward::GradientSum;
 use dggt_cube::atomic::{FloatAtomics, NativeAdd, SwapAdd};
 use lists::{FootprintBuffers, ListBatch};
@@ -133,6 +136,20 @@ impl Layout {
 
     fn pairs(&self) -> usize {
         self.views * self.count
+    }
+
+    /// The sizes as the kernels read them, for every launch that needs them.
+    fn grid(&self) -> GridLaunch {
+        GridLaunch::new(
+            self.count as u32,
+            self.views as u32,
+            self.per_view as u32,
+            self.width,
+            self.height,
+            self.tile_size,
+            self.tiles_x,
+            self.tiles_y,
+        )
     }
 }
 
@@ -193,6 +210,25 @@ fn arg(tensor: &CubeTensor) -> TensorArg {
 fn contiguous(tensor: CubeTensor, what: &str) -> CubeTensor {
     assert_eq!(tensor.dtype, DType::F32, "splat: `{what}` must be an f32 tensor, got {:?}", tensor.dtype);
     into_contiguous(tensor)
+}
+
+/// What both compositing passes read for `batch`: its lists, the pairs' footprints (`means2d`, `conics`,
+/// `depths`) and the Gaussians' opacities, colours and background (see `args::BlendInputs`).
+fn blend_inputs(
+    batch: &ListBatch,
+    [means2d, conics, depths]: [&CubeTensor; 3],
+    [opacities, colors, background]: [&CubeTensor; 3],
+) -> BlendInputsLaunch {
+    BlendInputsLaunch::new(
+        arg(&batch.ids),
+        arg(&batch.ranges),
+        arg(means2d),
+        arg(conics),
+        arg(depths),
+        arg(opacities),
+        arg(colors),
+        arg(background),
+    )
 }
 
 fn element_launch(client: &cubecl::client::Client, elements: usize) -> (CubeCount, CubeDim) {
@@ -314,7 +350,6 @@ fn project_and_count(device: &CubeDevice, layout: &Layout, inputs: &SplatInputs<
     if pairs == 0 {
         return footprints;
     }
-    let (count32, views32) = (layout.count as u32, views as u32);
     let (cubes, dim) = element_launch(&client, pairs);
     project::project_kernel::launch(
         &client,
@@ -332,11 +367,7 @@ fn project_and_count(device: &CubeDevice, layout: &Layout, inputs: &SplatInputs<
         arg(&footprints.depths),
         arg(&footprints.radii),
         arg(&footprints.reasons),
-        count32,
-        views32,
-        layout.per_view as u32,
-        layout.width,
-        layout.height,
+        layout.grid(),
         layout.near,
         layout.far,
         layout.eps2d,
@@ -351,11 +382,7 @@ fn project_and_count(device: &CubeDevice, layout: &Layout, inputs: &SplatInputs<
         arg(&footprints.reasons),
         arg(&footprints.pair_counts),
         arg(&footprints.stats),
-        count32,
-        views32,
-        layout.tile_size,
-        layout.tiles_x,
-        layout.tiles_y,
+        layout.grid(),
     );
     footprints
 }
@@ -384,29 +411,18 @@ fn composite_batch(
     let client = device.client();
     let (cubes, dim) = tile_launch(layout, batch.views);
     let stage = stage_len(layout);
+    let pairs = [&footprints.means2d, &footprints.conics, &footprints.depths];
+    let gaussians = [&inputs.opacities, &inputs.colors, &inputs.background];
     composite::composite_kernel::launch(
         &client,
         cubes,
         dim,
-        arg(&batch.ids),
-        arg(&batch.ranges),
-        arg(&footprints.means2d),
-        arg(&footprints.conics),
-        arg(&footprints.depths),
-        arg(&inputs.opacities),
-        arg(&inputs.colors),
-        arg(&inputs.background),
+        blend_inputs(batch, pairs, gaussians),
         arg(&out.images),
         arg(&out.transmittance),
         arg(&out.list_ends),
-        layout.count as u32,
+        layout.grid(),
         batch.first_view as u32,
-        layout.per_view as u32,
-        layout.width,
-        layout.height,
-        layout.tiles_x,
-        layout.tiles_y,
-        layout.tile_size,
         stage,
         layout.channels,
         layout.depth == DepthStatistic::Median,
@@ -501,8 +517,6 @@ fn composite_backward_batch(
 ) {
     let layout = &saved.layout;
     let client = saved.means.client.clone();
-    let pairs = layout.pairs();
-    let opacity_len = if layout.per_view { pairs } else { layout.count };
     let (cubes, dim) = tile_launch(layout, batch.views);
     let stage = stage_len(layout);
     let launch = if native {
@@ -510,34 +524,20 @@ fn composite_backward_batch(
     } else {
         composite_backward::composite_backward_kernel::launch::<SwapAdd>
     };
+    let pairs = [&saved.means2d, &saved.conics, &saved.depths];
+    let gaussians = [&saved.opacities, &saved.colors, &saved.background];
     launch(
         &client,
         cubes,
         dim,
-        arg(&batch.ids),
-        arg(&batch.ranges),
-        arg(&saved.means2d),
-        arg(&saved.conics),
-        arg(&saved.depths),
-        arg(&saved.opacities),
-        arg(&saved.colors),
-        arg(&saved.background),
+        blend_inputs(batch, pairs, gaussians),
         arg(&saved.images),
         arg(&saved.transmittance),
         arg(&saved.list_ends),
         arg(grad_images),
         arg(accumulated),
-        layout.count as u32,
+        layout.grid(),
         batch.first_view as u32,
-        layout.views as u32,
-        (6 * pairs) as u32,
-        (6 * pairs + opacity_len) as u32,
-        layout.per_view as u32,
-        layout.width,
-        layout.height,
-        layout.tiles_x,
-        layout.tiles_y,
-        layout.tile_size,
         stage,
         layout.channels,
         gradient_sum(&client),
@@ -552,7 +552,6 @@ fn backward(saved: &CubeForward, grad_images: FloatTensor<CubeBackend>) -> Splat
     let pairs = layout.pairs();
     let pixels = views * layout.pixels();
     let grad_images = contiguous(grad_images, "image gradient");
-    let (count32, views32) = (count as u32, views as u32);
 
     // One buffer for everything the compositing backward adds into (see `composite_backward_kernel`).
     let opacity_len = if layout.per_view { views * count } else { count };
@@ -582,10 +581,7 @@ fn backward(saved: &CubeForward, grad_images: FloatTensor<CubeBackend>) -> Splat
             arg(&grad_means),
             arg(&grad_quats),
             arg(&grad_scales),
-            count32,
-            views32,
-            layout.width,
-            layout.height,
+            layout.grid(),
             layout.eps2d,
         );
     }

@@ -8,6 +8,7 @@
 use burn_cubecl::cubecl;
 use cubecl::prelude::*;
 
+use super::args::Grid;
 use super::math::{M3, V3, apply, cross, dot, finite, product, rotation, scale_columns, sum3, transpose, v3};
 use crate::constants::{ALPHA_THRESHOLD, GUARD_BAND_F32, MAX_BOX_SIGMAS_F32, QUAT_MIN_NORM_F32};
 
@@ -179,25 +180,21 @@ pub fn project_kernel(
     depths: &mut Tensor<f32>,
     radii: &mut Tensor<u32>,
     reasons: &mut Tensor<u32>,
-    count: u32,
-    views: u32,
-    per_view: u32,
-    width: u32,
-    height: u32,
+    grid: Grid,
     near: f32,
     far: f32,
     eps2d: f32,
     #[comptime] channels: usize,
 ) {
     let k = ABSOLUTE_POS;
-    let count = count as usize;
-    if k >= count * (views as usize) {
+    let count = grid.count as usize;
+    if k >= count * (grid.views as usize) {
         terminate!();
     }
     let v = k / count;
     let n = k % count;
     let mut opacity = opacities[n];
-    if per_view == 1 {
+    if grid.per_view == 1 {
         opacity = opacities[k];
     }
     let mut all_finite = finite(opacity);
@@ -234,7 +231,7 @@ pub fn project_kernel(
             reason = CULL_FAR_PLANE;
         } else {
             let cov = covariance(quats, scales, n);
-            let (w, h) = (width as f32, height as f32);
+            let (w, h) = (grid.width as f32, grid.height as f32);
             let e = ewa(cov, cam, point, w, h, eps2d);
             let valid = e.det > 0.0
                 && finite(e.det)

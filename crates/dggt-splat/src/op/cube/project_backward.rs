@@ -4,6 +4,7 @@
 use burn_cubecl::cubecl;
 use cubecl::prelude::*;
 
+use super::args::Grid;
 use super::math::{
     M3, V3, apply, dot, mat_scaled, mat_sum, outer, product, scale_columns, scaled, sum3, transpose, v3,
 };
@@ -107,14 +108,11 @@ pub fn project_backward_kernel(
     grad_means: &mut Tensor<f32>,
     grad_quats: &mut Tensor<f32>,
     grad_scales: &mut Tensor<f32>,
-    count: u32,
-    views: u32,
-    width: u32,
-    height: u32,
+    grid: Grid,
     eps2d: f32,
 ) {
     let n = ABSOLUTE_POS;
-    let count = count as usize;
+    let count = grid.count as usize;
     if n >= count {
         terminate!();
     }
@@ -130,13 +128,13 @@ pub fn project_backward_kernel(
     let mut g_qz = 0.0f32;
     let mean = v3(means[3 * n], means[3 * n + 1], means[3 * n + 2]);
     let cov = covariance(quats, scales, n);
-    let pairs = views as usize * count;
-    for v in 0..views as usize {
+    let pairs = grid.views as usize * count;
+    for v in 0..grid.views as usize {
         let k = v * count + n;
         if reasons[k] == 0 {
             let cam = camera(viewmats, intrinsics, v);
             let point = sum3(apply(cam.rotation, mean), cam.translation);
-            let e = ewa(cov, cam, point, width as f32, height as f32, eps2d);
+            let e = ewa(cov, cam, point, grid.width as f32, grid.height as f32, eps2d);
             let conic = 2 * pairs + 3 * k;
             let (ga, gb, gc) = (footprint_grads[conic], footprint_grads[conic + 1], footprint_grads[conic + 2]);
             let g = conic_backward(e, ga, gb, gc);

@@ -1,9 +1,13 @@
 //! A tile's footprints staged in shared memory by the compositing kernels: each unit of the tile's cube loads
 //! one list entry's footprint (Gaussian index, 2D mean, conic, opacity, depth, colours) into its slot, then
-//! every unit reads the whole stage from there instead of from global memory.
+//! every unit reads the whole stage from there instead of from global memory, and evaluates each staged
+//! footprint at its pixel with [`footprint_at`].
 
 use burn_cubecl::cubecl;
 use cubecl::prelude::*;
+
+use super::args::BlendInputs;
+use crate::constants::{ALPHA_THRESHOLD, MAX_ALPHA};
 
 /// Where one list entry's values sit in global memory.
 #[derive(CubeType)]
@@ -57,31 +61,57 @@ impl FootprintStage {
 
 /// Copies list entry `entry` (of the view whose pairs start at `base`) into `slot` of `stage`.
 #[cube]
-#[allow(clippy::too_many_arguments)]
 pub fn load_footprint(
     stage: &mut FootprintStage,
     slot: usize,
-    ids: &Tensor<u32>,
-    means2d: &Tensor<f32>,
-    conics: &Tensor<f32>,
-    depths: &Tensor<f32>,
-    opacities: &Tensor<f32>,
-    colors: &Tensor<f32>,
+    inputs: &BlendInputs,
     entry: usize,
     base: usize,
     per_view: u32,
     #[comptime] channels: usize,
 ) {
-    let f = entry_index(ids, entry, base, per_view);
+    let f = entry_index(&inputs.ids, entry, base, per_view);
     stage.ids[slot] = f.id as u32;
-    stage.means[2 * slot] = means2d[2 * f.pair];
-    stage.means[2 * slot + 1] = means2d[2 * f.pair + 1];
-    stage.conics[3 * slot] = conics[3 * f.pair];
-    stage.conics[3 * slot + 1] = conics[3 * f.pair + 1];
-    stage.conics[3 * slot + 2] = conics[3 * f.pair + 2];
-    stage.opacities[slot] = opacities[f.opacity_slot];
-    stage.depths[slot] = depths[f.pair];
+    stage.means[2 * slot] = inputs.means2d[2 * f.pair];
+    stage.means[2 * slot + 1] = inputs.means2d[2 * f.pair + 1];
+    stage.conics[3 * slot] = inputs.conics[3 * f.pair];
+    stage.conics[3 * slot + 1] = inputs.conics[3 * f.pair + 1];
+    stage.conics[3 * slot + 2] = inputs.conics[3 * f.pair + 2];
+    stage.opacities[slot] = inputs.opacities[f.opacity_slot];
+    stage.depths[slot] = inputs.depths[f.pair];
     for ch in 0..channels {
-        stage.colors[channels * slot + ch] = colors[f.id * channels + ch];
+        stage.colors[channels * slot + ch] = inputs.colors[f.id * channels + ch];
     }
+}
+
+/// A staged footprint evaluated at a pixel centre: the offset to its mean, its conic `(a, b, c)`, the falloff
+/// `exp(-sigma)` of its Gaussian there, the opacity times the falloff (`raw`), that clamped to [`MAX_ALPHA`]
+/// (`alpha`), and whether the pixel blends it at all (`visible`: `sigma` a non-negative number and `alpha` at
+/// least [`ALPHA_THRESHOLD`]). Both compositing passes blend
+/// from it, so that they agree on every value.
+#[derive(CubeType)]
+pub struct PixelFootprint {
+    pub dx: f32,
+    pub dy: f32,
+    pub a: f32,
+    pub b: f32,
+    pub c: f32,
+    pub falloff: f32,
+    pub raw: f32,
+    pub alpha: f32,
+    pub visible: bool,
+}
+
+/// The footprint staged in `slot` at the pixel centre `(px, py)`.
+#[cube]
+pub fn footprint_at(stage: &FootprintStage, slot: usize, px: f32, py: f32) -> PixelFootprint {
+    let dx = stage.means[2 * slot] - px;
+    let dy = stage.means[2 * slot + 1] - py;
+    let (a, b, c) = (stage.conics[3 * slot], stage.conics[3 * slot + 1], stage.conics[3 * slot + 2]);
+    let sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy;
+    let falloff = (-sigma).exp();
+    let raw = stage.opacities[slot] * falloff;
+    let alpha = raw.min(MAX_ALPHA);
+    let visible = !(sigma.is_nan() || sigma < 0.0 || alpha < ALPHA_THRESHOLD);
+    PixelFootprint { dx, dy, a, b, c, falloff, raw, alpha, visible }
 }
