@@ -7,6 +7,7 @@ use std::ops::Range;
 use std::path::PathBuf;
 
 use anyhow::Result;
+use dggt_eval::grid::CellSampling;
 use dggt_eval::protocol::{DEFAULT_CAMERAS, DEFAULT_WINDOW, PAPER_EVERY};
 use dggt_eval::{CropImages, EvalOptions, LpipsWeights, Protocol, evaluate};
 use dggt_infer::{Architecture, CameraSource};
@@ -39,6 +40,15 @@ pub enum PosesChoice {
     Predicted,
     /// The export's poses, relative to the first input view (how `render.cameras = "ground_truth"` trains).
     Export,
+}
+
+/// How `--cell-sampling` reads the render at a lidar cell.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum CellSamplingChoice {
+    /// Bilinear between the four nearest pixel centres (blends the two surfaces at a depth edge).
+    Bilinear,
+    /// The rendered pixel the cell's centre falls on (as the training's depth terms compare it).
+    Pixel,
 }
 
 /// Arguments of `dggt eval`.
@@ -82,6 +92,9 @@ pub struct Args {
     /// Where the cameras come from: `predicted` (unposed) or `export`.
     #[arg(long, value_enum, default_value = "predicted")]
     pub poses: PosesChoice,
+    /// How the rendered depth and flow are read at each lidar cell's centre.
+    #[arg(long, value_enum, default_value = "bilinear")]
+    pub cell_sampling: CellSamplingChoice,
     /// LPIPS linear weights (the lpips package's `alex.pth`, a full LPIPS state dict, or safetensors).
     #[arg(long)]
     pub lpips_weights: Option<PathBuf>,
@@ -159,6 +172,10 @@ impl Args {
         options.poses = match self.poses {
             PosesChoice::Predicted => CameraSource::Predicted,
             PosesChoice::Export => CameraSource::GroundTruth,
+        };
+        options.cell_sampling = match self.cell_sampling {
+            CellSamplingChoice::Pixel => CellSampling::Pixel,
+            CellSamplingChoice::Bilinear => CellSampling::Bilinear,
         };
         Ok(options)
     }

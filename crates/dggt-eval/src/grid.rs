@@ -3,17 +3,41 @@
 //! Cell `(row, col)` of a map belongs to the full-resolution pixels `4 row .. 4 row + 4` x `4 col .. 4 col + 4`
 //! and is sampled at its centre, continuous coordinates `(4 col + 2, 4 row + 2)` of the original image. The
 //! network sees the image resized by `(sx, sy) = (resized / original)` per axis and cropped by `crop_top`
-//! rows, so that point lies at `(x sx, y sy - crop_top)` in the rendered view; the rendered expected depth is
-//! read there bilinearly ([`dggt_metrics::sample_bilinear`]). A cell takes part when its lidar depth is
+//! rows, so that point lies at `(x sx, y sy - crop_top)` in the rendered view. A rendered map is read there as
+//! [`CellSampling`] says: by default bilinearly between pixel centres ([`dggt_metrics::sample_bilinear`]), or
+//! the rendered pixel the point falls on, the pixel the training's depth terms compare with the same cell
+//! (`dggt_objective::depth_flow_samples`). A cell takes part when its lidar depth is
 //! positive, none of its 16 full-resolution pixels is sky in the export's sky mask (mask value at least 128,
 //! the binarisation the preprocessing uses), and its centre lies inside the cropped view.
 
 use dggt_data::PreprocessPlan;
 use dggt_data::depth_flow::DEPTH_FLOW_STRIDE;
 
-use dggt_metrics::sample_bilinear;
+use dggt_metrics::{sample_bilinear, sample_pixel};
 
-/// The map from original-image coordinates to network-image coordinates of one preprocessing plan.
+/// How a rendered map (depth, its span, flow) is read at a lidar cell's centre.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum CellSampling {
+    /// Bilinear between the four nearest pixel centres: at a depth edge this blends the near surface with the
+    /// far one, a depth neither holds.
+    #[default]
+    Bilinear,
+    /// The rendered pixel the centre falls on: a point on a depth edge reads one surface or the other.
+    Pixel,
+}
+
+impl CellSampling {
+    /// How the report's depth protocol says it.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Self::Pixel => "at the rendered pixel it falls on",
+            Self::Bilinear => "bilinearly between pixel centres",
+        }
+    }
+}
+
+/// The map from original-image coordinates to network-image coordinates of one preprocessing plan, and how a
+/// rendered map is read there.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CellMapping {
     pub scale_x: f64,
@@ -22,16 +46,18 @@ pub struct CellMapping {
     /// The network image size.
     pub width: usize,
     pub height: usize,
+    pub sampling: CellSampling,
 }
 
 impl CellMapping {
-    pub fn new(plan: &PreprocessPlan) -> Self {
+    pub fn new(plan: &PreprocessPlan, sampling: CellSampling) -> Self {
         Self {
             scale_x: f64::from(plan.resized.width) / f64::from(plan.original.width),
             scale_y: f64::from(plan.resized.height) / f64::from(plan.original.height),
             crop_top: f64::from(plan.crop_top),
             width: plan.output.width as usize,
             height: plan.output.height as usize,
+            sampling,
         }
     }
 
@@ -42,10 +68,14 @@ impl CellMapping {
         (x * self.scale_x, y * self.scale_y - self.crop_top)
     }
 
-    /// The rendered map (`width x height`, row-major) at the centre of cell `(row, col)`; `None` outside.
+    /// The rendered map (`width x height`, row-major) at the centre of cell `(row, col)`, read as
+    /// [`Self::sampling`] says; `None` outside.
     pub fn sample(&self, map: &[f32], row: usize, col: usize) -> Option<f32> {
         let (x, y) = self.cell_centre(row, col);
-        sample_bilinear(map, self.width, self.height, x, y)
+        match self.sampling {
+            CellSampling::Pixel => sample_pixel(map, self.width, self.height, x, y),
+            CellSampling::Bilinear => sample_bilinear(map, self.width, self.height, x, y),
+        }
     }
 }
 

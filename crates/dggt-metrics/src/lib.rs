@@ -5,7 +5,8 @@
 //! * [`image`]: PSNR and SSIM as scikit-image computes them.
 //! * [`depth`]: D-RMSE after the least-squares scale and shift.
 //! * [`motion`]: EPE3D, Acc5, Acc10 and the angular error of 3D scene flow.
-//! * [`sampling`]: a map read bilinearly at continuous coordinates, and the mean of present values.
+//! * [`sampling`]: a map read at continuous coordinates (the pixel there, or bilinearly), and the mean of present
+//!   values.
 //!
 //! Every function rejects inputs it cannot score (no values, mismatched lengths, non-finite values, images
 //! too small for the SSIM window) with a [`MetricError`] rather than returning NaN.
@@ -20,4 +21,4 @@ pub use depth::{DepthAlignment, aligned_depth_rmse};
 pub use error::MetricError;
 pub use image::{ImageMetrics, ImageShape, Ssim, image_metrics, masked_psnr, psnr, ssim, ssim_map};
 pub use motion::{FlowMetrics, scene_flow_metrics};
-pub use sampling::{mean_present, sample_bilinear};
+pub use sampling::{mean_present, sample_bilinear, sample_pixel};

@@ -1,5 +1,21 @@
-//! Reading the values a metric scores: a map at continuous image coordinates, and the mean of the values
-//! that are present.
+//! Reading the values a metric scores: a map at continuous image coordinates (the pixel there, or bilinear
+//! between pixel centres), and the mean of the values that are present.
+
+/// The value of the pixel of a row-major `width x height` map that holds continuous image coordinates `(x, y)`
+/// (pixel `(c, r)` covers `[c, c + 1) x [r, r + 1)`; a point on the far border belongs to the last pixel).
+/// `None` outside `[0, width] x [0, height]` (the same points [`sample_bilinear`] accepts) or for a map of the
+/// wrong length.
+pub fn sample_pixel(map: &[f32], width: usize, height: usize, x: f64, y: f64) -> Option<f32> {
+    if width == 0 || height == 0 || map.len() != width * height {
+        return None;
+    }
+    if !(0.0..=width as f64).contains(&x) || !(0.0..=height as f64).contains(&y) {
+        return None;
+    }
+    let col = (x.floor() as usize).min(width - 1);
+    let row = (y.floor() as usize).min(height - 1);
+    Some(map[row * width + col])
+}
 
 /// The value of a row-major `width x height` map at continuous image coordinates `(x, y)` (pixel `(c, r)`
 /// has its centre at `(c + 0.5, r + 0.5)`), bilinear between the four nearest pixel centres, with the edge

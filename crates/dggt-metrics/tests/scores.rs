@@ -1,6 +1,9 @@
-//! The scores on constructed cases: aligned depth RMSE, STORM's scene-flow metrics and the bilinear sampling.
+//! The scores on constructed cases: aligned depth RMSE, STORM's scene-flow metrics and the sampling of maps
+//! (bilinear, and the pixel a point falls on).
 
-use dggt_metrics::{FlowMetrics, MetricError, aligned_depth_rmse, mean_present, sample_bilinear, scene_flow_metrics};
+use dggt_metrics::{
+    FlowMetrics, MetricError, aligned_depth_rmse, mean_present, sample_bilinear, sample_pixel, scene_flow_metrics,
+};
 
 fn close(a: f64, b: f64, tolerance: f64) -> bool {
     (a - b).abs() <= tolerance
@@ -132,4 +135,23 @@ fn bilinear_sampling_uses_pixel_centres() {
 fn means_leave_out_missing_values() {
     assert_eq!(mean_present([None, None]), (None, 0));
     assert_eq!(mean_present([Some(1.0), None, Some(3.0)]), (Some(2.0), 2));
+}
+
+/// 3 x 2: a depth step between columns 0 and 1.
+const STEP: [f32; 6] = [2.0, 10.0, 10.0, 2.0, 10.0, 10.0];
+
+#[test]
+fn a_pixel_sample_reads_the_surface_the_point_falls_on_where_bilinear_blends_the_step() {
+    assert_eq!(sample_pixel(&STEP, 3, 2, 0.9, 0.5), Some(2.0), "x 0.9 lies in pixel 0");
+    assert_eq!(sample_pixel(&STEP, 3, 2, 1.1, 1.5), Some(10.0), "x 1.1 lies in pixel 1");
+    let blended = sample_bilinear(&STEP, 3, 2, 1.0, 0.5).expect("inside");
+    assert!((blended - 6.0).abs() < 1e-6, "bilinear halfway between the centres 0.5 and 1.5: {blended}");
+}
+
+#[test]
+fn a_pixel_sample_takes_the_far_border_and_refuses_what_lies_outside() {
+    assert_eq!(sample_pixel(&STEP, 3, 2, 3.0, 2.0), Some(10.0), "the far corner belongs to the last pixel");
+    assert_eq!(sample_pixel(&STEP, 3, 2, -0.1, 1.0), None, "left of the image");
+    assert_eq!(sample_pixel(&STEP, 3, 2, 1.0, 2.1), None, "below the image");
+    assert_eq!(sample_pixel(&STEP[..5], 3, 2, 1.0, 1.0), None, "a map of the wrong length");
 }

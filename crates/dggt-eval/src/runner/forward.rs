@@ -80,7 +80,7 @@ pub(super) fn forward_scene(
     let inputs = restrict_inputs(window, &protocol.input_frames());
     let (input_images, size) = inputs.load(&context.preprocess)?;
     let plan = context.preprocess.plan(inputs.size)?;
-    let mapping = CellMapping::new(&plan);
+    let mapping = CellMapping::new(&plan, context.options.cell_sampling);
     let data: Vec<f32> = input_images.iter().flat_map(|i| i.data.iter().copied()).collect();
     let (h, w) = (size.height as usize, size.width as usize);
     let batch = Tensor::<5>::from_data(TensorData::new(data, [1, input_images.len(), 3, h, w]), context.device);

@@ -118,9 +118,10 @@ pub fn evaluate(options: &EvalOptions, device: &Device) -> Result<EvalReport, Ev
         depth_protocol: format!(
             "rendered expected depth vs lidar depth (depth_flows_4, else the lidar sweep binned on the same grid), least-squares scale and shift, at \
                          cells with lidar depth > 0, no sky pixel and the centre (4 col + 2, 4 row + 2) inside the \
-                         view, the render sampled bilinearly there; its AbsRel also split into the cells at a depth edge \
+                         view, the render read there {sampling}; its AbsRel also split into the cells at a depth edge \
                          (the render's 3x3 neighbourhood spans more than {DEPTH_EDGE_SPAN} in depth) and the rest, under the same \
-                         fit; and the median depth (the surface each pixel sees) scored alike under its own fit"
+                         fit; and the median depth (the surface each pixel sees) scored alike under its own fit",
+            sampling = options.cell_sampling.describe()
         ),
         motion_protocol: format!(
             "STORM's EPE3D / Acc5 (EPE < 0.05 or relative < 5 %) / Acc10 (EPE < 0.1 or relative < 10 %) / angle \

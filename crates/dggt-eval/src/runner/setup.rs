@@ -12,6 +12,7 @@ use dggt_refine::{Refiner, RefinerSpec};
 use dggt_scene::DynamicMotion;
 
 use crate::error::EvalError;
+use crate::grid::CellSampling;
 use crate::protocol::Protocol;
 use crate::sources::CropImages;
 
@@ -49,6 +50,8 @@ pub struct EvalOptions {
     pub crops: CropImages,
     /// Where the cameras come from: the camera head's (the paper's unposed protocol) or the export's.
     pub poses: CameraSource,
+    /// How rendered depth and flow are read at the lidar cells.
+    pub cell_sampling: CellSampling,
 }
 
 impl EvalOptions {
@@ -66,6 +69,7 @@ impl EvalOptions {
             out: out.into(),
             crops: CropImages::Skip,
             poses: CameraSource::Predicted,
+            cell_sampling: CellSampling::Bilinear,
         }
     }
 }

@@ -2,7 +2,7 @@
 //! aggregation.
 
 use dggt_data::Preprocess;
-use dggt_eval::grid::{CellMapping, cell_has_sky};
+use dggt_eval::grid::{CellMapping, CellSampling, cell_has_sky};
 use dggt_eval::report::{ImageScores, SourceFlowMetrics, SourcePsnr, ViewRecord, summarise_views};
 use dggt_eval::{Protocol, ProtocolKind, TargetKind};
 use dggt_geom::ImageSize;
@@ -17,7 +17,7 @@ fn cells_map_through_the_resize_and_crop() {
     // 160x112 at width 112: resized 112x84 (scale 0.7, 0.75), no crop.
     let preprocess = Preprocess { target_width: 112, patch_size: 14, crop_to_square: true };
     let plan = preprocess.plan(ImageSize { width: 160, height: 112 }).unwrap();
-    let mapping = CellMapping::new(&plan);
+    let mapping = CellMapping::new(&plan, CellSampling::Pixel);
     let (x, y) = mapping.cell_centre(0, 0);
     assert!(close(x, 2.0 * 0.7, 1e-12) && close(y, 2.0 * 0.75, 1e-12));
     let (x, y) = mapping.cell_centre(27, 39);
@@ -25,10 +25,33 @@ fn cells_map_through_the_resize_and_crop() {
     // A tall image is cropped from the top: its top cells fall outside the view.
     let plan = preprocess.plan(ImageSize { width: 80, height: 160 }).unwrap();
     assert!(plan.crop_top > 0);
-    let mapping = CellMapping::new(&plan);
+    let mapping = CellMapping::new(&plan, CellSampling::Pixel);
     let map = vec![1.0f32; mapping.width * mapping.height];
     assert_eq!(mapping.sample(&map, 0, 0), None);
     assert_eq!(mapping.sample(&map, 20, 10), Some(1.0));
+}
+
+#[test]
+fn a_cell_on_a_depth_step_reads_one_surface_by_pixel_and_a_blend_bilinearly() {
+    // 112x112 seen at width 56: scale 0.5, so cell (row, 7) has its centre at x = 30 * 0.5 = 15, the border
+    // between network pixels 14 and 15 (centres 14.5 and 15.5); cell 6 at x = 13 (pixel 13).
+    let preprocess = Preprocess { target_width: 56, patch_size: 14, crop_to_square: true };
+    let plan = preprocess.plan(ImageSize { width: 112, height: 112 }).unwrap();
+    let pixel = CellMapping::new(&plan, CellSampling::Pixel);
+    let bilinear = CellMapping { sampling: CellSampling::Bilinear, ..pixel };
+    // Near (4 m) in columns 0-14, far (20 m) from column 15 on.
+    let depth: Vec<f32> =
+        (0..pixel.width * pixel.height).map(|i| if i % pixel.width < 15 { 4.0 } else { 20.0 }).collect();
+    assert_eq!(pixel.sample(&depth, 10, 7), Some(20.0), "the centre x = 15 falls on the far pixel 15");
+    assert_eq!(bilinear.sample(&depth, 10, 7), Some(12.0), "halfway between the centres 14.5 and 15.5");
+    for mapping in [pixel, bilinear] {
+        assert_eq!(
+            mapping.sample(&depth, 10, 6),
+            Some(4.0),
+            "{:?}: cell 6 lies inside the near surface",
+            mapping.sampling
+        );
+    }
 }
 
 #[test]
