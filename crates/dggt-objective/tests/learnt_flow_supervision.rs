@@ -135,15 +135,24 @@ fn scene_flow_alone_teaches_the_flow_head() {
     let trained = value(loss(&head, &pixels, &batch, &device));
     assert!(trained < 0.25 * initial, "the learnt flow loss went from {initial} to {trained}");
 
-    // Forward from view 0 and back from view 1, the head's velocities meet the patch's in the camera's axes.
+    // Forward from view 0 and back from view 1, the head's velocities meet the patch's in the camera's axes. The
+    // optimisation's path depends on the order of the CPU backend's parallel sums: over runs on two cores the
+    // rows' mean L1 error was 0.003-0.007 and the worst row's 0.006-0.032 (of a velocity of 0.1), so the bounds
+    // keep about twice the largest seen.
     let moved = pixels.with_learnt_flow(&head, &features(&device)).unwrap();
     let learnt = moved.learnt_velocity().unwrap();
     let per_frame =
         moved.rotate_rows(learnt.velocity, Axes::WorldToCamera).div_scalar(timeline.frames_per_time() as f32);
     let rows = per_frame.into_data().try_into_vec::<f32>().unwrap();
     let truth = patch_velocity();
-    for (row, velocity) in rows.chunks_exact(3).enumerate().filter(|&(row, _)| learnt.measured[row]) {
-        let error: f32 = (0..3).map(|i| (velocity[i] - truth[i]).abs()).sum();
-        assert!(error < 0.3 * truth[0], "row {row}: {velocity:?} vs {truth:?}");
-    }
+    let errors: Vec<f32> = rows
+        .chunks_exact(3)
+        .enumerate()
+        .filter(|&(row, _)| learnt.measured[row])
+        .map(|(_, velocity)| (0..3).map(|i| (velocity[i] - truth[i]).abs()).sum())
+        .collect();
+    let mean = errors.iter().sum::<f32>() / errors.len() as f32;
+    assert!(mean < 0.15 * truth[0], "mean L1 error {mean} of the measured rows against {truth:?}");
+    let worst = errors.iter().copied().fold(0.0f32, f32::max);
+    assert!(worst < 0.6 * truth[0], "the worst measured row is off by {worst} against {truth:?}");
 }
