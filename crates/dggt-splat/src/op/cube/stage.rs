@@ -87,8 +87,7 @@ pub fn load_footprint(
 /// A staged footprint evaluated at a pixel centre: the offset to its mean, its conic `(a, b, c)`, the falloff
 /// `exp(-sigma)` of its Gaussian there, the opacity times the falloff (`raw`), that clamped to [`MAX_ALPHA`]
 /// (`alpha`), and whether the pixel blends it at all (`visible`: `sigma` a non-negative number and `alpha` at
-/// least [`ALPHA_THRESHOLD`]). Both compositing passes blend
-/// from it, so that they agree on every value.
+/// least [`ALPHA_THRESHOLD`]). Both compositing passes blend from it, so that they agree on every value.
 #[derive(CubeType)]
 pub struct PixelFootprint {
     pub dx: f32,
