@@ -6,6 +6,7 @@
 #   scripts/gpu-bench.sh OUT_DIR [--dggt BIN] [--baseline-dggt BIN] [--release-src DIR] [--gsplat-src DIR]
 #                        [--raster-tests BIN] [--device wgpu|cuda] [--scale full|reduced] [--budget-s S]
 #                        [--no-reference] [--reference-records FILE]... [--baseline-records FILE]
+#                        [--tuning-cache FILE]
 #
 # --dggt:          the binary to measure (default target/release/dggt, `cargo build --release --features wgpu`).
 # --baseline-dggt: a build without fusion and autotune (`--features wgpu-backend`); its forward and rasteriser
@@ -14,7 +15,7 @@
 # --gsplat-src:    a gsplat source tree to import (prepended to PYTHONPATH) where gsplat is not installed.
 # --raster-tests:  the rasteriser's test binary (`cargo test --features wgpu --test raster --no-run`): its GPU
 #                  tests run first, so that the kernels' paths a software driver lacks (plane operations) are
-#                  checked against the host on this card.
+#                  checked against the host on this card (`--device cuda`: through CUDA, DGGT_TEST_DEVICE=cuda).
 # --budget-s:      the whole run's wall-clock limit (default 540); each part gets its share and is stopped at
 #                  it, keeping the records it finished. Parts in order of importance: ours, the references, the
 #                  baseline.
@@ -22,12 +23,17 @@
 # --reference-records, --baseline-records: records an earlier run on the same card kind wrote (its
 #                  reference.json, its baseline's compute.json), shown in the table instead of measuring again, so
 #                  that the whole budget goes to our build.
+# --tuning-cache:  a tuning cache an earlier run on the same card kind brought back (`tuning-cache.tar`, or the
+#                  `.tar.xz` of docs/gpu-bench-<card>/), unpacked as `target/environment` before the first part so
+#                  that kernels compiled and shapes tuned then are not compiled and tuned again. A
+#                  `target/environment` already there is refused rather than mixed into.
 #
 # Outputs in OUT_DIR (keep them as docs/gpu-bench-<card>/): ours-*/compute.json, baseline/compute.json,
-# reference.json, compute.md (the table), machine.txt and each part's log.
+# reference.json, compute.md (the table), machine.txt, each part's log, raster-stages.log (the rasteriser's time
+# per stage, DGGT_SPLAT_STAGE_TIMES) and tuning-cache.tar (what this run compiled and tuned).
 set -uo pipefail
 
-usage() { sed -n '6,25p' "$0" >&2; exit 2; }
+usage() { sed -n '6,33p' "$0" >&2; exit 2; }
 [[ $# -ge 1 && $1 != -* ]] || usage
 out=$1
 shift
@@ -38,6 +44,7 @@ gsplat_src=""
 raster_tests=""
 reference_records=()
 baseline_records=""
+tuning_cache=""
 device="wgpu"
 scale="full"
 budget=540
@@ -55,6 +62,7 @@ while [[ $# -gt 0 ]]; do
         --no-reference) reference=0; shift ;;
         --reference-records) reference_records+=("$2"); reference=0; shift 2 ;;
         --baseline-records) baseline_records=$2; shift 2 ;;
+        --tuning-cache) tuning_cache=$2; shift 2 ;;
         *) usage ;;
     esac
 done
@@ -65,15 +73,20 @@ for file in "${reference_records[@]}" $baseline_records; do
     [[ -f $file ]] || { echo "no record file at $file" >&2; exit 1; }
 done
 [[ $scale == full || $scale == reduced ]] || usage
+if [[ -n $tuning_cache ]]; then
+    [[ -f $tuning_cache ]] || { echo "no tuning cache at $tuning_cache" >&2; exit 1; }
+    [[ ! -e target/environment ]] || { echo "target/environment exists: move it away to use --tuning-cache" >&2; exit 1; }
+    tar -xf "$tuning_cache" target/environment || { echo "$tuning_cache holds no target/environment" >&2; exit 1; }
+fi
 mkdir -p "$out"
 here=$(cd "$(dirname "$0")" && pwd)
 deadline=$(($(date +%s) + budget))
 
-# The parts' shares of the budget, in percent; time a part leaves unused goes to the parts after it.
-shares_left=100
+# The parts' shares of the budget (they sum to 111); time a part leaves unused goes to the parts after it.
+shares_left=111
 ((reference)) || shares_left=$((shares_left - 30))
 [[ -n $baseline ]] || shares_left=$((shares_left - 18))
-[[ -n $raster_tests ]] || shares_left=$((shares_left - 4))
+[[ -n $raster_tests ]] || shares_left=$((shares_left - 8))
 
 # Seconds a part with share $1 may take: that share of what is left for it and the parts after it (less 10 s
 # for the table).
@@ -118,9 +131,14 @@ common=(bench compute --device "$device" --scale "$scale" --repeat 3 --warmup 1 
 
 if [[ -n $raster_tests ]]; then
     # Without the cases that read the shared parity vectors (the device machine may not have them).
-    part raster-tests 4 "$raster_tests" --test-threads=1 --skip shared_reference cube:: tile_cubes:: radix:: batches::
+    # On a CUDA device the tests read DGGT_TEST_DEVICE=cuda (the same kernels through CUDA instead of Vulkan).
+    part raster-tests 8 env DGGT_TEST_DEVICE="$device" "$raster_tests" --test-threads=1 --skip shared_reference \
+        cube:: tile_cubes:: radix:: batches::
 fi
 part ours-raster 6 "$dggt" "${common[@]}" --out "$out/ours-raster" --workloads raster
+# One more raster run that waits after each stage and logs its time (DGGT_SPLAT_STAGE_TIMES), kept out of the table.
+part raster-stages 3 env DGGT_SPLAT_STAGE_TIMES=1 "$dggt" bench compute --device "$device" --scale "$scale" \
+    --repeat 1 --warmup 1 --overwrite --out "$out/raster-stages" --workloads raster
 # Each precision tunes its own kernels on first use: f32 alone first, so that its figures survive a slow tuning.
 part ours-forward 12 "$dggt" "${common[@]}" --out "$out/ours-forward" --workloads forward --precisions f32
 part ours-forward-half 10 "$dggt" "${common[@]}" --out "$out/ours-forward-half" --workloads forward \
@@ -141,6 +159,10 @@ fi
 if [[ -n $baseline ]]; then
     part baseline 18 "$baseline" "${common[@]}" --out "$out/baseline" --workloads raster,forward --precisions f32
 fi
+
+# The kernels compiled and the choices tuned in this run (burn's persistence, `target/environment` under the
+# working directory's workspace), kept so that a later run on the same card kind can start from them.
+[[ -d target/environment ]] && tar -cf "$out/tuning-cache.tar" target/environment
 
 table_args=()
 for file in "$out"/ours-*/compute.json; do [[ -f $file ]] && table_args+=(--ours "$file"); done

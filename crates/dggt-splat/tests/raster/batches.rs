@@ -6,7 +6,7 @@ use std::panic::{AssertUnwindSafe, catch_unwind};
 use dggt_geom::ImageSize;
 use dggt_splat::{Opacities, RasterSettings, RenderSettings, ViewBatch, render_with_stats};
 
-use crate::cube::{DeviceResult, assert_close_to_host, render_on_with, wgpu_device};
+use crate::cube::{DeviceResult, assert_close_to_host, cube_device, render_on_with};
 use crate::parity::{Tolerance, check, compare};
 use crate::scenes::{LossWeights, Rng, Scene, view_at};
 use crate::tensor_op::{camera_tensors, gaussian_tensors};
@@ -50,7 +50,7 @@ fn assert_same(case: &str, batched: &DeviceResult, whole: &DeviceResult) {
 }
 
 fn check_batched(case: &str, scene: &Scene, views: &ViewBatch, background: &[f32]) {
-    let device = wgpu_device().autodiff();
+    let device = cube_device().autodiff();
     let mut rng = Rng::new(8);
     let weights = LossWeights::random(&mut rng, views.len(), views.size(), scene.channels);
     let whole = render_on_with(&device, scene, views, Some(background), &weights, &RasterSettings::default());
@@ -82,7 +82,7 @@ fn wgpu_batched_views_render_as_one_batch() {
 
 #[test]
 fn wgpu_view_beyond_the_buffer_cap_is_a_clear_error() {
-    let device = wgpu_device();
+    let device = cube_device();
     let mut rng = Rng::new(32);
     let size = ImageSize::new(32, 32).unwrap();
     let views = five_views(size);

@@ -28,9 +28,18 @@ use crate::tensor_op::{camera_tensors, gaussian_tensors, per_view_scene, tensor,
 /// as much), below 5e-5 elsewhere. Atomic accumulation makes the last bits vary from run to run.
 const GRADIENT: Tolerance = Tolerance { atol: 1e-5, rtol: 1e-3 };
 
-/// burn's default wgpu device, checked to work: a clear failure when no adapter can be created.
-pub fn wgpu_device() -> Device {
-    let device = Device::wgpu(DeviceKind::DefaultDevice);
+/// The CubeCL device the tests run on, checked to work: burn's default wgpu device, or the first CUDA device where
+/// the environment variable `DGGT_TEST_DEVICE` is `cuda` (a build with the `cuda` feature; one kernel set serves
+/// both). A clear failure when no device can be created.
+pub fn cube_device() -> Device {
+    let device = match std::env::var("DGGT_TEST_DEVICE").as_deref() {
+        #[cfg(feature = "cuda")]
+        Ok("cuda") => Device::cuda(0),
+        Ok(other) if other != "wgpu" => {
+            panic!("DGGT_TEST_DEVICE={other}: this test build runs `wgpu` (or `cuda` with the `cuda` feature)")
+        }
+        _ => Device::wgpu(DeviceKind::DefaultDevice),
+    };
     let probe = catch_unwind(AssertUnwindSafe(|| {
         let t = Tensor::<1>::from_data(TensorData::new(vec![1.0f32, 2.0], [2]), &device);
         (t * 2.0).into_data().try_into_vec::<f32>()
@@ -38,8 +47,8 @@ pub fn wgpu_device() -> Device {
     match probe {
         Ok(Ok(v)) if v == [2.0, 4.0] => device,
         other => panic!(
-            "no usable wgpu adapter (got {:?}). These tests need a GPU or a software Vulkan driver: install \
-             Mesa's lavapipe (`apt-get install mesa-vulkan-drivers`).",
+            "no usable CubeCL device {device:?} (got {:?}). These tests need a GPU or a software Vulkan driver: \
+             install Mesa's lavapipe (`apt-get install mesa-vulkan-drivers`).",
             other.as_ref().map(|r| r.as_ref().map(|_| ()).map_err(|e| format!("{e:?}"))).map_err(|_| "panic")
         ),
     }
@@ -170,7 +179,7 @@ pub fn assert_close_to_host_with(
 
 #[test]
 fn wgpu_matches_the_host_and_gsplat_on_the_shared_reference_cases() {
-    let device = wgpu_device().autodiff();
+    let device = cube_device().autodiff();
     for case in ["case_a_50g_32x24_1cam", "case_b_300g_64x48_2cam", "case_c_80g_40x40_degenerate"] {
         let dir = parity_dir().join(case);
         let inputs = Tensors::load(&dir.join("inputs.safetensors"));
@@ -211,7 +220,7 @@ fn wgpu_matches_the_host_and_gsplat_on_the_shared_reference_cases() {
 
 #[test]
 fn wgpu_matches_the_host_with_per_view_opacities_and_a_background() {
-    let device = wgpu_device().autodiff();
+    let device = cube_device().autodiff();
     for seed in [3, 11] {
         let mut rng = Rng::new(seed);
         let size = ImageSize::new(40, 32).unwrap();
@@ -235,7 +244,7 @@ fn wgpu_matches_the_host_with_per_view_opacities_and_a_background() {
 #[test]
 fn wgpu_renders_shared_opacities_at_an_odd_size_with_small_tiles() {
     // A size that is no multiple of the tile size, and many Gaussians per tile.
-    let device = wgpu_device().autodiff();
+    let device = cube_device().autodiff();
     let mut rng = Rng::new(21);
     let size = ImageSize::new(37, 23).unwrap();
     let views =
@@ -248,7 +257,7 @@ fn wgpu_renders_shared_opacities_at_an_odd_size_with_small_tiles() {
 
 #[test]
 fn wgpu_renders_an_empty_scene_as_the_background() {
-    let device = wgpu_device().autodiff();
+    let device = cube_device().autodiff();
     let size = ImageSize::new(19, 13).unwrap();
     let views = ViewBatch::new(vec![view_at([0.0; 3], 0.0, size), view_at([1.0, 0.0, 0.0], 0.3, size)], size).unwrap();
     let scene = Scene {
@@ -276,7 +285,7 @@ fn wgpu_renders_an_empty_scene_as_the_background() {
 
 #[test]
 fn wgpu_renders_no_views() {
-    let device = wgpu_device();
+    let device = cube_device();
     let size = ImageSize::new(8, 8).unwrap();
     let views = ViewBatch::new(vec![], size).unwrap();
     let scene = Scene::random(&mut Rng::new(2), 5, 3, (0.1, 0.2));
@@ -289,7 +298,7 @@ fn wgpu_renders_no_views() {
 
 #[test]
 fn wgpu_culls_non_finite_and_degenerate_gaussians_without_nan() {
-    let device = wgpu_device().autodiff();
+    let device = cube_device().autodiff();
     let mut rng = Rng::new(17);
     let size = ImageSize::new(32, 24).unwrap();
     let views =
@@ -336,7 +345,7 @@ fn wgpu_culls_non_finite_and_degenerate_gaussians_without_nan() {
 
 #[test]
 fn wgpu_forward_without_autodiff_matches_the_host() {
-    let device = wgpu_device();
+    let device = cube_device();
     let mut rng = Rng::new(5);
     let size = ImageSize::new(24, 20).unwrap();
     let views = ViewBatch::new(vec![view_at([0.0; 3], 0.0, size)], size).unwrap();
@@ -354,7 +363,7 @@ fn wgpu_forward_without_autodiff_matches_the_host() {
 fn wgpu_matches_the_host_on_a_dense_scene_with_coincident_gaussians() {
     // Thousands of small Gaussians per tile, as a pixel-aligned scene gives, and exact depth ties: a copy of
     // the first 3000 at the same positions with other opacities (the static and dynamic copies of a pixel).
-    let device = wgpu_device().autodiff();
+    let device = cube_device().autodiff();
     let mut rng = Rng::new(5);
     let size = ImageSize::new(70, 56).unwrap();
     let views = ViewBatch::new(vec![view_at([0.0; 3], 0.0, size)], size).unwrap();

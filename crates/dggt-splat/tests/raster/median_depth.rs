@@ -125,9 +125,9 @@ fn the_tensor_op_detaches_a_median_depth() {
 #[cfg(feature = "wgpu")]
 #[test]
 fn wgpu_renders_the_median_depth_as_the_host_does() {
-    use crate::cube::{assert_close_to_host_with, render_on_with, wgpu_device};
+    use crate::cube::{assert_close_to_host_with, cube_device, render_on_with};
 
-    let device = wgpu_device().autodiff();
+    let device = cube_device().autodiff();
     let mut rng = Rng::new(33);
     let size = ImageSize::new(37, 29).unwrap();
     let views = ViewBatch::new(vec![view_at([0.0; 3], 0.0, size), view_at([0.4, 0.1, -0.5], 0.2, size)], size).unwrap();

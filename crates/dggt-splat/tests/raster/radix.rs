@@ -5,7 +5,7 @@
 
 use dggt_splat::{SortedIntersections, prefix_sums, sort_intersections};
 
-use crate::cube::wgpu_device;
+use crate::cube::cube_device;
 use crate::scenes::Rng;
 
 /// The host's order: by list, then depth, then input position (a stable sort), with the list ranges.
@@ -28,7 +28,7 @@ fn host_sort(lists: &[u32], depths: &[f32], list_count: usize) -> SortedIntersec
 }
 
 fn check_sort(case: &str, lists: &[u32], depths: &[f32], list_count: usize) {
-    let device = wgpu_device();
+    let device = cube_device();
     let ours = sort_intersections(&device, lists, depths, list_count);
     let host = host_sort(lists, depths, list_count);
     assert_eq!(ours.lists, host.lists, "{case}: sorted lists");
@@ -112,7 +112,7 @@ fn radix_sort_of_a_large_batch_matches_the_host() {
 
 #[test]
 fn prefix_sums_over_three_levels_match_the_host() {
-    let device = wgpu_device();
+    let device = cube_device();
     let mut rng = Rng::new(7);
     // Tiles of 2048: up to 2048 values take one level, up to 2048² two, 2048² + 1 three (2049 tile sums,
     // then 2).
@@ -132,7 +132,7 @@ fn prefix_sums_over_three_levels_match_the_host() {
 
 #[test]
 fn prefix_sums_wrap_past_u32() {
-    let device = wgpu_device();
+    let device = cube_device();
     let mut rng = Rng::new(8);
     // Sums pass 2^32 many times, within tiles and across them.
     let values: Vec<u32> = (0..5000).map(|_| (1 << 31) + rng.below(1000) as u32).collect();

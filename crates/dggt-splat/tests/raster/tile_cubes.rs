@@ -7,7 +7,7 @@ use dggt_geom::ImageSize;
 use dggt_splat::constants::MAX_TILE_SIZE;
 use dggt_splat::{Opacities, RasterSettings, RenderSettings, ViewBatch, render};
 
-use crate::cube::{assert_close_to_host_with, render_on_with, wgpu_device};
+use crate::cube::{assert_close_to_host_with, cube_device, render_on_with};
 use crate::scenes::{LossWeights, Rng, Scene, view_at};
 use crate::tensor_op::{camera_tensors, gaussian_tensors};
 
@@ -16,7 +16,7 @@ fn two_views(size: ImageSize) -> ViewBatch {
 }
 
 fn check_case(case: &str, scene: &Scene, size: ImageSize, tile_size: u32, seed: u64) {
-    let device = wgpu_device().autodiff();
+    let device = cube_device().autodiff();
     let views = two_views(size);
     let mut rng = Rng::new(seed);
     let weights = LossWeights::random(&mut rng, views.len(), size, scene.channels);
@@ -100,7 +100,7 @@ fn tiles_larger_than_a_cube_are_refused_on_every_backend() {
         raster: RasterSettings { tile_size: MAX_TILE_SIZE + 1, ..RasterSettings::default() },
         background: None,
     };
-    for device in [wgpu_device(), burn::tensor::Device::flex()] {
+    for device in [cube_device(), burn::tensor::Device::flex()] {
         let gaussians = gaussian_tensors(&scene, views.len(), &device, false);
         let error = render(&gaussians, &camera_tensors(&views, &device), &settings).expect_err("refused");
         assert!(error.to_string().contains("tile_size must be in 1..=16, got 17"), "{error}");

@@ -15,6 +15,7 @@ use burn_cubecl::cubecl;
 use burn_cubecl::ops::into_data_sync;
 use burn_cubecl::tensor::CubeTensor;
 
+use super::timing::StageClock;
 use super::{Layout, arg, bin, buffer, element_launch, radix, zeroed};
 use crate::settings::RasterSettings;
 
@@ -110,6 +111,7 @@ pub fn sorted_batch(
     views: Range<usize>,
     base: u32,
     entries: usize,
+    clock: &mut StageClock,
 ) -> ListBatch {
     let client = device.client();
     let lists = views.len() * layout.tiles();
@@ -139,9 +141,12 @@ pub fn sorted_batch(
         views.len() as u32,
         base,
     );
+    clock.mark(|| format!("views {}.. fill of {entries}", views.start));
     let (sorted_lists, ids) =
         radix::sort_by_two_keys(device, entry_lists, entry_depths, entry_ids, entries, bits_for(lists), 32);
+    clock.mark(|| format!("views {}.. radix sort", views.start));
     let (cubes, dim) = element_launch(&client, entries);
     bin::ranges_kernel::launch(&client, cubes, dim, arg(&sorted_lists), arg(&ranges), entries as u32);
+    clock.mark(|| format!("views {}.. ranges", views.start));
     batch(ids)
 }

@@ -4,12 +4,13 @@
 //! The kernels, one module per stage, all in `f32`: [`args`] (the arguments launches share), [`math`] (shared device
 //! math and the atomic float add), [`project`], tile binning ([`bin`]: count, fill, list ranges; [`scan`]: prefix sums;
 //! [`radix`]: the sort; [`lists`]: batching them under the buffer cap), [`composite`], and the backward kernels
-//! [`composite_backward`] and [`project_backward`]. Every kernel reads and writes flat, contiguous buffers with the
-//! layouts of the host pipeline (`Projection`, `TileBins`, `Images`): index `k = v * N + n` for per-(view, Gaussian)
-//! values, pixel `p = (v * H + y) * W + x` for per-pixel values. Sizes arrive as runtime `u32` scalars, grouped in one
-//! [`args::Grid`] argument built by `Layout::grid`, and the buffers both compositing passes read in one
-//! [`args::BlendInputs`]; only the number of colour channels is a compile-time constant (one compiled kernel per `K`),
-//! so that per-pixel colour accumulators live in registers. Their constants are [`crate::constants`].
+//! [`composite_backward`] and [`project_backward`]; [`timing`] writes each stage's time on request. Every kernel reads
+//! and writes flat, contiguous buffers with the layouts of the host pipeline (`Projection`, `TileBins`, `Images`):
+//! index `k = v * N + n` for per-(view, Gaussian) values, pixel `p = (v * H + y) * W + x` for per-pixel values. Sizes
+//! arrive as runtime `u32` scalars, grouped in one [`args::Grid`] argument built by `Layout::grid`, and the buffers
+//! both compositing passes read in one [`args::BlendInputs`]; only the number of colour channels is a compile-time
+//! constant (one compiled kernel per `K`), so that per-pixel colour accumulators live in registers. Their constants are
+//! [`crate::constants`].
 //!
 //! Forward, for `V` views:
 //!
@@ -76,6 +77,7 @@ mod project_backward;
 mod radix;
 mod scan;
 mod stage;
+mod timing;
 
 use std::fmt;
 use std::sync::Arc;
@@ -101,6 +103,7 @@ use composite_backward::GradientSum;
 use dggt_cube::atomic::{FloatAtomics, NativeAdd, SwapAdd};
 use lists::{FootprintBuffers, ListBatch};
 pub use probe::{SortedIntersections, prefix_sums, sort_intersections};
+use timing::StageClock;
 
 /// Units per cube of the per-element kernels.
 const ELEMENT_UNITS: u32 = 256;
@@ -438,12 +441,14 @@ fn sort_and_composite(
     inputs: &SplatInputs<CubeBackend>,
     footprints: &Footprints,
     out: &Composited,
+    clock: &mut StageClock,
 ) -> Vec<ListBatch> {
     if layout.views == 0 || layout.pixels() == 0 {
         return Vec::new();
     }
     let pair_offsets = scan::exclusive_scan(device, &footprints.pair_counts, layout.pairs());
     let starts = lists::view_starts(device, layout, &pair_offsets);
+    clock.mark(|| "pair scan".into());
     let per_view = lists::per_view_counts(&starts);
     let cap = lists::max_entries(lists::buffer_cap(&device.client(), settings));
     let f = FootprintBuffers {
@@ -458,8 +463,10 @@ fn sort_and_composite(
         .map(|views| {
             let entries: u64 = per_view[views.clone()].iter().sum();
             let base = starts[views.start];
-            let batch = lists::sorted_batch(device, layout, &f, views, base, entries as usize);
+            let first = views.start;
+            let batch = lists::sorted_batch(device, layout, &f, views, base, entries as usize, clock);
             composite_batch(device, layout, inputs, footprints, &batch, out);
+            clock.mark(|| format!("views {first}.. composite"));
             batch
         })
         .collect()
@@ -474,10 +481,12 @@ fn forward_saved(
 ) -> (SplatOutputs<CubeBackend>, CubeForward) {
     let layout = layout(&inputs, settings, size);
     let device = inputs.means.device.clone();
+    let mut clock = StageClock::start(&device.client(), || format!("forward {}x{}", layout.count, layout.views));
     let inputs = contiguous_inputs(inputs);
     let footprints = project_and_count(&device, &layout, &inputs);
+    clock.mark(|| "project+count".into());
     let composited = composited_buffers(&device, &layout);
-    let batches = sort_and_composite(&device, &layout, settings, &inputs, &footprints, &composited);
+    let batches = sort_and_composite(&device, &layout, settings, &inputs, &footprints, &composited, &mut clock);
     let SplatInputs { means, quats, scales, opacities, colors, background, viewmats, intrinsics } = inputs;
     let Footprints { means2d, conics, depths, reasons, stats, .. } = footprints;
     let saved = CubeForward {
@@ -551,6 +560,7 @@ fn backward(saved: &CubeForward, grad_images: FloatTensor<CubeBackend>) -> Splat
     let (views, count, channels) = (layout.views, layout.count, layout.channels);
     let pairs = layout.pairs();
     let pixels = views * layout.pixels();
+    let mut clock = StageClock::start(&client, || format!("backward {count}x{views}"));
     let grad_images = contiguous(grad_images, "image gradient");
 
     // One buffer for everything the compositing backward adds into (see `composite_backward_kernel`).
@@ -563,8 +573,10 @@ fn backward(saved: &CubeForward, grad_images: FloatTensor<CubeBackend>) -> Splat
 
     if pixels > 0 && count > 0 {
         let native = native_float_atomics(&client);
+        clock.mark(|| "zeroed gradients".into());
         for batch in &saved.batches {
             composite_backward_batch(saved, batch, &grad_images, &accumulated, native);
+            clock.mark(|| format!("views {}.. composite backward", batch.first_view));
         }
         let (cubes, dim) = element_launch(&client, count);
         project_backward::project_backward_kernel::launch(
@@ -584,6 +596,7 @@ fn backward(saved: &CubeForward, grad_images: FloatTensor<CubeBackend>) -> Splat
             layout.grid(),
             layout.eps2d,
         );
+        clock.mark(|| "project backward".into());
     }
     let part = |start: usize, len: usize, shape: Shape| {
         let slice = CubeBackend::float_slice(accumulated.clone(), &[Slice::from(start..start + len)]);
