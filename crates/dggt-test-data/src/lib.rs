@@ -32,8 +32,25 @@ pub fn median_ms(runs: usize, mut run: impl FnMut()) -> f64 {
 }
 
 /// The repository's root folder (the workspace that holds this crate).
+///
+/// The path is the one this crate was compiled in. A target folder shared between two checkouts of the same
+/// sources can hand a test binary compiled in the other checkout, whose path may be gone; then the root is the
+/// nearest folder holding `data-fixtures/` above where cargo runs the test (`CARGO_MANIFEST_DIR` at run time,
+/// else the working directory).
 pub fn repo_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+    let start = std::env::var_os("CARGO_MANIFEST_DIR").map(PathBuf::from).or_else(|| std::env::current_dir().ok());
+    root_from(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../.."), start.as_deref())
+}
+
+/// `compiled` when it still holds the workspace, else the nearest folder at or above `start` that holds
+/// `data-fixtures/` (else `compiled`, so that the caller's error names the path it was built with).
+fn root_from(compiled: &Path, start: Option<&Path>) -> PathBuf {
+    if compiled.join("Cargo.toml").is_file() {
+        return compiled.to_path_buf();
+    }
+    start
+        .and_then(|start| start.ancestors().find(|dir| dir.join("data-fixtures").is_dir()))
+        .map_or_else(|| compiled.to_path_buf(), Path::to_path_buf)
 }
 
 /// The bundled fixture `name` (e.g. `synth-s0`) under `data-fixtures/`.
@@ -159,6 +176,21 @@ mod tests {
     fn the_repository_root_holds_the_workspace_manifest_and_the_fixtures() {
         assert!(repo_root().join("Cargo.toml").is_file());
         assert!(fixture("synth-s0").join("images").is_dir());
+    }
+
+    #[test]
+    fn a_root_compiled_in_a_checkout_that_is_gone_is_found_above_where_the_test_runs() {
+        let scratch = std::env::temp_dir().join(format!("dggt-test-data-root-{}", std::process::id()));
+        let (checkout, member) = (scratch.join("checkout"), scratch.join("checkout/crates/member"));
+        std::fs::create_dir_all(checkout.join("data-fixtures")).unwrap();
+        std::fs::create_dir_all(&member).unwrap();
+        let gone = scratch.join("gone/crates/dggt-test-data/../..");
+        assert_eq!(root_from(&gone, Some(&member)), checkout);
+        assert_eq!(root_from(&gone, Some(&checkout)), checkout);
+        assert_eq!(root_from(&gone, None), gone, "nothing to search from: the compiled path, for the error");
+        std::fs::write(checkout.join("Cargo.toml"), "").unwrap();
+        assert_eq!(root_from(&checkout, Some(&member)), checkout, "a compiled path that holds the workspace wins");
+        std::fs::remove_dir_all(&scratch).unwrap();
     }
 
     #[test]
