@@ -260,9 +260,18 @@ impl ViewerProcess {
     fn start(save: &Path) -> Self {
         let port = TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
         // Its own process group: `rerun` may be a launcher (a pip entry point behind a shim) whose child serves.
-        let child = Command::new("rerun")
-            .args(["--port", &port.to_string(), "--bind", "127.0.0.1", "--save", path(save)])
-            .process_group(0)
+        let mut command = Command::new("rerun");
+        command.args(["--port", &port.to_string(), "--bind", "127.0.0.1", "--save", path(save)]).process_group(0);
+        // SIGINT at its default, whatever this process inherited: a shell starts background jobs with SIGINT
+        // ignored, children inherit that, and Python then leaves it ignored, so Ctrl-C would never reach the viewer.
+        // SAFETY: `signal` is async-signal-safe, and the closure touches nothing else between fork and exec.
+        unsafe {
+            command.pre_exec(|| {
+                libc::signal(libc::SIGINT, libc::SIG_DFL);
+                Ok(())
+            });
+        }
+        let child = command
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .spawn()
