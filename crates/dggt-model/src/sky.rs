@@ -16,6 +16,8 @@ use burn::nn::{Initializer, Linear, LinearConfig};
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor, TensorData};
 use dggt_geom::{CameraFromWorld, ImageSize, PinholeIntrinsics};
+use rstar::RTree;
+use rstar::primitives::GeomWithData;
 
 use crate::config::SkyConfig;
 
@@ -264,32 +266,59 @@ pub fn hemisphere_points(count: usize, radius: f64) -> Vec<[f64; 3]> {
         .collect()
 }
 
-/// Log of each point's mean distance to its three nearest other points (isotropic sky scales).
+/// Log of each point's mean distance to its three nearest other points (isotropic sky scales), found with an
+/// R*-tree: the full-size hemisphere holds tens of thousands of points, which a search of every pair took tens
+/// of seconds over. Each distance is `sqrt(dx² + dy² + dz²)` of the point and a neighbour, summed nearest first.
 pub fn neighbour_log_scales(points: &[[f64; 3]]) -> Vec<f64> {
+    let tree = RTree::bulk_load(points.iter().enumerate().map(|(i, p)| GeomWithData::new(*p, i)).collect());
     points
         .iter()
         .enumerate()
         .map(|(i, p)| {
-            let mut nearest = [f64::INFINITY; 3];
-            for (j, q) in points.iter().enumerate() {
-                if i == j {
-                    continue;
-                }
-                let d = ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt();
-                if d < nearest[2] {
-                    nearest[2] = d;
-                    nearest.sort_by(f64::total_cmp);
-                }
-            }
-            let found: Vec<f64> = nearest.into_iter().filter(|d| d.is_finite()).collect();
-            (found.iter().sum::<f64>() / found.len().max(1) as f64).max(f64::MIN_POSITIVE).ln()
+            let mut nearest: Vec<f64> = tree
+                .nearest_neighbor_iter(*p)
+                .filter(|other| other.data != i)
+                .take(3)
+                .map(|other| distance(p, other.geom()))
+                .collect();
+            nearest.sort_by(f64::total_cmp);
+            (nearest.iter().sum::<f64>() / nearest.len().max(1) as f64).max(f64::MIN_POSITIVE).ln()
         })
         .collect()
+}
+
+/// The Euclidean distance between two points.
+fn distance(p: &[f64; 3], q: &[f64; 3]) -> f64 {
+    ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The three nearest other points of each point by a search of every pair: the reference the tree is held to.
+    fn neighbour_log_scales_of_every_pair(points: &[[f64; 3]]) -> Vec<f64> {
+        let log_mean = |i: usize| {
+            let mut others: Vec<f64> =
+                points.iter().enumerate().filter(|&(j, _)| j != i).map(|(_, q)| distance(&points[i], q)).collect();
+            others.sort_by(f64::total_cmp);
+            let nearest = &others[..others.len().min(3)];
+            (nearest.iter().sum::<f64>() / nearest.len().max(1) as f64).max(f64::MIN_POSITIVE).ln()
+        };
+        (0..points.len()).map(log_mean).collect()
+    }
+
+    #[test]
+    fn neighbour_scales_match_a_search_of_every_pair() {
+        let hemisphere = hemisphere_points(700, 50.0);
+        assert_eq!(neighbour_log_scales(&hemisphere), neighbour_log_scales_of_every_pair(&hemisphere));
+        // Repeated points (distance 0, clamped before the log), a lone pair and a single point.
+        let repeated = [[1.0, 2.0, 3.0], [1.0, 2.0, 3.0], [1.0, 2.0, 3.0], [4.0, 0.0, 0.0], [-2.0, 1.0, 0.5]];
+        assert_eq!(neighbour_log_scales(&repeated), neighbour_log_scales_of_every_pair(&repeated));
+        let pair = [[0.0, 0.0, 0.0], [0.0, 3.0, 4.0]];
+        assert_eq!(neighbour_log_scales(&pair), vec![5f64.ln(); 2]);
+        assert_eq!(neighbour_log_scales(&[[1.0, 1.0, 1.0]]), vec![f64::MIN_POSITIVE.ln()]);
+    }
 
     #[test]
     fn sampling_reads_pixels_at_the_release_offset() {
