@@ -282,9 +282,15 @@ pub fn neighbour_log_scales(points: &[[f64; 3]]) -> Vec<f64> {
                 .map(|other| distance(p, other.geom()))
                 .collect();
             nearest.sort_by(f64::total_cmp);
-            (nearest.iter().sum::<f64>() / nearest.len().max(1) as f64).max(f64::MIN_POSITIVE).ln()
+            log_mean(&nearest)
         })
         .collect()
+}
+
+/// Log of the mean of `distances` (nearest first), kept above the smallest positive float; with no distance, that
+/// smallest float's log.
+fn log_mean(distances: &[f64]) -> f64 {
+    (distances.iter().sum::<f64>() / distances.len().max(1) as f64).max(f64::MIN_POSITIVE).ln()
 }
 
 /// The Euclidean distance between two points.
@@ -302,8 +308,7 @@ mod tests {
             let mut others: Vec<f64> =
                 points.iter().enumerate().filter(|&(j, _)| j != i).map(|(_, q)| distance(&points[i], q)).collect();
             others.sort_by(f64::total_cmp);
-            let nearest = &others[..others.len().min(3)];
-            (nearest.iter().sum::<f64>() / nearest.len().max(1) as f64).max(f64::MIN_POSITIVE).ln()
+            log_mean(&others[..others.len().min(3)])
         };
         (0..points.len()).map(log_mean).collect()
     }
