@@ -126,6 +126,17 @@ impl BlockLists {
         Self { blocks_x, origin: [x0, y0], offsets, entries }
     }
 
+    /// Number of blocks.
+    pub fn len(&self) -> usize {
+        self.offsets.len() - 1
+    }
+
+    /// Block `b`'s top-left pixel and the list positions that can reach its pixels, in list order.
+    pub fn block(&self, b: usize) -> ([usize; 2], &[u32]) {
+        let origin = [self.origin[0] + (b % self.blocks_x) * BLOCK, self.origin[1] + (b / self.blocks_x) * BLOCK];
+        (origin, &self.entries[self.offsets[b] as usize..self.offsets[b + 1] as usize])
+    }
+
     /// The list positions that can reach pixel `(x, y)` of the tile, in list order.
     pub fn at(&self, x: usize, y: usize) -> &[u32] {
         let block = ((y - self.origin[1]) / BLOCK) * self.blocks_x + (x - self.origin[0]) / BLOCK;

@@ -11,7 +11,8 @@
 //! 1. `covariance`: `Σ = R S Sᵀ Rᵀ` from `wxyz` quaternions and linear scales.
 //! 2. `projection`: EWA projection into each view, culling with a [`CullReason`].
 //! 3. `tiles`: kept Gaussians binned into screen tiles, sorted by depth.
-//! 4. `composite`: front-to-back alpha compositing per pixel, and its backward pass.
+//! 4. `composite`: front-to-back alpha compositing per pixel (4x4 blocks of pixels as SIMD lanes, `lanes`), and
+//!    its backward pass.
 //! 5. [`rasterize`] / [`rasterize_backward`] run the stages over a batch of views.
 //!
 //! Every threshold and default they use (alpha threshold, transmittance floor, guard band, box sigmas, near and
@@ -37,6 +38,7 @@ mod cull;
 mod error;
 mod forward;
 mod gaussians;
+mod lanes;
 // burn's NdArray backend is deprecated; the `ndarray` feature names it on purpose.
 #[cfg_attr(feature = "ndarray", allow(deprecated))]
 mod op;
