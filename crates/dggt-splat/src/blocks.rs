@@ -138,6 +138,7 @@ impl BlockLists {
     }
 
     /// The list positions that can reach pixel `(x, y)` of the tile, in list order.
+    #[cfg(test)]
     pub fn at(&self, x: usize, y: usize) -> &[u32] {
         let block = ((y - self.origin[1]) / BLOCK) * self.blocks_x + (x - self.origin[0]) / BLOCK;
         &self.entries[self.offsets[block] as usize..self.offsets[block + 1] as usize]

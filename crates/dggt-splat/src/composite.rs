@@ -191,7 +191,7 @@ impl TileSplats {
     }
 
     /// Footprint `j`'s alpha at pixel centre `(px, py)`, or `None` if it is skipped there.
-    #[inline(always)]
+    #[cfg(test)]
     fn coverage_at(&self, j: usize, px: f32, py: f32) -> Option<PixelCoverage> {
         let offset = self.sigma_at(j, px, py);
         // Beyond the cutoff the footprint is skipped: no need for the exponential.
@@ -362,11 +362,129 @@ fn write_pixel(scene: &ViewScene, block: &BlockForward, l: usize, pixel: usize, 
     out.list_ends[pixel] = block.end[l];
 }
 
+/// The state of a block's pixels while the backward pass walks their footprints back to front.
+struct BlockBackward {
+    /// `[K]` `dL/d colour` per pixel.
+    grad_colors: Vec<Lanes<f64>>,
+    /// `dL/d Σ w z` (the expected depth's numerator).
+    grad_sum_depth: Lanes<f64>,
+    /// `dL/d T_final`, through alpha and the background term.
+    grad_final_transmittance: Lanes<f64>,
+    /// The forward pass's final transmittance and list end (0 outside the image: nothing to walk).
+    final_transmittance: Lanes<f64>,
+    end: Lanes<u32>,
+    /// The transmittance in front of the footprints walked so far.
+    transmittance: Lanes<f64>,
+    /// `[K]` colour, and depth, composited behind the footprints walked so far.
+    colors_behind: Vec<Lanes<f64>>,
+    depth_behind: Lanes<f64>,
+}
+
+impl BlockBackward {
+    fn new(channels: usize) -> Self {
+        Self {
+            grad_colors: vec![[0.0; LANES]; channels],
+            grad_sum_depth: [0.0; LANES],
+            grad_final_transmittance: [0.0; LANES],
+            final_transmittance: [0.0; LANES],
+            end: [0; LANES],
+            transmittance: [0.0; LANES],
+            colors_behind: vec![[0.0; LANES]; channels],
+            depth_behind: [0.0; LANES],
+        }
+    }
+
+    /// Starts the walk of the block `pixels` from the forward pass's outputs and the loss gradients; adds the
+    /// background's gradient `Σ dL/dc T_final` to `background`.
+    fn start(
+        &mut self,
+        scene: &ViewScene,
+        pixels: &BlockPixels,
+        forward: &ForwardPixels,
+        grads: &PixelGrads,
+        background: &mut [f64],
+    ) {
+        let channels = self.grad_colors.len();
+        for lanes in self.grad_colors.iter_mut().chain(&mut self.colors_behind) {
+            *lanes = [0.0; LANES];
+        }
+        for lanes in [&mut self.grad_sum_depth, &mut self.grad_final_transmittance, &mut self.depth_behind] {
+            *lanes = [0.0; LANES];
+        }
+        (self.final_transmittance, self.transmittance, self.end) = ([0.0; LANES], [0.0; LANES], [0; LANES]);
+        for (l, x, y) in pixels.inside() {
+            let pixel = y * scene.grid.width + x;
+            let final_transmittance = forward.transmittance[pixel] as f64;
+            let mut through_background = 0.0;
+            for (k, (grad, (sum, bg))) in
+                self.grad_colors.iter_mut().zip(background.iter_mut().zip(scene.background)).enumerate()
+            {
+                grad[l] = grads.colors.map_or(0.0, |c| c[pixel * channels + k] as f64);
+                *sum += grad[l] * final_transmittance;
+                through_background += grad[l] * *bg as f64;
+            }
+            let alpha_out = forward.alpha[pixel] as f64;
+            let grad_depth_out = grads.depth.map_or(0.0, |d| d[pixel] as f64);
+            // depth = D / max(alpha, eps): dD = g / max(alpha, eps); dalpha -= g depth / alpha (unless clamped).
+            let clamped_alpha = alpha_out.max(MIN_DEPTH_ALPHA as f64);
+            self.grad_sum_depth[l] = grad_depth_out / clamped_alpha;
+            let mut grad_alpha_out = grads.alpha.map_or(0.0, |a| a[pixel] as f64);
+            if alpha_out >= MIN_DEPTH_ALPHA as f64 {
+                grad_alpha_out -= grad_depth_out * forward.depth[pixel] as f64 / clamped_alpha;
+            }
+            // Final transmittance enters through alpha = 1 - T and the background term T bg.
+            self.grad_final_transmittance[l] = -grad_alpha_out + through_background;
+            self.final_transmittance[l] = final_transmittance;
+            self.transmittance[l] = final_transmittance;
+            self.end[l] = forward.list_ends[pixel];
+        }
+    }
+
+    /// Steps lane `l` back past footprint `j` (composited there, with `coverage` at lane `l`), adding the
+    /// footprint's gradient at that pixel to `row`.
+    #[inline(always)]
+    fn step(&mut self, l: usize, j: usize, coverage: &BlockCoverage, splats: &TileSplats, row: &mut [f64]) {
+        let channels = self.grad_colors.len();
+        let alpha = coverage.alpha[l] as f64;
+        let remaining = 1.0 - alpha;
+        self.transmittance[l] /= remaining;
+        let transmittance = self.transmittance[l];
+        let weight = alpha * transmittance;
+        let color = &splats.colors[j * channels..(j + 1) * channels];
+        let mut grad_alpha = 0.0;
+        for (k, &c) in color.iter().enumerate() {
+            let (c, grad, behind) = (c as f64, self.grad_colors[k][l], &mut self.colors_behind[k][l]);
+            row[GRAD_COLOR + k] += grad * weight;
+            grad_alpha += grad * (c - *behind);
+            *behind = alpha * c + remaining * *behind;
+        }
+        let (depth, grad_sum_depth) = (splats.depths[j] as f64, self.grad_sum_depth[l]);
+        row[GRAD_DEPTH] += grad_sum_depth * weight;
+        grad_alpha += grad_sum_depth * (depth - self.depth_behind[l]);
+        self.depth_behind[l] = alpha * depth + remaining * self.depth_behind[l];
+        grad_alpha =
+            grad_alpha * transmittance - self.grad_final_transmittance[l] * self.final_transmittance[l] / remaining;
+        if coverage.saturated[l] {
+            return;
+        }
+        row[GRAD_OPACITY] += grad_alpha * coverage.falloff[l] as f64;
+        // alpha = o exp(-sigma): dalpha/dsigma = -alpha.
+        let grad_sigma = -grad_alpha * alpha;
+        let [a, b, c] = splats.conics[j].map(f64::from);
+        let (dx, dy) = (coverage.dx[l] as f64, coverage.dy[l] as f64);
+        row[GRAD_CONIC] += grad_sigma * 0.5 * dx * dx;
+        row[GRAD_CONIC + 1] += grad_sigma * dx * dy;
+        row[GRAD_CONIC + 2] += grad_sigma * 0.5 * dy * dy;
+        row[GRAD_MEAN2D] += grad_sigma * (a * dx + b * dy);
+        row[GRAD_MEAN2D + 1] += grad_sigma * (b * dx + c * dy);
+    }
+}
+
 /// Backward of tile `tile`: adds each listed footprint's gradient (summed over the tile's pixels) to its row
 /// of `out` (`[n, grad_stride(K)]`, rows in list order), and the background gradient to `background` (`[K]`).
 ///
-/// Pixel by pixel: most of a block's pixels stop at different footprints, and the gradients run in `f64`, so
-/// lanes would buy less here than in the forward pass.
+/// Block by block: a footprint's alpha at the block's pixels is evaluated in lanes as in the forward pass; the
+/// `f64` gradient then runs pixel by pixel where the footprint was composited, from each pixel's list end back.
 pub(crate) fn composite_tile_backward(
     scene: &ViewScene,
     tile: usize,
@@ -375,81 +493,53 @@ pub(crate) fn composite_tile_backward(
     out: &mut [f64],
     background: &mut [f64],
 ) {
-    let grid = &scene.grid;
-    let channels = scene.gaussians.channels();
-    let stride = grad_stride(channels);
+    #[cfg(target_arch = "x86_64")]
+    if has_wide_vectors() {
+        // SAFETY: the processor supports AVX2.
+        return unsafe { composite_tile_backward_avx2(scene, tile, forward, grads, out, background) };
+    }
+    composite_tile_backward_lanes(scene, tile, forward, grads, out, background);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn composite_tile_backward_avx2(
+    scene: &ViewScene,
+    tile: usize,
+    forward: &ForwardPixels,
+    grads: &PixelGrads,
+    out: &mut [f64],
+    background: &mut [f64],
+) {
+    composite_tile_backward_lanes(scene, tile, forward, grads, out, background);
+}
+
+#[inline(always)]
+fn composite_tile_backward_lanes(
+    scene: &ViewScene,
+    tile: usize,
+    forward: &ForwardPixels,
+    grads: &PixelGrads,
+    out: &mut [f64],
+    background: &mut [f64],
+) {
+    let stride = grad_stride(scene.gaussians.channels());
     let splats = TileSplats::gather(scene, tile);
-    let mut grad_color = vec![0.0f64; channels];
-    let mut behind = vec![0.0f64; channels];
-    let [x0, x1, y0, y1] = grid.pixel_rect(tile);
-    for y in y0..y1 {
-        for x in x0..x1 {
-            let pixel = y * grid.width + x;
-            let final_transmittance = forward.transmittance[pixel] as f64;
-            for (k, g) in grad_color.iter_mut().enumerate() {
-                *g = grads.colors.map_or(0.0, |c| c[pixel * channels + k] as f64);
-            }
-            for (b, g) in background.iter_mut().zip(&grad_color) {
-                *b += g * final_transmittance;
-            }
-            let end = forward.list_ends[pixel] as usize;
-            if end == 0 {
-                continue;
-            }
-            let alpha_out = forward.alpha[pixel] as f64;
-            let grad_depth_out = grads.depth.map_or(0.0, |d| d[pixel] as f64);
-            // depth = D / max(alpha, eps): dD = g / max(alpha, eps); dalpha -= g depth / alpha (unless clamped).
-            let clamped_alpha = alpha_out.max(MIN_DEPTH_ALPHA as f64);
-            let grad_sum_depth = grad_depth_out / clamped_alpha;
-            let mut grad_alpha_out = grads.alpha.map_or(0.0, |a| a[pixel] as f64);
-            if alpha_out >= MIN_DEPTH_ALPHA as f64 {
-                grad_alpha_out -= grad_depth_out * forward.depth[pixel] as f64 / clamped_alpha;
-            }
-            // Final transmittance enters through alpha = 1 - T and the background term T bg.
-            let grad_final_transmittance =
-                -grad_alpha_out + grad_color.iter().zip(scene.background).map(|(g, bg)| g * *bg as f64).sum::<f64>();
-
-            let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
-            let mut transmittance = final_transmittance;
-            behind.fill(0.0);
-            let mut depth_behind = 0.0f64;
-            let reaching = splats.blocks.at(x, y);
-            let listed = reaching.partition_point(|&j| (j as usize) < end);
-            for &j in reaching[..listed].iter().rev() {
-                let j = j as usize;
-                let Some(coverage) = splats.coverage_at(j, px, py) else { continue };
-                let alpha = coverage.alpha as f64;
-                let remaining = 1.0 - alpha;
-                transmittance /= remaining;
-                let weight = alpha * transmittance;
-                let row = &mut out[j * stride..(j + 1) * stride];
-                let color = &splats.colors[j * channels..(j + 1) * channels];
-                let depth = splats.depths[j] as f64;
-                let mut grad_alpha = 0.0;
-                for k in 0..channels {
-                    let c = color[k] as f64;
-                    row[GRAD_COLOR + k] += grad_color[k] * weight;
-                    grad_alpha += grad_color[k] * (c - behind[k]);
-                    behind[k] = alpha * c + remaining * behind[k];
+    let rect = scene.grid.pixel_rect(tile);
+    let mut block = BlockBackward::new(scene.gaussians.channels());
+    for b in 0..splats.blocks.len() {
+        let (origin, list) = splats.blocks.block(b);
+        let pixels = BlockPixels::new(origin, rect);
+        block.start(scene, &pixels, forward, grads, background);
+        let last_end = block.end.iter().copied().max().unwrap_or(0);
+        let listed = list.partition_point(|&j| j < last_end);
+        for &j in list[..listed].iter().rev() {
+            let coverage = splats.coverage(j as usize, &pixels);
+            let row = &mut out[j as usize * stride..(j as usize + 1) * stride];
+            for l in 0..LANES {
+                if coverage.hit[l] & (j < block.end[l]) {
+                    block.step(l, j as usize, &coverage, &splats, row);
                 }
-                row[GRAD_DEPTH] += grad_sum_depth * weight;
-                grad_alpha += grad_sum_depth * (depth - depth_behind);
-                depth_behind = alpha * depth + remaining * depth_behind;
-                grad_alpha = grad_alpha * transmittance - grad_final_transmittance * final_transmittance / remaining;
-
-                if coverage.saturated {
-                    continue;
-                }
-                row[GRAD_OPACITY] += grad_alpha * coverage.falloff as f64;
-                // alpha = o exp(-sigma): dalpha/dsigma = -alpha.
-                let grad_sigma = -grad_alpha * alpha;
-                let [a, b, c] = splats.conics[j].map(f64::from);
-                let (dx, dy) = (coverage.dx as f64, coverage.dy as f64);
-                row[GRAD_CONIC] += grad_sigma * 0.5 * dx * dx;
-                row[GRAD_CONIC + 1] += grad_sigma * dx * dy;
-                row[GRAD_CONIC + 2] += grad_sigma * 0.5 * dy * dy;
-                row[GRAD_MEAN2D] += grad_sigma * (a * dx + b * dy);
-                row[GRAD_MEAN2D + 1] += grad_sigma * (b * dx + c * dy);
             }
         }
     }
