@@ -13,9 +13,10 @@
 //! by `1 - alpha` (at least 0.001), and sums per-footprint gradients over the tile's pixels in `f64`. Both
 //! passes evaluate alpha with the same function, so their skip decisions agree exactly.
 //!
-//! Both passes work on 4x4 blocks of pixels as SIMD lanes (see `lanes`): one footprint at sixteen pixels at once,
-//! each lane masked where its pixel skips the footprint or has stopped. A block's per-footprint gradients are
-//! summed over its lanes in a fixed order, then over the tile's blocks in row-major order.
+//! Both passes work on 4x4 blocks of pixels as SIMD lanes (see `lanes`): a footprint's alpha is evaluated at the
+//! block's sixteen pixels at once. The forward pass composites it into every lane that is hit and has not
+//! stopped; the backward pass runs its `f64` gradient pixel by pixel where it was composited, block by block in
+//! row-major order, so its sums have a fixed order too.
 
 use crate::blocks::{BLOCK, BlockLists, Reach};
 use crate::constants::{ALPHA_THRESHOLD, MAX_ALPHA, MEDIAN_TRANSMITTANCE, MIN_DEPTH_ALPHA, MIN_TRANSMITTANCE};
