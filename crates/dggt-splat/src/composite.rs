@@ -240,17 +240,14 @@ struct BlockForward {
     end: Lanes<u32>,
 }
 
-/// Composites the footprints `list` (positions in the tile list, front to back) at the pixels of a block.
+/// Composites the footprints `list` (positions in the tile list, front to back) at the pixels of a block into
+/// `state` (whose colour buffers are reused from block to block).
 #[inline(always)]
-fn composite_block(splats: &TileSplats, list: &[u32], pixels: &BlockPixels, channels: usize) -> BlockForward {
-    let mut state = BlockForward {
-        colors: vec![[0.0; LANES]; channels],
-        depth: [0.0; LANES],
-        median: [0.0; LANES],
-        has_median: [false; LANES],
-        transmittance: [1.0; LANES],
-        end: [0; LANES],
-    };
+fn composite_block(splats: &TileSplats, list: &[u32], pixels: &BlockPixels, state: &mut BlockForward) {
+    let channels = state.colors.len();
+    state.colors.fill([0.0; LANES]);
+    (state.depth, state.median, state.has_median) = ([0.0; LANES], [0.0; LANES], [false; LANES]);
+    (state.transmittance, state.end) = ([1.0; LANES], [0; LANES]);
     let mut done = pixels.inside.map(|inside| !inside);
     let mut weights = [0.0f32; LANES];
     let mut take = [false; LANES];
@@ -265,10 +262,20 @@ fn composite_block(splats: &TileSplats, list: &[u32], pixels: &BlockPixels, chan
             break;
         }
     }
-    state
 }
 
 impl BlockForward {
+    fn new(channels: usize) -> Self {
+        Self {
+            colors: vec![[0.0; LANES]; channels],
+            depth: [0.0; LANES],
+            median: [0.0; LANES],
+            has_median: [false; LANES],
+            transmittance: [1.0; LANES],
+            end: [0; LANES],
+        }
+    }
+
     /// Composites one footprint (at `depth`, list end `end` once taken) where it is hit and the pixel goes on:
     /// marks in `take` where it does, with its weights `alpha T`, and in `done` where the pixel stops instead.
     #[inline(always)]
@@ -329,13 +336,14 @@ fn composite_band_lanes(scene: &ViewScene, tile_row: usize, out: &mut BandOutput
     let grid = &scene.grid;
     let channels = scene.gaussians.channels();
     let row0 = tile_row * grid.tile_size;
+    let mut block = BlockForward::new(channels);
     for tile in tile_row * grid.tiles_x..(tile_row + 1) * grid.tiles_x {
         let splats = TileSplats::gather(scene, tile);
         let rect = grid.pixel_rect(tile);
         for b in 0..splats.blocks.len() {
             let (origin, list) = splats.blocks.block(b);
             let pixels = BlockPixels::new(origin, rect);
-            let block = composite_block(&splats, list, &pixels, channels);
+            composite_block(&splats, list, &pixels, &mut block);
             for (l, x, y) in pixels.inside() {
                 write_pixel(scene, &block, l, (y - row0) * grid.width + x, out);
             }
@@ -626,11 +634,8 @@ mod tests {
     fn block_lanes_composite_every_pixel_as_a_walk_over_the_tile_list_does() {
         use crate::settings::RasterSettings;
         use crate::view::{PinholeView, ViewBatch};
-        let mut state = 0x9e37_79b9_u64;
-        let mut uniform = move || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            ((state >> 11) as f64 / (1u64 << 53) as f64) as f32
-        };
+        let mut random = dggt_data::random::SplitMix64::new(0x9e37_79b9);
+        let mut uniform = move || random.unit();
         // 37 x 23 pixels: tiles and blocks cut by both edges. Dense enough that pixels stop at the floor.
         let (width, height, count, channels) = (37u32, 23u32, 3000, 4);
         let mut buffers: [Vec<f32>; 5] = Default::default();
