@@ -48,7 +48,7 @@ fn main() {
     time_views("fixture 160x112 jpg+masks -> 518x364", &synth, 0, &release, 60);
     let kitti = Arc::new(kitti);
     for workers in [1, 2] {
-        let options = LoaderOptions { workers, capacity: 2 * workers };
+        let options = LoaderOptions { workers, capacity: 2 * workers, decoded_cache_bytes: 0 }; // decode throughput: no cache
         time_stream(&format!("KITTI stream -> 518x154, {workers} worker(s)"), kitti.clone(), release, options, 10);
         time_stream(
             &format!("fixture stream 3 cams -> 518x364, {workers} worker(s)"),

@@ -20,6 +20,7 @@
 //! Every reader returns a [`DataError`] naming the file and what was expected; nothing here panics on bad input.
 
 pub mod confined;
+pub mod decoded;
 pub mod depth_flow;
 mod error;
 pub mod export;
@@ -46,6 +47,7 @@ pub mod variant;
 pub mod views;
 pub mod window;
 
+pub use decoded::DecodedViews;
 pub use depth_flow::{DepthFlowMap, DepthSource, FlowOrigin};
 pub use error::{DataError, Result};
 pub use export::{ExportOptions, read_export};
@@ -61,5 +63,5 @@ pub use sampler::{Sampler, SamplerConfig, TrainingSample};
 pub use scene::{Scene, SceneCamera, SceneFrame, SceneSource, View, ViewFiles};
 pub use summary::SceneSummary;
 pub use variant::ExportVariant;
-pub use views::{PreparedView, prepare_view};
+pub use views::{PreparedView, prepare_view, prepare_view_cached};
 pub use window::{FramesOutside, frames_outside};

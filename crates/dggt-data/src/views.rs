@@ -3,6 +3,7 @@
 
 use dggt_geom::{PinholeIntrinsics, WorldFromCamera};
 
+use crate::decoded::DecodedViews;
 use crate::error::Result;
 use crate::images;
 use crate::preprocess::{BinaryMask, PlanarImage, Preprocess};
@@ -29,31 +30,49 @@ pub struct PreparedView {
 
 /// Decodes and preprocesses view `(frame, camera)` (positions in the scene).
 pub fn prepare_view(scene: &Scene, frame: usize, camera: usize, preprocess: &Preprocess) -> Result<PreparedView> {
+    prepare_view_cached(scene, frame, camera, preprocess, &DecodedViews::none())
+}
+
+/// [`prepare_view`], taking the image and masks from `cache` where it keeps them (and keeping them there when it
+/// has room). `cache` must belong to `preprocess`.
+pub fn prepare_view_cached(
+    scene: &Scene,
+    frame: usize,
+    camera: usize,
+    preprocess: &Preprocess,
+    cache: &DecodedViews,
+) -> Result<PreparedView> {
     let view = scene.view(frame, camera);
     let scene_camera = &scene.cameras[camera];
     let plan = preprocess.plan(scene_camera.size)?;
-    let rgb = images::read_rgb(&view.files.image)?;
-    images::expect_size(
-        &view.files.image,
-        dggt_geom::ImageSize { width: rgb.width(), height: rgb.height() },
-        scene_camera.size,
-    )?;
-    let mask = |path: &Option<std::path::PathBuf>| -> Result<Option<BinaryMask>> {
-        let Some(path) = path else { return Ok(None) };
-        let gray = images::read_gray(path)?;
+    let image = cache.image(&view.files.image, || {
+        let rgb = images::read_rgb(&view.files.image)?;
         images::expect_size(
-            path,
-            dggt_geom::ImageSize { width: gray.width(), height: gray.height() },
+            &view.files.image,
+            dggt_geom::ImageSize { width: rgb.width(), height: rgb.height() },
             scene_camera.size,
         )?;
-        Ok(Some(plan.mask(&gray)?))
+        plan.image(&rgb)
+    })?;
+    let mask = |path: &Option<std::path::PathBuf>| -> Result<Option<BinaryMask>> {
+        let Some(path) = path else { return Ok(None) };
+        let mask = cache.mask(path, || {
+            let gray = images::read_gray(path)?;
+            images::expect_size(
+                path,
+                dggt_geom::ImageSize { width: gray.width(), height: gray.height() },
+                scene_camera.size,
+            )?;
+            plan.mask(&gray)
+        })?;
+        Ok(Some(mask))
     };
     let dynamic_source = view.files.fine_dynamic_mask.as_ref().or(view.files.dynamic_mask.as_ref()).cloned();
     Ok(PreparedView {
         frame,
         camera,
         timestamp: scene.frames[frame].timestamp,
-        image: plan.image(&rgb)?,
+        image,
         sky_mask: mask(&view.files.sky_mask)?,
         dynamic_mask: mask(&dynamic_source)?,
         intrinsics: plan.intrinsics(&scene_camera.intrinsics),

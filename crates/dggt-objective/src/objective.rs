@@ -119,31 +119,34 @@ impl Objective {
         batch: &StepBatch,
         which: ViewsToRender,
     ) -> Result<Vec<RenderedView>, ObjectiveError> {
-        let mut views = Vec::new();
         let mut wanted: Vec<(usize, bool)> = (0..batch.targets.len()).map(|i| (i, true)).collect();
         if which == ViewsToRender::TargetsAndInputs {
             wanted.extend((0..batch.inputs.len()).map(|i| (i, false)));
         }
-        for (index, is_target) in wanted {
-            let truth = if is_target { &batch.targets[index] } else { &batch.inputs[index] };
-            let camera = match self.render.cameras {
-                CameraSource::GroundTruth => truth.camera,
-                CameraSource::Predicted => forward.scene.camera_at(truth.rig_camera, truth.time)?,
-            };
-            let target = TargetView { rig_camera: truth.rig_camera, time: truth.time, camera };
-            let view = forward.scene.render(&target)?;
-            let alpha = view.alpha.squeeze_dim::<2>(0);
-            let depth = view.depth.squeeze_dim::<2>(0);
-            views.push(RenderedView {
-                truth_index: index,
+        let targets: Vec<TargetView> = wanted
+            .iter()
+            .map(|&(index, is_target)| {
+                let truth = if is_target { &batch.targets[index] } else { &batch.inputs[index] };
+                let camera = match self.render.cameras {
+                    CameraSource::GroundTruth => truth.camera,
+                    CameraSource::Predicted => forward.scene.camera_at(truth.rig_camera, truth.time)?,
+                };
+                Ok(TargetView { rig_camera: truth.rig_camera, time: truth.time, camera })
+            })
+            .collect::<Result<_, ObjectiveError>>()?;
+        let rendered = forward.scene.render_all(&targets)?;
+        Ok(wanted
+            .into_iter()
+            .zip(rendered)
+            .map(|((truth_index, is_target), view)| RenderedView {
+                truth_index,
                 is_target,
                 rgb: view.rgb,
-                alpha,
-                depth,
+                alpha: view.alpha.squeeze_dim::<2>(0),
+                depth: view.depth.squeeze_dim::<2>(0),
                 counts: view.counts,
-            });
-        }
-        Ok(views)
+            })
+            .collect())
     }
 
     /// The weighted camera loss alone, from the aggregator and the camera head (no dense head runs, nothing is

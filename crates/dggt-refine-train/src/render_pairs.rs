@@ -6,7 +6,7 @@
 
 use burn::module::Module;
 use burn::tensor::{Device, Tensor};
-use dggt_data::{DatasetSampling, Preprocess};
+use dggt_data::{DatasetSampling, DecodedViews, LoaderOptions, Preprocess};
 use dggt_model::Dggt;
 use dggt_model::host::host_f32;
 use dggt_objective::{DepthFlowMaps, Objective, StepBatch, ViewTruth, ViewsToRender};
@@ -34,8 +34,9 @@ pub fn render_pairs(
 ) -> Result<Vec<RenderedPair>, RefineTrainError> {
     let model = run.model.clone().valid().fork(device);
     let mut pairs = Vec::new();
+    let decoded = DecodedViews::new(LoaderOptions::DEFAULT_DECODED_CACHE_BYTES);
     for index in samples {
-        let loaded = run.sampling.load(run.preprocess, index)?;
+        let loaded = run.sampling.load(run.preprocess, index, &decoded)?;
         let batch = StepBatch::new(&loaded, &loaded.scene, run.preprocess, DepthFlowMaps::Skip, device)?;
         let (_, views) = run.objective.render(&model, &batch, ViewsToRender::Targets)?;
         for view in views {

@@ -5,6 +5,9 @@
 //! through; the foreground is then composited over black (`alpha · foreground`), which differs from the exact
 //! composite by `(1 - alpha) · sky`, below the tolerance times the sky's colour.
 //!
+//! Several target views render their foregrounds one by one and their skies together ([`render_targets`]): the
+//! same sky Gaussians from every camera in one rasteriser call.
+//!
 //! The release's inference additionally min-max normalises the sky over all views before [`composite`]
 //! (`dggt_parity::network::release_render`); a trained model of this project composites the sky as rendered, in training and
 //! inference alike.
@@ -50,6 +53,19 @@ pub fn render_target(
     render_assembled(&assembled, sky, target, pixels.size, assembly)
 }
 
+/// Assembles and renders every view of `targets`, over `sky` when given: [`render_target`] for each, with the
+/// sky of all of them rasterised in one call (the same sky Gaussians seen from every target camera).
+pub fn render_targets(
+    pixels: &PixelGaussians,
+    sky: Option<&SkyGaussians>,
+    targets: &[TargetView],
+    assembly: &AssemblySettings,
+) -> Result<Vec<ViewRender>, SceneError> {
+    let assembled: Vec<AssembledGaussians> =
+        targets.iter().map(|target| assemble(pixels, target, assembly)).collect::<Result<_, _>>()?;
+    render_all_assembled(&assembled, sky, targets, pixels.size, assembly)
+}
+
 /// Renders Gaussians already assembled for `target` (the second half of [`render_target`]), over `sky` when
 /// given, at `size`.
 pub fn render_assembled(
@@ -59,34 +75,93 @@ pub fn render_assembled(
     size: ImageSize,
     assembly: &AssemblySettings,
 ) -> Result<ViewRender, SceneError> {
-    let AssembledGaussians { gaussians, counts } = assembled;
-    let counts = *counts;
-    let device = gaussians.means.device();
-    let cameras = camera_tensors(&[target.camera], size, &device)?;
-    let settings = foreground_settings(assembly);
-    let what = || format!("the view of camera {} at t = {}", target.rig_camera, target.time);
-    let foreground =
-        render(gaussians, &cameras, &settings).map_err(|source| SceneError::Render { what: what(), source })?;
-    let RenderTensors { colors, alpha, depth } = foreground;
-    let hidden = match (sky, assembly.hidden_sky) {
-        (Some(_), HiddenSky::Skip { tolerance }) => !sky_shows_through(&alpha, tolerance)?,
-        _ => false,
+    let mut views =
+        render_all_assembled(std::slice::from_ref(assembled), sky, std::slice::from_ref(target), size, assembly)?;
+    Ok(views.pop().expect("one view rendered for one target"))
+}
+
+/// Each `assembled[i]` rendered at `targets[i]` and composited over the sky, the skies of all views that show
+/// one rasterised together.
+fn render_all_assembled(
+    assembled: &[AssembledGaussians],
+    sky: Option<&SkyGaussians>,
+    targets: &[TargetView],
+    size: ImageSize,
+    assembly: &AssemblySettings,
+) -> Result<Vec<ViewRender>, SceneError> {
+    let foregrounds: Vec<RenderTensors> = assembled
+        .iter()
+        .zip(targets)
+        .map(|(assembled, target)| render_foreground(assembled, target, size, assembly))
+        .collect::<Result<_, _>>()?;
+    let shows_sky: Vec<bool> = match (sky, assembly.hidden_sky) {
+        (None, _) => vec![false; targets.len()],
+        (Some(_), HiddenSky::Render) => vec![true; targets.len()],
+        (Some(_), HiddenSky::Skip { tolerance }) => {
+            foregrounds.iter().map(|f| sky_shows_through(&f.alpha, tolerance)).collect::<Result<_, _>>()?
+        }
     };
-    let (rgb, sky) = match sky {
-        Some(_) if hidden => {
-            tracing::debug!(time = target.time, "sky hidden by the foreground: not rendered");
-            (colors * alpha.clone().unsqueeze_dim::<4>(3), None)
-        }
-        Some(sky) => {
-            let sky_rgb = render(&sky_splats(sky), &cameras, &settings)
-                .map_err(|source| SceneError::Render { what: format!("the sky of {}", what()), source })?
-                .colors;
-            (composite(alpha.clone(), colors, sky_rgb.clone()), Some(sky_rgb))
-        }
-        None => (colors, None),
+    let mut skies = match sky {
+        Some(sky) => render_skies(sky, targets, &shows_sky, size, assembly)?.into_iter(),
+        None => Vec::new().into_iter(),
     };
     let squeeze3 = |t: Tensor<4>| t.squeeze_dim::<3>(0);
-    Ok(ViewRender { rgb: squeeze3(rgb), alpha, depth, sky: sky.map(squeeze3), counts })
+    let views = foregrounds.into_iter().zip(assembled).zip(&shows_sky).zip(targets);
+    Ok(views
+        .map(|(((RenderTensors { colors, alpha, depth }, assembled), &shows_sky), target)| {
+            let (rgb, sky) = match sky {
+                Some(_) if shows_sky => {
+                    let sky_rgb = skies.next().expect("one sky rendered per view that shows it");
+                    (composite(alpha.clone(), colors, sky_rgb.clone()), Some(sky_rgb))
+                }
+                Some(_) => {
+                    tracing::debug!(time = target.time, "sky hidden by the foreground: not rendered");
+                    (colors * alpha.clone().unsqueeze_dim::<4>(3), None)
+                }
+                None => (colors, None),
+            };
+            ViewRender { rgb: squeeze3(rgb), alpha, depth, sky: sky.map(squeeze3), counts: assembled.counts }
+        })
+        .collect())
+}
+
+/// The foreground of one target view: `[1, H, W, 3]` colours, `[1, H, W]` alpha and depth.
+fn render_foreground(
+    assembled: &AssembledGaussians,
+    target: &TargetView,
+    size: ImageSize,
+    assembly: &AssemblySettings,
+) -> Result<RenderTensors, SceneError> {
+    let gaussians = &assembled.gaussians;
+    let cameras = camera_tensors(&[target.camera], size, &gaussians.means.device())?;
+    render(gaussians, &cameras, &foreground_settings(assembly)).map_err(|source| SceneError::Render {
+        what: format!("the view of camera {} at t = {}", target.rig_camera, target.time),
+        source,
+    })
+}
+
+/// `[1, H, W, 3]` the sky of each target whose `shows_sky` is set, in order, rasterised in one call.
+fn render_skies(
+    sky: &SkyGaussians,
+    targets: &[TargetView],
+    shows_sky: &[bool],
+    size: ImageSize,
+    assembly: &AssemblySettings,
+) -> Result<Vec<Tensor<4>>, SceneError> {
+    let cameras: Vec<PosedCamera> =
+        targets.iter().zip(shows_sky).filter(|&(_, &shows)| shows).map(|(target, _)| target.camera).collect();
+    if cameras.is_empty() {
+        return Ok(Vec::new());
+    }
+    let tensors = camera_tensors(&cameras, size, &sky.means.device())?;
+    let what = || match targets {
+        [target] => format!("the sky of the view of camera {} at t = {}", target.rig_camera, target.time),
+        _ => format!("the sky of {} target views", cameras.len()),
+    };
+    let skies = render(&sky_splats(sky), &tensors, &foreground_settings(assembly))
+        .map_err(|source| SceneError::Render { what: what(), source })?
+        .colors;
+    Ok((0..cameras.len()).map(|v| skies.clone().narrow(0, v, 1)).collect())
 }
 
 /// `[H, W]` the foreground's depth of Gaussians already assembled for `target`, as `statistic` says (the

@@ -35,7 +35,8 @@ pub use assemble::{
     assembled_velocities,
 };
 pub use compose::{
-    ViewRender, camera_tensors, composite, render_assembled, render_depth, render_flow, render_target, sky_splats,
+    ViewRender, camera_tensors, composite, render_assembled, render_depth, render_flow, render_target, render_targets,
+    sky_splats,
 };
 pub use dggt_instances::{InstanceSettings, Instances};
 pub use dggt_splat::DepthStatistic;

@@ -8,7 +8,7 @@ use dggt_model::sky::SkyGaussians;
 use dggt_splat::DepthStatistic;
 
 use crate::assemble::{AssembledGaussians, AssemblySettings, assemble};
-use crate::compose::{ViewRender, render_assembled, render_depth, render_target};
+use crate::compose::{ViewRender, render_assembled, render_depth, render_target, render_targets};
 use crate::error::SceneError;
 use crate::pixels::PixelGaussians;
 use crate::timeline::{InputView, TargetView, interpolate_camera};
@@ -36,6 +36,11 @@ impl Scene4d {
     /// Assembles and renders `target` over the sky.
     pub fn render(&self, target: &TargetView) -> Result<ViewRender, SceneError> {
         render_target(&self.pixels, self.sky.as_ref(), target, &self.assembly)
+    }
+
+    /// [`Scene4d::render`] for each of `targets`, their skies rasterised together.
+    pub fn render_all(&self, targets: &[TargetView]) -> Result<Vec<ViewRender>, SceneError> {
+        render_targets(&self.pixels, self.sky.as_ref(), targets, &self.assembly)
     }
 
     /// The first half of [`Scene4d::render`]: the Gaussians visible at `target`.

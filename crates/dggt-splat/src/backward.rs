@@ -1,8 +1,8 @@
 //! The backward pass: loss gradients of the images to gradients of every Gaussian input and the background.
 //!
 //! Per view: each tile walks its pixels back to front and sums per-footprint gradients (in parallel over
-//! tiles, one gradient row per tile-list entry); the rows are then added per Gaussian in list order, and each
-//! Gaussian's footprint gradient is pulled back through the projection (in parallel over Gaussians). All sums
+//! tiles, one gradient row per tile-list entry); each Gaussian's rows are then added in list order and its
+//! footprint gradient is pulled back through the projection (in parallel over Gaussians). All sums
 //! run in `f64` in a fixed order, so the result is bit-identical for any number of threads.
 
 use rayon::prelude::*;
@@ -122,14 +122,7 @@ pub fn rasterize_backward(
             }
         }
 
-        let mut per_gaussian = vec![0.0f64; count * stride];
-        for (row, &id) in rows.chunks(stride).zip(&bins.ids) {
-            let target = &mut per_gaussian[id as usize * stride..(id as usize + 1) * stride];
-            for (t, r) in target.iter_mut().zip(row) {
-                *t += r;
-            }
-        }
-
+        let entries = EntriesByGaussian::new(&bins.ids, count);
         let view_opacities =
             if layout.per_view_opacities { &mut opacities[v * count..(v + 1) * count] } else { &mut opacities[..] };
         let culled = &forward.projection.culled[v * count..(v + 1) * count];
@@ -139,25 +132,28 @@ pub fn rasterize_backward(
             .zip(colors.par_chunks_mut(channels))
             .zip(view_opacities.par_iter_mut())
             .enumerate()
-            .for_each(|(i, ((geometry, color), opacity))| {
-                if culled[i].is_some() {
-                    return;
-                }
-                let row = &per_gaussian[i * stride..(i + 1) * stride];
-                *opacity += row[GRAD_OPACITY];
-                for (c, g) in color.iter_mut().zip(&row[GRAD_COLOR..]) {
-                    *c += g;
-                }
-                let footprint = FootprintGrad {
-                    mean2d: [row[GRAD_MEAN2D], row[GRAD_MEAN2D + 1]],
-                    conic: [row[GRAD_CONIC], row[GRAD_CONIC + 1], row[GRAD_CONIC + 2]],
-                    depth: row[GRAD_DEPTH],
-                };
-                let g = project_backward(gaussians, i, camera, views, settings, &footprint);
-                add(&mut geometry.mean, &g.mean);
-                add(&mut geometry.quat, &g.quat);
-                add(&mut geometry.scale, &g.scale);
-            });
+            .for_each_init(
+                || vec![0.0f64; stride],
+                |row, (i, ((geometry, color), opacity))| {
+                    if culled[i].is_some() {
+                        return;
+                    }
+                    entries.sum_rows(i, &rows, row);
+                    *opacity += row[GRAD_OPACITY];
+                    for (c, g) in color.iter_mut().zip(&row[GRAD_COLOR..]) {
+                        *c += g;
+                    }
+                    let footprint = FootprintGrad {
+                        mean2d: [row[GRAD_MEAN2D], row[GRAD_MEAN2D + 1]],
+                        conic: [row[GRAD_CONIC], row[GRAD_CONIC + 1], row[GRAD_CONIC + 2]],
+                        depth: row[GRAD_DEPTH],
+                    };
+                    let g = project_backward(gaussians, i, camera, views, settings, &footprint);
+                    add(&mut geometry.mean, &g.mean);
+                    add(&mut geometry.quat, &g.quat);
+                    add(&mut geometry.scale, &g.scale);
+                },
+            );
     }
 
     let opacities = to_f32(&opacities);
@@ -169,6 +165,48 @@ pub fn rasterize_backward(
         colors: to_f32(&colors),
         background: to_f32(&background_grad),
     })
+}
+
+/// The tile-list entries of each Gaussian of one view, in list order: its gradient rows are summed in the order
+/// a pass over the whole list would add them, so the sums do not depend on how the Gaussians are split across
+/// threads.
+struct EntriesByGaussian {
+    /// `[N + 1]`: Gaussian `i`'s entries are `entries[offsets[i]..offsets[i + 1]]`.
+    offsets: Vec<u32>,
+    entries: Vec<u32>,
+}
+
+impl EntriesByGaussian {
+    /// Groups the entries of `ids` (the Gaussian of each tile-list entry) by Gaussian, of `count`.
+    fn new(ids: &[u32], count: usize) -> Self {
+        let mut offsets = vec![0u32; count + 1];
+        for &id in ids {
+            offsets[id as usize + 1] += 1;
+        }
+        for i in 0..count {
+            offsets[i + 1] += offsets[i];
+        }
+        let mut cursor = offsets.clone();
+        let mut entries = vec![0u32; ids.len()];
+        for (entry, &id) in ids.iter().enumerate() {
+            entries[cursor[id as usize] as usize] = entry as u32;
+            cursor[id as usize] += 1;
+        }
+        Self { offsets, entries }
+    }
+
+    /// Writes into `sum` the sum of Gaussian `i`'s rows of `rows` (`sum.len()` values each, one per entry), in
+    /// list order.
+    fn sum_rows(&self, i: usize, rows: &[f64], sum: &mut [f64]) {
+        let stride = sum.len();
+        sum.fill(0.0);
+        for &entry in &self.entries[self.offsets[i] as usize..self.offsets[i + 1] as usize] {
+            let row = &rows[entry as usize * stride..(entry as usize + 1) * stride];
+            for (s, r) in sum.iter_mut().zip(row) {
+                *s += r;
+            }
+        }
+    }
 }
 
 fn check_image_grad(

@@ -20,14 +20,18 @@ const MAX_CONDITION: f64 = 1e4;
 /// Slack in pixels on a bounding box, covering the rounding of `mean2d - centre`.
 const BOX_SLACK: f64 = 1e-2;
 
-/// A footprint's reach: skip it where `sigma > cutoff`; `None` half-extents mean "every block".
+/// A footprint's reach: skip it where `sigma > cutoff`; `None` half-extents mean "every block". The
+/// half-extents are rounded up to `f32` (16 bytes a footprint: one is kept per view and Gaussian).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Reach {
     pub cutoff: f32,
-    pub half_extent: Option<[f64; 2]>,
+    pub half_extent: Option<[f32; 2]>,
 }
 
 impl Reach {
+    /// The reach of a culled footprint: none.
+    pub const NOWHERE: Self = Self { cutoff: f32::NEG_INFINITY, half_extent: Some([-1.0, -1.0]) };
+
     /// The reach of a footprint with conic `[a, b, c]` and opacity `opacity` at alpha threshold `threshold`.
     pub fn new(conic: [f32; 3], opacity: f32, threshold: f32) -> Self {
         let [a, b, c] = conic.map(f64::from);
@@ -56,8 +60,14 @@ impl Reach {
             let det = a * c - b * b;
             [(2.0 * bound * c / det).sqrt() + BOX_SLACK, (2.0 * bound * a / det).sqrt() + BOX_SLACK]
         };
-        Self { cutoff, half_extent: Some(half_extent) }
+        Self { cutoff, half_extent: Some(half_extent.map(f32_at_least)) }
     }
+}
+
+/// The smallest `f32` at least `x` (a half-extent only ever widens when stored).
+fn f32_at_least(x: f64) -> f32 {
+    let rounded = x as f32;
+    if f64::from(rounded) < x { rounded.next_up() } else { rounded }
 }
 
 /// Per block of one tile, the positions in the tile list of the footprints that can reach it, in list order.
@@ -95,8 +105,8 @@ impl BlockLists {
                 None => [0..blocks_x, 0..blocks_y],
                 Some([hx, hy]) if hx < 0.0 || hy < 0.0 => [0..0, 0..0],
                 Some([hx, hy]) => [
-                    block_range(f64::from(mean[0]), hx, x0, x1, blocks_x),
-                    block_range(f64::from(mean[1]), hy, y0, y1, blocks_y),
+                    block_range(f64::from(mean[0]), f64::from(hx), x0, x1, blocks_x),
+                    block_range(f64::from(mean[1]), f64::from(hy), y0, y1, blocks_y),
                 ],
             })
             .collect();

@@ -18,7 +18,9 @@
 //! stopped; the backward pass runs its `f64` gradient pixel by pixel where it was composited, block by block in
 //! row-major order, so its sums have a fixed order too.
 
-use crate::blocks::{BLOCK, BlockLists, Reach};
+#[cfg(test)]
+use crate::blocks::Reach;
+use crate::blocks::{BLOCK, BlockLists};
 use crate::constants::{ALPHA_THRESHOLD, MAX_ALPHA, MEDIAN_TRANSMITTANCE, MIN_DEPTH_ALPHA, MIN_TRANSMITTANCE};
 use crate::gaussians::Gaussians;
 use crate::lanes::{LANES, Lanes, exp_neg, has_wide_vectors};
@@ -155,15 +157,15 @@ impl TileSplats {
         let mut reaches = Vec::with_capacity(ids.len());
         for &id in ids {
             let i = id as usize;
-            let footprint =
-                scene.projection.footprint(scene.view * count + i).expect("tile lists hold only kept Gaussians");
+            let k = scene.view * count + i;
+            let footprint = scene.projection.footprint(k).expect("tile lists hold only kept Gaussians");
             let opacity = scene.gaussians.opacity(scene.view, i);
             means2d.push(footprint.mean2d);
             conics.push(footprint.conic);
             depths.push(footprint.depth);
             opacities.push(opacity);
             colors.extend_from_slice(scene.gaussians.color(i));
-            reaches.push(Reach::new(footprint.conic, opacity, ALPHA_THRESHOLD));
+            reaches.push(scene.projection.reaches[k]);
         }
         let blocks = BlockLists::build(scene.grid.pixel_rect(tile), &means2d, &reaches);
         let cutoffs = reaches.iter().map(|r| r.cutoff).collect();

@@ -12,6 +12,7 @@
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 
+use crate::blocks::Reach;
 use crate::constants::{ALPHA_THRESHOLD, GUARD_BAND, MAX_BOX_SIGMAS};
 use crate::covariance::Covariance;
 use crate::cull::CullReason;
@@ -29,6 +30,9 @@ use crate::view::{PinholeView, ViewBatch};
 /// | `conics` | `[V, N, 3]` | inverse 2D covariance `(a, b, c)` = `[[a, b], [b, c]]` |
 /// | `radii` | `[V, N, 2]` | bounding-box half-size in whole pixels; `0` = culled |
 /// | `culled` | `[V, N]` | `None` if kept, else why not |
+///
+/// Beside them, for compositing: how far each kept footprint reaches (its falloff cutoff and the box of pixels
+/// above the alpha threshold), worked out once per view and Gaussian for the forward and the backward pass alike.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Projection {
     pub means2d: Vec<f32>,
@@ -36,6 +40,8 @@ pub struct Projection {
     pub conics: Vec<f32>,
     pub radii: Vec<u32>,
     pub culled: Vec<Option<CullReason>>,
+    /// `[V, N]`; [`Reach::NOWHERE`] where culled.
+    pub(crate) reaches: Vec<Reach>,
 }
 
 /// The 2D footprint of a kept Gaussian, as compositing reads it.
@@ -67,32 +73,36 @@ impl Projection {
     /// Projects every Gaussian into every view (in parallel; the result does not depend on the thread count).
     pub(crate) fn compute(gaussians: &Gaussians, views: &ViewBatch, settings: &RasterSettings) -> Self {
         let count = gaussians.len();
-        let outcomes: Vec<Result<Footprint, CullReason>> = (0..views.len() * count)
-            .into_par_iter()
-            .map(|k| {
-                let (v, i) = (k / count, k % count);
-                project(gaussians, i, v, &views.views()[v], views, settings)
-            })
-            .collect();
-        let total = outcomes.len();
+        let total = views.len() * count;
         let mut projection = Projection {
             means2d: vec![0.0; 2 * total],
             depths: vec![0.0; total],
             conics: vec![0.0; 3 * total],
             radii: vec![0; 2 * total],
             culled: vec![None; total],
+            reaches: vec![Reach::NOWHERE; total],
         };
-        for (k, outcome) in outcomes.into_iter().enumerate() {
-            match outcome {
-                Ok(f) => {
-                    projection.means2d[2 * k..2 * k + 2].copy_from_slice(&f.mean2d);
-                    projection.depths[k] = f.depth;
-                    projection.conics[3 * k..3 * k + 3].copy_from_slice(&f.conic);
-                    projection.radii[2 * k..2 * k + 2].copy_from_slice(&f.radius);
+        let Projection { means2d, depths, conics, radii, culled, reaches } = &mut projection;
+        let entries = means2d
+            .par_chunks_mut(2)
+            .zip(conics.par_chunks_mut(3))
+            .zip(radii.par_chunks_mut(2))
+            .zip(depths.par_iter_mut())
+            .zip(culled.par_iter_mut())
+            .zip(reaches.par_iter_mut());
+        entries.enumerate().for_each(|(k, (((((mean2d, conic), radius), depth), culled), reach))| {
+            let (v, i) = (k / count, k % count);
+            match project(gaussians, i, v, &views.views()[v], views, settings) {
+                Ok(footprint) => {
+                    mean2d.copy_from_slice(&footprint.mean2d);
+                    conic.copy_from_slice(&footprint.conic);
+                    radius.copy_from_slice(&footprint.radius);
+                    *depth = footprint.depth;
+                    *reach = Reach::new(footprint.conic, gaussians.opacity(v, i), ALPHA_THRESHOLD);
                 }
-                Err(reason) => projection.culled[k] = Some(reason),
+                Err(reason) => *culled = Some(reason),
             }
-        }
+        });
         projection
     }
 

@@ -130,7 +130,7 @@ fn sampling(root: &Path, layout: LogLayout) -> DatasetSampling {
 
 /// Views per second of the dataset stream over `SAMPLES` samples, once the first one has arrived.
 fn views_per_second(sampling: DatasetSampling, workers: usize) -> f64 {
-    let options = LoaderOptions { workers, capacity: 2 * workers };
+    let options = LoaderOptions { workers, capacity: 2 * workers, decoded_cache_bytes: 0 }; // decode throughput: no cache
     let mut stream = dataset_stream(sampling, Preprocess::default(), 0.., options).expect("stream");
     stream.next().expect("a first sample").expect("the first sample loads");
     let (views, time) = seconds(|| {

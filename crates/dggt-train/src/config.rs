@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use dggt_data::{DatasetSpec, Preprocess, SamplerConfig};
+use dggt_data::{DatasetSpec, LoaderOptions, Preprocess, SamplerConfig};
 use dggt_flow_head::FlowHeadShape;
 pub use dggt_infer::{CameraSource, ModelSection, RenderSection};
 use dggt_objective::LossTerm;
@@ -46,6 +46,9 @@ pub struct DataSection {
     pub validation: ValidationSection,
     /// Decoding threads.
     pub workers: usize,
+    /// MiB of decoded, preprocessed images and masks kept between steps, so that a view drawn again is not
+    /// decoded again (0: decode every time).
+    pub decoded_cache_mb: usize,
     /// Samples that may fail to load (each replaced by another scene's, with a warning) before the run stops.
     pub max_bad_samples: u64,
 }
@@ -75,6 +78,7 @@ impl Default for DataSection {
             datasets: Vec::new(),
             validation: ValidationSection::default(),
             workers: 2,
+            decoded_cache_mb: LoaderOptions::DEFAULT_DECODED_CACHE_BYTES >> 20,
             max_bad_samples: 100,
         }
     }

@@ -9,7 +9,7 @@ use dggt_geom::{PinholeIntrinsics, PixelConvention, PosedCamera, WorldFromCamera
 use dggt_model::gaussian_maps::GaussianMaps;
 use dggt_scene::{
     AssemblySettings, DynamicBlend, DynamicMotion, HiddenSky, InputView, MeansGradient, PixelGaussians, TargetView,
-    assemble, interpolate_camera, render_target,
+    assemble, interpolate_camera, render_target, render_targets,
 };
 use dggt_splat::OpacityTensor;
 
@@ -397,32 +397,39 @@ fn below_the_alpha_threshold(logit: f32) -> bool {
     1.0 / (1.0 + (-logit).exp()) < dggt_splat::constants::ALPHA_THRESHOLD
 }
 
+/// The Gaussians of `raw_maps` with every opacity logit at `logit` and scales ~0.3 (1.5 pixels at their depth):
+/// opaque ones cover a view from the input cameras.
+fn with_opacity(device: &Device, logit: f32) -> PixelGaussians {
+    let raw = raw_maps(device, 0.0);
+    let [b, s, h, w, _] = raw.dims();
+    let channels = vec![
+        raw.clone().narrow(4, 0, 3),
+        Tensor::full([b, s, h, w, 1], logit, device),
+        Tensor::full([b, s, h, w, 3], 3.0, device),
+        raw.narrow(4, 7, 5),
+    ];
+    placed(&GaussianMaps::from_raw(Tensor::<5>::cat(channels, 4)), None, views())
+}
+
+/// One wide, nearly opaque sky Gaussian 50 units ahead of the first camera.
+fn wide_sky(device: &Device) -> dggt_model::sky::SkyGaussians {
+    dggt_model::sky::SkyGaussians {
+        visible_index: vec![0],
+        rgb_mean: Tensor::zeros([1, 3], device),
+        field_out: Tensor::zeros([1, 6], device),
+        means: Tensor::from_data(TensorData::new(vec![0.0f32, 0.0, 50.0], [1, 3]), device),
+        quats: Tensor::from_data(TensorData::new(vec![1.0f32, 0.0, 0.0, 0.0], [1, 4]), device),
+        scales: Tensor::full([1, 3], 100.0, device),
+        opacities: Tensor::full([1], 0.99, device),
+        colors: Tensor::full([1, 3], 0.8, device),
+    }
+}
+
 #[test]
 fn a_sky_the_foreground_covers_is_not_rendered_and_changes_the_image_below_the_tolerance() {
     let device = Device::flex();
-    // Gaussians of opacity logit `logit` and scales ~0.3 (1.5 pixels at their depth): opaque ones cover the view.
-    let raw = raw_maps(&device, 0.0);
-    let [b, s, h, w, _] = raw.dims();
-    let with_opacity = |logit: f32| {
-        let channels = vec![
-            raw.clone().narrow(4, 0, 3),
-            Tensor::full([b, s, h, w, 1], logit, &device),
-            Tensor::full([b, s, h, w, 3], 3.0, &device),
-            raw.clone().narrow(4, 7, 5),
-        ];
-        placed(&GaussianMaps::from_raw(Tensor::<5>::cat(channels, 4)), None, views())
-    };
-    let (covered, faint) = (with_opacity(8.0), with_opacity(-4.0));
-    let sky = dggt_model::sky::SkyGaussians {
-        visible_index: vec![0],
-        rgb_mean: Tensor::zeros([1, 3], &device),
-        field_out: Tensor::zeros([1, 6], &device),
-        means: Tensor::from_data(TensorData::new(vec![0.0f32, 0.0, 50.0], [1, 3]), &device),
-        quats: Tensor::from_data(TensorData::new(vec![1.0f32, 0.0, 0.0, 0.0], [1, 4]), &device),
-        scales: Tensor::full([1, 3], 100.0, &device),
-        opacities: Tensor::full([1], 0.99, &device),
-        colors: Tensor::full([1, 3], 0.8, &device),
-    };
+    let (covered, faint) = (with_opacity(&device, 8.0), with_opacity(&device, -4.0));
+    let sky = wide_sky(&device);
     let target = TargetView { rig_camera: 0, time: 0.5, camera: camera(0.3, 0.0) };
     let skip = AssemblySettings { hidden_sky: HiddenSky::BELOW_ONE_LEVEL, ..AssemblySettings::default() };
     let render = |pixels: &PixelGaussians, settings: &AssemblySettings| {
@@ -434,4 +441,35 @@ fn a_sky_the_foreground_covers_is_not_rendered_and_changes_the_image_below_the_t
     assert!(worst < 0.8 / 255.0, "skipping the sky changed a colour by {worst}");
     // Where the sky shows through, it is rendered whatever the setting.
     assert!(render(&faint, &skip).sky.is_some());
+}
+
+#[test]
+fn targets_rendered_together_are_each_target_rendered_alone() {
+    let device = Device::flex();
+    let pixels = with_opacity(&device, 8.0);
+    let sky = wide_sky(&device);
+    // From an input camera the opaque Gaussians cover the view; turned away, the sky shows.
+    let targets = [
+        TargetView { rig_camera: 0, time: 0.5, camera: camera(0.3, 0.0) },
+        TargetView { rig_camera: 0, time: 0.2, camera: camera(0.1, 0.6) },
+        TargetView { rig_camera: 0, time: 0.9, camera: camera(0.5, -0.4) },
+    ];
+    let skip = AssemblySettings { hidden_sky: HiddenSky::BELOW_ONE_LEVEL, ..AssemblySettings::default() };
+    for settings in [AssemblySettings::default(), skip] {
+        let together = render_targets(&pixels, Some(&sky), &targets, &settings).unwrap();
+        assert_eq!(together.len(), targets.len());
+        let mut skies = Vec::new();
+        for (target, view) in targets.iter().zip(together) {
+            let alone = render_target(&pixels, Some(&sky), target, &settings).unwrap();
+            assert_eq!(view.counts, alone.counts);
+            assert_eq!(view.sky.is_some(), alone.sky.is_some());
+            skies.push(view.sky.is_some());
+            assert_eq!(host(view.rgb), host(alone.rgb), "{settings:?} at t = {}", target.time);
+            assert_eq!(host(view.alpha), host(alone.alpha));
+        }
+        match settings.hidden_sky {
+            HiddenSky::Render => assert_eq!(skies, [true; 3]),
+            HiddenSky::Skip { .. } => assert_eq!(skies, [false, true, true], "the covered view skips its sky"),
+        }
+    }
 }

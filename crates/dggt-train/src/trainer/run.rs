@@ -67,8 +67,12 @@ impl Trainer {
 
         let local = self.local_samples_per_step();
         let positions = ranks::sample_positions(self.state.step, local, self.group.rank(), self.group.size());
-        let options_loader =
-            LoaderOptions { workers: self.config.data.workers.max(1), capacity: 2 * self.config.data.workers.max(1) };
+        let data = &self.config.data;
+        let options_loader = LoaderOptions {
+            workers: data.workers.max(1),
+            capacity: 2 * data.workers.max(1),
+            decoded_cache_bytes: data.decoded_cache_mb << 20,
+        };
         let mut stream = dataset_stream(self.sampling.clone(), self.config.data.preprocess, positions, options_loader)?;
 
         let last_step = options.stop_after.map_or(run.steps, |s| s.min(run.steps));

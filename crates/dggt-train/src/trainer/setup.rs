@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use burn::tensor::Device;
 use dggt_collective::ProcessGroup;
-use dggt_data::{DatasetIndex, DatasetSampling, IndexedScene, LoadedSample};
+use dggt_data::{DatasetIndex, DatasetSampling, DecodedViews, IndexedScene, LoadedSample};
 use dggt_infer::{StartingWeights, fresh_model};
 use dggt_losses::{Lpips, LpipsKind};
 use dggt_model::{Dggt, ModelConfig};
@@ -207,7 +207,7 @@ impl Trainer {
 
     /// The sample drawn for sample index `index` (`step · samples_per_step + j`), decoded.
     pub fn sample(&self, index: u64) -> Result<LoadedSample, TrainError> {
-        Ok(self.sampling.load(&self.config.data.preprocess, index)?)
+        Ok(self.sampling.load(&self.config.data.preprocess, index, &DecodedViews::none())?)
     }
 }
 
