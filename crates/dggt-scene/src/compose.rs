@@ -132,10 +132,20 @@ fn render_foreground(
     size: ImageSize,
     assembly: &AssemblySettings,
 ) -> Result<RenderTensors, SceneError> {
-    let gaussians = &assembled.gaussians;
+    render_one(&assembled.gaussians, target, size, &foreground_settings(assembly), "the view")
+}
+
+/// `gaussians` rasterised from `target`'s camera alone; errors name `what` of which view was rendered.
+fn render_one(
+    gaussians: &GaussianTensors,
+    target: &TargetView,
+    size: ImageSize,
+    settings: &RenderSettings,
+    what: &str,
+) -> Result<RenderTensors, SceneError> {
     let cameras = camera_tensors(&[target.camera], size, &gaussians.means.device())?;
-    render(gaussians, &cameras, &foreground_settings(assembly)).map_err(|source| SceneError::Render {
-        what: format!("the view of camera {} at t = {}", target.rig_camera, target.time),
+    render(gaussians, &cameras, settings).map_err(|source| SceneError::Render {
+        what: format!("{what} of camera {} at t = {}", target.rig_camera, target.time),
         source,
     })
 }
@@ -174,14 +184,9 @@ pub fn render_depth(
     assembly: &AssemblySettings,
     statistic: DepthStatistic,
 ) -> Result<Tensor<3>, SceneError> {
-    let gaussians = &assembled.gaussians;
-    let cameras = camera_tensors(&[target.camera], size, &gaussians.means.device())?;
     let mut settings = foreground_settings(assembly);
     settings.raster.depth = statistic;
-    let what = || format!("the depth of camera {} at t = {}", target.rig_camera, target.time);
-    let rendered =
-        render(gaussians, &cameras, &settings).map_err(|source| SceneError::Render { what: what(), source })?;
-    Ok(rendered.depth)
+    Ok(render_one(&assembled.gaussians, target, size, &settings, "the depth")?.depth)
 }
 
 /// How the foreground is rasterised under `assembly`: its planes and low-pass, over no background.
@@ -211,10 +216,8 @@ pub fn render_flow(
         colors: Tensor::from_data(TensorData::new(velocities, [count, 3]), &device),
         ..assembled.gaussians
     };
-    let cameras = camera_tensors(&[target.camera], pixels.size, &device)?;
-    let what = || format!("the flow of camera {} at t = {}", target.rig_camera, target.time);
-    let RenderTensors { colors, alpha, .. } = render(&gaussians, &cameras, &foreground_settings(assembly))
-        .map_err(|source| SceneError::Render { what: what(), source })?;
+    let RenderTensors { colors, alpha, .. } =
+        render_one(&gaussians, target, pixels.size, &foreground_settings(assembly), "the flow")?;
     let flow = colors / alpha.clamp_min(1e-6).unsqueeze_dim::<4>(3);
     Ok(flow.squeeze_dim::<3>(0))
 }
