@@ -216,7 +216,8 @@ fn shipped_configurations_parse_and_validate() {
         .collect();
     std::fs::write(bad.path(), inverted).unwrap();
     let error = TrainConfig::load(bad.path()).unwrap_err().to_string();
-    assert!(error.contains("min_inputs (9) exceeds max_inputs (8)"), "{error}");
+    let max_inputs = TrainConfig::load(&dir.join("tiny-overfit.toml")).unwrap().sampler.max_inputs;
+    assert!(error.contains(&format!("min_inputs (9) exceeds max_inputs ({max_inputs})")), "{error}");
 }
 
 #[test]
