@@ -247,9 +247,7 @@ struct BlockForward {
 #[inline(always)]
 fn composite_block(splats: &TileSplats, list: &[u32], pixels: &BlockPixels, state: &mut BlockForward) {
     let channels = state.colors.len();
-    state.colors.fill([0.0; LANES]);
-    (state.depth, state.median, state.has_median) = ([0.0; LANES], [0.0; LANES], [false; LANES]);
-    (state.transmittance, state.end) = ([1.0; LANES], [0; LANES]);
+    state.reset();
     let mut done = pixels.inside.map(|inside| !inside);
     let mut weights = [0.0f32; LANES];
     let mut take = [false; LANES];
@@ -268,14 +266,24 @@ fn composite_block(splats: &TileSplats, list: &[u32], pixels: &BlockPixels, stat
 
 impl BlockForward {
     fn new(channels: usize) -> Self {
-        Self {
+        let mut state = Self {
             colors: vec![[0.0; LANES]; channels],
             depth: [0.0; LANES],
             median: [0.0; LANES],
             has_median: [false; LANES],
             transmittance: [1.0; LANES],
             end: [0; LANES],
-        }
+        };
+        state.reset();
+        state
+    }
+
+    /// Back to nothing composited: no colour or depth, full transmittance.
+    #[inline(always)]
+    fn reset(&mut self) {
+        self.colors.fill([0.0; LANES]);
+        (self.depth, self.median, self.has_median) = ([0.0; LANES], [0.0; LANES], [false; LANES]);
+        (self.transmittance, self.end) = ([1.0; LANES], [0; LANES]);
     }
 
     /// Composites one footprint (at `depth`, list end `end` once taken) where it is hit and the pixel goes on:

@@ -4,7 +4,8 @@ use std::path::Path;
 
 use dggt_data::depth_flow::write_flow_origin;
 use dggt_data::{
-    DataError, ExportLayout, ExportOptions, FlowOrigin, Preprocess, images, npy, prepare_view, read_export, text,
+    DataError, DecodedViews, ExportLayout, ExportOptions, FlowOrigin, Preprocess, images, npy, prepare_view,
+    prepare_view_cached, read_export, text,
 };
 use image::{GrayImage, RgbImage};
 
@@ -53,6 +54,29 @@ fn a_valid_export_reads_and_prepares() {
     assert_eq!((view.image.size.width, view.image.size.height), (56, 42));
     let sky = view.sky_mask.unwrap();
     assert!((sky.coverage() - 17.0 / 42.0).abs() < 0.03, "{}", sky.coverage());
+}
+
+#[test]
+fn a_view_the_cache_keeps_is_the_view_decoded_and_a_file_broken_later_is_not_reread() {
+    let dir = tempfile::tempdir().unwrap();
+    write_minimal_export(dir.path());
+    let scene = read_export(dir.path(), &ExportOptions::default()).unwrap();
+    let preprocess = Preprocess { target_width: 56, patch_size: 14, crop_to_square: true };
+    let cache = DecodedViews::new(1 << 20);
+    let decoded = prepare_view(&scene, 1, 0, &preprocess).unwrap();
+    let first = prepare_view_cached(&scene, 1, 0, &preprocess, &cache).unwrap();
+    assert!(cache.bytes() > 0, "the image and the sky mask are kept");
+    // Kept views come from memory: the files are not read again.
+    std::fs::write(&scene.view(1, 0).files.image, b"no longer a JPEG").unwrap();
+    let second = prepare_view_cached(&scene, 1, 0, &preprocess, &cache).unwrap();
+    for view in [&first, &second] {
+        assert_eq!(view.image, decoded.image);
+        assert_eq!(view.sky_mask, decoded.sky_mask);
+        assert_eq!(view.dynamic_mask, decoded.dynamic_mask);
+    }
+    // Without the cache the broken file is an error naming it.
+    let error = prepare_view(&scene, 1, 0, &preprocess).unwrap_err().to_string();
+    assert!(error.contains(&scene.view(1, 0).files.image.display().to_string()), "{error}");
 }
 
 #[test]
