@@ -12,6 +12,7 @@ pub mod divergence;
 mod error;
 pub mod failpoint;
 pub mod finite;
+mod host_adamw;
 pub mod metrics;
 pub mod optim_config;
 pub mod optimizer;

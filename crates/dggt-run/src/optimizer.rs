@@ -10,27 +10,33 @@
 //! A step never leaves a non-finite value behind: one whose gradient norm is not finite is not applied, and
 //! one whose update makes a weight or moment non-finite is rolled back ([`StepOutcome`]). The rollback keeps
 //! the previous weights and moments alive until the updated ones are checked, so the update's peak memory holds
-//! both (burn's tensors are shared, not copied, so nothing else is spent on it).
+//! both (burn's tensors are shared, not copied, so nothing else is spent on it). A host pass checks each value
+//! as it writes it; where any parameter was stepped by burn's AdamW, the whole model and its moments are checked
+//! after the update ([`first_non_finite`]). Weights and moments a step leaves as they were are not checked again.
 
 use std::collections::HashMap;
 use std::path::Path;
 
 use burn::module::{Module, ModuleMapper, ModuleVisitor, Param, ParamId};
 use burn::optim::{AdamW, AdamWConfig, AdamWState, AdaptiveMomentumState, GradientsParams, Optimizer as _};
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{DType, Device, Tensor, TensorData};
 use dggt_checkpoint::deferred_tensor;
 
 use crate::error::RunError;
-use crate::finite::{Moments, NonFinite, first_non_finite};
+use crate::finite::{Holder, Moments, NonFinite, first_non_finite};
+use crate::host_adamw::{self, AdamWRule, MomentsBefore};
 use crate::optim_config::OptimSection;
 
 /// AdamW with groups and clipping.
 ///
-/// The update of each parameter is burn's [`AdamW`], applied to the flattened parameter (the update is
-/// elementwise, so flattening changes nothing); the moments live here, keyed by parameter id, so that a
+/// The update of each parameter is burn's [`AdamW`] rule, applied to the flattened parameter (the update is
+/// elementwise, so flattening changes nothing): in one host pass for `f32` parameters on the `Flex` device, which
+/// also checks what it writes for finiteness, and through burn's own AdamW everywhere else. The moments live here, keyed by parameter id, so that a
 /// checkpoint can write them one tensor at a time ([`Optimizer::save`]).
 pub struct Optimizer {
     adamw: AdamW,
+    /// The constants `adamw` was built with, for the host pass.
+    rule: AdamWRule,
     /// Flattened moments and step count of every parameter stepped so far.
     states: HashMap<ParamId, AdamWState<1>>,
     /// Peak rate of everything outside the groups.
@@ -81,14 +87,21 @@ impl Optimizer {
     /// The optimiser of any module, every parameter at `config.lr` (`config.groups` and `config.frozen` name
     /// a network's modules and are not consulted).
     pub fn ungrouped(config: &OptimSection) -> Self {
+        let rule = AdamWRule {
+            beta_1: config.beta1 as f32,
+            beta_2: config.beta2 as f32,
+            epsilon: config.epsilon as f32,
+            weight_decay: config.weight_decay as f32,
+        };
         let adamw = AdamWConfig::new()
-            .with_beta_1(config.beta1 as f32)
-            .with_beta_2(config.beta2 as f32)
-            .with_epsilon(config.epsilon as f32)
-            .with_weight_decay(config.weight_decay as f32)
+            .with_beta_1(rule.beta_1)
+            .with_beta_2(rule.beta_2)
+            .with_epsilon(rule.epsilon)
+            .with_weight_decay(rule.weight_decay)
             .build();
         Self {
             adamw,
+            rule,
             states: HashMap::new(),
             base_rate: config.lr,
             group_rates: HashMap::new(),
@@ -112,18 +125,24 @@ impl Optimizer {
         if !grad_norm.is_finite() {
             return (model, StepOutcome::NonFiniteGradient);
         }
-        let mut clipped = false;
-        if let Some(limit) = self.clip_norm
-            && grad_norm > limit
-        {
-            let mut scale = Scale { grads: &mut grads, factor: limit / grad_norm };
-            model.visit(&mut scale);
-            clipped = true;
-        }
-        let report = StepReport { grad_norm, clipped };
+        let grad_scale = self.clip_norm.filter(|&limit| grad_norm > limit).map(|limit| limit / grad_norm);
+        let report = StepReport { grad_norm, clipped: grad_scale.is_some() };
         let (model_before, states_before) = (model.clone(), self.states.clone());
-        let updated = model.map(&mut Update { optimizer: self, grads: &mut grads, factor });
-        match first_non_finite(&updated, Some(&*self)) {
+        let mut update = Update {
+            optimizer: self,
+            grads: &mut grads,
+            factor,
+            grad_scale,
+            path: Vec::new(),
+            check: Default::default(),
+        };
+        let updated = model.map(&mut update);
+        let non_finite = match update.check {
+            UpdateCheck::Complete => None,
+            UpdateCheck::CompleteWith(non_finite) => Some(non_finite),
+            UpdateCheck::Partial => first_non_finite(&updated, Some(&*self)),
+        };
+        match non_finite {
             None => (updated, StepOutcome::Applied(report)),
             Some(non_finite) => {
                 self.states = states_before;
@@ -136,6 +155,7 @@ impl Optimizer {
     pub fn fork(&self, device: &Device) -> Self {
         Self {
             adamw: self.adamw.clone(),
+            rule: self.rule,
             states: self.states.iter().map(|(id, state)| (*id, AdamW::to_device(state.clone(), device))).collect(),
             base_rate: self.base_rate,
             group_rates: self.group_rates.clone(),
@@ -237,14 +257,92 @@ fn optimizer_file_error(path: &Path, detail: impl ToString) -> RunError {
     RunError::Checkpoint { path: path.to_path_buf(), detail: detail.to_string() }
 }
 
-/// Steps every parameter that has a gradient, keeping its autodiff association.
+/// Steps every parameter that has a gradient, keeping its autodiff association: `f32` parameters on the `Flex`
+/// device in one host pass each ([`host_adamw`]), every other one through burn's AdamW.
 struct Update<'a> {
     optimizer: &'a mut Optimizer,
     grads: &'a mut GradientsParams,
     factor: f64,
+    /// The clipping factor the gradients are scaled by, if any.
+    grad_scale: Option<f64>,
+    /// The module path of the parameter being visited.
+    path: Vec<String>,
+    check: UpdateCheck,
+}
+
+/// What the host passes of an [`Update`] learnt about the finiteness of what it changed.
+#[derive(Debug, Default)]
+enum UpdateCheck {
+    /// Every changed weight and moment was checked on the way; the first non-finite one, if any.
+    #[default]
+    Complete,
+    CompleteWith(NonFinite),
+    /// Some parameter was stepped by burn's AdamW: the whole model is to be checked.
+    Partial,
+}
+
+impl UpdateCheck {
+    fn record(&mut self, parameter: &[String], holder: Option<Holder>) {
+        if let (Self::Complete, Some(holder)) = (&*self, holder) {
+            *self = Self::CompleteWith(NonFinite { parameter: parameter.join("."), holder });
+        }
+    }
+}
+
+impl Update<'_> {
+    /// `flat` stepped in one host pass, when it, its gradient and its moments are `f32` on the `Flex` device;
+    /// `None` (nothing consumed but the state taken back) otherwise.
+    fn host_step(&mut self, id: ParamId, rate: f64, flat: &Tensor<1>, grad: &Tensor<1>) -> Option<Tensor<1>> {
+        let state = self.optimizer.states.get(&id);
+        let moments = state.map(|s| [&s.momentum.moment_1, &s.momentum.moment_2]);
+        let tensors = [flat, grad].into_iter().chain(moments.into_iter().flatten());
+        if !tensors.into_iter().all(|t| t.dtype() == DType::F32 && on_flex(t)) {
+            return None;
+        }
+        let read = |t: &Tensor<1>| t.clone().into_data().try_into_vec::<f32>().ok();
+        let (weight, grad) = (read(flat)?, read(grad)?);
+        let before = match moments {
+            Some([first, second]) => Some((read(first)?, read(second)?, state.map_or(0, |s| s.momentum.time))),
+            None => None,
+        };
+        let moments = before.as_ref().map(|(first, second, time)| MomentsBefore { first, second, time: *time });
+        let updated = host_adamw::update(self.optimizer.rule, rate, self.grad_scale, &weight, &grad, moments);
+        self.check.record(&self.path, updated.non_finite);
+        let device = flat.device();
+        let tensor = |values: Vec<f32>| Tensor::<1>::from_data(TensorData::new(values, [weight.len()]), &device);
+        let momentum = AdaptiveMomentumState {
+            time: updated.time,
+            moment_1: tensor(updated.first),
+            moment_2: tensor(updated.second),
+            max_moment_2: None,
+        };
+        self.optimizer.states.insert(id, AdamWState { momentum });
+        Some(tensor(updated.weight))
+    }
+
+    /// `flat` stepped by burn's AdamW (its gradient scaled first).
+    fn burn_step(&mut self, id: ParamId, rate: f64, flat: Tensor<1>, grad: Tensor<1>) -> Tensor<1> {
+        self.check = UpdateCheck::Partial;
+        let device = flat.device();
+        let grad = self.grad_scale.map_or(grad.clone(), |scale| grad.mul_scalar(scale));
+        let state = self.optimizer.states.remove(&id).map(|s| AdamW::to_device(s, &device));
+        let (updated, state) = self.optimizer.adamw.step(rate, flat, grad, state);
+        if let Some(state) = state {
+            self.optimizer.states.insert(id, state);
+        }
+        updated
+    }
 }
 
 impl ModuleMapper for Update<'_> {
+    fn enter_module(&mut self, name: &str, _container_type: &str) {
+        self.path.push(name.to_string());
+    }
+
+    fn exit_module(&mut self, _name: &str, _container_type: &str) {
+        self.path.pop();
+    }
+
     fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
         let (id, tensor, mapper) = param.consume();
         let rate = self.optimizer.rate(&id) * self.factor;
@@ -254,13 +352,11 @@ impl ModuleMapper for Update<'_> {
         let (dims, require_grad) = (tensor.dims(), tensor.is_require_grad());
         let strategy = tensor.gradient_checkpointing_strategy();
         let flat = tensor.inner().reshape([dims.iter().product::<usize>()]);
-        let device = flat.device();
-        let state = self.optimizer.states.remove(&id).map(|s| AdamW::to_device(s, &device));
-        let grad = grad.inner().to_device(&device).reshape([flat.dims()[0]]);
-        let (updated, state) = self.optimizer.adamw.step(rate, flat, grad, state);
-        if let Some(state) = state {
-            self.optimizer.states.insert(id, state);
-        }
+        let grad = grad.inner().to_device(&flat.device()).reshape([flat.dims()[0]]);
+        let updated = match self.host_step(id, rate, &flat, &grad) {
+            Some(updated) => updated,
+            None => self.burn_step(id, rate, flat, grad),
+        };
         let mut updated = updated.reshape(dims).autodiff();
         if let Some(strategy) = strategy {
             updated = updated.with_gradient_checkpointing_strategy(strategy);
@@ -270,6 +366,10 @@ impl ModuleMapper for Update<'_> {
         }
         Param::from_mapped_value(id, updated, mapper)
     }
+}
+
+fn on_flex(tensor: &Tensor<1>) -> bool {
+    tensor.device().without_autodiff() == Device::flex()
 }
 
 struct SquaredNorm<'a> {
@@ -313,19 +413,6 @@ fn squared_sum<const D: usize>(tensor: Tensor<D>) -> f64 {
     }
     let sums = Tensor::cat(partial, 0).into_data().convert::<f64>();
     sums.iter::<f64>().sum()
-}
-
-struct Scale<'a> {
-    grads: &'a mut GradientsParams,
-    factor: f64,
-}
-
-impl ModuleVisitor for Scale<'_> {
-    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-        if let Some(grad) = self.grads.remove::<D>(param.id) {
-            self.grads.register::<D>(param.id, grad.mul_scalar(self.factor));
-        }
-    }
 }
 
 #[cfg(test)]

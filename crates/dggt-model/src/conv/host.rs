@@ -11,6 +11,8 @@
 //! - input gradient: `dXpad[:, p + off_k] += W_kᵀ · dY` for each tap, then the interior of `dXpad`;
 //! - weight gradient: `dW_k = Σ_n dY_n · X_{k,n}ᵀ`; the bias gradient sums `dY` over images and pixels.
 //!
+//! Both gradients read `dY` with its values below [`FLUSH_BELOW`] (2⁻¹⁰⁰, subnormal products otherwise) as zero.
+//!
 //! Images run in parallel (rayon), each product single-threaded: the products are small (`O, C <= 64` in the
 //! DPT heads at training sizes) and the images many. All buffers are `f32`, `NCHW`, weights `[O, C, 3, 3]`.
 
@@ -19,6 +21,14 @@ use rayon::prelude::*;
 
 /// Zeros after the padded image: the junk columns of the last row read up to two values past it.
 const TAIL: usize = 2;
+
+/// Output-gradient values smaller than this in magnitude (2⁻¹⁰⁰) are taken as zero by the backward pass.
+///
+/// Late in training the heads' output gradients hold subnormal floats, and an x86 processor multiplies those
+/// through a microcode assist many times slower than a normal product: the input gradient's products, which do
+/// the forward's work, took six times its time. No value this small can move anything: AdamW divides by at
+/// least its ε (1e-8), and beside gradients of ordinary size it is below `f32`'s rounding.
+const FLUSH_BELOW: f32 = 1.0 / (1u128 << 100) as f32;
 
 /// Sizes of one call: `images` of `channels` x `height` x `width` in, `outputs` channels out.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -164,14 +174,17 @@ fn wide(shape: &ConvShape) -> Strided {
     Strided { offset: 0, row_stride: shape.wide_pixels(), col_stride: 1 }
 }
 
-/// An output gradient `[O, H, W]` spread into the padded-width layout, junk columns zero.
+/// An output gradient `[O, H, W]` spread into the padded-width layout, junk columns and values below
+/// [`FLUSH_BELOW`] zero.
 fn widen(shape: &ConvShape, grad: &[f32]) -> Vec<f32> {
     let (h, w, wp) = (shape.height, shape.width, shape.padded_width());
     let mut wide = vec![0.0f32; shape.outputs * shape.wide_pixels()];
     for (o, channel) in grad.chunks_exact(h * w).enumerate() {
         for (i, row) in channel.chunks_exact(w).enumerate() {
             let start = o * shape.wide_pixels() + i * wp;
-            wide[start..start + w].copy_from_slice(row);
+            for (d, &v) in wide[start..start + w].iter_mut().zip(row) {
+                *d = if v.abs() < FLUSH_BELOW { 0.0 } else { v };
+            }
         }
     }
     wide
@@ -303,4 +316,26 @@ fn weight_grad(shape: &ConvShape, padded: &[f32], wide_grad: &[f32]) -> Vec<f32>
         product(shape, dims, &mut grad, tap_weights(shape, k), false, wide_grad, wide(shape), padded, rhs);
     }
     grad
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn widening_keeps_every_gradient_value_but_the_negligible_ones() {
+        let shape = ConvShape { images: 1, channels: 1, outputs: 2, height: 2, width: 3 };
+        let tiny = f32::MIN_POSITIVE / 8.0;
+        let grad = [1.0, -tiny, FLUSH_BELOW, -FLUSH_BELOW / 2.0, 1e-20, -3.0, 0.5, 2e-31, -1e-30, 0.0, 4.0, -0.25];
+        assert!(tiny.is_subnormal(), "the test holds a subnormal value");
+        let wide = widen(&shape, &grad);
+        // Rows of width 3 padded to 5: two junk columns after each row.
+        let expected = [
+            [1.0, 0.0, FLUSH_BELOW, 0.0, 0.0],
+            [0.0, 1e-20, -3.0, 0.0, 0.0],
+            [0.5, 0.0, -1e-30, 0.0, 0.0],
+            [0.0, 4.0, -0.25, 0.0, 0.0],
+        ];
+        assert_eq!(wide, expected.concat(), "values below 2^-100 are zero, the rest kept bit for bit");
+    }
 }
