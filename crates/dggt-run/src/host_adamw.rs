@@ -8,6 +8,8 @@
 //! `Flex` device its results are those of burn's AdamW bit for bit (a test holds it to that), and it learns on
 //! the way which of the new weight and moments holds a NaN or an infinity, which spares the separate check.
 
+use burn::optim::{AdamW, AdamWConfig};
+
 use crate::finite::Holder;
 
 /// The constants of AdamW's rule, as `burn::optim::AdamWConfig` keeps them (`f32`).
@@ -19,7 +21,20 @@ pub(crate) struct AdamWRule {
     pub weight_decay: f32,
 }
 
+impl AdamWRule {
+    /// Burn's AdamW with these constants.
+    pub fn burn_adamw(self) -> AdamW {
+        AdamWConfig::new()
+            .with_beta_1(self.beta_1)
+            .with_beta_2(self.beta_2)
+            .with_epsilon(self.epsilon)
+            .with_weight_decay(self.weight_decay)
+            .build()
+    }
+}
+
 /// The moments of one parameter before a step, flattened, and how many steps made them.
+#[derive(Clone, Copy)]
 pub(crate) struct MomentsBefore<'a> {
     pub first: &'a [f32],
     pub second: &'a [f32],
@@ -48,6 +63,10 @@ pub(crate) fn update(
 ) -> Updated {
     let count = weight.len();
     assert_eq!(grad.len(), count, "a gradient of {} values for a weight of {count}", grad.len());
+    if let Some(before) = &moments {
+        let sizes = [before.first.len(), before.second.len()];
+        assert_eq!(sizes, [count; 2], "moments of {sizes:?} values for a weight of {count}");
+    }
     let time = moments.as_ref().map_or(1, |m| m.time + 1);
     let (factor_1, factor_2) = (1.0 - rule.beta_1, 1.0 - rule.beta_2);
     // As burn computes them: the corrections in `f32` from the step count, the decay in `f64` from the rate.
@@ -83,7 +102,7 @@ pub(crate) fn update(
 
 #[cfg(test)]
 mod tests {
-    use burn::optim::{AdamWConfig, AdamWState, AdaptiveMomentumState, Optimizer as _};
+    use burn::optim::{AdamWState, AdaptiveMomentumState, Optimizer as _};
     use burn::tensor::{Device, Distribution, Tensor};
 
     use super::*;
@@ -91,18 +110,13 @@ mod tests {
     const RULE: AdamWRule = AdamWRule { beta_1: 0.9, beta_2: 0.999, epsilon: 1e-8, weight_decay: 1e-4 };
 
     fn values(tensor: &Tensor<1>) -> Vec<f32> {
-        tensor.clone().into_data().to_vec::<f32>().expect("f32 values")
+        tensor.clone().into_data().try_to_vec::<f32>().expect("f32 values")
     }
 
     /// Burn's AdamW on the `Flex` device and [`update`] over five steps, with and without clipping and decay.
     fn against_burn(rule: AdamWRule, grad_scale: Option<f64>) {
         let device = Device::flex();
-        let adamw = AdamWConfig::new()
-            .with_beta_1(rule.beta_1)
-            .with_beta_2(rule.beta_2)
-            .with_epsilon(rule.epsilon)
-            .with_weight_decay(rule.weight_decay)
-            .build();
+        let adamw = rule.burn_adamw();
         let count = 1000;
         let mut weight = Tensor::<1>::random([count], Distribution::Normal(0.0, 1.0), &device);
         let mut host_weight = values(&weight);

@@ -18,7 +18,7 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use burn::module::{Module, ModuleMapper, ModuleVisitor, Param, ParamId};
-use burn::optim::{AdamW, AdamWConfig, AdamWState, AdaptiveMomentumState, GradientsParams, Optimizer as _};
+use burn::optim::{AdamW, AdamWState, AdaptiveMomentumState, GradientsParams, Optimizer as _};
 use burn::tensor::{DType, Device, Tensor, TensorData};
 use dggt_checkpoint::deferred_tensor;
 
@@ -93,14 +93,8 @@ impl Optimizer {
             epsilon: config.epsilon as f32,
             weight_decay: config.weight_decay as f32,
         };
-        let adamw = AdamWConfig::new()
-            .with_beta_1(rule.beta_1)
-            .with_beta_2(rule.beta_2)
-            .with_epsilon(rule.epsilon)
-            .with_weight_decay(rule.weight_decay)
-            .build();
         Self {
-            adamw,
+            adamw: rule.burn_adamw(),
             rule,
             states: HashMap::new(),
             base_rate: config.lr,
@@ -290,8 +284,8 @@ impl UpdateCheck {
 }
 
 impl Update<'_> {
-    /// `flat` stepped in one host pass, when it, its gradient and its moments are `f32` on the `Flex` device;
-    /// `None` (nothing consumed but the state taken back) otherwise.
+    /// `flat` stepped in one host pass, when it, its gradient and its moments (of its size) are `f32` on the
+    /// `Flex` device; otherwise `None`, nothing changed.
     fn host_step(&mut self, id: ParamId, rate: f64, flat: &Tensor<1>, grad: &Tensor<1>) -> Option<Tensor<1>> {
         let state = self.optimizer.states.get(&id);
         let moments = state.map(|s| [&s.momentum.moment_1, &s.momentum.moment_2]);
@@ -305,6 +299,10 @@ impl Update<'_> {
             Some([first, second]) => Some((read(first)?, read(second)?, state.map_or(0, |s| s.momentum.time))),
             None => None,
         };
+        if before.as_ref().is_some_and(|(first, second, _)| first.len() != weight.len() || second.len() != weight.len())
+        {
+            return None;
+        }
         let moments = before.as_ref().map(|(first, second, time)| MomentsBefore { first, second, time: *time });
         let updated = host_adamw::update(self.optimizer.rule, rate, self.grad_scale, &weight, &grad, moments);
         self.check.record(&self.path, updated.non_finite);
@@ -324,7 +322,10 @@ impl Update<'_> {
     fn burn_step(&mut self, id: ParamId, rate: f64, flat: Tensor<1>, grad: Tensor<1>) -> Tensor<1> {
         self.check = UpdateCheck::Partial;
         let device = flat.device();
-        let grad = self.grad_scale.map_or(grad.clone(), |scale| grad.mul_scalar(scale));
+        let grad = match self.grad_scale {
+            Some(scale) => grad.mul_scalar(scale),
+            None => grad,
+        };
         let state = self.optimizer.states.remove(&id).map(|s| AdamW::to_device(s, &device));
         let (updated, state) = self.optimizer.adamw.step(rate, flat, grad, state);
         if let Some(state) = state {
