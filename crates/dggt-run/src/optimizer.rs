@@ -31,8 +31,8 @@ use crate::optim_config::OptimSection;
 ///
 /// The update of each parameter is burn's [`AdamW`] rule, applied to the flattened parameter (the update is
 /// elementwise, so flattening changes nothing): in one host pass for `f32` parameters on the `Flex` device, which
-/// also checks what it writes for finiteness, and through burn's own AdamW everywhere else. The moments live here, keyed by parameter id, so that a
-/// checkpoint can write them one tensor at a time ([`Optimizer::save`]).
+/// also checks what it writes for finiteness, and through burn's own AdamW everywhere else. The moments live
+/// here, keyed by parameter id, so that a checkpoint can write them one tensor at a time ([`Optimizer::save`]).
 pub struct Optimizer {
     adamw: AdamW,
     /// The constants `adamw` was built with, for the host pass.
