@@ -129,7 +129,7 @@ impl PreprocessPlan {
     /// Resizes, crops and converts an RGB image.
     pub fn image(&self, image: &RgbImage) -> Result<PlanarImage> {
         self.check_input("an image", ImageSize { width: image.width(), height: image.height() })?;
-        let resized = self.resize(image.as_raw().clone(), Pixels::Rgb)?;
+        let resized = self.resize(image.as_raw(), Pixels::Rgb)?;
         let (w, h) = (self.output.width as usize, self.output.height as usize);
         let plane = w * h;
         let mut data = vec![0f32; 3 * plane];
@@ -145,16 +145,16 @@ impl PreprocessPlan {
     /// Resizes and crops a mask with the image's filter, then binarises at one half.
     pub fn mask(&self, mask: &GrayImage) -> Result<BinaryMask> {
         self.check_input("a mask", ImageSize { width: mask.width(), height: mask.height() })?;
-        let resized = self.resize(mask.as_raw().clone(), Pixels::Gray)?;
+        let resized = self.resize(mask.as_raw(), Pixels::Gray)?;
         let w = self.output.width as usize;
         let start = self.crop_top as usize * w;
         let data = resized[start..start + self.output.area()].iter().map(|&v| u8::from(v >= 128)).collect();
         Ok(BinaryMask { size: self.output, data })
     }
 
-    fn resize(&self, pixels: Vec<u8>, layout: Pixels) -> Result<Vec<u8>> {
+    fn resize(&self, pixels: &[u8], layout: Pixels) -> Result<Vec<u8>> {
         if self.resized == self.original {
-            return Ok(pixels);
+            return Ok(pixels.to_vec());
         }
         let (from, to) = (self.original, self.resized);
         resize(pixels, layout, (from.width, from.height), (to.width, to.height))

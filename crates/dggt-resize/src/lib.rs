@@ -36,10 +36,10 @@ impl Pixels {
 pub struct ResizeError(String);
 
 /// Resizes `pixels` (row-major, `from = (width, height)`, interleaved as `layout`) to `to = (width, height)`.
-pub fn resize(pixels: Vec<u8>, layout: Pixels, from: (u32, u32), to: (u32, u32)) -> Result<Vec<u8>, ResizeError> {
+pub fn resize(pixels: &[u8], layout: Pixels, from: (u32, u32), to: (u32, u32)) -> Result<Vec<u8>, ResizeError> {
     match layout {
-        Pixels::Gray => resize_typed::<U8>(&pixels, from, to),
-        Pixels::Rgb => resize_typed::<U8x3>(&pixels, from, to),
+        Pixels::Gray => resize_typed::<U8>(pixels, from, to),
+        Pixels::Rgb => resize_typed::<U8x3>(pixels, from, to),
     }
 }
 
@@ -73,10 +73,10 @@ mod tests {
     #[test]
     fn a_flat_image_stays_flat_and_a_short_buffer_is_refused() {
         let grey = vec![77u8; 3 * 40 * 30];
-        let resized = resize(grey, Pixels::Rgb, (40, 30), (14, 10)).unwrap();
+        let resized = resize(&grey, Pixels::Rgb, (40, 30), (14, 10)).unwrap();
         assert_eq!(resized.len(), 3 * 14 * 10, "three bytes per pixel of the target");
         assert!(resized.iter().all(|&v| v == 77), "a constant image resizes to the same constant");
-        let short = resize(vec![0u8; 10], Pixels::Gray, (4, 4), (2, 2));
+        let short = resize(&[0u8; 10], Pixels::Gray, (4, 4), (2, 2));
         assert!(short.is_err_and(|e| e.to_string().contains("4x4")), "the buffer's size is named");
     }
 }
