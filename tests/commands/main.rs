@@ -13,7 +13,6 @@ mod convert;
 mod convert_train;
 mod crash_resume;
 mod fixture;
-mod gpu_buffer_limit;
 mod layering;
 mod parity_cli;
 mod refine_cli;

@@ -49,18 +49,75 @@ fn the_bounded_suite_finds_nothing_non_finite() {
 /// shape compiled and tuned once (minutes on the software driver, hence not the whole network group). Without
 /// the LPIPS and Gram terms: their VGG features need buffers beyond the 128 MiB storage binding of Mesa's
 /// software Vulkan driver.
+///
+/// The device's buffers are limited in the proportion of the network case's workload to the full-size training
+/// step's (see [`buffer_limit`]): the full-size step once failed on an H100 asking for 4 GiB at once, so a buffer
+/// growing with the workload past what a GPU gives one buffer fails here first. One process compiles the
+/// network's kernels for both checks.
 #[cfg(feature = "wgpu")]
 #[test]
-fn the_device_suite_finds_nothing_non_finite_on_wgpu() {
+fn the_device_suite_finds_nothing_non_finite_on_wgpu_under_a_lowered_buffer_limit() {
+    let limit = buffer_limit::bytes();
+    let device = buffer_limit::device(limit);
+    let past_the_limit = Tensor::<1>::zeros([limit as usize / 4 + 1024], &device).try_into_data();
+    assert!(past_the_limit.is_err(), "a {limit}-byte limit did not stop a larger buffer");
+
     let options = StressOptions { scope: StressScope::Device, loss_weights: None };
-    let device = Device::wgpu(burn::tensor::DeviceKind::default());
     let report = run_suite(&options, &device).expect("the suite runs");
     println!("{}", report.table());
-    assert!(report.passed(), "{}", report.table());
+    assert!(report.passed(), "under a {} KiB buffer limit:\n{}", limit >> 10, report.table());
     assert_eq!(report.skipped().count(), 0, "{}", report.table());
     assert!(report.cases.iter().filter(|c| c.group == "crafted").count() >= 20, "{}", report.table());
     let network: Vec<&str> = report.cases.iter().filter(|c| c.group == "network").map(|c| c.name.as_str()).collect();
-    assert_eq!(network, ["random images (3 at 70x56)"], "the device scope runs one network case");
+    assert_eq!(network, [buffer_limit::NETWORK_CASE], "the device scope runs one network case");
+}
+
+/// The lowered buffer limit of the device test.
+#[cfg(feature = "wgpu")]
+mod buffer_limit {
+    use burn::backend::wgpu::{RuntimeOptions, WgpuSetup, init_device, wgpu};
+    use burn::tensor::Device;
+    use dggt_bench::compute::Scale;
+
+    /// The most a wgpu device gives one buffer at full size (`max_storage_buffer_binding_size` on desktop GPUs).
+    const FULL_SIZE_LIMIT: u64 = 1 << 32;
+
+    /// The device scope's one network case: 3 inputs and the suite's 2 targets at 70x56.
+    pub const NETWORK_CASE: &str = "random images (3 at 70x56)";
+    const NETWORK_CASE_VIEWS: u64 = 3 + 2;
+    const NETWORK_CASE_PIXELS: u64 = 70 * 56;
+
+    /// `FULL_SIZE_LIMIT` scaled by the network case's views x pixels against the full-size training step's (the
+    /// compute suite's: its inputs and twice as many targets at its image size).
+    pub fn bytes() -> u64 {
+        let full = Scale::Full.spec();
+        let full_views = 3 * full.train_inputs as u64;
+        let full_pixels = u64::from(full.image.width) * u64::from(full.image.height);
+        FULL_SIZE_LIMIT * NETWORK_CASE_VIEWS * NETWORK_CASE_PIXELS / (full_views * full_pixels)
+    }
+
+    /// A wgpu device on the first Vulkan adapter whose storage buffers are limited to `bytes`.
+    pub fn device(bytes: u64) -> Device {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
+            backends: wgpu::Backends::VULKAN,
+            ..wgpu::InstanceDescriptor::new_without_display_handle()
+        });
+        let adapter = futures_lite::future::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
+            .expect("a Vulkan adapter (install Mesa's software driver, mesa-vulkan-drivers, where there is no GPU)");
+        let limits =
+            wgpu::Limits { max_buffer_size: bytes, max_storage_buffer_binding_size: bytes, ..adapter.limits() };
+        let descriptor = wgpu::DeviceDescriptor {
+            label: Some("lowered buffer limit"),
+            required_features: adapter.features().difference(wgpu::Features::MAPPABLE_PRIMARY_BUFFERS),
+            required_limits: limits,
+            memory_hints: wgpu::MemoryHints::MemoryUsage,
+            ..Default::default()
+        };
+        let (device, queue) =
+            futures_lite::future::block_on(adapter.request_device(&descriptor)).expect("a device with lowered limits");
+        let setup = WgpuSetup { instance, adapter, device, queue, backend: wgpu::Backend::Vulkan };
+        Device::from(init_device(setup, RuntimeOptions::default()))
+    }
 }
 
 #[test]
