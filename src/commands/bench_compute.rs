@@ -110,6 +110,8 @@ fn parse_frame_range(text: &str) -> Result<(usize, usize)> {
 fn build_flavour() -> &'static str {
     if cfg!(feature = "gpu-tuning") {
         "fusion + autotune"
+    } else if cfg!(feature = "gpu-fusion") {
+        "fusion, no autotune"
     } else if cfg!(any(feature = "wgpu-backend", feature = "cuda-backend")) {
         "no fusion, no autotune"
     } else {

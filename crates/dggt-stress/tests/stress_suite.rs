@@ -44,11 +44,11 @@ fn the_bounded_suite_finds_nothing_non_finite() {
     }
 }
 
-/// What the wgpu device adds, through the CubeCL kernels and burn's wgpu backend with fusion and autotune:
-/// every crafted case (the rasteriser at its extremes, training included) and one network case, each new
-/// shape compiled and tuned once (minutes on the software driver, hence not the whole network group). Without
-/// the LPIPS and Gram terms: their VGG features need buffers beyond the 128 MiB storage binding of Mesa's
-/// software Vulkan driver.
+/// What the wgpu device adds, through the CubeCL kernels and burn's wgpu backend with fusion (and autotune where
+/// the build has it; the test suite's `wgpu-untuned` does not): every crafted case (the rasteriser at its
+/// extremes, training included) and one network case, each new kernel compiled once (minutes on the software
+/// driver, hence not the whole network group). Without the LPIPS and Gram terms: their VGG features need buffers
+/// beyond the 128 MiB storage binding of Mesa's software Vulkan driver.
 ///
 /// The device's buffers are limited in the proportion of the network case's workload to the full-size training
 /// step's (see [`buffer_limit`]): the full-size step once failed on an H100 asking for 4 GiB at once, so a buffer
