@@ -114,11 +114,7 @@ part() {
     tail -n 3 "$out/$name.log" >&2
 }
 
-{
-    date -u
-    nvidia-smi --query-gpu=name,memory.total,driver_version,clocks.max.sm --format=csv 2>/dev/null || echo "no nvidia-smi"
-    "$dggt" devices --device "$device" 2>&1 | tail -n 5
-} > "$out/machine.txt"
+"$here/gpu-machine.sh" "$dggt" "$device" > "$out/machine.txt"
 
 # Full scale: the forward in f32 and f16 (bf16 where the device has it: wgpu has not), the longest search asking
 # whether 150 frames fit in f16; reduced: the same code at a CPU's scale (the search in f32, which every device has).

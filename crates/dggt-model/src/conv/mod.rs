@@ -1,15 +1,21 @@
-//! The DPT heads' convolutions on the CPU backend as matrix products, forward and backward, instead of burn's
-//! im2col convolution (whose weight gradient is a convolution by the whole output gradient and whose input
-//! gradient is a transposed convolution). Same values up to the order of the sums.
+//! The DPT heads' convolutions as matrix products, forward and backward, instead of burn's own convolutions: on
+//! the CPU backend, burn's im2col convolution (whose weight gradient is a convolution by the whole output gradient
+//! and whose input gradient is a transposed convolution); on GPU devices, its direct convolution kernel (what a
+//! build without autotune runs, and autotune's only candidate for a 3x3 convolution without the matrix units),
+//! which took two thirds of a forward pass on an H200 against the matrix products' kernels. Same values up to the
+//! order of the sums.
 //!
-//! - [`conv2d`]: a 3x3 convolution with stride 1 and zero padding 1 runs the host kernels of [`host`] (nine
-//!   shifted matrix products; a backend extension with a hand-written backward, [`op`]); a 1x1 convolution with
-//!   stride 1 and no padding is one matrix product over the channels.
+//! - [`conv2d`]: a 3x3 convolution with stride 1 and zero padding 1 runs, for `f32` on the `Flex` CPU device, the
+//!   host kernels of [`host`] (nine shifted matrix products; a backend extension with a hand-written backward,
+//!   [`op`]); elsewhere a 3x3 convolution with zero padding 1 and any square stride (the DPT's stride-2
+//!   downsampling too) is three matrix products, one per kernel row, over the channels of three shifted copies of
+//!   the input (burn's autodiff differentiates them); a 1x1 convolution with stride 1 and no padding is one matrix
+//!   product over the channels on every device.
 //! - [`conv_transpose2d`]: a transposed convolution whose stride equals its kernel (no padding), the DPT's x2
-//!   and x4 resize, writes disjoint `k x k` patches: one matrix product and a reshuffle of the patches.
+//!   and x4 resize, writes disjoint `k x k` patches: one matrix product and a reshuffle of the patches (`f32` on
+//!   the `Flex` device; elsewhere the module's own forward).
 //!
-//! The rewrites apply to `f32` tensors on the `Flex` device, with or without autodiff; everywhere else (GPU
-//! devices, `ndarray`, half precision, other settings) the module's own forward runs.
+//! Other settings run the module's own forward.
 
 mod host;
 mod op;
@@ -17,6 +23,8 @@ mod op;
 use burn::backend::Dispatch;
 use burn::nn::PaddingConfig2d;
 use burn::nn::conv::{Conv2d, ConvTranspose2d};
+use burn::tensor::Slice;
+use burn::tensor::ops::PadMode;
 use burn::tensor::{DType, Device, Tensor};
 
 use op::Conv3x3Ops;
@@ -25,6 +33,7 @@ use op::Conv3x3Ops;
 pub fn conv2d(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
     match Conv2dRoute::of(conv, &x) {
         Conv2dRoute::SameThreeByThree => same_3x3(conv, x),
+        Conv2dRoute::ShiftedRows => shifted_rows_3x3(conv, x),
         Conv2dRoute::Pointwise => pointwise(conv, x),
         Conv2dRoute::Module => conv.forward(x),
     }
@@ -52,8 +61,10 @@ pub fn conv_transpose2d(conv: &ConvTranspose2d, x: Tensor<4>) -> Tensor<4> {
 /// Which computation [`conv2d`] runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Conv2dRoute {
-    /// The host kernels of a 3x3 convolution with zero padding 1.
+    /// The host kernels of a 3x3 convolution with zero padding 1 (`f32` on the `Flex` device).
     SameThreeByThree,
+    /// A 3x3 convolution with zero padding 1 on any other device or precision: a matrix product per kernel row.
+    ShiftedRows,
     /// One matrix product over the channels.
     Pointwise,
     /// The module's own forward.
@@ -62,13 +73,17 @@ enum Conv2dRoute {
 
 impl Conv2dRoute {
     fn of(conv: &Conv2d, x: &Tensor<4>) -> Self {
-        let plain = conv.stride == [1, 1] && conv.dilation == [1, 1] && conv.groups == 1;
-        if !(plain && host_f32(x, conv.weight.val().dtype())) {
+        let [stride_y, stride_x] = conv.stride;
+        if !(stride_y == stride_x && conv.dilation == [1, 1] && conv.groups == 1) {
             return Self::Module;
         }
+        let unit_stride = stride_y == 1;
         match (conv.kernel_size, &conv.padding) {
-            ([3, 3], PaddingConfig2d::Explicit(1, 1, 1, 1)) => Self::SameThreeByThree,
-            ([1, 1], PaddingConfig2d::Valid | PaddingConfig2d::Explicit(0, 0, 0, 0)) => Self::Pointwise,
+            ([3, 3], PaddingConfig2d::Explicit(1, 1, 1, 1)) if !host_f32(x, conv.weight.val().dtype()) => {
+                Self::ShiftedRows
+            }
+            ([3, 3], PaddingConfig2d::Explicit(1, 1, 1, 1)) if unit_stride => Self::SameThreeByThree,
+            ([1, 1], PaddingConfig2d::Valid | PaddingConfig2d::Explicit(0, 0, 0, 0)) if unit_stride => Self::Pointwise,
             _ => Self::Module,
         }
     }
@@ -83,6 +98,42 @@ fn same_3x3(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
     let output =
         <Dispatch as Conv3x3Ops>::conv3x3_same(x.into_dispatch(), weight.into_dispatch(), bias.into_dispatch());
     Tensor::from_dispatch(output)
+}
+
+/// `y = Σ_r W[:, :, r, :] · [x shifted by (r - 1, -1), (r - 1, 0), (r - 1, 1)]`, taken every `s`-th row and column
+/// for a stride `s`: per kernel row `r`, the input's three horizontal shifts (zero padded) stacked along the
+/// channels `[N, 3C, H'·W']` (shift-major, the weight's column order after its permute), one matrix product with
+/// the row's weights `[O, 3C]`. Three times the output's input footprint at a time instead of im2col's nine.
+fn shifted_rows_3x3(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
+    let [n, c, h, w] = x.dims();
+    let o = conv.weight.dims()[0];
+    let stride = conv.stride[0];
+    let (out_h, out_w) = ((h - 1) / stride + 1, (w - 1) / stride + 1);
+    let padded = x.pad([(1, 1), (1, 1)], PadMode::Constant(0.0));
+    // Every `stride`-th of `count` entries from `first`.
+    let taken = |first: usize, count: usize| {
+        Slice::new(first as isize, Some((first + stride * (count - 1) + 1) as isize), stride as isize)
+    };
+    // [O, C, kh, kw] -> [kh, O, kw, C]: row r's weights as [O, 3C], shift-major.
+    let weight = conv.weight.val().permute([2, 0, 3, 1]);
+    let mut y: Option<Tensor<3>> = None;
+    for row in 0..3 {
+        let shifts: Vec<Tensor<4>> = (0..3)
+            .map(|column| {
+                let whole = Slice::new(0, None, 1);
+                padded.clone().slice([whole, whole, taken(row, out_h), taken(column, out_w)])
+            })
+            .collect();
+        let columns = Tensor::cat(shifts, 1).reshape([n, 3 * c, out_h * out_w]);
+        let row_weight = weight.clone().slice([row..row + 1, 0..o, 0..3, 0..c]).reshape([1, o, 3 * c]);
+        let product = row_weight.matmul(columns);
+        y = Some(match y {
+            Some(sum) => sum + product,
+            None => product,
+        });
+    }
+    let y = y.expect("three kernel rows").reshape([n, o, out_h, out_w]);
+    add_bias(y, conv.bias.as_ref().map(|b| b.val()))
 }
 
 fn pointwise(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
@@ -156,6 +207,23 @@ mod tests {
         }
     }
 
+    /// Asserts that `ours` computes what `module` (burn's own forward) does at `x`, in value and gradients.
+    fn assert_matches_module(
+        case: &str,
+        ours: impl Fn(Tensor<4>) -> Tensor<4>,
+        module: impl Fn(Tensor<4>) -> Tensor<4>,
+        x: &Tensor<4>,
+        (weight, bias): (Tensor<4>, Option<Tensor<1>>),
+    ) {
+        let ours = outputs_and_grads(ours, x, &weight, bias.as_ref());
+        let reference = outputs_and_grads(module, x, &weight, bias.as_ref());
+        assert_close(case, &ours, &reference);
+    }
+
+    fn parameters_of(conv: &Conv2d) -> (Tensor<4>, Option<Tensor<1>>) {
+        (conv.weight.val(), conv.bias.as_ref().map(|b| b.val()))
+    }
+
     #[test]
     fn convolutions_as_products_match_burns_in_value_and_gradient() {
         let device = Device::flex().autodiff();
@@ -178,10 +246,14 @@ mod tests {
             let x = input(shape, seed, &device);
             let expected = if kernel == 3 { Conv2dRoute::SameThreeByThree } else { Conv2dRoute::Pointwise };
             assert_eq!(Conv2dRoute::of(&conv, &x), expected, "{shape:?}");
-            let (weight, bias) = (conv.weight.val(), conv.bias.as_ref().map(|b| b.val()));
-            let ours = outputs_and_grads(|x| conv2d(&conv, x), &x, &weight, bias.as_ref());
-            let reference = outputs_and_grads(|x| conv.forward(x), &x, &weight, bias.as_ref());
-            assert_close(&format!("{kernel}x{kernel} {shape:?} -> {outputs}"), &ours, &reference);
+            let case = format!("{kernel}x{kernel} {shape:?} -> {outputs}");
+            assert_matches_module(&case, |x| conv2d(&conv, x), |x| conv.forward(x), &x, parameters_of(&conv));
+            if kernel == 3 {
+                // The route of the other devices, on this one.
+                let case = format!("shifted rows {shape:?} -> {outputs}");
+                let rows = |x| shifted_rows_3x3(&conv, x);
+                assert_matches_module(&case, rows, |x| conv.forward(x), &x, parameters_of(&conv));
+            }
         }
     }
 
@@ -193,15 +265,33 @@ mod tests {
         {
             let conv = ConvTranspose2dConfig::new([shape[1], outputs], [k, k]).with_stride([k, k]).init(&device);
             let x = input(shape, seed, &device);
-            let (weight, bias) = (conv.weight.val(), conv.bias.as_ref().map(|b| b.val()));
-            let ours = outputs_and_grads(|x| conv_transpose2d(&conv, x), &x, &weight, bias.as_ref());
-            let reference = outputs_and_grads(|x| conv.forward(x), &x, &weight, bias.as_ref());
-            assert_close(&format!("transposed x{k} {shape:?} -> {outputs}"), &ours, &reference);
+            let parameters = (conv.weight.val(), conv.bias.as_ref().map(|b| b.val()));
+            let case = format!("transposed x{k} {shape:?} -> {outputs}");
+            assert_matches_module(&case, |x| conv_transpose2d(&conv, x), |x| conv.forward(x), &x, parameters);
         }
     }
 
     #[test]
-    fn other_convolutions_and_precisions_keep_the_modules_forward() {
+    fn strided_shifted_rows_match_burns_convolution_in_value_and_gradient() {
+        let device = Device::flex().autodiff();
+        // The DPT's stride-2 downsampling (even and odd sizes), a single pixel, stride 3.
+        for (seed, (shape, outputs, stride)) in
+            [([2, 8, 9, 12], 6, 2), ([1, 4, 8, 5], 3, 2), ([1, 3, 1, 1], 2, 2), ([2, 5, 10, 7], 4, 3)]
+                .into_iter()
+                .enumerate()
+        {
+            let conv = Conv2dConfig::new([shape[1], outputs], [3, 3])
+                .with_stride([stride, stride])
+                .with_padding(PaddingConfig2d::Explicit(1, 1, 1, 1))
+                .init(&device);
+            let x = input(shape, seed, &device);
+            let case = format!("stride {stride} {shape:?} -> {outputs}");
+            assert_matches_module(&case, |x| shifted_rows_3x3(&conv, x), |x| conv.forward(x), &x, parameters_of(&conv));
+        }
+    }
+
+    #[test]
+    fn other_convolutions_keep_the_modules_forward_and_other_precisions_take_the_shifted_rows() {
         let device = Device::flex();
         let padded = PaddingConfig2d::Explicit(1, 1, 1, 1);
         let strided = Conv2dConfig::new([3, 4], [3, 3]).with_stride([2, 2]).with_padding(padded.clone()).init(&device);
@@ -209,8 +299,9 @@ mod tests {
         let same = Conv2dConfig::new([3, 4], [3, 3]).with_padding(padded).init(&device);
         let x = Tensor::<4>::zeros([1, 3, 8, 8], &device);
         assert_eq!(Conv2dRoute::of(&strided, &x), Conv2dRoute::Module);
+        assert_eq!(Conv2dRoute::of(&strided, &x.clone().cast(DType::F16)), Conv2dRoute::ShiftedRows);
         assert_eq!(Conv2dRoute::of(&unpadded, &x), Conv2dRoute::Module);
-        assert_eq!(Conv2dRoute::of(&same, &x.clone().cast(DType::F16)), Conv2dRoute::Module);
+        assert_eq!(Conv2dRoute::of(&same, &x.clone().cast(DType::F16)), Conv2dRoute::ShiftedRows);
         assert_eq!(Conv2dRoute::of(&same, &x), Conv2dRoute::SameThreeByThree);
     }
 }

@@ -5,7 +5,8 @@
 //! memory `stage` at a time, from the end of the tile's longest pixel list backwards; every unit computes its
 //! pixel's contribution to each staged footprint in the same back-to-front order as the host. With plane
 //! operations the contributions are summed across each plane (`plane_sum`) and one unit of the plane adds the
-//! sum, one atomic per footprint and plane instead of one per pixel; without them every unit adds its own.
+//! sum, one atomic per footprint and plane instead of one per pixel; without them every unit adds its own. A
+//! footprint that no unit of the plane (or, without plane operations, the unit itself) blended adds nothing.
 
 use burn_cubecl::cubecl;
 use cubecl::prelude::*;
@@ -23,6 +24,18 @@ pub enum GradientSum {
     PerPlane,
     /// One add per unit (devices without plane operations).
     PerUnit,
+}
+
+/// Whether a footprint's gradients are added at all: when any unit of the plane blended it (every unit of the
+/// plane then takes the plane's sums), or, one add per unit, when this unit did. A footprint that no unit blended
+/// would add only zeros: most footprints of a tile's list cover a few of its pixels, so most adds are skipped.
+#[cube]
+fn adds_gradients(blended: bool, #[comptime] sum: GradientSum) -> bool {
+    let mut adds = blended;
+    if comptime!(sum == GradientSum::PerPlane) {
+        adds = plane_any(blended);
+    }
+    adds
 }
 
 /// `grads[index] += value`, summed per [`GradientSum`].
@@ -217,16 +230,18 @@ pub fn composite_backward_kernel<A: FloatAdd>(
                     grad_mean[1] = grad_sigma * (b * dx + c * dy);
                 }
             }
-            for ch in 0..channels {
-                add_gradient::<A>(grads, color_offset + id * channels + ch, grad_colors[ch], sum);
+            if adds_gradients(blended, sum) {
+                for ch in 0..channels {
+                    add_gradient::<A>(grads, color_offset + id * channels + ch, grad_colors[ch], sum);
+                }
+                add_gradient::<A>(grads, depth_offset + k, grad_depth, sum);
+                add_gradient::<A>(grads, opacity_offset + opacity_slot, grad_opacity, sum);
+                for e in 0..3usize {
+                    add_gradient::<A>(grads, conic_offset + 3 * k + e, grad_conic[e], sum);
+                }
+                add_gradient::<A>(grads, 2 * k, grad_mean[0], sum);
+                add_gradient::<A>(grads, 2 * k + 1, grad_mean[1], sum);
             }
-            add_gradient::<A>(grads, depth_offset + k, grad_depth, sum);
-            add_gradient::<A>(grads, opacity_offset + opacity_slot, grad_opacity, sum);
-            for e in 0..3usize {
-                add_gradient::<A>(grads, conic_offset + 3 * k + e, grad_conic[e], sum);
-            }
-            add_gradient::<A>(grads, 2 * k, grad_mean[0], sum);
-            add_gradient::<A>(grads, 2 * k + 1, grad_mean[1], sum);
         }
         batch_end -= batch;
     }
