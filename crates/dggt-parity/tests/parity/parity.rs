@@ -62,6 +62,21 @@ fn every_output_is_reproduced() {
     }
 }
 
+/// The same vectors on burn's wgpu device (CI: Mesa's software Vulkan driver): the GPU route of the network (burn's
+/// fused kernels, the DPT's convolutions as matrix products, the CubeCL rasteriser for the renders) reproduces every
+/// reference output within the same tolerances as the CPU.
+#[cfg(feature = "wgpu")]
+#[test]
+fn every_output_is_reproduced_on_wgpu() {
+    let weights = parity_dir().join("weights.safetensors");
+    let device = Device::wgpu(burn::tensor::DeviceKind::default());
+    let report = run_parity(vectors(), &weights, &device).expect("running the parity vectors on wgpu").report;
+    println!("\n{report}{}", report.summary());
+    let failed: Vec<&String> = report.failed().map(|row| &row.name).collect();
+    assert!(report.passed(), "out of tolerance on wgpu: {failed:?}");
+    assert_eq!(report.rows.len(), vectors().outputs.len(), "one row per reference output");
+}
+
 #[test]
 fn dino_and_aggregator_match_release() {
     assert_group_passes("DINO and aggregator", &["dino.", "image_feature", "agg."]);
