@@ -79,7 +79,9 @@ impl Conv2dRoute {
         }
         let unit_stride = stride_y == 1;
         match (conv.kernel_size, &conv.padding) {
-            ([3, 3], PaddingConfig2d::Explicit(1, 1, 1, 1)) if !host_f32(x, conv.weight.val().dtype()) => {
+            ([3, 3], PaddingConfig2d::Explicit(1, 1, 1, 1))
+                if !host_f32(x, conv.weight.val().dtype()) && x.shape().num_elements() > 0 =>
+            {
                 Self::ShiftedRows
             }
             ([3, 3], PaddingConfig2d::Explicit(1, 1, 1, 1)) if unit_stride => Self::SameThreeByThree,
@@ -300,6 +302,8 @@ mod tests {
         let x = Tensor::<4>::zeros([1, 3, 8, 8], &device);
         assert_eq!(Conv2dRoute::of(&strided, &x), Conv2dRoute::Module);
         assert_eq!(Conv2dRoute::of(&strided, &x.clone().cast(DType::F16)), Conv2dRoute::ShiftedRows);
+        let empty = Tensor::<4>::zeros([1, 3, 0, 8], &device).cast(DType::F16);
+        assert_eq!(Conv2dRoute::of(&strided, &empty), Conv2dRoute::Module, "an empty map keeps burn's forward");
         assert_eq!(Conv2dRoute::of(&unpadded, &x), Conv2dRoute::Module);
         assert_eq!(Conv2dRoute::of(&same, &x.clone().cast(DType::F16)), Conv2dRoute::ShiftedRows);
         assert_eq!(Conv2dRoute::of(&same, &x), Conv2dRoute::SameThreeByThree);
