@@ -1,5 +1,6 @@
 //! Views rendered in batches under a lowered buffer cap (feature `wgpu`): the same images, statistics and
-//! gradients as one batch, and a clear error when a single view does not fit.
+//! gradients as one batch, a view beyond the cap in bands of its tile rows with the same results, and a clear
+//! error when a single tile row does not fit.
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 
@@ -81,10 +82,36 @@ fn wgpu_batched_views_render_as_one_batch() {
 }
 
 #[test]
-fn wgpu_view_beyond_the_buffer_cap_is_a_clear_error() {
+fn wgpu_views_beyond_the_buffer_cap_render_in_bands_of_tile_rows_as_one_batch() {
+    let device = cube_device().autodiff();
+    let mut rng = Rng::new(33);
+    // 64x48 pixels: 4 x 3 tiles of 16, so that a view splits into bands of one or two tile rows.
+    let size = ImageSize::new(64, 48).unwrap();
+    let views = five_views(size);
+    let scene = Scene::random(&mut rng, 300, 3, (0.05, 0.4));
+    let background = [0.2, 0.4, 0.1];
+    let weights = LossWeights::random(&mut rng, views.len(), size, scene.channels);
+    let whole = render_on_with(&device, &scene, &views, Some(&background), &weights, &RasterSettings::default());
+    let per_view: Vec<u64> = whole.stats.iter().map(|s| s.tile_intersections as u64).collect();
+    let largest = *per_view.iter().max().unwrap();
+    assert!(largest > 300, "the scene should touch many tiles, got {per_view:?}");
+    // Bands of one or two of the three tile rows, and views split beside views batched whole.
+    for entries in [largest * 3 / 4, largest - 1] {
+        let raster = RasterSettings { max_buffer_bytes: Some(entries * ENTRY_BYTES), ..RasterSettings::default() };
+        let banded = render_on_with(&device, &scene, &views, Some(&background), &weights, &raster);
+        let split = per_view.iter().filter(|&&count| count > entries).count();
+        eprintln!("{per_view:?} intersections, {entries} a batch: {split} views in bands");
+        assert!(split >= 1, "a cap of {entries} intersections should split a view");
+        assert_same(&format!("{entries} intersections a batch, {split} views in bands"), &banded, &whole);
+    }
+}
+
+#[test]
+fn wgpu_tile_row_beyond_the_buffer_cap_is_a_clear_error() {
     let device = cube_device();
     let mut rng = Rng::new(32);
-    let size = ImageSize::new(32, 32).unwrap();
+    // One row of tiles: the view's intersections are the row's.
+    let size = ImageSize::new(32, 16).unwrap();
     let views = five_views(size);
     let scene = Scene::random(&mut rng, 200, 3, (0.05, 0.4));
     let gaussians = gaussian_tensors(&scene, views.len(), &device, false);
@@ -95,12 +122,13 @@ fn wgpu_view_beyond_the_buffer_cap_is_a_clear_error() {
     let raster = RasterSettings { max_buffer_bytes: Some(cap), ..RasterSettings::default() };
     let settings = RenderSettings { raster, background: None };
     let outcome = catch_unwind(AssertUnwindSafe(|| render_with_stats(&gaussians, &cameras, &settings)));
-    let panic = outcome.expect_err("a view beyond the cap must be refused");
+    let panic = outcome.expect_err("a tile row beyond the cap must be refused");
     let message = panic
         .downcast_ref::<String>()
         .cloned()
         .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
         .unwrap_or_default();
+    assert!(message.contains("tile row 0 of view"), "message: {message}");
     assert!(message.contains(&format!("{largest} tile intersections")), "message: {message}");
     assert!(message.contains(&format!("{cap} bytes")), "message: {message}");
 }

@@ -21,6 +21,14 @@ pub fn tile_rect(mx: f32, my: f32, rx: u32, ry: u32, grid: &Grid) -> (u32, u32, 
     (x0 as u32, x1 as u32, y0 as u32, y1 as u32)
 }
 
+/// `[y0, y1)` clipped to the tile rows `[first_row, end_row)`, empty (`y0 == y1`) when they do not meet.
+#[cube]
+fn clip_rows(y0: u32, y1: u32, first_row: u32, end_row: u32) -> (u32, u32) {
+    let low = y0.max(first_row);
+    let high = y1.min(end_row).max(low);
+    (low, high)
+}
+
 /// Counts the tiles each (view, Gaussian) pair touches into `pair_counts` (zero when culled) and fills the
 /// statistics rows `[V, 9]` (see `CullStats::to_counts`).
 #[cube(launch)]
@@ -53,6 +61,39 @@ pub fn count_kernel(
     pair_counts[k] = touched;
 }
 
+/// A band of one view's tile rows: `pair_counts[k]` the tiles within rows `[first_row, end_row)` of pair `k`
+/// of view `view`, zero for every other pair (so that the scan of the counts starts the view's entries at 0);
+/// `row_counts[ty]` (zeroed first) the view's intersections in each tile row, which plan the bands.
+#[cube(launch)]
+#[allow(clippy::too_many_arguments)]
+pub fn band_count_kernel(
+    means2d: &Tensor<f32>,
+    radii: &Tensor<u32>,
+    reasons: &Tensor<u32>,
+    pair_counts: &mut Tensor<u32>,
+    row_counts: &Tensor<Atomic<u32>>,
+    grid: Grid,
+    view: u32,
+    first_row: u32,
+    end_row: u32,
+) {
+    let k = ABSOLUTE_POS;
+    let count = grid.count as usize;
+    if k >= count * (grid.views as usize) {
+        terminate!();
+    }
+    let mut touched = 0u32;
+    if k / count == view as usize && reasons[k] == 0 {
+        let (x0, x1, y0, y1) = tile_rect(means2d[2 * k], means2d[2 * k + 1], radii[2 * k], radii[2 * k + 1], &grid);
+        let (low, high) = clip_rows(y0, y1, first_row, end_row);
+        touched = (x1 - x0) * (high - low);
+        for ty in low..high {
+            row_counts[ty as usize].fetch_add(x1 - x0);
+        }
+    }
+    pair_counts[k] = touched;
+}
+
 /// `view_starts[v] = pair_offsets[v · count]` for `v` in `0..=views`: where each view's intersections start
 /// (entry `views` is the total), the only values read back to size the intersection buffers.
 #[cube(launch)]
@@ -64,9 +105,9 @@ pub fn view_starts_kernel(pair_offsets: &Tensor<u32>, view_starts: &mut Tensor<u
 }
 
 /// Writes the sort entries of the views `first_view..first_view + batch_views` (the pairs `k` from
-/// `first_view · count`), each pair at its own offset `pair_offsets[k] - base` in pair order, its tiles in
-/// row-major order: the list `(v - first_view) · tiles + tile`, the depth's `f32` bits (positive, so they
-/// order as unsigned integers) and the Gaussian index.
+/// `first_view · count`) in the tile rows `[first_row, end_row)`, each pair at its own offset
+/// `pair_offsets[k] - base` in pair order, its tiles in row-major order: the list `(v - first_view) · tiles +
+/// tile`, the depth's `f32` bits (positive, so they order as unsigned integers) and the Gaussian index.
 #[cube(launch)]
 #[allow(clippy::too_many_arguments)]
 pub fn fill_kernel(
@@ -82,6 +123,8 @@ pub fn fill_kernel(
     first_view: u32,
     batch_views: u32,
     base: u32,
+    first_row: u32,
+    end_row: u32,
 ) {
     let local = ABSOLUTE_POS;
     let count = grid.count as usize;
@@ -94,8 +137,9 @@ pub fn fill_kernel(
         let n = (k % count) as u32;
         let depth = depths[k].to_bits();
         let (x0, x1, y0, y1) = tile_rect(means2d[2 * k], means2d[2 * k + 1], radii[2 * k], radii[2 * k + 1], &grid);
+        let (low, high) = clip_rows(y0, y1, first_row, end_row);
         let mut slot = (pair_offsets[k] - base) as usize;
-        for ty in y0..y1 {
+        for ty in low..high {
             for tx in x0..x1 {
                 entry_lists[slot] = list_base + ty * grid.tiles_x + tx;
                 entry_depths[slot] = depth;

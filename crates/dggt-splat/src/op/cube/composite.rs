@@ -28,8 +28,9 @@ pub fn tile_range(ranges: &Tensor<u32>, list: usize) -> (u32, u32) {
     (start, end)
 }
 
-/// Where a compositing unit works, the same in both passes: one cube per tile (`CUBE_POS_X/Y` the tile,
-/// `CUBE_POS_Z` the view within the batch of views starting at `first_view`), one unit per pixel of it.
+/// Where a compositing unit works, the same in both passes: one cube per tile (`CUBE_POS_X` its column,
+/// `first_row + CUBE_POS_Y` its row, `CUBE_POS_Z` the view within the batch of views starting at `first_view`),
+/// one unit per pixel of it.
 #[derive(CubeType)]
 pub struct TilePixel {
     /// Where the view's (view, Gaussian) pairs start: `v · N`.
@@ -50,13 +51,14 @@ pub struct TilePixel {
 
 /// The unit's [`TilePixel`]; every unit of the cube calls it (it reads the list range through shared memory).
 #[cube]
-pub fn tile_pixel(grid: &Grid, ranges: &Tensor<u32>, first_view: u32) -> TilePixel {
+pub fn tile_pixel(grid: &Grid, ranges: &Tensor<u32>, first_view: u32, first_row: u32) -> TilePixel {
     let batch_view = CUBE_POS_Z as usize;
     let v = first_view as usize + batch_view;
+    let tile_row = first_row + CUBE_POS_Y;
     let x = CUBE_POS_X * grid.tile_size + UNIT_POS_X;
-    let y = CUBE_POS_Y * grid.tile_size + UNIT_POS_Y;
+    let y = tile_row * grid.tile_size + UNIT_POS_Y;
     let tiles = (grid.tiles_x * grid.tiles_y) as usize;
-    let list = batch_view * tiles + (CUBE_POS_Y * grid.tiles_x + CUBE_POS_X) as usize;
+    let list = batch_view * tiles + (tile_row * grid.tiles_x + CUBE_POS_X) as usize;
     let (start, end) = tile_range(ranges, list);
     TilePixel {
         base: v * grid.count as usize,
@@ -84,13 +86,14 @@ pub fn composite_kernel(
     list_ends: &mut Tensor<u32>,
     grid: Grid,
     first_view: u32,
+    first_row: u32,
     #[comptime] stage: u32,
     #[comptime] channels: usize,
     #[comptime] median_depth: bool,
 ) {
     let units = CUBE_DIM;
     let slots = comptime!(stage as usize);
-    let t = tile_pixel(&grid, &inputs.ranges, first_view);
+    let t = tile_pixel(&grid, &inputs.ranges, first_view, first_row);
     let (start, end) = (t.start, t.end);
 
     let mut staged = FootprintStage::new(slots, channels);

@@ -121,12 +121,13 @@ pub fn composite_backward_kernel<A: FloatAdd>(
     grads: &Tensor<Atomic<A::Slot>>,
     grid: Grid,
     first_view: u32,
+    first_row: u32,
     #[comptime] stage: u32,
     #[comptime] channels: usize,
     #[comptime] sum: GradientSum,
 ) {
     let slots = comptime!(stage as usize);
-    let t = tile_pixel(&grid, &inputs.ranges, first_view);
+    let t = tile_pixel(&grid, &inputs.ranges, first_view, first_row);
     let (start, base, pixel) = (t.start, t.base, t.pixel);
     let mut last = 0u32;
     if t.inside {

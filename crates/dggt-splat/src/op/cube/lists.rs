@@ -6,6 +6,12 @@
 //! into batches of at most [`max_entries`] intersections. Each batch is then filled (in pair order), radix
 //! sorted by (list, depth) and cut into per-list ranges ([`sorted_batch`]). The per-entry buffers of one batch
 //! are `4` bytes an entry, so the cap on entries is the cap on bytes over 4.
+//!
+//! A view with more intersections than that is split into bands of its tile rows ([`view_bands`]: its
+//! intersections per tile row, read back, grouped greedily under the cap); each band is counted, scanned,
+//! filled and sorted on its own ([`sorted_band`]), and compositing runs on the band's rows alone. A tile's
+//! list is whole in one band, so the images do not depend on the bands. Only a single tile row beyond the cap
+//! is refused.
 
 use std::ops::Range;
 
@@ -16,7 +22,7 @@ use burn_cubecl::ops::into_data_sync;
 use burn_cubecl::tensor::CubeTensor;
 
 use super::timing::StageClock;
-use super::{Layout, arg, bin, buffer, element_launch, radix, zeroed};
+use super::{Layout, arg, bin, buffer, element_launch, radix, scan, zeroed};
 use crate::settings::RasterSettings;
 
 /// Bytes per intersection in each per-entry buffer (keys and payloads are `u32`).
@@ -28,6 +34,8 @@ const ENTRY_BYTES: u64 = 4;
 pub struct ListBatch {
     pub first_view: usize,
     pub views: usize,
+    /// The tile rows whose lists the batch holds (every row, but for a band of one view's rows).
+    pub rows: Range<u32>,
     pub ranges: CubeTensor,
     pub ids: CubeTensor,
 }
@@ -45,32 +53,47 @@ pub fn max_entries(cap: u64) -> u64 {
     (cap / ENTRY_BYTES).min(u64::from(u32::MAX))
 }
 
-/// Consecutive views grouped greedily into batches of at most `max_entries` intersections.
+/// Consecutive views grouped greedily into batches of at most `max_entries` intersections; a view with more
+/// is a batch of its own (to be split into bands of tile rows by [`view_bands`]).
+pub fn plan_batches(per_view: &[u64], max_entries: u64) -> Vec<Range<usize>> {
+    group_greedily(per_view, max_entries)
+}
+
+/// Consecutive tile rows grouped greedily into bands of at most `max_entries` intersections, from the view's
+/// intersections per row.
 ///
 /// # Panics
 ///
-/// When one view alone has more intersections than `max_entries`.
-pub fn plan_batches(per_view: &[u64], max_entries: u64) -> Vec<Range<usize>> {
-    let mut batches = Vec::new();
-    let (mut start, mut total) = (0, 0u64);
-    for (v, &count) in per_view.iter().enumerate() {
-        assert!(
-            count <= max_entries,
-            "splat: view {v} has {count} tile intersections, {} bytes a buffer, beyond the cap of {} bytes a \
-             buffer ({max_entries} intersections); lower the resolution or the number of Gaussians",
+/// When one tile row alone has more intersections than `max_entries`.
+pub fn plan_bands(view: usize, per_row: &[u64], max_entries: u64) -> Vec<Range<u32>> {
+    if let Some((row, &count)) = per_row.iter().enumerate().find(|&(_, &count)| count > max_entries) {
+        panic!(
+            "splat: tile row {row} of view {view} has {count} tile intersections, {} bytes a buffer, beyond the \
+             cap of {} bytes a buffer ({max_entries} intersections); lower the resolution or the number of \
+             Gaussians",
             count * ENTRY_BYTES,
             max_entries * ENTRY_BYTES,
         );
-        if v > start && total + count > max_entries {
-            batches.push(start..v);
-            (start, total) = (v, 0);
+    }
+    group_greedily(per_row, max_entries).into_iter().map(|rows| rows.start as u32..rows.end as u32).collect()
+}
+
+/// Consecutive items grouped greedily into runs whose counts sum to at most `max`; an item above `max` is a run
+/// of its own.
+fn group_greedily(counts: &[u64], max: u64) -> Vec<Range<usize>> {
+    let mut runs = Vec::new();
+    let (mut start, mut total) = (0, 0u64);
+    for (i, &count) in counts.iter().enumerate() {
+        if i > start && (total + count > max || count > max) {
+            runs.push(start..i);
+            (start, total) = (i, 0);
         }
         total += count;
     }
-    if start < per_view.len() {
-        batches.push(start..per_view.len());
+    if start < counts.len() {
+        runs.push(start..counts.len());
     }
-    batches
+    runs
 }
 
 /// Where each view's intersections start in pair order (`V + 1` values, read back): `pair_offsets` at every
@@ -102,13 +125,76 @@ pub fn bits_for(n: usize) -> u32 {
     usize::BITS - n.saturating_sub(1).leading_zeros()
 }
 
-/// Fills, sorts and ranges the lists of the views `views` holding `entries` intersections, which start at
-/// `base` in pair order.
+/// The bands of tile rows [`plan_bands`] splits `view` into, each with its intersections, from the view's
+/// intersections per row (a count pass and one read-back of `tiles_y` integers).
+pub fn view_bands(
+    device: &CubeDevice,
+    layout: &Layout,
+    f: &FootprintBuffers,
+    view: usize,
+    cap: u64,
+) -> Vec<(Range<u32>, usize)> {
+    let (_, per_row) = band_counts(device, layout, f, view, 0..layout.tiles_y);
+    let per_row: Vec<u64> = into_data_sync(per_row).iter::<u32>().map(u64::from).collect();
+    let entries = |rows: &Range<u32>| per_row[rows.start as usize..rows.end as usize].iter().sum::<u64>() as usize;
+    plan_bands(view, &per_row, cap).into_iter().map(|rows| (rows.clone(), entries(&rows))).collect()
+}
+
+/// The pair counts of `view` within `rows` (zero for every other pair) and the view's intersections per row.
+fn band_counts(
+    device: &CubeDevice,
+    layout: &Layout,
+    f: &FootprintBuffers,
+    view: usize,
+    rows: Range<u32>,
+) -> (CubeTensor, CubeTensor) {
+    let client = device.client();
+    let pair_counts = buffer(device, layout.pairs(), DType::U32);
+    let per_row = zeroed(device, layout.tiles_y as usize, DType::U32);
+    let (cubes, dim) = element_launch(&client, layout.pairs());
+    bin::band_count_kernel::launch(
+        &client,
+        cubes,
+        dim,
+        arg(f.means2d),
+        arg(f.radii),
+        arg(f.reasons),
+        arg(&pair_counts),
+        arg(&per_row),
+        layout.grid(),
+        view as u32,
+        rows.start,
+        rows.end,
+    );
+    (pair_counts, per_row)
+}
+
+/// Fills, sorts and ranges the lists of `view`'s tile rows `rows`, which hold `entries` intersections.
+pub fn sorted_band(
+    device: &CubeDevice,
+    layout: &Layout,
+    f: &FootprintBuffers,
+    view: usize,
+    rows: Range<u32>,
+    entries: usize,
+    clock: &mut StageClock,
+) -> ListBatch {
+    let (pair_counts, _) = band_counts(device, layout, f, view, rows.clone());
+    let band_offsets = scan::exclusive_scan(device, &pair_counts, layout.pairs());
+    let band = FootprintBuffers { pair_offsets: &band_offsets, ..*f };
+    // Every pair before the view counts nothing here, so the band's entries start at 0.
+    sorted_batch(device, layout, &band, view..view + 1, rows, 0, entries, clock)
+}
+
+/// Fills, sorts and ranges the lists of the views `views` in the tile rows `rows`, holding `entries`
+/// intersections, which start at `base` in pair order.
+#[allow(clippy::too_many_arguments)]
 pub fn sorted_batch(
     device: &CubeDevice,
     layout: &Layout,
     f: &FootprintBuffers,
     views: Range<usize>,
+    rows: Range<u32>,
     base: u32,
     entries: usize,
     clock: &mut StageClock,
@@ -119,7 +205,13 @@ pub fn sorted_batch(
     let entry_lists = buffer(device, entries, DType::U32);
     let entry_depths = buffer(device, entries, DType::U32);
     let entry_ids = buffer(device, entries, DType::U32);
-    let batch = |ids| ListBatch { first_view: views.start, views: views.len(), ranges: ranges.clone(), ids };
+    let batch = |ids| ListBatch {
+        first_view: views.start,
+        views: views.len(),
+        rows: rows.clone(),
+        ranges: ranges.clone(),
+        ids,
+    };
     if entries == 0 {
         return batch(entry_ids);
     }
@@ -140,6 +232,8 @@ pub fn sorted_batch(
         views.start as u32,
         views.len() as u32,
         base,
+        rows.start,
+        rows.end,
     );
     clock.mark(|| format!("views {}.. fill of {entries}", views.start));
     let (sorted_lists, ids) =
@@ -149,4 +243,23 @@ pub fn sorted_batch(
     bin::ranges_kernel::launch(&client, cubes, dim, arg(&sorted_lists), arg(&ranges), entries as u32);
     clock.mark(|| format!("views {}.. ranges", views.start));
     batch(ids)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn greedy_runs_stay_under_the_cap_and_an_item_above_it_runs_alone() {
+        assert_eq!(plan_batches(&[3, 2, 2, 9, 1, 1], 5), vec![0..2, 2..3, 3..4, 4..6]);
+        assert_eq!(plan_bands(0, &[2, 2, 1, 4], 4), vec![0..2, 2..3, 3..4]);
+        assert_eq!(plan_bands(0, &[1, 1, 1], 10), vec![0..3]);
+        assert!(plan_batches(&[], 5).is_empty());
+    }
+
+    #[test]
+    #[should_panic(expected = "tile row 1 of view 3 has 7 tile intersections, 28 bytes a buffer")]
+    fn a_tile_row_above_the_cap_is_refused_naming_it() {
+        plan_bands(3, &[1, 7], 4);
+    }
 }

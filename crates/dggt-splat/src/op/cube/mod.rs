@@ -20,7 +20,8 @@
 //! 3. `exclusive_scan` of the pair counts: each pair's offset into the intersections, in pair order.
 //!    `view_starts_kernel` picks the offsets at view boundaries, **read back to the host** (`V + 1` integers,
 //!    the only device-to-host transfer of the forward pass), which group the views into batches whose
-//!    per-entry buffers fit the buffer cap (`lists`).
+//!    per-entry buffers fit the buffer cap (`lists`); a view beyond the cap is split into bands of its tile rows
+//!    (its intersections per row read back), each band a batch of its own.
 //! 4. Per batch: `fill_kernel` writes each pair's entries at its own offset (deterministic, no atomics): key
 //!    (list, depth bits), payload Gaussian index; `radix` sorts them stably by depth, then by list (so equal
 //!    depths keep index order, the host's); `ranges_kernel` finds each list's range; `composite_kernel`
@@ -247,9 +248,9 @@ fn cube_launch(client: &cubecl::client::Client, cubes: usize, units: u32) -> (Cu
 }
 
 /// One cube per tile of the `views` views of a batch, one unit per pixel of the tile.
-fn tile_launch(layout: &Layout, views: usize) -> (CubeCount, CubeDim) {
+fn tile_launch(layout: &Layout, batch: &ListBatch) -> (CubeCount, CubeDim) {
     (
-        CubeCount::new_3d(layout.tiles_x, layout.tiles_y, views as u32),
+        CubeCount::new_3d(layout.tiles_x, batch.rows.len() as u32, batch.views as u32),
         CubeDim::new_2d(layout.tile_size, layout.tile_size),
     )
 }
@@ -412,7 +413,7 @@ fn composite_batch(
     out: &Composited,
 ) {
     let client = device.client();
-    let (cubes, dim) = tile_launch(layout, batch.views);
+    let (cubes, dim) = tile_launch(layout, batch);
     let stage = stage_len(layout);
     let pairs = [&footprints.means2d, &footprints.conics, &footprints.depths];
     let gaussians = [&inputs.opacities, &inputs.colors, &inputs.background];
@@ -426,6 +427,7 @@ fn composite_batch(
         arg(&out.list_ends),
         layout.grid(),
         batch.first_view as u32,
+        batch.rows.start,
         stage,
         layout.channels,
         layout.depth == DepthStatistic::Median,
@@ -458,18 +460,29 @@ fn sort_and_composite(
         depths: &footprints.depths,
         pair_offsets: &pair_offsets,
     };
-    lists::plan_batches(&per_view, cap)
-        .into_iter()
-        .map(|views| {
-            let entries: u64 = per_view[views.clone()].iter().sum();
+    let mut batches = Vec::new();
+    let mut composite = |batch: ListBatch, clock: &mut StageClock| {
+        composite_batch(device, layout, inputs, footprints, &batch, out);
+        clock.mark(|| format!("views {}.. rows {:?} composite", batch.first_view, batch.rows));
+        batches.push(batch);
+    };
+    let all_rows = 0..layout.tiles_y;
+    for views in lists::plan_batches(&per_view, cap) {
+        let entries: u64 = per_view[views.clone()].iter().sum();
+        if entries <= cap {
             let base = starts[views.start];
-            let first = views.start;
-            let batch = lists::sorted_batch(device, layout, &f, views, base, entries as usize, clock);
-            composite_batch(device, layout, inputs, footprints, &batch, out);
-            clock.mark(|| format!("views {first}.. composite"));
-            batch
-        })
-        .collect()
+            let batch = lists::sorted_batch(device, layout, &f, views, all_rows.clone(), base, entries as usize, clock);
+            composite(batch, clock);
+            continue;
+        }
+        // One view beyond the cap: its tile rows in bands.
+        let view = views.start;
+        for (rows, entries) in lists::view_bands(device, layout, &f, view, cap) {
+            let batch = lists::sorted_band(device, layout, &f, view, rows, entries, clock);
+            composite(batch, clock);
+        }
+    }
+    batches
 }
 
 /// The forward pass: projection and tile counts, pair offsets, sorted tile lists and compositing batch by
@@ -526,7 +539,7 @@ fn composite_backward_batch(
 ) {
     let layout = &saved.layout;
     let client = saved.means.client.clone();
-    let (cubes, dim) = tile_launch(layout, batch.views);
+    let (cubes, dim) = tile_launch(layout, batch);
     let stage = stage_len(layout);
     let launch = if native {
         composite_backward::composite_backward_kernel::launch::<NativeAdd>
@@ -547,6 +560,7 @@ fn composite_backward_batch(
         arg(accumulated),
         layout.grid(),
         batch.first_view as u32,
+        batch.rows.start,
         stage,
         layout.channels,
         gradient_sum(&client),
