@@ -61,9 +61,31 @@ pub fn count_kernel(
     pair_counts[k] = touched;
 }
 
+/// `row_counts[ty]` (zeroed first): the intersections of view `view` in each tile row, which plan its bands.
+#[cube(launch)]
+pub fn row_counts_kernel(
+    means2d: &Tensor<f32>,
+    radii: &Tensor<u32>,
+    reasons: &Tensor<u32>,
+    row_counts: &Tensor<Atomic<u32>>,
+    grid: Grid,
+    view: u32,
+) {
+    let count = grid.count as usize;
+    let k = view as usize * count + ABSOLUTE_POS;
+    if ABSOLUTE_POS >= count {
+        terminate!();
+    }
+    if reasons[k] == 0 {
+        let (x0, x1, y0, y1) = tile_rect(means2d[2 * k], means2d[2 * k + 1], radii[2 * k], radii[2 * k + 1], &grid);
+        for ty in y0..y1 {
+            row_counts[ty as usize].fetch_add(x1 - x0);
+        }
+    }
+}
+
 /// A band of one view's tile rows: `pair_counts[k]` the tiles within rows `[first_row, end_row)` of pair `k`
-/// of view `view`, zero for every other pair (so that the scan of the counts starts the view's entries at 0);
-/// `row_counts[ty]` (zeroed first) the view's intersections in each tile row, which plan the bands.
+/// of view `view`, zero for every other pair (so that the scan of the counts starts the view's entries at 0).
 #[cube(launch)]
 #[allow(clippy::too_many_arguments)]
 pub fn band_count_kernel(
@@ -71,7 +93,6 @@ pub fn band_count_kernel(
     radii: &Tensor<u32>,
     reasons: &Tensor<u32>,
     pair_counts: &mut Tensor<u32>,
-    row_counts: &Tensor<Atomic<u32>>,
     grid: Grid,
     view: u32,
     first_row: u32,
@@ -87,9 +108,6 @@ pub fn band_count_kernel(
         let (x0, x1, y0, y1) = tile_rect(means2d[2 * k], means2d[2 * k + 1], radii[2 * k], radii[2 * k + 1], &grid);
         let (low, high) = clip_rows(y0, y1, first_row, end_row);
         touched = (x1 - x0) * (high - low);
-        for ty in low..high {
-            row_counts[ty as usize].fetch_add(x1 - x0);
-        }
     }
     pair_counts[k] = touched;
 }

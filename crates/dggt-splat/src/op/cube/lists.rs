@@ -134,39 +134,24 @@ pub fn view_bands(
     view: usize,
     cap: u64,
 ) -> Vec<(Range<u32>, usize)> {
-    let (_, per_row) = band_counts(device, layout, f, view, 0..layout.tiles_y);
-    let per_row: Vec<u64> = into_data_sync(per_row).iter::<u32>().map(u64::from).collect();
-    let entries = |rows: &Range<u32>| per_row[rows.start as usize..rows.end as usize].iter().sum::<u64>() as usize;
-    plan_bands(view, &per_row, cap).into_iter().map(|rows| (rows.clone(), entries(&rows))).collect()
-}
-
-/// The pair counts of `view` within `rows` (zero for every other pair) and the view's intersections per row.
-fn band_counts(
-    device: &CubeDevice,
-    layout: &Layout,
-    f: &FootprintBuffers,
-    view: usize,
-    rows: Range<u32>,
-) -> (CubeTensor, CubeTensor) {
     let client = device.client();
-    let pair_counts = buffer(device, layout.pairs(), DType::U32);
     let per_row = zeroed(device, layout.tiles_y as usize, DType::U32);
-    let (cubes, dim) = element_launch(&client, layout.pairs());
-    bin::band_count_kernel::launch(
+    let (cubes, dim) = element_launch(&client, layout.count);
+    let (means2d, radii, reasons) = (arg(f.means2d), arg(f.radii), arg(f.reasons));
+    bin::row_counts_kernel::launch(
         &client,
         cubes,
         dim,
-        arg(f.means2d),
-        arg(f.radii),
-        arg(f.reasons),
-        arg(&pair_counts),
+        means2d,
+        radii,
+        reasons,
         arg(&per_row),
         layout.grid(),
         view as u32,
-        rows.start,
-        rows.end,
     );
-    (pair_counts, per_row)
+    let per_row: Vec<u64> = into_data_sync(per_row).iter::<u32>().map(u64::from).collect();
+    let entries = |rows: &Range<u32>| per_row[rows.start as usize..rows.end as usize].iter().sum::<u64>() as usize;
+    plan_bands(view, &per_row, cap).into_iter().map(|rows| (rows.clone(), entries(&rows))).collect()
 }
 
 /// Fills, sorts and ranges the lists of `view`'s tile rows `rows`, which hold `entries` intersections.
@@ -179,7 +164,22 @@ pub fn sorted_band(
     entries: usize,
     clock: &mut StageClock,
 ) -> ListBatch {
-    let (pair_counts, _) = band_counts(device, layout, f, view, rows.clone());
+    let client = device.client();
+    let pair_counts = buffer(device, layout.pairs(), DType::U32);
+    let (cubes, dim) = element_launch(&client, layout.pairs());
+    bin::band_count_kernel::launch(
+        &client,
+        cubes,
+        dim,
+        arg(f.means2d),
+        arg(f.radii),
+        arg(f.reasons),
+        arg(&pair_counts),
+        layout.grid(),
+        view as u32,
+        rows.start,
+        rows.end,
+    );
     let band_offsets = scan::exclusive_scan(device, &pair_counts, layout.pairs());
     let band = FootprintBuffers { pair_offsets: &band_offsets, ..*f };
     // Every pair before the view counts nothing here, so the band's entries start at 0.

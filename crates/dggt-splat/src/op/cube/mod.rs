@@ -247,7 +247,7 @@ fn cube_launch(client: &cubecl::client::Client, cubes: usize, units: u32) -> (Cu
     (calculate_cube_count_elemwise(client, cubes * units as usize, dim), dim)
 }
 
-/// One cube per tile of the `views` views of a batch, one unit per pixel of the tile.
+/// One cube per tile of a batch's views and tile rows, one unit per pixel of the tile.
 fn tile_launch(layout: &Layout, batch: &ListBatch) -> (CubeCount, CubeDim) {
     (
         CubeCount::new_3d(layout.tiles_x, batch.rows.len() as u32, batch.views as u32),
