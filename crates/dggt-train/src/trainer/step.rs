@@ -9,6 +9,7 @@ use burn::tensor::Device;
 use dggt_data::LoadedSample;
 use dggt_model::Dggt;
 use dggt_objective::{DepthFlowMaps, LossTerm, StepBatch};
+use dggt_run::compute_pool::on_pool_worker;
 use dggt_run::divergence::{self, StepFailure};
 use dggt_run::spikes::{self, Spike};
 
@@ -46,7 +47,11 @@ impl Trainer {
                 let master = self.replicas.master();
                 let total = self.replicas.sum_on_master(outcome.grads);
                 let total = sum_over_ranks(&self.group, &self.transport, &master.model, total)?;
-                let stepped = self.replicas.step(self.replicas.share(total), factor);
+                let replicas = &mut self.replicas;
+                let stepped = on_pool_worker(|| {
+                    let shared = replicas.share(total);
+                    replicas.step(shared, factor)
+                });
                 record.update = stepped.report().map(Into::into);
                 measures.stage_seconds.insert("update".into(), update.elapsed().as_secs_f64());
                 record.measures = Some(measures);
@@ -79,17 +84,19 @@ impl Trainer {
     }
 
     /// Loss and gradients of this process's samples of one step: every device takes its own consecutive
-    /// `optim.accumulation` samples (on its own thread) and sums their gradients; `None` when a loss is not
-    /// finite. Each loss is scaled by one over the step's samples on all ranks. The gradients come back per
-    /// device, in device order, for [`Replicas::sum_on_master`].
+    /// `optim.accumulation` samples (on its own thread; a single device on one of rayon's, [`on_pool_worker`])
+    /// and sums their gradients; `None` when a loss is not finite. Each loss is scaled by one over the step's
+    /// samples on all ranks. The gradients come back per device, in device order, for
+    /// [`Replicas::sum_on_master`].
     ///
     /// [`Replicas::sum_on_master`]: crate::replicas::Replicas::sum_on_master
     fn accumulate(&self, samples: &[LoadedSample], maps: DepthFlowMaps) -> Result<Option<StepOutcome>, TrainError> {
         let scale = 1.0 / (samples.len() * self.group.size()) as f64;
         let shares: Vec<&[LoadedSample]> = samples.chunks(samples.len().div_ceil(self.replicas.len())).collect();
         let results: Vec<Result<DeviceShare, TrainError>> = if shares.len() == 1 {
-            vec![self.run_share(self.replicas.master(), shares[0], scale, maps)]
+            vec![on_pool_worker(|| self.run_share(self.replicas.master(), shares[0], scale, maps))]
         } else {
+            // One thread per device, each sending its own work to the pool.
             std::thread::scope(|scope| {
                 let handles: Vec<_> = self
                     .replicas

@@ -6,6 +6,7 @@ use std::path::Path;
 use burn::module::Module;
 use dggt_model::Dggt;
 use dggt_run::average::WeightAverage;
+use dggt_run::compute_pool::on_pool_worker;
 use dggt_run::metrics::{MetricsLog, RecordKind};
 use dggt_run::progress::ProgressBar;
 
@@ -58,7 +59,7 @@ impl Trainer {
             device: &self.plain_device,
             snapshot,
         };
-        validator.scenes(&self.validation_scenes, frames, save_to)
+        on_pool_worker(|| validator.scenes(&self.validation_scenes, frames, save_to))
     }
 
     /// The weights validation scores, without autodiff: their average once it has started, else the master's.
