@@ -4,8 +4,8 @@
 //! outside the pool (the program's main thread), every such operation hands its work to the pool, wakes the
 //! workers and puts the caller to sleep until they are done: a few context switches per operation, and thousands
 //! of operations in a training step. Called from a worker, an operation keeps a share of its work on the calling
-//! thread and wakes only the others. On two cores this made the tiny training step about 8 % faster, with
-//! bit-identical losses (docs/BENCHMARKS.md, *A step's work on rayon's pool*).
+//! thread and wakes only the others. On two cores this made the main job's step 0.87x as long and the real
+//! log's first steps 0.92x, with bit-identical losses (docs/BENCHMARKS.md, *A step's work on rayon's pool*).
 
 /// Runs `work` on a thread of rayon's global pool and returns its result, the caller waiting meanwhile; inside
 /// the pool already, `work` runs where it is.
