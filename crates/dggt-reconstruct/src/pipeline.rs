@@ -39,6 +39,7 @@ use dggt_infer::{
     InputCameras, InputSet, MotionPath, SceneOptions, ViewSlot, forward_chunked, input_views, load_network,
 };
 use dggt_model::host::host_f32;
+use dggt_run::compute_pool::on_pool_worker;
 use dggt_run::progress::{Visibility, styled_bar};
 use dggt_scene::{
     AssemblyCounts, AssemblySettings, InputView, Instances, MIN_OPACITY, PixelGaussians, SCENE_FILE, Scene4d,
@@ -137,8 +138,14 @@ impl Written {
     }
 }
 
-/// Runs the whole reconstruction on `device`.
+/// Runs the whole reconstruction on `device`, on one of rayon's threads so that the host kernels' parallel
+/// operations keep a share of their work on the calling thread ([`on_pool_worker`]).
 pub fn reconstruct(options: &ReconstructOptions, device: &Device) -> Result<Summary, ReconstructError> {
+    on_pool_worker(|| reconstruct_here(options, device))
+}
+
+/// [`reconstruct`] on the calling thread.
+fn reconstruct_here(options: &ReconstructOptions, device: &Device) -> Result<Summary, ReconstructError> {
     let mut stages = Stages { started: Instant::now(), list: Vec::new() };
     let inputs = InputSet::open(&options.images, options.frames.clone(), options.cameras.clone())?;
     let times_s = requested_times(&inputs, &options.times)?;
