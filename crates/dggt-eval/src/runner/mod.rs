@@ -53,6 +53,7 @@ use burn::tensor::Device;
 use dggt_data::Scene;
 use dggt_infer::load_network;
 use dggt_refine::RefinerSpec;
+use dggt_run::compute_pool::on_pool_worker;
 
 use crate::error::EvalError;
 use crate::report::{EvalReport, summarise_scenes};
@@ -67,8 +68,15 @@ pub use scene::MOTION_GATE;
 pub use scoring::NEAREST_INPUT;
 pub use setup::{EvalOptions, LpipsWeights, open_window};
 
-/// Runs the evaluation on `device`, writes `eval.json` and `eval.md` to `options.out` and returns the report.
+/// Runs the evaluation on `device`, writes `eval.json` and `eval.md` to `options.out` and returns the report. It
+/// runs on one of rayon's threads, so that the host kernels' parallel operations keep a share of their work on the
+/// calling thread ([`on_pool_worker`]).
 pub fn evaluate(options: &EvalOptions, device: &Device) -> Result<EvalReport, EvalError> {
+    on_pool_worker(|| evaluate_here(options, device))
+}
+
+/// [`evaluate`] on the calling thread.
+fn evaluate_here(options: &EvalOptions, device: &Device) -> Result<EvalReport, EvalError> {
     let protocol = &options.protocol;
     protocol.validate()?;
     if options.scenes.is_empty() {
