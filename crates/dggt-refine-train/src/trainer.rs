@@ -23,6 +23,7 @@ use dggt_model::host::host_f32;
 use dggt_model::safetensors_file::SafetensorsFile;
 use dggt_refine::{Latent, Prompt};
 use dggt_run::checkpoint::{Purpose, RunState, Weights, latest, load_model, optimizer_file, read_state, save_folder};
+use dggt_run::compute_pool::on_pool_worker;
 use dggt_run::divergence::{self, CheckpointDue, CheckpointGate, DivergenceLimit, StepFailure};
 use dggt_run::metrics::{MetricsLog, RecordKind};
 use dggt_run::progress::{Visibility, progress_bar};
@@ -185,7 +186,7 @@ impl RefineTrainer {
         let mut last = None;
         let mut metrics = MetricsLog::continuing_at(&run.out_dir.join(run_folder::METRICS), self.state.step)?;
         while self.state.step < run.steps {
-            let record = match self.step() {
+            let record = match on_pool_worker(|| self.step()) {
                 Ok(record) => record,
                 Err(error) => {
                     // The weights and state of the last completed step are kept for `--resume`.
