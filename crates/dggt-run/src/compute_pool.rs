@@ -1,5 +1,5 @@
-//! Tensor work (a training step, a validation pass, a reconstruction, an evaluation, a refiner's training step)
-//! run on one of rayon's worker threads.
+//! Tensor work (a training step, a validation pass, a reconstruction, an evaluation, a benchmark's sweep, a
+//! refiner's training step) run on one of rayon's worker threads.
 //!
 //! The CPU backend and the project's host kernels split large operations over rayon's pool. Called from a thread
 //! outside the pool (the program's main thread), every such operation hands its work to the pool, wakes the
@@ -7,8 +7,8 @@
 //! of operations in a training step. Called from a worker, an operation keeps a share of its work on the calling
 //! thread and wakes only the others. On two cores this made the main job's step 0.87x as long and the real
 //! log's first steps 0.92x, with bit-identical losses (docs/BENCHMARKS.md, *A step's work on rayon's pool*); a
-//! reconstruction's renders took 0.93x as long, an evaluation 0.85x and the tiny refiner's training 0.91x, with the
-//! same outputs.
+//! reconstruction's renders took 0.93x as long, an evaluation and a benchmark's rows 0.85x and the tiny refiner's
+//! training 0.91x, with the same outputs.
 
 /// Runs `work` on a thread of rayon's global pool and returns its result, the caller waiting meanwhile; inside
 /// the pool already, `work` runs where it is.

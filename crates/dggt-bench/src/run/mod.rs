@@ -26,6 +26,7 @@ mod score;
 mod setup;
 
 use burn::tensor::Device;
+use dggt_run::compute_pool::on_pool_worker;
 
 pub use measure::median;
 pub use options::{BenchOptions, LpipsFiles};
@@ -35,8 +36,14 @@ pub use setup::fresh_tiny_config;
 
 use crate::error::BenchError;
 
-/// Runs the sweep of `options` on `device`.
+/// Runs the sweep of `options` on `device`, on one of rayon's threads as `dggt reconstruct` and `dggt eval` run
+/// ([`on_pool_worker`]), so that its times are theirs.
 pub fn run_bench(options: &BenchOptions, device: &Device) -> Result<BenchReport, BenchError> {
+    on_pool_worker(|| run_sweep(options, device))
+}
+
+/// [`run_bench`] on the calling thread.
+fn run_sweep(options: &BenchOptions, device: &Device) -> Result<BenchReport, BenchError> {
     options.sweep.validate()?;
     if options.repeat == 0 {
         return Err(BenchError::setting("--repeat", "must be at least 1"));
