@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
+use dggt_run::compute_pool::on_pool_worker;
 
 use crate::backend::DeviceList;
 use crate::commands::output::{self, OverwriteFileArg};
@@ -54,7 +55,9 @@ pub fn run(args: Args) -> Result<()> {
     let device = args.device.single()?;
     let started = std::time::Instant::now();
     let options = dggt_stress::StressOptions { scope: args.scope.into(), loss_weights: args.loss_weights };
-    let report = dggt_stress::run_suite(&options, &device).map_err(|e| anyhow::anyhow!("stress suite: {e}"))?;
+    // On one of rayon's threads: the host kernels' parallel operations keep a share of their work where called.
+    let report = on_pool_worker(|| dggt_stress::run_suite(&options, &device))
+        .map_err(|e| anyhow::anyhow!("stress suite: {e}"))?;
     print!("{}", report.table());
     println!("({:.1} s on {device:?})", started.elapsed().as_secs_f64());
     if let Some(path) = args.json {
