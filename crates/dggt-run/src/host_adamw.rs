@@ -7,6 +7,10 @@
 //! expressions in the same order (the rule of `burn::optim::AdamW` without AMSGrad or cautious decay), so on the
 //! `Flex` device its results are those of burn's AdamW bit for bit (a test holds it to that), and it learns on
 //! the way which of the new weight and moments holds a NaN or an infinity, which spares the separate check.
+//!
+//! The pass is written so that the compiler vectorises it (zipped slices, no indexing, no branch per value). Late
+//! in a run a few percent of the second moments are subnormal, and an x86 processor takes a microcode assist for
+//! each instruction that meets one: one per vector of values instead of one per value halved the update there.
 
 use burn::optim::{AdamW, AdamWConfig};
 
@@ -74,30 +78,93 @@ pub(crate) fn update(
     let correction_2 = 1f32 - rule.beta_2.powi(time as i32);
     let decay_rate = rate * f64::from(rule.weight_decay);
     let keep = (decay_rate != 0.0).then_some((1.0 - decay_rate) as f32);
-    let (rate, grad_scale) = (rate as f32, grad_scale.map(|s| s as f32));
+    // Without clipping or decay the factors are 1: `x · 1` is `x` to the last bit.
+    let constants = StepConstants {
+        beta_1: rule.beta_1,
+        beta_2: rule.beta_2,
+        factor_1,
+        factor_2,
+        correction_1,
+        correction_2,
+        epsilon: rule.epsilon,
+        keep: keep.unwrap_or(1.0),
+        rate: rate as f32,
+        grad_scale: grad_scale.map_or(1.0, |s| s as f32),
+    };
 
     let mut updated =
         Updated { weight: vec![0.0; count], first: vec![0.0; count], second: vec![0.0; count], time, non_finite: None };
-    let mut finite = [true; 3];
-    for i in 0..count {
-        let g = grad_scale.map_or(grad[i], |s| grad[i] * s);
-        let (m, v) = match &moments {
-            Some(before) => {
-                (before.first[i] * rule.beta_1 + g * factor_1, before.second[i] * rule.beta_2 + g * g * factor_2)
+    let outputs = updated.weight.iter_mut().zip(updated.first.iter_mut()).zip(updated.second.iter_mut());
+    let mut finite = Finite::default();
+    // Two loops over zipped slices, without indexing or branches, so that the compiler vectorises them.
+    match &moments {
+        Some(before) => {
+            let inputs = weight.iter().zip(grad).zip(before.first).zip(before.second);
+            for (((w_out, m_out), v_out), (((&w, &g), &m), &v)) in outputs.zip(inputs) {
+                let g = g * constants.grad_scale;
+                let m = m * constants.beta_1 + g * constants.factor_1;
+                let v = v * constants.beta_2 + g * g * constants.factor_2;
+                (*w_out, *m_out, *v_out) = finite.track(constants.weight(w, m, v), m, v);
             }
-            None => (g * factor_1, g * g * factor_2),
-        };
-        let delta = (m / correction_1) / ((v / correction_2).sqrt() + rule.epsilon);
-        let decayed = keep.map_or(weight[i], |keep| weight[i] * keep);
-        let w = decayed - delta * rate;
-        (updated.weight[i], updated.first[i], updated.second[i]) = (w, m, v);
-        finite[0] &= w.is_finite();
-        finite[1] &= m.is_finite();
-        finite[2] &= v.is_finite();
+        }
+        None => {
+            for (((w_out, m_out), v_out), (&w, &g)) in outputs.zip(weight.iter().zip(grad)) {
+                let g = g * constants.grad_scale;
+                let (m, v) = (g * constants.factor_1, g * g * constants.factor_2);
+                (*w_out, *m_out, *v_out) = finite.track(constants.weight(w, m, v), m, v);
+            }
+        }
     }
+    let finite = [finite.weight, finite.first, finite.second];
     let holders = [Holder::Weight, Holder::FirstMoment, Holder::SecondMoment];
     updated.non_finite = finite.iter().zip(holders).find(|(finite, _)| !**finite).map(|(_, holder)| holder);
     updated
+}
+
+/// The `f32` constants of one parameter's step.
+struct StepConstants {
+    beta_1: f32,
+    beta_2: f32,
+    factor_1: f32,
+    factor_2: f32,
+    correction_1: f32,
+    correction_2: f32,
+    epsilon: f32,
+    keep: f32,
+    rate: f32,
+    grad_scale: f32,
+}
+
+impl StepConstants {
+    /// The new weight from the old one and the new moments.
+    #[inline(always)]
+    fn weight(&self, weight: f32, m: f32, v: f32) -> f32 {
+        let delta = (m / self.correction_1) / ((v / self.correction_2).sqrt() + self.epsilon);
+        weight * self.keep - delta * self.rate
+    }
+}
+
+/// Whether every new weight, first and second moment so far is finite.
+struct Finite {
+    weight: bool,
+    first: bool,
+    second: bool,
+}
+
+impl Default for Finite {
+    fn default() -> Self {
+        Self { weight: true, first: true, second: true }
+    }
+}
+
+impl Finite {
+    #[inline(always)]
+    fn track(&mut self, w: f32, m: f32, v: f32) -> (f32, f32, f32) {
+        self.weight &= w.is_finite();
+        self.first &= m.is_finite();
+        self.second &= v.is_finite();
+        (w, m, v)
+    }
 }
 
 #[cfg(test)]
