@@ -1,9 +1,8 @@
-//! A training run, whatever it trains: the optimiser (AdamW with groups, clipping and a rollback of updates
-//! that leave non-finite values), the learning-rate schedule, a moving average of the weights, skipping loss
-//! spikes, a step's tensor work on rayon's pool, what a viewer is shown (`[viewer]`), checkpoint folders with
-//! their run state and the `latest` pointer, the rules of a run's output folder and of resuming in it,
-//! divergence (steps that make no update, and when to give up), the progress bar and the metric records of
-//! `metrics.jsonl`.
+//! A training run, whatever it trains: the optimiser (AdamW with groups, clipping and a rollback of updates that leave
+//! non-finite values), the learning-rate schedule, a moving average of the weights, skipping loss spikes, tensor work
+//! run on one of rayon's threads (`compute_pool`), what a viewer is shown (`[viewer]`), checkpoint folders with their
+//! run state and the `latest` pointer, the rules of a run's output folder and of resuming in it, divergence (steps that
+//! make no update, and when to give up), the progress bar and the metric records of `metrics.jsonl`.
 //!
 //! The DGGT trainer (`dggt-train`) and the refiner's trainer (`dggt-refine-train`) share all of it; what is
 //! particular to a network (its modules, its configuration, its samples) stays with its trainer.
